@@ -1,0 +1,243 @@
+"""Robot config YAML (`configs/<robot>/robot.yaml`) -> typed objects.
+
+Every error names the file, the key and what to do; unknown keys are errors, not silently ignored.
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from wolfcal.errors import WolfcalError
+
+TAG_FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
+
+
+@dataclass(frozen=True)
+class TagConfig:
+    """One fiducial: `T_link_tag` places the tag frame (aruco convention, centre of the tag) in `link`."""
+
+    id: int
+    family: str
+    size: float  # edge of the black square [m]
+    link: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    side: str | None = None  # 'right' / 'left' for the leg preset; None for tags not on a leg
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    frame: str
+    topic: str
+    info_topic: str
+    intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
+
+
+@dataclass(frozen=True)
+class ServoConfig:
+    port: str
+    baudrate: int
+    protocol: float
+    ids: dict[str, int]
+    models: dict[str, int] = field(default_factory=dict)  # expected model number per joint (optional)
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    """Standard deviations of the Gaussian priors on free parameters (deviations from the nominal model)."""
+
+    offset: float = 0.05  # joint encoder offset [rad]
+    camera_translation: float = 0.01  # [m]
+    camera_rotation: float = 0.1  # [rad]
+    tag_translation: float = 0.005  # [m]
+    tag_rotation: float = 0.05  # [rad]
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    path: Path
+    name: str
+    urdf: Path
+    base_link: str
+    camera: CameraConfig
+    joint_states_topic: str
+    tags: tuple[TagConfig, ...]
+    servos: ServoConfig | None = None
+    priors: PriorConfig = PriorConfig()
+
+    def tag(self, tag_id: int) -> TagConfig:
+        for tag in self.tags:
+            if tag.id == tag_id:
+                return tag
+        raise KeyError(tag_id)
+
+    @property
+    def tag_ids(self) -> list[int]:
+        return [t.id for t in self.tags]
+
+
+class _Reader:
+    """Checks one mapping of the config and builds error messages that name file and key."""
+
+    def __init__(self, path: Path, data, where: str):
+        self.path, self.where = path, where
+        if not isinstance(data, dict):
+            self.fail(f"must be a mapping, found {type(data).__name__}")
+        self.data = data
+
+    def fail(self, message: str):
+        key = f" '{self.where}'" if self.where else ""
+        raise WolfcalError(f"{self.path}:{key} {message}")
+
+    def check_keys(self, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
+        unknown = sorted(set(self.data) - set(required) - set(optional))
+        if unknown:
+            allowed = ", ".join(required + optional)
+            self.fail(f"unknown key(s) {', '.join(map(str, unknown))}; allowed keys: {allowed}")
+        missing = [k for k in required if k not in self.data]
+        if missing:
+            self.fail(f"missing key(s) {', '.join(missing)}")
+
+    def sub(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def string(self, key: str, default: str | None = None) -> str:
+        value = self.data.get(key, default)
+        if not isinstance(value, str) or not value:
+            raise WolfcalError(f"{self.path}: '{self.sub(key)}' must be a non-empty string")
+        return value
+
+    def number(self, key: str, default: float | None = None, positive: bool = False) -> float:
+        value = self.data.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise WolfcalError(f"{self.path}: '{self.sub(key)}' must be a number, found {value!r}")
+        if positive and value <= 0:
+            raise WolfcalError(f"{self.path}: '{self.sub(key)}' must be positive, found {value!r}")
+        return float(value)
+
+    def vector3(self, key: str) -> tuple[float, float, float]:
+        value = self.data.get(key, [0.0, 0.0, 0.0])
+        ok = isinstance(value, (list, tuple)) and len(value) == 3
+        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        if not ok:
+            raise WolfcalError(f"{self.path}: '{self.sub(key)}' must be a list of 3 numbers, found {value!r}")
+        return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _resolve(base: Path, value: str) -> Path:
+    p = Path(value).expanduser()
+    return p if p.is_absolute() else (base / p)
+
+
+def _tag(path: Path, index: int, data) -> TagConfig:
+    r = _Reader(path, data, f"tags[{index}]")
+    r.check_keys(("id", "size", "link"), ("family", "xyz", "rpy", "side"))
+    tag_id = r.data["id"]
+    if isinstance(tag_id, bool) or not isinstance(tag_id, int) or tag_id < 0:
+        r.fail(f"'id' must be a non-negative integer, found {tag_id!r}")
+    family = r.string("family", "tag36h11")
+    if family not in TAG_FAMILIES:
+        r.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
+    side = r.data.get("side")
+    if side is None:
+        link = str(r.data["link"]).lower()
+        side = "right" if link.startswith(("r_", "right")) else "left" if link.startswith(("l_", "left")) else None
+    elif side not in ("right", "left"):
+        r.fail(f"'side' must be 'right' or 'left', found {side!r}")
+    return TagConfig(
+        id=tag_id,
+        family=family,
+        size=r.number("size", positive=True),
+        link=r.string("link"),
+        xyz=r.vector3("xyz"),
+        rpy=r.vector3("rpy"),
+        side=side,
+    )
+
+
+def _servos(path: Path, data) -> ServoConfig:
+    r = _Reader(path, data, "servos")
+    r.check_keys(("ids",), ("port", "baudrate", "protocol", "models"))
+    ids = r.data["ids"]
+    if not isinstance(ids, dict) or not ids:
+        r.fail("'ids' must map joint names to servo ids")
+    for joint, sid in ids.items():
+        if isinstance(sid, bool) or not isinstance(sid, int) or not 0 <= sid <= 252:
+            raise WolfcalError(f"{path}: 'servos.ids.{joint}' must be a servo id 0-252, found {sid!r}")
+    if len(set(ids.values())) != len(ids):
+        r.fail("'ids' has the same servo id for two joints")
+    models = r.data.get("models", {}) or {}
+    if not isinstance(models, dict):
+        r.fail("'models' must map joint names to model numbers")
+    protocol = r.number("protocol", 2.0)
+    if protocol != 2.0:
+        r.fail(f"'protocol' must be 2 (Dynamixel Protocol 2.0), found {protocol!r}")
+    return ServoConfig(
+        port=r.string("port", "/dev/ttyUSB0"),
+        baudrate=int(r.number("baudrate", 1_000_000, positive=True)),
+        protocol=protocol,
+        ids={str(k): int(v) for k, v in ids.items()},
+        models={str(k): int(v) for k, v in models.items()},
+    )
+
+
+def _priors(path: Path, data) -> PriorConfig:
+    r = _Reader(path, data, "priors")
+    names = tuple(PriorConfig.__dataclass_fields__)
+    r.check_keys((), names)
+    return PriorConfig(**{k: r.number(k, positive=True) for k in names if k in r.data})
+
+
+def load_robot_config(path: str | Path) -> RobotConfig:
+    """Read and check a robot config; the URDF's existence is checked, its content by `wolfcal.robot`."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "robot.yaml"
+    if not path.is_file():
+        raise WolfcalError(f"{path}: robot config not found (give --robot a robot.yaml or a folder holding one)")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    r = _Reader(path, data, "")
+    r.check_keys(
+        ("name", "urdf", "base_link", "camera", "tags"), ("joint_states_topic", "servos", "priors")
+    )
+    urdf = _resolve(path.parent, r.string("urdf"))
+    if not urdf.is_file():
+        raise WolfcalError(f"{path}: 'urdf' file {urdf} not found")
+    cam = _Reader(path, r.data["camera"], "camera")
+    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
+    intrinsics = None
+    if "intrinsics" in cam.data:
+        intrinsics = _resolve(path.parent, cam.string("intrinsics"))
+        if not intrinsics.is_file():
+            raise WolfcalError(f"{path}: 'camera.intrinsics' file {intrinsics} not found")
+    camera = CameraConfig(
+        frame=cam.string("frame"),
+        topic=cam.string("topic", "/camera/image_raw/compressed"),
+        info_topic=cam.string("info_topic", "/camera/camera_info"),
+        intrinsics=intrinsics,
+    )
+    tags_data = r.data["tags"]
+    if not isinstance(tags_data, list) or not tags_data:
+        r.fail("'tags' must be a non-empty list of tags")
+    tags = tuple(_tag(path, i, t) for i, t in enumerate(tags_data))
+    if len({t.id for t in tags}) != len(tags):
+        r.fail("'tags' lists the same tag id twice")
+    return RobotConfig(
+        path=path,
+        name=r.string("name"),
+        urdf=urdf,
+        base_link=r.string("base_link"),
+        camera=camera,
+        joint_states_topic=r.string("joint_states_topic", "/joint_states"),
+        tags=tags,
+        servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
+        priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
+    )

@@ -1,0 +1,1 @@
+"""Capture files: write samples, read samples (own files and plain ROS 2 recordings), recover torn files."""

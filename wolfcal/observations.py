@@ -1,0 +1,52 @@
+"""Observations: tag corners detected in the samples of one or more captures, ready for the estimation problem.
+
+One row per detected corner (vectorised over everything): which sample, which tag, which corner (aruco order:
+top-left, top-right, bottom-right, bottom-left) and where it was seen, in pixels (OpenCV convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+
+
+@dataclass
+class Observations:
+    joint_names: list[str]
+    q_measured: np.ndarray  # (S, J) encoder readings [rad]
+    stamps_ns: np.ndarray  # (S,)
+    sources: list[str]  # (S,) capture file of each sample
+    camera: CameraModel
+    sample_index: np.ndarray  # (M,) int
+    tag_ids: np.ndarray  # (M,) int
+    corner_index: np.ndarray  # (M,) int in 0..3
+    uv: np.ndarray  # (M, 2) detected corner [px]
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.q_measured.shape[0])
+
+    @property
+    def observed_tag_ids(self) -> list[int]:
+        return sorted(int(t) for t in np.unique(self.tag_ids))
+
+    def subset(self, samples: np.ndarray) -> Observations:
+        """The observations of the given sample indices (renumbered 0..len-1)."""
+        samples = np.asarray(samples, dtype=int)
+        remap = np.full(self.n_samples, -1)
+        remap[samples] = np.arange(len(samples))
+        keep = remap[self.sample_index] >= 0
+        return Observations(
+            joint_names=list(self.joint_names),
+            q_measured=self.q_measured[samples],
+            stamps_ns=self.stamps_ns[samples],
+            sources=[self.sources[i] for i in samples],
+            camera=self.camera,
+            sample_index=remap[self.sample_index[keep]],
+            tag_ids=self.tag_ids[keep],
+            corner_index=self.corner_index[keep],
+            uv=self.uv[keep],
+        )
