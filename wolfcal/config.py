@@ -56,6 +56,8 @@ class PriorConfig:
     camera_rotation: float = 0.1  # [rad]
     tag_translation: float = 0.005  # [m]
     tag_rotation: float = 0.05  # [rad]
+    encoder_noise: float = 0.00044  # joint reading noise [rad]: 4096-tick quantisation, tick / sqrt(12)
+    pixel_noise: float = 0.2  # corner detection noise per axis [px], the starting value before it is estimated
 
 
 @dataclass(frozen=True)

@@ -33,12 +33,14 @@ class Observations:
     def observed_tag_ids(self) -> list[int]:
         return sorted(int(t) for t in np.unique(self.tag_ids))
 
-    def subset(self, samples: np.ndarray) -> Observations:
-        """The observations of the given sample indices (renumbered 0..len-1)."""
+    def subset(self, samples: np.ndarray, tag_ids: list[int] | None = None) -> Observations:
+        """The observations of the given sample indices (renumbered 0..len-1), optionally of some tags only."""
         samples = np.asarray(samples, dtype=int)
         remap = np.full(self.n_samples, -1)
         remap[samples] = np.arange(len(samples))
         keep = remap[self.sample_index] >= 0
+        if tag_ids is not None:
+            keep &= np.isin(self.tag_ids, tag_ids)
         return Observations(
             joint_names=list(self.joint_names),
             q_measured=self.q_measured[samples],
@@ -50,3 +52,8 @@ class Observations:
             corner_index=self.corner_index[keep],
             uv=self.uv[keep],
         )
+
+    def only_tags(self, tag_ids: list[int]) -> Observations:
+        """The corners of the given tags; samples that see none of them are dropped."""
+        seen = np.unique(self.sample_index[np.isin(self.tag_ids, tag_ids)])
+        return self.subset(seen, tag_ids)

@@ -1,1 +1,1 @@
-"""wolfcal.fit"""
+"""`wolfcal fit`: the estimation problem, its solver and the result file."""

@@ -1,1 +1,1 @@
-"""wolfcal.robot"""
+"""Robot model: URDF kinematics, corrections, free-parameter sets, calibrated-URDF writer."""

@@ -1,1 +1,1 @@
-"""wolfcal.sim"""
+"""Synthetic robots, scenes and captures with known ground truth."""

@@ -1,0 +1,128 @@
+"""`wolfcal fit`: captures -> observations -> problem -> solution -> result.yaml + calibrated.urdf."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.errors import WolfcalError
+from wolfcal.fit.problem import Problem
+from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
+from wolfcal.fit.solver import Solution, solve
+from wolfcal.io.reader import read_captures
+from wolfcal.io.samples import Sample
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
+from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.robot.urdf_writer import write_calibrated_urdf
+from wolfcal.vision.observe import detect_observations
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    free: str = "camera"
+    side: str = "both"
+    fix_tags: bool = False
+    huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
+    outlier_floor_px: float = 1.0
+
+
+@dataclass
+class Fit:
+    robot: Robot
+    obs: Observations
+    tag_ids: list[int]
+    params: ParameterSet
+    problem: Problem
+    solution: Solution
+
+    @property
+    def corrections(self) -> Corrections:
+        return self.params.corrections(self.solution.values)
+
+
+def minimum_samples(n_params: int) -> int:
+    """Samples needed for a free-parameter set: each tag view gives 8 numbers; ask for twice the unknowns."""
+    return max(3, -(-2 * n_params // 8))
+
+
+def fit_observations(
+    robot: Robot, obs: Observations, options: FitOptions, say: Callable[[str], None] | None = None
+) -> Fit:
+    """Choose the free parameters for the observed tags, check there is enough data, solve."""
+    tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
+    if not tag_ids:
+        raise WolfcalError(
+            f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
+        )
+    if set(tag_ids) != set(obs.observed_tag_ids):
+        obs = obs.only_tags(tag_ids)
+    params = build_parameter_set(robot, options.free, tag_ids, options.side, options.fix_tags)
+    needed = minimum_samples(len(params))
+    if obs.n_samples < needed:
+        raise WolfcalError(
+            f"too few samples for the free parameters: {obs.n_samples} sample(s) with tags for {len(params)} free "
+            f"parameters (--free {options.free}); capture at least {needed}, or free fewer parameters"
+        )
+    priors = robot.config.priors
+    problem = Problem(
+        robot, obs, params, tag_ids, Corrections(), priors.pixel_noise, priors.encoder_noise, options.huber_k
+    )
+    solution = solve(problem, outlier_floor_px=options.outlier_floor_px, progress=say)
+    return Fit(robot, obs, tag_ids, params, problem, solution)
+
+
+def load_samples(
+    robot: Robot, captures: list[Path], intrinsics: Path | None
+) -> tuple[list[Sample], list[str]]:
+    camera = load_camera_info(intrinsics) if intrinsics else None
+    loaded = read_captures(captures, robot.config, camera)
+    samples = [s for c in loaded for s in c.samples]
+    notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
+    return samples, notes
+
+
+def run_fit(
+    captures: list[Path],
+    robot_path: Path,
+    out_dir: Path,
+    options: FitOptions,
+    intrinsics: Path | None = None,
+    say: Callable[[str], None] = print,
+) -> dict:
+    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml."""
+    robot = load_robot(robot_path)
+    samples, warnings = load_samples(robot, captures, intrinsics)
+    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+    obs, detect_warnings = detect_observations(samples, robot)
+    warnings += detect_warnings
+    say(f"{obs.n_samples} sample(s) with tags, {len(obs.uv)} corners; fitting --free {options.free} ...")
+    fit = fit_observations(robot, obs, options, say)
+    data = result_dict(
+        robot_path=robot.config.path,
+        urdf_path=robot.config.urdf,
+        captures=captures,
+        intrinsics=intrinsics,
+        preset=options.free,
+        side=options.side,
+        fix_tags=options.fix_tags,
+        tag_ids=fit.tag_ids,
+        params=fit.params,
+        solution=fit.solution,
+        obs=fit.obs,
+        corrections=fit.corrections,
+        huber_k=options.huber_k,
+        warnings=warnings,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_result(out_dir / "result.yaml", data)
+    write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+    for line in summary_lines(data):
+        say(line)
+    for line in explain(fit.params, fit.solution) + warnings:
+        say(f"note: {line}")
+    say(f"wrote {out_dir / 'result.yaml'} and {out_dir / 'calibrated.urdf'}")
+    return data

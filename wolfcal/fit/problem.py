@@ -1,0 +1,119 @@
+"""The estimation problem: pixel residuals of tag corners plus Gaussian priors, in normalised units.
+
+Unknowns are z = values / prior_sigma, so the prior residual is z itself. Data residual per corner and axis:
+r = project(K, D, T_camera_tag(q_s + offsets) @ p_corner) - u_detected [px].
+
+Noise model: the corners of one sample share the error of that sample's joint readings (encoder quantisation moves
+the whole tag), so each sample's residuals have covariance C_s = sigma_px^2 I + sigma_q^2 A_s A_s^T with
+A_s = d(uv_s)/d(q_s). Residuals are whitened by a block-diagonal W (W_s = chol(C_s)^-1), built once per solver
+round at the current estimate, then passed through a Huber-shaped function so a misdetected corner cannot drag the
+solution while priors stay purely quadratic. Everything is vectorised over corners; the only Python loops are over
+joints (inside FK and for A) and over samples when W is rebuilt, never inside the residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse
+
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.parameters import ParameterSet
+from wolfcal.robot.robot import Robot
+from wolfcal.vision.tags import tag_corners
+
+BEHIND_CAMERA_PX = 1e4  # residual given to a corner that a candidate model puts behind the camera
+JOINT_STEP = 1e-6  # finite-difference step for d(uv)/d(q) [rad]
+
+
+def huber_sqrt(r: np.ndarray, k: float) -> np.ndarray:
+    """Residual transform whose square is the Huber loss: r for |r| <= k, sign(r) sqrt(2k|r| - k^2) beyond."""
+    a = np.abs(r)
+    return np.where(a <= k, r, np.sign(r) * np.sqrt(np.maximum(2.0 * k * a - k * k, 0.0)))
+
+
+@dataclass
+class Problem:
+    robot: Robot
+    obs: Observations
+    params: ParameterSet
+    tag_ids: list[int]  # tags whose observations are used, in column order of T_camera_tag
+    base: Corrections  # known corrections held fixed (e.g. none)
+    sigma_px: float = 0.2  # corner noise per axis [px]
+    sigma_q: float = 0.00044  # joint reading noise [rad]
+    huber_k: float = 3.0  # robust threshold in whitened units (standard deviations)
+    weights: scipy.sparse.csr_matrix | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        column = {t: i for i, t in enumerate(self.tag_ids)}
+        self.tag_col = np.array([column[int(t)] for t in self.obs.tag_ids], dtype=int)
+        corners = np.stack([tag_corners(self.robot.config.tag(t).size) for t in self.tag_ids])
+        self.p_tag = corners[self.tag_col, self.obs.corner_index]  # (M, 3) corner in its tag frame [m]
+        self.q = self.obs.q_measured
+        self.excluded = np.zeros(self.obs.n_samples, dtype=bool)
+        self.update_weights(np.zeros(len(self.params)))
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        return np.asarray(z) * self.params.prior_sigmas
+
+    def corrections(self, z: np.ndarray) -> Corrections:
+        return self.params.corrections(self.values(z), self.base)
+
+    def predict(self, z: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
+        """Predicted pixel positions (M, 2) of the observed corners (NaN behind the camera)."""
+        _, T_camera_tag = self.robot.camera_and_tag_poses(
+            self.q if q is None else q, self.tag_ids, self.corrections(z)
+        )
+        T = T_camera_tag[self.obs.sample_index, self.tag_col]  # (M, 4, 4)
+        p_camera = np.einsum("mij,mj->mi", T[:, :3, :3], self.p_tag) + T[:, :3, 3]
+        return self.obs.camera.project(p_camera)
+
+    def pixel_residuals(self, z: np.ndarray) -> np.ndarray:
+        """(M, 2) predicted minus detected [px]; corners behind the camera get a large finite value."""
+        r = self.predict(z) - self.obs.uv
+        return np.where(np.isfinite(r), r, BEHIND_CAMERA_PX)
+
+    def joint_sensitivity(self, z: np.ndarray) -> np.ndarray:
+        """(M, 2, J) d(uv)/d(q) of every corner with respect to its sample's joint readings [px/rad]."""
+        uv0 = self.predict(z)
+        columns = []
+        for j in range(self.q.shape[1]):
+            q = self.q.copy()
+            q[:, j] += JOINT_STEP
+            columns.append((self.predict(z, q) - uv0) / JOINT_STEP)
+        return np.nan_to_num(np.stack(columns, axis=-1))
+
+    def update_weights(self, z: np.ndarray) -> None:
+        """Rebuild the whitening matrix at z for the current noise levels; excluded samples get zero rows."""
+        A = self.joint_sensitivity(z)
+        rows, cols, vals = [], [], []
+        for s in range(self.obs.n_samples):
+            if self.excluded[s]:
+                continue
+            corners = np.flatnonzero(self.obs.sample_index == s)
+            if corners.size == 0:
+                continue
+            A_s = A[corners].reshape(-1, A.shape[-1])  # (2c, J), rows ordered u0 v0 u1 v1 ...
+            C = self.sigma_px**2 * np.eye(len(A_s)) + self.sigma_q**2 * (A_s @ A_s.T)
+            W_s = np.linalg.inv(np.linalg.cholesky(C))
+            index = np.stack([2 * corners, 2 * corners + 1], axis=1).ravel()
+            rows.append(np.repeat(index, len(index)))
+            cols.append(np.tile(index, len(index)))
+            vals.append(W_s.ravel())
+        n = 2 * len(self.obs.uv)
+        if rows:
+            self.weights = scipy.sparse.csr_matrix(
+                (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+            )
+        else:
+            self.weights = scipy.sparse.csr_matrix((n, n))
+
+    def whitened(self, z: np.ndarray) -> np.ndarray:
+        """Whitened data residuals (2M,) without the robust function (zero for excluded samples)."""
+        return self.weights @ self.pixel_residuals(z).ravel()
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        """Robust whitened data residuals followed by the prior residuals z (unit-variance Gaussian priors)."""
+        return np.concatenate([huber_sqrt(self.whitened(z), self.huber_k), np.asarray(z, dtype=float)])

@@ -1,0 +1,153 @@
+"""Solve the problem and report how far to trust each number.
+
+Rounds: robust trf solve -> flag outlier samples (per-sample RMS far above the others; they get zero weight) ->
+rescale the noise model by the variance factor of the whitened inlier residuals -> rebuild the weights at the new
+estimate; until the outlier set and the noise level settle. Then the uncertainty at the solution: posterior
+covariance (J^T J)^-1 in prior-normalised units, so each parameter's share of information from the data is
+1 - posterior variance / prior variance; correlated pairs; condition number of the column-scaled data Jacobian
+(calibration practice: below 100).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from wolfcal.fit.problem import Problem
+
+MIN_SIGMA_PX = 0.02  # floor of the pixel noise (keeps reported std honest on perfect data)
+CORRELATION_LIMIT = 0.9
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass
+class Solution:
+    values: np.ndarray  # (P,) [SI]
+    std: np.ndarray  # (P,) [SI]
+    covariance: np.ndarray  # (P, P) [SI]
+    correlation: np.ndarray  # (P, P)
+    data_share: np.ndarray  # (P,) in [0, 1]: information from the data rather than the prior
+    condition_number: float
+    sigma_px: float  # corner noise per axis of the final noise model [px]
+    sigma_q: float  # joint reading noise of the final noise model [rad]
+    sample_rms_before: np.ndarray  # (S,) [px] per-axis RMS with the nominal model
+    sample_rms_after: np.ndarray  # (S,)
+    outlier_samples: np.ndarray  # (S,) bool
+    rms_before_px: float  # inlier corners, per axis, nominal model
+    rms_after_px: float
+    max_after_px: float
+    n_corners: int
+    evaluations: int
+    converged: bool
+
+    def correlated_pairs(self, names: list[str], limit: float = CORRELATION_LIMIT) -> list[tuple[str, str, float]]:
+        i, j = np.triu_indices(len(names), k=1)
+        strong = np.abs(self.correlation[i, j]) > limit
+        pairs = [(names[a], names[b], float(self.correlation[a, b])) for a, b in zip(i[strong], j[strong])]
+        return sorted(pairs, key=lambda p: -abs(p[2]))
+
+
+def per_sample_rms(problem: Problem, residuals_px: np.ndarray) -> np.ndarray:
+    """Per-axis RMS [px] of each sample's corner residuals (NaN for samples with no corner)."""
+    s = problem.obs.sample_index
+    sq = np.bincount(s, weights=np.sum(residuals_px**2, axis=1), minlength=problem.obs.n_samples)
+    count = np.bincount(s, minlength=problem.obs.n_samples) * 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(sq / count)
+
+
+def flag_outliers(sample_rms: np.ndarray, floor_px: float) -> np.ndarray:
+    """Samples whose RMS exceeds both `floor_px` and 4x the median sample RMS."""
+    finite = np.isfinite(sample_rms)
+    median = np.median(sample_rms[finite]) if np.any(finite) else 0.0
+    return finite & (sample_rms > max(floor_px, 4.0 * median))
+
+
+def variance_factor(problem: Problem, z: np.ndarray) -> float:
+    """Robust estimate of (residual scale / modelled scale)^2 from the whitened inlier residuals."""
+    w = problem.whitened(z)
+    rows = np.repeat(~problem.excluded[problem.obs.sample_index], 2)
+    w = w[rows]
+    if w.size <= len(z):
+        return 1.0
+    scale = MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - len(z)))
+    return float(scale**2)
+
+
+def central_jacobian(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    columns = []
+    for i in range(len(z)):
+        dz = np.zeros_like(z)
+        dz[i] = step
+        columns.append((fun(z + dz) - fun(z - dz)) / (2 * step))
+    return np.stack(columns, axis=1)
+
+
+def solve(
+    problem: Problem,
+    outlier_floor_px: float = 1.0,
+    max_rounds: int = 5,
+    progress: Callable[[str], None] | None = None,
+) -> Solution:
+    say = progress or (lambda _msg: None)
+    n_params = len(problem.params)
+    z = np.zeros(n_params)
+    r_before = problem.pixel_residuals(z)
+    rms_before_samples = per_sample_rms(problem, r_before)
+    evaluations, converged = 0, False
+    for round_index in range(max_rounds):
+        result = least_squares(problem.residuals, z, method="trf", x_scale=1.0, max_nfev=100 * (n_params + 1))
+        z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
+        outliers = flag_outliers(per_sample_rms(problem, problem.pixel_residuals(z)), outlier_floor_px)
+        changed = not np.array_equal(outliers, problem.excluded)
+        problem.excluded = outliers
+        problem.update_weights(z)
+        factor = variance_factor(problem, z)
+        scale = np.sqrt(factor)
+        problem.sigma_px = max(problem.sigma_px * scale, MIN_SIGMA_PX)
+        problem.sigma_q *= scale
+        problem.update_weights(z)
+        say(
+            f"round {round_index + 1}: {int(outliers.sum())} outlier sample(s), noise model {problem.sigma_px:.3f} px "
+            f"+ {problem.sigma_q * 1000:.3f} mrad per joint (variance factor {factor:.2f})"
+        )
+        if not changed and abs(factor - 1.0) < 0.1:
+            break
+    result = least_squares(problem.residuals, z, method="trf", x_scale=1.0)
+    z, evaluations = result.x, evaluations + result.nfev
+    J = central_jacobian(problem.residuals, z)
+    n_data = J.shape[0] - n_params
+    cov_z = np.linalg.pinv(J.T @ J)
+    d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
+    sig = problem.params.prior_sigmas
+    J_data = J[:n_data]
+    norms = np.linalg.norm(J_data, axis=0)
+    if np.any(norms < 1e-12):
+        condition = float("inf")
+    else:
+        s = np.linalg.svd(J_data / norms, compute_uv=False)
+        condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    inlier = ~problem.excluded[problem.obs.sample_index]
+    r_after = problem.pixel_residuals(z)
+    return Solution(
+        values=z * sig,
+        std=d * sig,
+        covariance=cov_z * np.outer(sig, sig),
+        correlation=cov_z / np.outer(d, d),
+        data_share=np.clip(1.0 - np.diag(cov_z), 0.0, 1.0),
+        condition_number=condition,
+        sigma_px=problem.sigma_px,
+        sigma_q=problem.sigma_q,
+        sample_rms_before=rms_before_samples,
+        sample_rms_after=per_sample_rms(problem, r_after),
+        outlier_samples=problem.excluded.copy(),
+        rms_before_px=float(np.sqrt(np.mean(r_before[inlier] ** 2))),
+        rms_after_px=float(np.sqrt(np.mean(r_after[inlier] ** 2))),
+        max_after_px=float(np.max(np.abs(r_after[inlier]))) if inlier.any() else 0.0,
+        n_corners=int(inlier.sum()),
+        evaluations=evaluations,
+        converged=converged and result.status > 0,
+    )

@@ -1,0 +1,194 @@
+"""URDF -> kinematic tree with forward kinematics vectorised over samples.
+
+Joint values follow the URDF: revolute/continuous rotate about `axis` [rad], prismatic translate along it [m];
+T_parent_child(q) = origin @ Delta(frame correction) @ Motion(axis, q + offset). Poses returned are `T_base_link`
+(N, 4, 4) for the chosen base link. Corrections (encoder offsets, frame corrections, tag mounts) come as a
+`Corrections` object, so the same code serves the nominal model, a fit in progress and a simulator's truth.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yourdfpy
+
+from wolfcal.errors import WolfcalError
+from wolfcal.geometry import (
+    axis_angle_matrix,
+    invert_transform,
+    make_transform,
+    transform_from_twist_params,
+)
+from wolfcal.robot.corrections import Corrections
+
+ACTUATED_TYPES = ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class JointModel:
+    name: str
+    type: str  # 'fixed' | 'revolute' | 'continuous' | 'prismatic'
+    parent: str
+    child: str
+    T_parent_origin: np.ndarray  # (4, 4) the URDF <origin>
+    axis: np.ndarray  # (3,) unit axis in the joint frame
+    lower: float = -np.inf
+    upper: float = np.inf
+    mimic: tuple[str, float, float] | None = None  # (master joint, multiplier, offset)
+
+    @property
+    def actuated(self) -> bool:
+        return self.type in ACTUATED_TYPES and self.mimic is None
+
+
+class KinematicModel:
+    """A tree of joints; `actuated_joint_names` fixes the column order of joint-value arrays."""
+
+    def __init__(self, joints: Iterable[JointModel], name: str = "robot", source: str = "URDF"):
+        self.name = name
+        self.source = source
+        self.joints: dict[str, JointModel] = {j.name: j for j in joints}
+        self.joint_to_child: dict[str, JointModel] = {}
+        for joint in self.joints.values():
+            if joint.child in self.joint_to_child:
+                raise WolfcalError(f"{source}: link '{joint.child}' has two parent joints")
+            self.joint_to_child[joint.child] = joint
+        parents = {j.parent for j in self.joints.values()}
+        children = set(self.joint_to_child)
+        roots = sorted(parents - children) or sorted(children)[:1]
+        if len(roots) != 1:
+            raise WolfcalError(f"{source}: the URDF must form one tree, found roots {', '.join(roots)}")
+        self.root = roots[0]
+        self.links = parents | children
+        self.actuated_joint_names = [j.name for j in self.joints.values() if j.actuated]
+        self._column = {n: i for i, n in enumerate(self.actuated_joint_names)}
+
+    @classmethod
+    def from_urdf(cls, path: str | Path) -> KinematicModel:
+        """Parse a URDF with yourdfpy (meshes are not loaded)."""
+        path = Path(path)
+        if not path.is_file():
+            raise WolfcalError(f"{path}: URDF not found")
+        try:
+            urdf = yourdfpy.URDF.load(
+                str(path), load_meshes=False, build_scene_graph=False, build_collision_scene_graph=False
+            )
+        except Exception as exc:  # yourdfpy raises many types for malformed XML
+            raise WolfcalError(f"{path}: cannot read the URDF ({exc})") from None
+        joints = []
+        for j in urdf.robot.joints:
+            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+            axis = np.array([1.0, 0.0, 0.0]) if j.axis is None else np.asarray(j.axis, dtype=float)
+            norm = np.linalg.norm(axis)
+            if j.type in ACTUATED_TYPES and norm < 1e-12:
+                raise WolfcalError(f"{path}: joint '{j.name}' has a zero axis")
+            lower, upper = -np.inf, np.inf
+            if j.type in ("revolute", "prismatic") and j.limit is not None:
+                lower = -np.inf if j.limit.lower is None else float(j.limit.lower)
+                upper = np.inf if j.limit.upper is None else float(j.limit.upper)
+            mimic = None
+            if j.mimic is not None:
+                mimic = (j.mimic.joint, float(j.mimic.multiplier or 1.0), float(j.mimic.offset or 0.0))
+            joints.append(
+                JointModel(j.name, j.type, j.parent, j.child, origin, axis / max(norm, 1e-12), lower, upper, mimic)
+            )
+        if not joints:
+            raise WolfcalError(f"{path}: the URDF has no joints")
+        return cls(joints, name=urdf.robot.name, source=str(path))
+
+    # --- structure ------------------------------------------------------------------------------------------
+    def require_link(self, link: str, where: str) -> None:
+        if link not in self.links:
+            raise WolfcalError(f"{where}: link/frame '{link}' is not in the URDF {self.source}")
+
+    def path_from_root(self, link: str) -> list[JointModel]:
+        """Joints from the root down to `link`, root first."""
+        self.require_link(link, self.source)
+        path = []
+        while link != self.root:
+            joint = self.joint_to_child[link]
+            path.append(joint)
+            link = joint.parent
+        return path[::-1]
+
+    def joints_between(self, link_a: str, link_b: str) -> list[JointModel]:
+        """Joints on the path between two links (in no particular direction), excluding the shared part."""
+        path_a, path_b = self.path_from_root(link_a), self.path_from_root(link_b)
+        common = 0
+        while common < min(len(path_a), len(path_b)) and path_a[common].name == path_b[common].name:
+            common += 1
+        return path_a[common:][::-1] + path_b[common:]
+
+    def parent_joint(self, link: str) -> JointModel:
+        self.require_link(link, self.source)
+        if link not in self.joint_to_child:
+            raise WolfcalError(f"{self.source}: link '{link}' is the root and has no parent joint")
+        return self.joint_to_child[link]
+
+    def column(self, joint: str) -> int:
+        return self._column[joint]
+
+    # --- forward kinematics -------------------------------------------------------------------------------
+    def joint_values(self, joint: JointModel, q: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """(N,) model-side value of one joint from measured q (N, J) and offsets (J,)."""
+        if joint.mimic is not None:
+            master, multiplier, offset = joint.mimic
+            col = self._column[master]
+            return multiplier * (q[:, col] + offsets[col]) + offset
+        col = self._column[joint.name]
+        return q[:, col] + offsets[col]
+
+    def link_poses(
+        self,
+        q: np.ndarray,
+        links: Iterable[str],
+        corrections: Corrections | None = None,
+        base: str | None = None,
+    ) -> dict[str, np.ndarray]:
+        """T_base_link (N, 4, 4) for each requested link, from measured joint values q (N, J) [rad or m]."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if q.shape[1] != len(self.actuated_joint_names):
+            raise ValueError(f"q has {q.shape[1]} columns, the model has {len(self.actuated_joint_names)} joints")
+        corrections = corrections or Corrections()
+        offsets = corrections.offset_vector(self.actuated_joint_names)
+        n = q.shape[0]
+        links = list(links)
+        base = base or self.root
+        cache: dict[str, np.ndarray] = {self.root: np.broadcast_to(np.eye(4), (n, 4, 4))}
+
+        def pose(link: str) -> np.ndarray:
+            if link in cache:
+                return cache[link]
+            for joint in self.path_from_root(link):
+                if joint.child in cache:
+                    continue
+                T = cache[joint.parent] @ self._joint_transform(joint, q, offsets, corrections)
+                cache[joint.child] = T
+            return cache[link]
+
+        T_root_base = pose(base)
+        T_base_root = None if base == self.root else invert_transform(T_root_base)
+        out = {}
+        for link in links:
+            T = pose(link)
+            out[link] = T if T_base_root is None else T_base_root @ T
+        return out
+
+    def _joint_transform(
+        self, joint: JointModel, q: np.ndarray, offsets: np.ndarray, corrections: Corrections
+    ) -> np.ndarray:
+        origin = joint.T_parent_origin
+        delta = corrections.frames.get(joint.name)
+        if delta is not None:
+            origin = origin @ transform_from_twist_params(delta)
+        if joint.type == "fixed" or joint.type not in ACTUATED_TYPES:
+            return np.broadcast_to(origin, (q.shape[0], 4, 4))
+        values = self.joint_values(joint, q, offsets)
+        if joint.type == "prismatic":
+            motion = make_transform(np.eye(3), values[:, None] * joint.axis)
+        else:
+            motion = make_transform(axis_angle_matrix(joint.axis, values), np.zeros(3))
+        return origin @ motion

@@ -1,0 +1,123 @@
+"""Free-parameter sets: names, units, priors, and the presets `camera`, `head_camera`, `leg`.
+
+A parameter is a deviation from the nominal model (nominal value 0). Names follow DESIGN.md and mean the same
+everywhere: `<joint>.offset` (encoder offset, rad), `<joint>.x|y|z|rx|ry|rz` (frame correction of a joint origin
+in its child frame, m / rad), `tag<id>.x|...|rz` (tag mount correction in the tag frame, m / rad).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.errors import WolfcalError
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+
+COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+PRESETS = ("camera", "head_camera", "leg")
+SIDES = ("right", "left", "both")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    kind: str  # 'offset' | 'frame' | 'tag'
+    target: str  # joint name, or tag id as text
+    component: int  # index in (x, y, z, rx, ry, rz); 0 for offsets
+    unit: str  # 'rad' | 'm'
+    prior_sigma: float  # standard deviation of the Gaussian prior around 0, in `unit`
+
+
+class ParameterSet:
+    """An ordered list of free parameters; maps value vectors to `Corrections`."""
+
+    def __init__(self, parameters: list[Parameter]):
+        self.parameters = parameters
+        self.names = [p.name for p in parameters]
+        self.prior_sigmas = np.array([p.prior_sigma for p in parameters], dtype=float)
+
+    def __len__(self) -> int:
+        return len(self.parameters)
+
+    def corrections(self, values: np.ndarray, base: Corrections | None = None) -> Corrections:
+        """Corrections with these parameter values [SI], on top of `base` (fixed, known corrections)."""
+        out = Corrections(
+            offsets=dict(base.offsets) if base else {},
+            frames={k: v.copy() for k, v in base.frames.items()} if base else {},
+            tags={k: v.copy() for k, v in base.tags.items()} if base else {},
+        )
+        for p, value in zip(self.parameters, np.asarray(values, dtype=float)):
+            if p.kind == "offset":
+                out.offsets[p.target] = out.offsets.get(p.target, 0.0) + float(value)
+            else:
+                store = out.frames if p.kind == "frame" else out.tags
+                key = p.target if p.kind == "frame" else int(p.target)
+                vec = store.setdefault(key, np.zeros(6))
+                vec[p.component] += value
+        return out
+
+    def values_from(self, corrections: Corrections) -> np.ndarray:
+        """The parameter values a `Corrections` object holds (e.g. a simulator's truth) [SI]."""
+        values = []
+        for p in self.parameters:
+            if p.kind == "offset":
+                values.append(corrections.offsets.get(p.target, 0.0))
+            else:
+                store = corrections.frames if p.kind == "frame" else corrections.tags
+                key = p.target if p.kind == "frame" else int(p.target)
+                values.append(float(store[key][p.component]) if key in store else 0.0)
+        return np.array(values, dtype=float)
+
+
+def frame_parameters(prefix: str, kind: str, target: str, sigma_m: float, sigma_rad: float) -> list[Parameter]:
+    return [
+        Parameter(f"{prefix}.{c}", kind, target, i, "m" if i < 3 else "rad", sigma_m if i < 3 else sigma_rad)
+        for i, c in enumerate(COMPONENTS)
+    ]
+
+
+def offset_parameter(joint: str, sigma: float) -> Parameter:
+    return Parameter(f"{joint}.offset", "offset", joint, 0, "rad", sigma)
+
+
+def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side: str) -> list[int]:
+    """The observed tags whose observations the preset uses (the leg preset keeps the chosen side's tags)."""
+    if preset != "leg" or side == "both":
+        return list(observed_tag_ids)
+    return [t for t in observed_tag_ids if robot.config.tag(t).side in (side, None)]
+
+
+def build_parameter_set(
+    robot: Robot, preset: str, tag_ids: list[int], side: str = "both", fix_tags: bool = False
+) -> ParameterSet:
+    """Free parameters of a preset for the tags used.
+
+    camera: camera frame correction + mounts of the tags used; head_camera: + offsets of the joints between base
+    and camera; leg: + offsets of the joints between base and each used tag's link (the chain camera -> tag).
+    """
+    if preset not in PRESETS:
+        raise WolfcalError(f"--free {preset!r} is not a preset; use one of {', '.join(PRESETS)}")
+    if side not in SIDES:
+        raise WolfcalError(f"--side {side!r} must be one of {', '.join(SIDES)}")
+    priors = robot.config.priors
+    model = robot.model
+    base = robot.config.base_link
+    camera_joint = robot.camera_joint
+    params = frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation, priors.camera_rotation)
+    joints: list[str] = []
+    if preset in ("head_camera", "leg"):
+        joints += [j.name for j in model.joints_between(base, robot.config.camera.frame) if j.actuated]
+    if preset == "leg":
+        for tag_id in tag_ids:
+            joints += [j.name for j in model.joints_between(base, robot.config.tag(tag_id).link) if j.actuated]
+    seen: set[str] = set()
+    for joint in joints:
+        if joint not in seen:
+            seen.add(joint)
+            params.append(offset_parameter(joint, priors.offset))
+    if not fix_tags:
+        for tag_id in tag_ids:
+            params += frame_parameters(f"tag{tag_id}", "tag", str(tag_id), priors.tag_translation, priors.tag_rotation)
+    return ParameterSet(params)

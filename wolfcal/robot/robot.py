@@ -1,0 +1,76 @@
+"""A robot = its config + its kinematic model, cross-checked; tag and camera poses in the base frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.config import RobotConfig, load_robot_config
+from wolfcal.errors import WolfcalError
+from wolfcal.geometry import invert_transform, transform_from_twist_params, transform_from_xyz_rpy
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.kinematics import KinematicModel
+
+
+@dataclass
+class Robot:
+    config: RobotConfig
+    model: KinematicModel
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self.model.actuated_joint_names
+
+    @property
+    def camera_joint(self) -> str:
+        """The joint whose origin places the camera frame: its frame correction is the camera extrinsic."""
+        return self.model.parent_joint(self.config.camera.frame).name
+
+    def T_link_tag(self, tag_id: int, corrections: Corrections | None = None) -> np.ndarray:
+        """(4, 4) mount of a tag in its link, with its correction applied."""
+        tag = self.config.tag(tag_id)
+        T = transform_from_xyz_rpy(tag.xyz, tag.rpy)
+        if corrections is not None and tag_id in corrections.tags:
+            T = T @ transform_from_twist_params(corrections.tags[tag_id])
+        return T
+
+    def camera_and_tag_poses(
+        self, q: np.ndarray, tag_ids: list[int], corrections: Corrections | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """T_base_camera (N, 4, 4) and T_camera_tag (N, len(tag_ids), 4, 4) from measured q (N, J)."""
+        links = [self.config.camera.frame] + [self.config.tag(t).link for t in tag_ids]
+        poses = self.model.link_poses(q, links, corrections, base=self.config.base_link)
+        T_base_camera = poses[self.config.camera.frame]
+        T_camera_base = invert_transform(T_base_camera)
+        T_camera_tag = np.stack(
+            [T_camera_base @ poses[self.config.tag(t).link] @ self.T_link_tag(t, corrections) for t in tag_ids],
+            axis=1,
+        ) if tag_ids else np.zeros((len(T_base_camera), 0, 4, 4))
+        return T_base_camera, T_camera_tag
+
+
+def load_robot(config_path: str | Path) -> Robot:
+    """Load a robot config and its URDF; every link and joint the config names must exist in the URDF."""
+    config = load_robot_config(config_path)
+    model = KinematicModel.from_urdf(config.urdf)
+    where = str(config.path)
+    if config.base_link not in model.links:
+        raise WolfcalError(f"{where}: 'base_link' {config.base_link!r} is not a link of {config.urdf}")
+    if config.camera.frame not in model.links:
+        raise WolfcalError(f"{where}: 'camera.frame' {config.camera.frame!r} is not a link/frame of {config.urdf}")
+    if config.camera.frame == model.root:
+        raise WolfcalError(f"{where}: 'camera.frame' must not be the URDF's root link")
+    for i, tag in enumerate(config.tags):
+        if tag.link not in model.links:
+            raise WolfcalError(
+                f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}"
+            )
+    if config.servos is not None:
+        unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
+        if unknown:
+            raise WolfcalError(
+                f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of {config.urdf}"
+            )
+    return Robot(config=config, model=model)

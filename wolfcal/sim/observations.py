@@ -1,0 +1,42 @@
+"""Observations without images: tag corners projected at the true kinematics plus Gaussian pixel noise.
+
+For testing and benchmarking the estimator apart from detection.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+from wolfcal.sim.encoders import encoder_readings
+from wolfcal.vision.tags import tag_corners
+
+
+def synthetic_observations(
+    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, visible: np.ndarray,
+    noise_px: float, rng: np.random.Generator,
+) -> Observations:
+    """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids) seen at the true kinematics."""
+    tag_ids = robot.config.tag_ids
+    frames = Corrections(frames=truth.frames, tags=truth.tags)
+    _, T_camera_tag = robot.camera_and_tag_poses(q_true, tag_ids, frames)
+    s_idx, t_idx = np.nonzero(visible)
+    corners = np.stack([tag_corners(robot.config.tag(t).size) for t in tag_ids])  # (T, 4, 3)
+    T = T_camera_tag[s_idx, t_idx]  # (V, 4, 4)
+    p = np.einsum("vij,vcj->vci", T[:, :3, :3], corners[t_idx]) + T[:, None, :3, 3]
+    uv = camera.project(p) + rng.normal(0.0, noise_px, size=p.shape[:2] + (2,))
+    n = len(q_true)
+    return Observations(
+        joint_names=list(robot.joint_names),
+        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        stamps_ns=np.arange(n, dtype=np.int64),
+        sources=["synthetic"] * n,
+        camera=camera,
+        sample_index=np.repeat(s_idx, 4),
+        tag_ids=np.repeat(np.array(tag_ids)[t_idx], 4),
+        corner_index=np.tile(np.arange(4), len(s_idx)),
+        uv=uv.reshape(-1, 2),
+    )

@@ -1,0 +1,96 @@
+"""Random reachable robot poses in which the head camera sees at least one tag well.
+
+Joint values are true angles [rad]. Candidates are drawn in batches (vectorised FK and projection) and kept when a
+tag lies fully inside the image with a margin, faces the camera (less than 60 deg off the viewing ray) and
+appears large enough to detect.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+from wolfcal.vision.tags import tag_corners
+
+# Sampling ranges of the Wolfgang joints for calibration poses (true angles, rad); other joints stay at 0 unless
+# their limits exclude it. Joints not listed here and not in the robot's URDF are ignored.
+WOLFGANG_RANGES = {
+    "HeadPan": (-0.9, 0.9),
+    "HeadTilt": (-1.7, -0.5),
+    "RHipYaw": (-0.4, 0.4),
+    "LHipYaw": (-0.4, 0.4),
+    "RHipRoll": (-0.35, 0.35),
+    "LHipRoll": (-0.35, 0.35),
+    "RHipPitch": (-1.2, 0.4),
+    "LHipPitch": (-0.4, 1.2),
+    "RKnee": (-1.8, -0.26),
+    "LKnee": (0.26, 1.8),
+    "RAnklePitch": (-0.37, 1.0),
+    "LAnklePitch": (-1.0, 0.37),
+    "RAnkleRoll": (-0.35, 0.35),
+    "LAnkleRoll": (-0.35, 0.35),
+}
+
+
+def sampling_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) per actuated joint: the calibration range intersected with the URDF limits."""
+    lo, hi = [], []
+    for name in robot.joint_names:
+        joint = robot.model.joints[name]
+        a, b = WOLFGANG_RANGES.get(name, (0.0, 0.0))
+        a, b = max(a, joint.lower), min(b, joint.upper)
+        if a > b:  # range and limits disjoint: sit at the limit nearest to 0
+            a = b = float(np.clip(0.0, joint.lower, joint.upper))
+        lo.append(a)
+        hi.append(b)
+    return np.array(lo), np.array(hi)
+
+
+def tag_visibility(
+    robot: Robot, camera: CameraModel, q_true: np.ndarray, truth: Corrections, tag_ids: list[int],
+    margin_px: float, min_size_px: float, max_angle_rad: float = np.deg2rad(60.0),
+) -> np.ndarray:
+    """(N, T) bool: tag t is well visible in pose n (q_true are true angles: no offsets applied)."""
+    true_frames = Corrections(frames=truth.frames, tags=truth.tags)
+    _, T_camera_tag = robot.camera_and_tag_poses(q_true, tag_ids, true_frames)
+    sizes = np.array([robot.config.tag(t).size for t in tag_ids])
+    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
+    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
+    uv = camera.project(p)  # (N, T, 4, 2)
+    inside = np.all(camera.in_image(uv, margin_px), axis=-1)
+    edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
+    big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px
+    normal = T_camera_tag[..., :3, 2]
+    to_camera = -T_camera_tag[..., :3, 3]
+    cos = np.sum(normal * to_camera, axis=-1) / np.linalg.norm(to_camera, axis=-1)
+    return inside & big & (cos > np.cos(max_angle_rad))
+
+
+def random_visible_poses(
+    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
+    tag_ids: list[int] | None = None, margin_px: float | None = None, min_size_px: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """n true joint configurations (n, J) and their visibility (n, T) of `tag_ids` (default: all tags)."""
+    tag_ids = tag_ids or robot.config.tag_ids
+    margin_px = 0.03 * camera.width if margin_px is None else margin_px
+    min_size_px = 0.02 * camera.width if min_size_px is None else min_size_px
+    lo, hi = sampling_bounds(robot)
+    kept_q, kept_vis = [], []
+    for _ in range(200):
+        q = rng.uniform(lo, hi, size=(4000, len(lo)))
+        vis = tag_visibility(robot, camera, q, truth, tag_ids, margin_px, min_size_px)
+        good = np.any(vis, axis=1)
+        kept_q.append(q[good])
+        kept_vis.append(vis[good])
+        if sum(len(k) for k in kept_q) >= n:
+            break
+    q, vis = np.concatenate(kept_q)[:n], np.concatenate(kept_vis)[:n]
+    if len(q) < n:
+        raise WolfcalError(
+            f"the simulator found only {len(q)} of {n} poses with a tag in view; check the tags and camera of "
+            f"{robot.config.path}"
+        )
+    return q, vis

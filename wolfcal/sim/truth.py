@@ -1,0 +1,50 @@
+"""Random ground truth for simulations: the corrections a real robot would hide from its nominal model."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+
+
+@dataclass(frozen=True)
+class TruthSpec:
+    """Standard deviations of the simulated errors (SI units); the camera also gets a systematic tilt."""
+
+    offset_rms: float = 0.025  # encoder offsets of the joints in `offset_joints` [rad]
+    offset_joints: tuple[str, ...] = ()  # which joints get an offset (empty: none)
+    camera_rotation: float = 0.03  # per axis [rad], on top of `camera_tilt`
+    camera_tilt: float = -0.065  # rotation about the optical x axis [rad] (hand-tuned values: -0.06 to -0.075)
+    camera_translation: float = 0.003  # per axis [m]
+    tag_translation: float = 0.001  # per axis [m]
+    tag_rotation: float = 0.01  # per axis [rad]
+
+
+def leg_and_head_joints(robot: Robot, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
+    """The actuated joints between base and camera and between base and each foot tag of the given sides."""
+    base = robot.config.base_link
+    links = [robot.config.camera.frame] + [t.link for t in robot.config.tags if t.side in sides]
+    joints: list[str] = []
+    for link in links:
+        for joint in robot.model.joints_between(base, link):
+            if joint.actuated and joint.name not in joints:
+                joints.append(joint.name)
+    return tuple(joints)
+
+
+def random_truth(robot: Robot, spec: TruthSpec, rng: np.random.Generator) -> Corrections:
+    camera = np.concatenate(
+        [rng.normal(0.0, spec.camera_translation, 3), rng.normal(0.0, spec.camera_rotation, 3)]
+    )
+    camera[3] += spec.camera_tilt
+    return Corrections(
+        offsets={j: float(rng.normal(0.0, spec.offset_rms)) for j in spec.offset_joints},
+        frames={robot.camera_joint: camera},
+        tags={
+            t.id: np.concatenate([rng.normal(0.0, spec.tag_translation, 3), rng.normal(0.0, spec.tag_rotation, 3)])
+            for t in robot.config.tags
+        },
+    )
