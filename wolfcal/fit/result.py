@@ -20,13 +20,32 @@ CONDITION_LIMIT = 100.0
 DATA_SHARE_LIMIT = 0.5
 
 
+def correlated_groups(names: list[str], pairs: list[tuple[str, str, float]]) -> list[list[str]]:
+    """Connected groups of parameters linked by strongly correlated pairs, in parameter order."""
+    group = {n: {n} for n in names}
+    for a, b, _ in pairs:
+        if group[a] is not group[b]:
+            merged = group[a] | group[b]
+            for n in merged:
+                group[n] = merged
+    seen, out = set(), []
+    for n in names:
+        if len(group[n]) > 1 and n not in seen:
+            seen |= group[n]
+            out.append([m for m in names if m in group[n]])
+    return out
+
+
 def explain(params: ParameterSet, solution: Solution) -> list[str]:
     """Plain sentences on what the data cannot tell apart and which values rest on the priors."""
     lines = []
-    for a, b, c in solution.correlated_pairs(params.names):
+    pairs = solution.correlated_pairs(params.names)
+    for members in correlated_groups(params.names, pairs):
+        strongest = max(abs(c) for a, b, c in pairs if a in members)
         lines.append(
-            f"{a} and {b} move together in these poses (correlation {c:+.2f}): the data cannot tell them apart; "
-            "their split comes from the priors. Add poses that move them differently, or fix one of them."
+            f"{', '.join(members)} move together in these poses (|correlation| up to {strongest:.2f}): the data "
+            "cannot tell them apart, so how the correction splits between them comes from the priors; the model "
+            "they give together is still determined. Add poses that move them differently, or fix some of them."
         )
     for name, share in zip(params.names, solution.data_share):
         if share < DATA_SHARE_LIMIT:
@@ -36,8 +55,8 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
             )
     if solution.condition_number > CONDITION_LIMIT:
         lines.append(
-            f"condition number {solution.condition_number:.0f} of the column-scaled Jacobian is above "
-            f"{CONDITION_LIMIT:.0f}: some parameter combinations are weakly observable in these poses."
+            f"condition number {solution.condition_number:.3g} of the column-scaled Jacobian is above "
+            f"{CONDITION_LIMIT:.0f}: some parameter combinations are weakly or not at all observable in these poses."
         )
     return lines
 
