@@ -80,6 +80,160 @@ def simulate(
     simulate_capture(robot, out, options, camera, say=typer.echo)
 
 
+@app.command()
+@friendly_errors
+def recover(
+    file: Path = typer.Argument(..., help="Capture that did not finish, e.g. x.mcap.partial."),  # noqa: B008
+    out: Path | None = typer.Option(  # noqa: B008
+        None, "--out", help="Where to write the rescued capture (default: FILE.recovered.mcap)."
+    ),
+) -> None:
+    """Rescue every complete sample of a capture whose recording stopped before it finished."""
+    from wolfcal.io.recover import recover_capture, recovered_path
+
+    target = out or recovered_path(file)
+    count = recover_capture(file, target)
+    typer.echo(f"rescued {count} sample(s) from {file} into {target}")
+
+
+@app.command()
+@friendly_errors
+def emulate(
+    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
+    fault: list[str] = typer.Option([], "--fault", help="KIND:ID[=VALUE][@SECONDS], KIND: no-answer, crc, "
+                                    "hw-error, missing, model. Repeatable."),
+    operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
+                                         "limp joints through (manual capture)."),
+    hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
+) -> None:
+    """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
+    from wolfcal.hardware.emulator import emulate as run
+
+    run(robot, truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
+
+
+@app.command()
+@friendly_errors
+def capture(
+    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
+    camera: str = typer.Option(..., "--camera", help="V4L index or /dev/video path, video file, image folder, "
+                               "or 'sim' (renders the robot served by `wolfcal emulate`)."),
+    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on)."),
+    manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
+    samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
+    out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
+    limp: str = typer.Option("head,legs", "--limp", help="Manual mode: groups (head, legs, arms, all) or "
+                             "joints to switch torque off."),
+    yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
+    exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
+    velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed [rad/s]."),
+    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default 4)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
+    min_sharpness: float = typer.Option(100.0, "--min-sharpness", help="Minimum variance of the Laplacian."),
+) -> None:
+    """Capture still poses (joint angles + image + camera info) into an MCAP file."""
+    from wolfcal.capture.gating import GateSettings
+    from wolfcal.capture.pipeline import CaptureOptions, run_capture
+
+    options = CaptureOptions(
+        robot=robot, out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples, limp=limp,
+        yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
+        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness),
+    )
+    ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
+    run_capture(options, ask=ask)
+
+
+@app.command()
+@friendly_errors
+def intrinsics(
+    inputs: list[str] = typer.Argument(None, help="Image files, globs, folders or video files."),
+    board: str = typer.Option(..., "--board", help="Inner corners COLSxROWS (OpenCV sample: 9x6)."),
+    square: float = typer.Option(..., "--square", help="Square edge [m]."),
+    out: Path = typer.Option(..., "--out", help="camera_info YAML to write."),
+    model: str = typer.Option("plumb_bob", "--model", help="plumb_bob | rational_polynomial | equidistant."),
+    charuco: str | None = typer.Option(None, "--charuco", help="ChArUco marker dictionary, e.g. 5X5_100."),
+    marker: float | None = typer.Option(None, "--marker", help="ChArUco marker edge [m] (0.75 square)."),
+    legacy: bool = typer.Option(False, "--legacy", help="ChArUco layout of OpenCV < 4.6 (older printouts)."),
+    camera: str | None = typer.Option(None, "--camera", help="Live camera: index (0) or device path."),
+    report: Path | None = typer.Option(None, "--report", help="Report folder (default: OUT_report)."),
+    save_frames: Path | None = typer.Option(None, "--save-frames", help="Save views kept from video/camera."),
+    min_views: int = typer.Option(10, "--min-views", help="Fewest views to calibrate from."),
+    detector: str = typer.Option("classic", "--detector", help="Checkerboard detector: classic | sb."),
+    no_reject: bool = typer.Option(False, "--no-reject", help="Keep outlier views."),
+    workers: int = typer.Option(2, "--workers", help="Detection threads."),
+    name: str = typer.Option("camera", "--name", help="camera_name in the YAML."),
+) -> None:
+    """Calibrate camera intrinsics from checkerboard or ChArUco views -> camera_info YAML and a report."""
+    from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics
+    from wolfcal.vision.board import make_board
+
+    options = IntrinsicsOptions(
+        model=model, method=detector, min_views=min_views, reject_outliers=not no_reject, workers=workers,
+        camera_name=name, report=report, save_frames=save_frames, live_view=True,
+    )  # fmt: skip
+    target = make_board(board, square, charuco, marker, legacy)
+    run_intrinsics(inputs or [], target, out, options, camera, say=typer.echo)
+
+
+@app.command("board")
+@friendly_errors
+def board_command(
+    board: str = typer.Option(..., "--board", help="Inner corners COLSxROWS (a 9x6 board has 10x7 squares)."),
+    square: float = typer.Option(..., "--square", help="Square edge [m]."),
+    out: Path = typer.Option(..., "--out", help="Output file; OUT.pdf and OUT.png are written."),
+    charuco: str | None = typer.Option(None, "--charuco", help="ChArUco marker dictionary, e.g. 5X5_100."),
+    marker: float | None = typer.Option(None, "--marker", help="ChArUco marker edge [m] (0.75 square)."),
+    legacy: bool = typer.Option(False, "--legacy", help="ChArUco layout of OpenCV < 4.6."),
+    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit."),
+    dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
+) -> None:
+    """Write a printable checkerboard or ChArUco board: PDF and PNG at exact size, with a scale line."""
+    from wolfcal.vision.board import make_board
+    from wolfcal.vision.printing import board_sheet, write_sheet
+
+    paths = write_sheet(board_sheet(make_board(board, square, charuco, marker, legacy), paper), out, dpi)
+    typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
+
+
+@app.command()
+@friendly_errors
+def tags(
+    ids: str = typer.Option("0-11", "--ids", help="Tag ids, e.g. 0-7,10."),
+    size: float = typer.Option(..., "--size", help="Edge of the black square [m]."),
+    out: Path = typer.Option(..., "--out", help="Output file; OUT.pdf and OUT.png are written."),
+    family: str = typer.Option("36h11", "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11."),
+    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit."),
+    dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
+) -> None:
+    """Write a sheet of AprilTags with their ids (PDF and PNG at exact size, with a scale check line)."""
+    from wolfcal.vision.printing import parse_ids, tag_sheet, write_sheet
+
+    paths = write_sheet(tag_sheet(family, parse_ids(ids), size, paper), out, dpi)
+    typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
+
+
+@app.command()
+@friendly_errors
+def evaluate(
+    fit_dir: Path = typer.Argument(..., help="Folder written by `wolfcal fit` (holds result.yaml)."),
+    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap), not used by the fit. "
+                                       "Repeatable. Without it: k-fold cross-validation over the fit's samples."),
+    out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
+    folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
+    force: bool = typer.Option(False, "--force", help="Write the deploy files even if held-out error got worse."),
+) -> None:
+    """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
+    from wolfcal.evaluate.pipeline import run_evaluate
+
+    metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
+    if not metrics["deploy"]["written"]:
+        raise WolfcalError(metrics["deploy"]["reason"])
+
+
 def main() -> None:
     app()
 

@@ -27,7 +27,7 @@ class FitOptions:
     side: str = "both"
     fix_tags: bool = False
     huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    outlier_floor_px: float = 1.0
+    outlier_floor_px: float = 0.5
 
 
 @dataclass

@@ -52,8 +52,8 @@ class Problem:
         corners = np.stack([tag_corners(self.robot.config.tag(t).size) for t in self.tag_ids])
         self.p_tag = corners[self.tag_col, self.obs.corner_index]  # (M, 3) corner in its tag frame [m]
         self.q = self.obs.q_measured
-        self.excluded = np.zeros(self.obs.n_samples, dtype=bool)
-        self.update_weights(np.zeros(len(self.params)))
+        self.exclude(np.zeros(self.obs.n_samples, dtype=bool))
+        self.linearize(np.zeros(len(self.params)))
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return np.asarray(z) * self.params.prior_sigmas
@@ -85,13 +85,17 @@ class Problem:
             columns.append((self.predict(z, q) - uv0) / JOINT_STEP)
         return np.nan_to_num(np.stack(columns, axis=-1))
 
-    def update_weights(self, z: np.ndarray) -> None:
-        """Rebuild the whitening matrix at z for the current noise levels; excluded samples get zero rows."""
-        A = self.joint_sensitivity(z)
+    def linearize(self, z: np.ndarray) -> None:
+        """Recompute d(uv)/d(q) at z and rebuild the whitening for the current noise levels."""
+        self._A = self.joint_sensitivity(z)
+        self.set_noise(self.sigma_px)
+
+    def set_noise(self, sigma_px: float) -> None:
+        """Rebuild the whitening matrix of every sample for this corner noise [px] (encoder noise fixed)."""
+        self.sigma_px = sigma_px
+        A = self._A
         rows, cols, vals = [], [], []
         for s in range(self.obs.n_samples):
-            if self.excluded[s]:
-                continue
             corners = np.flatnonzero(self.obs.sample_index == s)
             if corners.size == 0:
                 continue
@@ -103,16 +107,22 @@ class Problem:
             cols.append(np.tile(index, len(index)))
             vals.append(W_s.ravel())
         n = 2 * len(self.obs.uv)
-        if rows:
-            self.weights = scipy.sparse.csr_matrix(
-                (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
-            )
-        else:
-            self.weights = scipy.sparse.csr_matrix((n, n))
+        self.weights = scipy.sparse.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+        )
+
+    def exclude(self, samples: np.ndarray) -> None:
+        """Give the residuals of these samples (bool mask (S,)) zero weight."""
+        self.excluded = np.asarray(samples, dtype=bool).copy()
+        self._row_weight = np.repeat(~self.excluded[self.obs.sample_index], 2).astype(float)
+
+    def whitened_all(self, z: np.ndarray) -> np.ndarray:
+        """Whitened data residuals (2M,) of every sample, excluded ones included."""
+        return self.weights @ self.pixel_residuals(z).ravel()
 
     def whitened(self, z: np.ndarray) -> np.ndarray:
         """Whitened data residuals (2M,) without the robust function (zero for excluded samples)."""
-        return self.weights @ self.pixel_residuals(z).ravel()
+        return self.whitened_all(z) * self._row_weight
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Robust whitened data residuals followed by the prior residuals z (unit-variance Gaussian priors)."""

@@ -145,8 +145,21 @@ def result_dict(
     }
 
 
+def plain(value):
+    """Numpy scalars and arrays inside nested dicts/lists -> plain Python values (for YAML and JSON)."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 def write_result(path: Path, data: dict) -> None:
-    write_text_atomic(path, yaml.safe_dump(data, sort_keys=False, width=120))
+    write_text_atomic(path, yaml.safe_dump(plain(data), sort_keys=False, width=120))
 
 
 def load_result(path: str | Path) -> dict:

@@ -1,9 +1,9 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust trf solve -> flag outlier samples (per-sample RMS far above the others; they get zero weight) ->
-rescale the noise model by the variance factor of the whitened inlier residuals -> rebuild the weights at the new
-estimate; until the outlier set and the noise level settle. Then the uncertainty at the solution: posterior
-covariance (J^T J)^-1 in prior-normalised units, so each parameter's share of information from the data is
+Rounds: robust trf solve -> flag outlier samples (whitened per-sample RMS far above the others; they get zero
+weight) -> estimate the corner noise from the whitened inlier residuals (the encoder noise is a known property of
+the servos and stays fixed) -> rebuild the weights at the new estimate; until the outlier set and the noise level
+settle. Then the uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each parameter's share of information from the data is
 1 - posterior variance / prior variance; correlated pairs; condition number of the column-scaled data Jacobian
 (calibration practice: below 100).
 """
@@ -18,9 +18,11 @@ from scipy.optimize import least_squares
 
 from wolfcal.fit.problem import Problem
 
-MIN_SIGMA_PX = 0.02  # floor of the pixel noise (keeps reported std honest on perfect data)
+MIN_SIGMA_PX = 0.02  # bounds of the estimated corner noise [px]
+MAX_SIGMA_PX = 50.0
 CORRELATION_LIMIT = 0.9
 MAD_TO_SIGMA = 1.4826
+OUTLIER_FACTOR = 4.0
 
 
 @dataclass
@@ -59,22 +61,47 @@ def per_sample_rms(problem: Problem, residuals_px: np.ndarray) -> np.ndarray:
         return np.sqrt(sq / count)
 
 
-def flag_outliers(sample_rms: np.ndarray, floor_px: float) -> np.ndarray:
-    """Samples whose RMS exceeds both `floor_px` and 4x the median sample RMS."""
-    finite = np.isfinite(sample_rms)
-    median = np.median(sample_rms[finite]) if np.any(finite) else 0.0
-    return finite & (sample_rms > max(floor_px, 4.0 * median))
+def per_sample_whitened_rms(problem: Problem, z: np.ndarray) -> np.ndarray:
+    """(S,) RMS of each sample's whitened residuals: about 1 where the noise model explains the sample."""
+    w = problem.whitened_all(z).reshape(-1, 2)
+    s = problem.obs.sample_index
+    sq = np.bincount(s, weights=np.sum(w**2, axis=1), minlength=problem.obs.n_samples)
+    count = np.bincount(s, minlength=problem.obs.n_samples) * 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(sq / count)
 
 
-def variance_factor(problem: Problem, z: np.ndarray) -> float:
-    """Robust estimate of (residual scale / modelled scale)^2 from the whitened inlier residuals."""
+def flag_outliers(problem: Problem, z: np.ndarray, floor_px: float) -> np.ndarray:
+    """Samples that the noise model explains far worse than the others (whitened RMS above 4x the median)
+    and that are off by more than `floor_px` in pixels."""
+    t = per_sample_whitened_rms(problem, z)
+    pixels = per_sample_rms(problem, problem.pixel_residuals(z))
+    finite = np.isfinite(t)
+    median = np.median(t[finite]) if np.any(finite) else 0.0
+    return finite & (t > OUTLIER_FACTOR * median) & (pixels > floor_px)
+
+
+def residual_scale(problem: Problem, z: np.ndarray) -> float:
+    """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for dof."""
     w = problem.whitened(z)
-    rows = np.repeat(~problem.excluded[problem.obs.sample_index], 2)
-    w = w[rows]
+    w = w[np.repeat(~problem.excluded[problem.obs.sample_index], 2)]
     if w.size <= len(z):
         return 1.0
-    scale = MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - len(z)))
-    return float(scale**2)
+    return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - len(z))))
+
+
+def estimate_pixel_noise(problem: Problem, z: np.ndarray) -> float:
+    """Set sigma_px so that the whitened inlier residuals have unit scale, holding the encoder noise (a known
+    property of the servos) fixed; bisection on log(sigma_px). Returns the residual scale reached."""
+    lo, hi = np.log(MIN_SIGMA_PX), np.log(MAX_SIGMA_PX)
+    for _ in range(14):
+        problem.set_noise(float(np.exp(0.5 * (lo + hi))))
+        if residual_scale(problem, z) > 1.0:
+            lo = np.log(problem.sigma_px)
+        else:
+            hi = np.log(problem.sigma_px)
+    problem.set_noise(float(np.exp(hi)))
+    return residual_scale(problem, z)
 
 
 def central_jacobian(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray, step: float = 1e-6) -> np.ndarray:
@@ -101,23 +128,21 @@ def solve(
     for round_index in range(max_rounds):
         result = least_squares(problem.residuals, z, method="trf", x_scale=1.0, max_nfev=100 * (n_params + 1))
         z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
-        outliers = flag_outliers(per_sample_rms(problem, problem.pixel_residuals(z)), outlier_floor_px)
+        problem.linearize(z)
+        outliers = flag_outliers(problem, z, outlier_floor_px)
         changed = not np.array_equal(outliers, problem.excluded)
-        problem.excluded = outliers
-        problem.update_weights(z)
-        factor = variance_factor(problem, z)
-        scale = np.sqrt(factor)
-        problem.sigma_px = max(problem.sigma_px * scale, MIN_SIGMA_PX)
-        problem.sigma_q *= scale
-        problem.update_weights(z)
+        problem.exclude(outliers)
+        previous = problem.sigma_px
+        scale = estimate_pixel_noise(problem, z)
         say(
             f"round {round_index + 1}: {int(outliers.sum())} outlier sample(s), noise model {problem.sigma_px:.3f} px "
-            f"+ {problem.sigma_q * 1000:.3f} mrad per joint (variance factor {factor:.2f})"
+            f"per corner + {problem.sigma_q * 1000:.3f} mrad per joint (residual scale {scale:.2f})"
         )
-        if not changed and abs(factor - 1.0) < 0.1:
-            break
-    result = least_squares(problem.residuals, z, method="trf", x_scale=1.0)
-    z, evaluations = result.x, evaluations + result.nfev
+        if not changed and abs(problem.sigma_px / previous - 1.0) < 0.1:
+            break  # the last solve used (nearly) this noise model and inlier set
+    else:
+        result = least_squares(problem.residuals, z, method="trf", x_scale=1.0)
+        z, evaluations = result.x, evaluations + result.nfev
     J = central_jacobian(problem.residuals, z)
     n_data = J.shape[0] - n_params
     cov_z = np.linalg.pinv(J.T @ J)

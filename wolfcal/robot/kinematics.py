@@ -16,12 +16,7 @@ import numpy as np
 import yourdfpy
 
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import (
-    axis_angle_matrix,
-    invert_transform,
-    make_transform,
-    transform_from_twist_params,
-)
+from wolfcal.geometry import invert_transform, skew, transform_from_twist_params
 from wolfcal.robot.corrections import Corrections
 
 ACTUATED_TYPES = ("revolute", "continuous", "prismatic")
@@ -180,15 +175,23 @@ class KinematicModel:
     def _joint_transform(
         self, joint: JointModel, q: np.ndarray, offsets: np.ndarray, corrections: Corrections
     ) -> np.ndarray:
+        """T_parent_child (N, 4, 4) of one joint for all samples."""
         origin = joint.T_parent_origin
         delta = corrections.frames.get(joint.name)
         if delta is not None:
             origin = origin @ transform_from_twist_params(delta)
-        if joint.type == "fixed" or joint.type not in ACTUATED_TYPES:
+        if not joint.actuated and joint.mimic is None:
             return np.broadcast_to(origin, (q.shape[0], 4, 4))
         values = self.joint_values(joint, q, offsets)
+        out = np.zeros((q.shape[0], 4, 4))
+        out[:, 3, 3] = 1.0
         if joint.type == "prismatic":
-            motion = make_transform(np.eye(3), values[:, None] * joint.axis)
-        else:
-            motion = make_transform(axis_angle_matrix(joint.axis, values), np.zeros(3))
-        return origin @ motion
+            out[:, :3, :3] = origin[:3, :3]
+            out[:, :3, 3] = origin[:3, 3] + values[:, None] * (origin[:3, :3] @ joint.axis)
+            return out
+        # Rodrigues with the fixed unit axis: R = I + sin(q) K + (1 - cos(q)) K^2.
+        K = skew(joint.axis)
+        R = np.eye(3) + np.sin(values)[:, None, None] * K + (1.0 - np.cos(values))[:, None, None] * (K @ K)
+        out[:, :3, :3] = origin[:3, :3] @ R
+        out[:, :3, 3] = origin[:3, 3]
+        return out

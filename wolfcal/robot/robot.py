@@ -71,6 +71,7 @@ def load_robot(config_path: str | Path) -> Robot:
         unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
         if unknown:
             raise WolfcalError(
-                f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of {config.urdf}"
+                f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of "
+                f"{config.urdf}"
             )
     return Robot(config=config, model=model)

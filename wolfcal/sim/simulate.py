@@ -97,10 +97,10 @@ def simulate_capture(
                                     angle_rad=rng.uniform(0, np.pi))
             elif kinds.get(i) == "stale_joints":
                 reading[moving] += rng.normal(0.0, 0.04, len(moving))
-            writer.add_sample(START_NS + i * 2_000_000_000, robot.joint_names, reading, np.zeros_like(reading),
-                              image)
-            say(f"sample {i + 1}/{options.samples}: tags {', '.join(str(t) for t, v in zip(robot.config.tag_ids, visible[i]) if v)}"
-                + (f" ({kinds[i]})" if i in kinds else ""))
+            stamp = START_NS + i * 2_000_000_000
+            writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), image)
+            seen = ", ".join(str(t) for t, v in zip(robot.config.tag_ids, visible[i]) if v)
+            say(f"sample {i + 1}/{options.samples}: tags {seen}" + (f" ({kinds[i]})" if i in kinds else ""))
     truth_yaml, truth_urdf = truth_paths(out)
     write_text_atomic(
         truth_yaml,

@@ -1,0 +1,213 @@
+"""`wolfcal evaluate` against simulated truth: metrics, ground error, deploy files, refusal, report, bad input."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+import yourdfpy
+from typer.testing import CliRunner
+
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.cli import app
+from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.deploy import DEPLOY_FILES, write_deploy_files
+from wolfcal.evaluate.ground import ground_errors
+from wolfcal.evaluate.metrics import measure_tag_views, model_errors
+from wolfcal.evaluate.pipeline import run_evaluate
+from wolfcal.evaluate.report import before_after_table
+from wolfcal.fit.pipeline import FitOptions, run_fit
+from wolfcal.geometry import transform_from_twist_params
+from wolfcal.io.reader import read_capture
+from wolfcal.io.writer import CaptureWriter
+from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.scenario import synthetic_scenario
+from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+URDF_DIGITS_TOLERANCE = 1e-7  # [m], rotation-matrix entries: 9 printed digits of <origin> (1e-12 with 17)
+
+
+def quiet(_text: str) -> None:
+    pass
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(CONFIG)
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return load_camera_info(CONFIG / "basler_acA2040.yaml")
+
+
+def split_capture(src: Path, parts: dict[Path, range], robot, camera) -> None:
+    """Write samples of one simulated capture into several files (same robot, same truth, different poses)."""
+    samples = read_capture(src, robot.config).samples
+    binning = camera.width // samples[0].camera.width
+    for dst, indices in parts.items():
+        with CaptureWriter(dst, robot.config, camera, binning=(binning, binning)) as writer:
+            for i in indices:
+                s = samples[i]
+                writer.add_sample(s.stamp_ns, s.joint_names, s.positions, None, s.image())
+        shutil.copy(truth_paths(src)[0], truth_paths(dst)[0])
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory, robot, camera):
+    """A simulated robot (camera tilted by ~0.065 rad): fit on 22 poses, 10 other poses held out."""
+    root = tmp_path_factory.mktemp("evaluate")
+    simulate_capture(CONFIG, root / "all.mcap", SimOptions(samples=32, seed=5, binning=4), say=quiet)
+    split_capture(root / "all.mcap", {root / "fit.mcap": range(22), root / "held.mcap": range(22, 32)},
+                  robot, camera)
+    run_fit([root / "fit.mcap"], CONFIG, root / "fit", FitOptions(free="camera"), say=quiet)
+    return root
+
+
+@pytest.fixture(scope="module")
+def held_out(sim):
+    return run_evaluate(sim / "fit", [sim / "held.mcap"], sim / "report", say=quiet)
+
+
+def test_metrics_are_zero_for_the_true_model(robot, camera):
+    scenario = synthetic_scenario(robot, camera, n=12, seed=3, noise_px=0.0)
+    views = measure_tag_views(robot, scenario.obs)
+    true = model_errors(robot, scenario.obs, views, scenario.truth)
+    nominal = model_errors(robot, scenario.obs, views, Corrections())
+    assert len(views.sample) >= 12
+    # Only encoder quantisation (1 tick = 1.5 mrad) is left: about a pixel at 2048 x 1536, under a millimetre.
+    assert np.sqrt(np.mean(true.residuals**2)) < 1.5
+    assert np.nanmax(true.view_grid) < 1.5e-3
+    assert np.nanmean(nominal.view_grid) > 10e-3  # a 0.065 rad camera tilt moves the tags by centimetres
+    assert np.sqrt(np.mean(nominal.residuals**2)) > 10.0
+
+
+def test_ground_error_of_a_pitched_camera(robot, camera):
+    """DESIGN facts: a 0.06 rad pitch error moves a ball seen 4.5 m away to about 6.8 m."""
+    truth = Corrections(frames={robot.camera_joint: np.array([0, 0, 0, -0.06, 0, 0])})
+    rows = {r["distance_m"]: r["models"] for r in ground_errors(robot, camera, truth, {"before": Corrections(),
+                                                                                     "truth": truth})}
+    assert 6.5 < rows[4.5]["before"]["landed_at_m"] < 7.2
+    assert rows[4.5]["truth"]["error_m"] < 1e-9
+    assert rows[1.0]["before"]["error_m"] < rows[2.0]["before"]["error_m"] < rows[4.5]["before"]["error_m"]
+
+
+def test_held_out_errors_before_and_after(held_out):
+    m = held_out
+    assert m["mode"] == "held-out" and m["ground"]["reference"] == "simulator truth"
+    ground = {r["distance_m"]: r["models"] for r in m["ground"]["rows"]}
+    assert ground[4.5]["after"]["error_m"] < 0.03
+    assert ground[4.5]["before"]["error_m"] > 0.2
+    assert m["after"]["rms_px"] < 0.1 * m["before"]["rms_px"]
+    assert m["after"]["tag_grid_mean_mm"] < 0.5 * m["before"]["tag_grid_mean_mm"]
+    assert not m["verdict"]["worse"] and m["deploy"]["written"]
+    assert len(m["samples"]) == m["n_samples"] >= 8
+    table = before_after_table(m)
+    assert "ground error, ball at 4.5 m [cm]" in table and "tag-grid" in table
+
+
+def test_report_is_self_contained(sim, held_out):
+    out = sim / "report"
+    page = (out / "report.html").read_text()
+    figures = held_out["figures"]
+    assert {Path(f["file"]).name for f in figures} >= {"corner_histogram.png", "per_sample.png", "overlay_1.png",
+                                                       "correlation.png"}
+    assert page.count('src="data:image/png;base64,') == len(figures)
+    assert 'src="figures' not in page and "<script" not in page
+    markdown = (out / "report.md").read_text()
+    for f in figures:
+        assert f["file"] in markdown and (out / f["file"]).is_file()
+    assert json.loads((out / "metrics.json").read_text())["after"] == held_out["after"]
+
+
+def _fk(urdf: Path, cfg: dict[str, float]) -> dict[str, np.ndarray]:
+    model = yourdfpy.URDF.load(str(urdf), load_meshes=False, build_collision_scene_graph=False)
+    model.update_cfg(cfg)
+    return {link: model.get_transform(link, "base_link") for link in model.link_map}
+
+
+def test_deploy_urdfs_reproduce_the_model(tmp_path, robot, sim, held_out):
+    """Folded and `rising` variants have equal FK, for the fit and for offsets on every head and leg joint."""
+    truth = load_corrections(truth_paths(sim / "all.mcap")[0], key="truth")
+    rng = np.random.default_rng(0)
+    truth.offsets = {j: float(rng.normal(0, 0.03)) for j in robot.joint_names}
+    write_deploy_files(robot, truth, tmp_path)
+    q = rng.uniform(-0.5, 0.5, size=(3, len(robot.joint_names)))
+    for out, corrections in ((sim / "report", Corrections.from_dict(yaml.safe_load(
+            (sim / "fit" / "result.yaml").read_text())["corrections"])), (tmp_path, truth)):
+        offsets = corrections.offset_vector(robot.joint_names)
+        for qi in q:
+            rising = _fk(out / "calibrated.urdf", dict(zip(robot.joint_names, qi + offsets)))
+            folded = _fk(out / "calibrated_folded.urdf", dict(zip(robot.joint_names, qi)))
+            ours = robot.model.link_poses(qi[None], rising, corrections, base="base_link")
+            for link, T in rising.items():
+                # wolfcal.robot.urdf_writer prints 9 significant digits: up to 1e-8 apart (2.5e-14 with 17).
+                np.testing.assert_allclose(folded[link], T, rtol=0, atol=URDF_DIGITS_TOLERANCE, err_msg=link)
+                np.testing.assert_allclose(ours[link][0], T, rtol=0, atol=URDF_DIGITS_TOLERANCE, err_msg=link)
+    offsets_file = yaml.safe_load((tmp_path / "joint_offsets.yaml").read_text())["joint_offsets"]
+    assert offsets_file == pytest.approx(truth.offsets, abs=1e-8)
+
+
+def test_camera_correction_is_the_fitted_frame_change(robot, sim, held_out):
+    from scipy.spatial.transform import Rotation
+
+    c = yaml.safe_load((sim / "report" / "camera_correction.yaml").read_text())
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat([c["rotation"][k] for k in "xyzw"]).as_matrix()
+    T[:3, 3] = [c["translation"][k] for k in "xyz"]
+    fitted = Corrections.from_dict(yaml.safe_load((sim / "fit" / "result.yaml").read_text())["corrections"])
+    np.testing.assert_allclose(T, transform_from_twist_params(fitted.frames[robot.camera_joint]), atol=1e-8)
+    assert c["parent_frame"] == "camera_optical_frame_uncalibrated" and "--child-frame-id camera_optical_frame" in \
+        c["static_transform_publisher"]
+
+
+def test_worse_fit_is_refused(sim, held_out):
+    """A fit whose camera correction points the wrong way (as a fit on a capture of outliers would) is refused."""
+    bad = sim / "bad_fit"
+    shutil.copytree(sim / "fit", bad)
+    result = yaml.safe_load((bad / "result.yaml").read_text())
+    camera_joint = next(iter(result["corrections"]["frames"]))
+    result["corrections"]["frames"][camera_joint] = [0.0, 0.0, 0.0, 0.08, 0.0, 0.0]
+    (bad / "result.yaml").write_text(yaml.safe_dump(result))
+    out = sim / "bad_report"
+    out.mkdir()
+    (out / "calibrated.urdf").write_text("stale deploy file of an earlier run")
+    m = run_evaluate(bad, [sim / "held.mcap"], out, say=quiet)
+    assert m["verdict"]["worse"] and not m["deploy"]["written"]
+    assert not any((out / name).exists() for name in DEPLOY_FILES)
+    assert "worse" in (out / "report.html").read_text()
+    runner = CliRunner()
+    refused = runner.invoke(app, ["evaluate", str(bad), "--capture", str(sim / "held.mcap"), "--out", str(out)])
+    assert refused.exit_code != 0 and "--force" in refused.output and "Traceback" not in refused.output
+    forced = runner.invoke(app, ["evaluate", str(bad), "--capture", str(sim / "held.mcap"), "--out", str(out),
+                                 "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert all((out / name).exists() for name in DEPLOY_FILES)
+
+
+def test_cross_validation_without_held_out_capture(sim):
+    m = run_evaluate(sim / "fit", [], sim / "cv_report", folds=3, say=quiet)
+    assert m["mode"] == "cross-validation" and m["folds"] == 3
+    assert {s["fold"] for s in m["samples"]} == {0, 1, 2}
+    assert m["after"]["rms_px"] < 0.1 * m["before"]["rms_px"]
+    assert "cross-validation" in (sim / "cv_report" / "report.html").read_text()
+
+
+def test_bad_input_is_a_clear_error(tmp_path, sim):
+    with pytest.raises(WolfcalError, match="fit folder not found"):
+        run_evaluate(tmp_path / "nowhere", [sim / "held.mcap"], tmp_path / "out", say=quiet)
+    with pytest.raises(WolfcalError, match="capture file not found"):
+        run_evaluate(sim / "fit", [tmp_path / "missing.mcap"], tmp_path / "out", say=quiet)
+    other = tmp_path / "otherbot"
+    shutil.copytree(CONFIG, other)
+    config = (other / "robot.yaml").read_text().replace("name: wolfgang", "name: otherbot")
+    (other / "robot.yaml").write_text(config)
+    simulate_capture(other, tmp_path / "other.mcap", SimOptions(samples=2, seed=1, binning=4), say=quiet)
+    with pytest.raises(WolfcalError, match="captured with robot 'otherbot'"):
+        run_evaluate(sim / "fit", [tmp_path / "other.mcap"], tmp_path / "out", say=quiet)
+    result = CliRunner().invoke(app, ["evaluate", str(tmp_path / "nowhere"), "--out", str(tmp_path / "out")])
+    assert result.exit_code != 0 and "fit folder not found" in result.output

@@ -1,0 +1,100 @@
+"""Scripted capture poses: a YAML list of named joint targets, checked against the URDF limits up front.
+
+Format (angles in radians, the robot's joint convention (ticks - 2048) * 2 pi / 4096, velocity in rad/s):
+
+    velocity: 0.5            # optional, profile velocity of every move (default 0.5 rad/s)
+    poses:
+      - name: look_at_right_foot
+        joints: {HeadPan: -0.3, HeadTilt: -1.2, RHipPitch: -0.4, RKnee: -0.8}
+      - name: ...
+
+A joint not named in a pose keeps its previous target (at the start: where it stands).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from wolfcal.errors import WolfcalError
+
+DEFAULT_VELOCITY = 0.5  # rad/s
+
+
+@dataclass(frozen=True)
+class Pose:
+    name: str
+    joints: dict[str, float]  # joint -> target [rad]
+
+
+@dataclass(frozen=True)
+class PoseScript:
+    poses: list[Pose]
+    velocity: float  # rad/s
+
+    @property
+    def joints(self) -> list[str]:
+        """Every joint some pose moves, in first-seen order."""
+        seen: dict[str, None] = {}
+        for pose in self.poses:
+            seen.update(dict.fromkeys(pose.joints))
+        return list(seen)
+
+
+def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> PoseScript:
+    """Read and check a poses file; `limits` maps each servo joint to its URDF (lower, upper) [rad].
+
+    Every problem (unknown joint, target outside the limits, bad value) is listed in one WolfcalError.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise WolfcalError(f"{path}: poses file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("poses"), list) or not data["poses"]:
+        raise WolfcalError(f"{path}: expected a mapping with 'poses': a non-empty list of {{name, joints}}")
+    unknown = sorted(set(data) - {"poses", "velocity"})
+    if unknown:
+        raise WolfcalError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: poses, velocity")
+    velocity = data.get("velocity", DEFAULT_VELOCITY)
+    if isinstance(velocity, bool) or not isinstance(velocity, (int, float)) or not 0 < velocity <= 6:
+        raise WolfcalError(f"{path}: 'velocity' must be a speed in rad/s in (0, 6], found {velocity!r}")
+    problems, poses, names = [], [], set()
+    for i, entry in enumerate(data["poses"]):
+        where = f"poses[{i}]"
+        if (
+            not isinstance(entry, dict)
+            or set(entry) - {"name", "joints"}
+            or not isinstance(entry.get("joints"), dict)
+        ):
+            problems.append(f"{where}: must be a mapping with 'name' and 'joints' (joint: rad)")
+            continue
+        name = str(entry.get("name", f"pose{i + 1}"))
+        where = f"{where} ({name})"
+        if name in names:
+            problems.append(f"{where}: the name is used twice")
+        names.add(name)
+        joints = {}
+        for joint, value in entry["joints"].items():
+            if joint not in limits:
+                problems.append(f"{where}: unknown joint {joint!r} (not in the robot config's servos)")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                problems.append(f"{where}: {joint} must be a number of radians, found {value!r}")
+            elif not limits[joint][0] <= value <= limits[joint][1]:
+                lo, hi = limits[joint]
+                problems.append(
+                    f"{where}: {joint} = {value:.4f} rad is outside the URDF limits [{lo:.4f}, {hi:.4f}]"
+                )
+            else:
+                joints[str(joint)] = float(value)
+        poses.append(Pose(name, joints))
+    if problems:
+        raise WolfcalError(
+            f"{path}: {len(problems)} problem(s), nothing was moved:\n  " + "\n  ".join(problems)
+        )
+    return PoseScript(poses, float(velocity))

@@ -1,0 +1,259 @@
+"""The Dynamixel servo bus through `dynamixel_sdk` (Protocol 2.0), in joint terms.
+
+Joint angle [rad] = (present position - 2048) * 2 pi / 4096: the robot's joint convention; the sign of a joint
+comes from its URDF axis only, so none is applied here. Every failure raises `BusError` naming the port, the
+joint and id and what to check.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import dynamixel_sdk as sdk
+import numpy as np
+import serial
+
+from wolfcal.config import ServoConfig
+from wolfcal.errors import WolfcalError
+from wolfcal.hardware import protocol as P
+
+RAD_PER_TICK = 2.0 * math.pi / P.TICKS_PER_TURN
+RAD_S_PER_UNIT = P.RPM_PER_UNIT * 2.0 * math.pi / 60.0
+RETRIES = 3  # attempts per transaction before a communication error is reported
+READ_BLOCK_S = 0.002  # longest a serial read blocks before the SDK checks its packet timeout again
+
+
+class BusError(WolfcalError):
+    """The servo bus failed (no answer, corrupted replies, hardware error)."""
+
+    exit_code = 3
+
+
+def ticks_to_rad(ticks: np.ndarray | int) -> np.ndarray | float:
+    return (np.asarray(ticks) - P.CENTRE_TICK) * RAD_PER_TICK
+
+
+def rad_to_ticks(rad: np.ndarray | float) -> np.ndarray | int:
+    return np.round(np.asarray(rad) / RAD_PER_TICK).astype(int) + P.CENTRE_TICK
+
+
+def _signed32(value: int) -> int:
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+@dataclass
+class JointState:
+    """One sync read: `ticks` and `velocity_units` raw, per joint in `DynamixelBus.joints` order."""
+
+    ticks: np.ndarray  # (J,) int present positions
+    velocity_units: np.ndarray  # (J,) int present velocities (0.229 rpm)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(J,) joint angles [rad]."""
+        return ticks_to_rad(self.ticks)
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(J,) joint velocities [rad/s]."""
+        return self.velocity_units * RAD_S_PER_UNIT
+
+
+def hardware_error_text(bits: int) -> str:
+    names = [name for bit, name in P.HW_ERROR_BITS.items() if bits & (1 << bit)]
+    return ", ".join(names) or f"bits {bits:#04x}"
+
+
+class DynamixelBus:
+    """The servos of a robot config on one port. Use as a context manager; `joints` fixes the array order."""
+
+    def __init__(self, servos: ServoConfig, port: str | None = None, baudrate: int | None = None):
+        self.servos = servos
+        self.port_name = port or servos.port
+        self.baudrate = baudrate or servos.baudrate
+        self.joints = list(servos.ids)
+        self.ids = [servos.ids[j] for j in self.joints]
+        self.port: sdk.PortHandler | None = None
+        self.ph = sdk.PacketHandler(2.0)
+
+    # --- connection -----------------------------------------------------------------------------------------
+    def open(self) -> DynamixelBus:
+        port = sdk.PortHandler(self.port_name)
+        try:
+            opened = port.openPort()
+        except (serial.SerialException, OSError) as exc:
+            raise BusError(
+                f"{self.port_name}: cannot open the servo bus ({exc}); check the cable, the --port name and "
+                "that you may use the device (group 'dialout')"
+            ) from None
+        if not opened or not port.setBaudRate(self.baudrate):
+            raise BusError(
+                f"{self.port_name}: cannot set {self.baudrate} baud; use 57600, 115200, 1000000, "
+                "2000000, 3000000 or 4000000"
+            )
+        # The SDK opens the port with timeout=0 and busy-waits for replies, burning a core that the host (or
+        # the emulator) needs; a short blocking timeout lets reads sleep in select() instead.
+        port.ser.timeout = READ_BLOCK_S
+        self.port = port
+        self._state_reader = sdk.GroupSyncRead(port, self.ph, P.PRESENT_VELOCITY[0], 8)
+        self._error_reader = sdk.GroupSyncRead(port, self.ph, P.HARDWARE_ERROR_STATUS[0], 1)
+        for sid in self.ids:
+            self._state_reader.addParam(sid)
+            self._error_reader.addParam(sid)
+        return self
+
+    def close(self) -> None:
+        if self.port is not None:
+            self.port.closePort()
+            self.port = None
+
+    def recover_port(self) -> None:
+        """Make the port usable after an interrupted transaction (Ctrl-C leaves the SDK's busy flag set)."""
+        if self.port is not None:
+            self.port.is_using = False
+
+    def __enter__(self) -> DynamixelBus:
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _name(self, sid: int) -> str:
+        joint = self.joints[self.ids.index(sid)] if sid in self.ids else "?"
+        return f"{joint} (id {sid})"
+
+    def _comm_text(self, result: int) -> str:
+        return self.ph.getTxRxResult(result).replace("[TxRxResult] ", "")
+
+    # --- checks ---------------------------------------------------------------------------------------------
+    def ping_all(self) -> dict[str, int]:
+        """Ping every configured servo; one BusError lists every missing id and unexpected model number."""
+        problems, models = [], {}
+        for joint, sid in zip(self.joints, self.ids, strict=True):
+            for _ in range(RETRIES):
+                model, result, _ = self.ph.ping(self.port, sid)
+                if result == sdk.COMM_SUCCESS:
+                    break
+            if result != sdk.COMM_SUCCESS:
+                problems.append(f"{joint} (id {sid}): no answer ({self._comm_text(result)})")
+                continue
+            models[joint] = model
+            expected = self.servos.models.get(joint)
+            if expected is not None and model != expected:
+                problems.append(f"{joint} (id {sid}): model number {model}, expected {expected}")
+        if problems:
+            raise BusError(
+                f"{self.port_name}: {len(problems)} servo problem(s):\n  "
+                + "\n  ".join(problems)
+                + "\ncheck power, cables and ids (Dynamixel Wizard), or fix 'servos' in the robot config"
+            )
+        return models
+
+    def hardware_errors(self) -> dict[str, int]:
+        """Non-zero Hardware Error Status per joint (polled: sync read replies drop the alert bit)."""
+        self._sync_read(self._error_reader, "hardware error status")
+        errors = {}
+        for joint, sid in zip(self.joints, self.ids, strict=True):
+            bits = self._error_reader.getData(sid, P.HARDWARE_ERROR_STATUS[0], 1)
+            if bits:
+                errors[joint] = bits
+        return errors
+
+    def check_hardware(self) -> None:
+        """Raise BusError when any servo reports a hardware error."""
+        errors = self.hardware_errors()
+        if errors:
+            listed = "; ".join(
+                f"{j} (id {self.servos.ids[j]}): {hardware_error_text(b)}" for j, b in errors.items()
+            )
+            raise BusError(
+                f"{self.port_name}: hardware error: {listed}; the servo switched its torque off: remove the "
+                "cause (load, temperature, supply voltage), then reboot the servo or power-cycle the robot"
+            )
+
+    # --- reading --------------------------------------------------------------------------------------------
+    def _sync_read(self, group: sdk.GroupSyncRead, what: str) -> None:
+        for _ in range(RETRIES):
+            result = group.txRxPacket()
+            if result == sdk.COMM_SUCCESS:
+                return
+        # the SDK stops at the first servo that failed; its data is left empty
+        culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
+        who = self._name(culprit) if culprit is not None else "a servo"
+        raise BusError(
+            f"{self.port_name}: sync read of {what} failed at {who}: {self._comm_text(result)} "
+            f"({RETRIES} attempts); check that servo's cable and power"
+        )
+
+    def read_state(self) -> JointState:
+        """Present position and velocity of every joint in one sync read."""
+        self._sync_read(self._state_reader, "present position/velocity")
+        get = self._state_reader.getData
+        ticks = np.array([_signed32(get(s, P.PRESENT_POSITION[0], 4)) for s in self.ids])
+        vel = np.array([_signed32(get(s, P.PRESENT_VELOCITY[0], 4)) for s in self.ids])
+        return JointState(ticks, vel)
+
+    # --- writing --------------------------------------------------------------------------------------------
+    def _write(self, joint: str, item: tuple[int, int], value: int) -> None:
+        sid = self.servos.ids[joint]
+        addr, size = item
+        write = {1: self.ph.write1ByteTxRx, 2: self.ph.write2ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
+        for _ in range(RETRIES):
+            result, error = write(self.port, sid, addr, value & ((1 << (8 * size)) - 1))
+            if result == sdk.COMM_SUCCESS:
+                break
+        if result != sdk.COMM_SUCCESS:
+            raise BusError(
+                f"{self.port_name}: writing address {addr} of {self._name(sid)} failed: "
+                f"{self._comm_text(result)}; check that servo's cable and power"
+            )
+        if error & 0x7F:
+            raise BusError(
+                f"{self.port_name}: {self._name(sid)} refused writing address {addr}: "
+                f"{self.ph.getRxPacketError(error & 0x7F)}"
+                + ("; it reports a hardware error: reboot it" if error & P.ERR_ALERT else "")
+            )
+
+    def set_torque(self, joints: Iterable[str], on: bool) -> None:
+        """Torque on or off, joint by joint, each acknowledged."""
+        for joint in joints:
+            self._write(joint, P.TORQUE_ENABLE, int(on))
+
+    def torque_enabled(self) -> dict[str, bool]:
+        result = {}
+        for joint, sid in zip(self.joints, self.ids, strict=True):
+            for _ in range(RETRIES):
+                value, comm, _ = self.ph.read1ByteTxRx(self.port, sid, P.TORQUE_ENABLE[0])
+                if comm == sdk.COMM_SUCCESS:
+                    break
+            if comm != sdk.COMM_SUCCESS:
+                raise BusError(
+                    f"{self.port_name}: reading the torque state of {self._name(sid)} failed: "
+                    f"{self._comm_text(comm)}"
+                )
+            result[joint] = bool(value)
+        return result
+
+    def set_profile_velocity(self, joints: Iterable[str], rad_s: float) -> None:
+        """Limit the speed of position moves to `rad_s` (at least one unit of 0.229 rpm)."""
+        units = max(1, int(round(rad_s / RAD_S_PER_UNIT)))
+        for joint in joints:
+            self._write(joint, P.PROFILE_VELOCITY, units)
+
+    def set_goal_positions(self, goals: dict[str, float]) -> None:
+        """Goal positions [rad] in one sync write (no reply: read back to confirm arrival)."""
+        group = sdk.GroupSyncWrite(self.port, self.ph, P.GOAL_POSITION[0], 4)
+        for joint, rad in goals.items():
+            tick = int(rad_to_ticks(rad))
+            group.addParam(self.servos.ids[joint], list((tick & 0xFFFFFFFF).to_bytes(4, "little")))
+        result = group.txPacket()
+        if result != sdk.COMM_SUCCESS:
+            raise BusError(f"{self.port_name}: sending goal positions failed: {self._comm_text(result)}")
+
+    def reboot(self, joint: str) -> None:
+        sid = self.servos.ids[joint]
+        result, _ = self.ph.reboot(self.port, sid)
+        if result != sdk.COMM_SUCCESS:
+            raise BusError(f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result)}")

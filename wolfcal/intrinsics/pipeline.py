@@ -1,0 +1,177 @@
+"""`wolfcal intrinsics`: inputs -> detections -> calibration -> camera_info YAML and report folder."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.camera.camera_info import save_camera_info
+from wolfcal.errors import WolfcalError
+from wolfcal.intrinsics.calibrate import Calibration, calibrate_views
+from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
+from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
+from wolfcal.intrinsics.live import LiveView, collect_views
+from wolfcal.intrinsics.report import write_detections, write_report
+from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
+from wolfcal.vision.board import Board
+
+
+@dataclass(frozen=True)
+class IntrinsicsOptions:
+    """Everything but the inputs, the board and the output file."""
+
+    model: str = "plumb_bob"
+    method: str = "classic"  # checkerboard detector: classic | sb
+    min_views: int = 10
+    reject_outliers: bool = True
+    workers: int = 2
+    camera_name: str = "camera"
+    report: Path | None = None  # default: <out stem>_report beside the output
+    save_frames: Path | None = None  # folder for frames kept from videos / the live camera
+    live_view: bool = False  # show the coverage bars in the terminal while collecting from streams
+
+
+def _wrong_board_hint(failures: list[Failure], board: Board) -> str:
+    """A hint when failed images hold a checkerboard of another size than --board (most common of three)."""
+    if board.is_charuco:
+        return ""
+    sizes: Counter[tuple[int, int]] = Counter()
+    for failure in failures[:3]:
+        try:
+            size = probe_board_size(read_image(Path(failure.name)))
+        except OSError:
+            continue
+        if size:  # in the orientation the user wrote --board in
+            sizes[tuple(sorted(size, reverse=board.cols >= board.rows))] += 1
+    if not sizes:
+        return ""
+    cols, rows = sizes.most_common(1)[0][0]
+    if (cols, rows) == (board.cols, board.rows):
+        return ""
+    return f" (found a {cols}x{rows} checkerboard in {failures[0].name}: is --board {cols}x{rows} right?)"
+
+
+def _check_sizes(views: list[Detection]) -> None:
+    sizes = Counter(v.image_size for v in views)
+    if len(sizes) > 1:
+        common = sizes.most_common(1)[0][0]
+        odd = next(v for v in views if v.image_size != common)
+        raise WolfcalError(
+            f"{odd.name}: image size {odd.image_size[0]}x{odd.image_size[1]} differs from the "
+            f"{common[0]}x{common[1]} of most views; calibrate one camera resolution at a time"
+        )
+
+
+def coverage_warnings(calibration: Calibration, board: Board) -> list[str]:
+    """Image regions without corners, and pose coverage below ROS camera_calibration's targets."""
+    cam = calibration.camera
+    warnings = []
+    empty = empty_regions(calibration.views, (cam.width, cam.height))
+    if empty:
+        warnings.append(
+            f"no corners in the {', '.join(empty)} of the image: distortion there is extrapolated; "
+            "add views with the board there"
+        )
+    coverage = Coverage([view_params(v, board) for v in calibration.views])
+    for name, value in zip(PARAM_NAMES, coverage.progress(), strict=True):
+        if value < 1.0:
+            warnings.append(f"{name} coverage {100 * value:.0f} %")
+    if any(value < 1.0 for value in coverage.progress()):
+        warnings.append("to improve coverage: " + "; ".join(coverage.hints()))
+    return warnings
+
+
+def run_intrinsics(
+    inputs: list[str],
+    board: Board,
+    out: Path,
+    options: IntrinsicsOptions,
+    camera: str | None = None,
+    say: Callable[[str], None] = print,
+) -> Calibration:
+    """Detect, calibrate, write `out` (camera_info YAML) and the report folder; return the calibration."""
+    if options.method not in METHODS:
+        raise WolfcalError(f"unknown --detector {options.method!r}; use one of {', '.join(METHODS)}")
+    if not inputs and camera is None:
+        raise WolfcalError(
+            "give images, folders or videos to calibrate from, or --camera for the live camera"
+        )
+    found = expand_inputs(inputs)
+    if out.resolve() in {p.resolve() for p in found.images + found.videos}:
+        raise WolfcalError(f"{out}: --out names one of the inputs; choose another output file")
+    report = options.report or out.with_name(f"{out.stem}_report")
+    failures = list(found.missing)
+    for failure in failures:
+        say(f"{failure.name}: {failure.reason}")
+    views: list[Detection] = []
+
+    def note(result: Detection | Failure) -> None:
+        if isinstance(result, Failure):
+            failures.append(result)
+            say(f"{result.name}: {result.reason}")
+
+    if found.images:
+        say(f"detecting the {board.describe()} in {len(found.images)} images on {options.workers} threads")
+        results = detect_many(image_jobs(found.images), board, options.method, options.workers, note)
+        views += [r for r in results if isinstance(r, Detection)]
+        say(f"board found in {len(views)} of {len(found.images)} images")
+    streams = [(str(p), p.name) for p in found.videos] + ([(camera_source(camera), None)] if camera else [])
+    if streams:
+        selector = ViewSelector(board, Coverage([view_params(v, board) for v in views]), list(views))
+        for source, name in streams:
+            say(f"collecting still, distinct views from {name or f'camera {source}'} (Ctrl-C stops)")
+            frames = stream_frames(source, name)
+            try:
+                if options.live_view:
+                    with LiveView(options.min_views) as view:
+                        collect_views(
+                            frames, selector, options.min_views, options.method, options.save_frames, view
+                        )
+                else:
+                    collect_views(frames, selector, options.min_views, options.method, options.save_frames)
+            except KeyboardInterrupt:
+                say("stopped; calibrating with the views kept so far")
+            if selector.coverage.complete(options.min_views):
+                break
+        views = selector.kept
+    write_detections(report, views, failures)
+    if not views:
+        raise WolfcalError(
+            f"the {board.describe()} was not found in any view{_wrong_board_hint(failures, board)}; "
+            "check --board "
+            f"(inner corners, COLSxROWS) and --charuco, and that the whole board is in view; see {report}"
+        )
+    _check_sizes(views)
+    calibration = calibrate_views(views, board, options.model, options.min_views, options.reject_outliers)
+    calibration.camera = dataclasses.replace(calibration.camera, name=options.camera_name)
+    warnings = coverage_warnings(calibration, board)
+    save_camera_info(calibration.camera, out)
+    write_report(report, calibration, failures, warnings, options.method)
+    _say_result(calibration, failures, warnings, say)
+    say(f"wrote {out} and the report {report}/summary.md")
+    return calibration
+
+
+def _say_result(calibration: Calibration, failures: list[Failure], warnings: list[str], say) -> None:
+    cam = calibration.camera
+    say(
+        f"calibrated {cam.width}x{cam.height} {cam.distortion_model} from {len(calibration.views)} views, "
+        f"{calibration.n_points} corners ({len(failures)} views failed)"
+    )
+    for view, rms in calibration.rejected:
+        say(f"rejected outlier view {view.name}: RMS {rms:.3f} px")
+    say(
+        f"reprojection RMS per point {calibration.rms_per_point:.3f} px (OpenCV's convention; per axis "
+        f"{calibration.rms_per_axis:.3f} px)"
+    )
+    values = np.concatenate([[cam.fx, cam.fy, cam.cx, cam.cy], cam.D])
+    for (name, std), value in zip(calibration.std.items(), values, strict=True):
+        unit = " px" if name in ("fx", "fy", "cx", "cy") else ""
+        say(f"  {name:>3} = {value:.6g} +- {std:.2g}{unit} (1-sigma)")
+    for warning in warnings:
+        say(f"warning: {warning}")

@@ -1,0 +1,55 @@
+"""Checks on an MCAP file before reading it: present, an MCAP file at all, finished (has its footer)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from wolfcal.errors import WolfcalError
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+def partial_path(path: Path) -> Path:
+    """The temporary name a capture is written under until it is closed."""
+    return path.with_name(path.name + ".partial")
+
+
+def recover_hint(path: Path) -> str:
+    """What to tell a user holding a torn or damaged file."""
+    return f"run `wolfcal recover {path}` to rescue the samples in it"
+
+
+def check_mcap(path: Path) -> None:
+    """WolfcalError naming `path` when it is missing or not an MCAP file."""
+    if not path.is_file():
+        partial = partial_path(path)
+        if partial.is_file():
+            raise WolfcalError(
+                f"{path}: capture file not found, but {partial} exists: that recording did not finish; "
+                f"{recover_hint(partial)}"
+            )
+        raise WolfcalError(f"{path}: capture file not found; check the path")
+    with path.open("rb") as handle:
+        start = handle.read(len(MAGIC))
+    if start != MAGIC:
+        raise WolfcalError(
+            f"{path}: not an MCAP file (it does not start with the MCAP magic bytes); give a capture file "
+            "written by `wolfcal capture` or a ROS 2 recording in MCAP format (`ros2 bag record -s mcap`)"
+        )
+
+
+def is_finished(path: Path) -> bool:
+    """Whether the file ends with the closing MCAP magic, i.e. its writer finished it."""
+    size = path.stat().st_size
+    if size < 2 * len(MAGIC):
+        return False
+    with path.open("rb") as handle:
+        handle.seek(size - len(MAGIC))
+        return handle.read(len(MAGIC)) == MAGIC
+
+
+def torn_error(path: Path) -> WolfcalError:
+    """The error for a file without its closing footer."""
+    return WolfcalError(
+        f"{path}: was not closed properly (the recording stopped before it finished); {recover_hint(path)}"
+    )

@@ -1,0 +1,85 @@
+"""ROS 2 message definitions (`ros2msg` schema text) of the messages in a capture file.
+
+Written from the ROS 2 interface specifications (rcl_interfaces/common_interfaces, Humble and later). Each
+definition is the message's own fields followed by every type it uses, each after a line of '=' and
+`MSG: pkg/Type`: the layout rosbag2 stores and mcap_ros2 parses. Also: header stamps <-> nanoseconds.
+"""
+
+from __future__ import annotations
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+
+_SEPARATOR = "=" * 80
+
+_TIME = """int32 sec
+uint32 nanosec
+"""
+
+_HEADER = """builtin_interfaces/Time stamp
+string frame_id
+"""
+
+_REGION_OF_INTEREST = """uint32 x_offset
+uint32 y_offset
+uint32 height
+uint32 width
+bool do_rectify
+"""
+
+_JOINT_STATE = """std_msgs/Header header
+string[] name
+float64[] position
+float64[] velocity
+float64[] effort
+"""
+
+_COMPRESSED_IMAGE = """std_msgs/Header header
+string format
+uint8[] data
+"""
+
+_CAMERA_INFO = """std_msgs/Header header
+uint32 height
+uint32 width
+string distortion_model
+float64[] d
+float64[9] k
+float64[9] r
+float64[12] p
+uint32 binning_x
+uint32 binning_y
+sensor_msgs/RegionOfInterest roi
+"""
+
+
+def _with_dependencies(definition: str, *dependencies: tuple[str, str]) -> str:
+    parts = [definition]
+    for name, text in dependencies:
+        parts.append(f"{_SEPARATOR}\nMSG: {name}\n{text}")
+    return "".join(parts)
+
+
+_HEADER_DEPS = (("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME))
+
+#: schema name -> full `ros2msg` definition text
+MSGDEFS: dict[str, str] = {
+    JOINT_STATE: _with_dependencies(_JOINT_STATE, *_HEADER_DEPS),
+    COMPRESSED_IMAGE: _with_dependencies(_COMPRESSED_IMAGE, *_HEADER_DEPS),
+    CAMERA_INFO: _with_dependencies(
+        _CAMERA_INFO, *_HEADER_DEPS, ("sensor_msgs/RegionOfInterest", _REGION_OF_INTEREST)
+    ),
+}
+
+
+def stamp_dict(stamp_ns: int) -> dict:
+    """builtin_interfaces/Time (as a dict for the CDR encoder) of a time in nanoseconds."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def header_stamp_ns(header, log_time: int) -> int:
+    """Stamp of a decoded std_msgs/Header [ns]; the message's log time when the publisher left it at zero."""
+    stamp = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return stamp or int(log_time)

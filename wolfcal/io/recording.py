@@ -1,0 +1,117 @@
+"""Pair camera frames with joint states and keep only still frames.
+
+In a capture file a sample's joint state has exactly the stamp of its image. A plain ROS 2 recording has
+continuous joint states (50-100 Hz) and images (a few Hz) with their own stamps; a frame is used only if,
+for every joint:
+- a joint state lies within `PAIR_TOLERANCE_NS` of the image stamp (the nearest gives the sample's angle);
+- the joint was still: over its states within +-`STILL_WINDOW_NS` of the image (spanning at least half of
+  that window) its position changed by at most one encoder tick (2 pi / 4096 rad); where the states are too
+  sparse to span it, every reported |velocity| in the window must be at most `STILL_VELOCITY`.
+Joint states are kept per joint, so recordings in which several publishers share the topic (e.g. legs and
+head on separate messages) pair too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+PAIR_TOLERANCE_NS = 20_000_000  # 20 ms: a joint moving at STILL_VELOCITY turns by < 1/2 tick in this time
+STILL_WINDOW_NS = 250_000_000  # +-0.25 s around the image
+ENCODER_TICK = 2 * np.pi / 4096  # [rad] Dynamixel resolution
+STILL_VELOCITY = 0.03  # [rad/s] about one Dynamixel velocity unit (0.229 rpm = 0.024 rad/s)
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    """Time series of one joint, sorted by time; velocities are NaN where a message reported none."""
+
+    times: np.ndarray  # (N,) int64 [ns]
+    positions: np.ndarray  # (N,) [rad]
+    velocities: np.ndarray  # (N,) [rad/s]
+
+
+@dataclass(frozen=True)
+class JointStates:
+    names: list[str]  # every joint seen, in order of first appearance
+    series: dict[str, JointSeries]
+
+    @classmethod
+    def from_messages(
+        cls, messages: Iterable[tuple[int, Sequence[str], Sequence[float], Sequence[float]]]
+    ) -> JointStates:
+        """From (stamp_ns, names, positions, velocities) per JointState message; empty velocities allowed."""
+        columns: dict[str, tuple[list[int], list[float], list[float]]] = {}
+        for stamp, names, positions, velocities in messages:
+            has_velocity = len(velocities) == len(names)
+            for k, name in enumerate(names):
+                if k >= len(positions):
+                    break
+                times, qs, vs = columns.setdefault(name, ([], [], []))
+                times.append(stamp)
+                qs.append(positions[k])
+                vs.append(velocities[k] if has_velocity else np.nan)
+        series = {}
+        for name, (times, qs, vs) in columns.items():
+            t = np.asarray(times, dtype=np.int64)
+            order = np.argsort(t, kind="stable")
+            series[name] = JointSeries(t[order], np.asarray(qs, float)[order], np.asarray(vs, float)[order])
+        return cls(list(columns), series)
+
+
+@dataclass(frozen=True)
+class Paired:
+    positions: np.ndarray  # (J,) in the order of JointStates.names [rad]
+    velocities: np.ndarray | None  # (J,) [rad/s]; None unless every joint reported one
+
+
+def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
+    """Joint angles for the frame at `stamp_ns`, or the reason the frame is not used.
+
+    exact=True (capture files): the joint state must have the image's stamp, and no stillness test is
+    made (the capture decided that the robot was still). exact=False (recordings): nearest state within the
+    tolerance, and the stillness test of the module docstring.
+    """
+    positions, velocities = [], []
+    worst: tuple[float, str] | None = None  # (ticks moved, joint) of the joint that moved most
+    for name in states.names:
+        s = states.series[name]
+        i = int(np.searchsorted(s.times, stamp_ns))
+        candidates = [j for j in (i - 1, i) if 0 <= j < len(s.times)]
+        j = min(candidates, key=lambda c: abs(int(s.times[c]) - stamp_ns))
+        dt = abs(int(s.times[j]) - stamp_ns)
+        if exact and dt != 0:
+            return f"no joint state of {name} with the image's stamp"
+        if dt > PAIR_TOLERANCE_NS:
+            return (
+                f"no joint state of {name} within {PAIR_TOLERANCE_NS / 1e6:.0f} ms "
+                f"(nearest {dt / 1e6:.0f} ms away)"
+            )
+        positions.append(s.positions[j])
+        velocities.append(s.velocities[j])
+        if exact:
+            continue
+        lo = int(np.searchsorted(s.times, stamp_ns - STILL_WINDOW_NS, side="left"))
+        hi = int(np.searchsorted(s.times, stamp_ns + STILL_WINDOW_NS, side="right"))
+        if s.times[hi - 1] - s.times[lo] >= STILL_WINDOW_NS:
+            ticks = float(np.ptp(s.positions[lo:hi])) / ENCODER_TICK
+            if ticks > 1 + 1e-6 and (worst is None or ticks > worst[0]):
+                worst = (ticks, name)
+            continue
+        v = s.velocities[lo:hi]
+        v = v[np.isfinite(v)]
+        if not len(v):
+            return (
+                f"too few joint states of {name} around the image to tell whether it was still "
+                f"(need states over +-{STILL_WINDOW_NS / 1e9:.2f} s, or velocities)"
+            )
+        if np.max(np.abs(v)) > STILL_VELOCITY:
+            return f"{name} was turning at {np.max(np.abs(v)):.3f} rad/s (still: <= {STILL_VELOCITY} rad/s)"
+    if worst is not None:
+        return (
+            f"not still: {worst[1]} moved {worst[0]:.1f} encoder ticks within +-{STILL_WINDOW_NS / 1e9:.2f} s"
+        )
+    v = np.asarray(velocities)
+    return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
