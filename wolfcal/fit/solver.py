@@ -3,9 +3,9 @@
 Rounds: robust trf solve -> flag outlier samples (whitened per-sample RMS far above the others; they get zero
 weight) -> estimate the corner noise from the whitened inlier residuals (the encoder noise is a known property of
 the servos and stays fixed) -> rebuild the weights at the new estimate; until the outlier set and the noise level
-settle. Then the uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each parameter's share of information from the data is
-1 - posterior variance / prior variance; correlated pairs; condition number of the column-scaled data Jacobian
-(calibration practice: below 100).
+settle. Then the uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each
+parameter's share of information from the data is 1 - posterior variance / prior variance; correlated pairs;
+condition number of the column-scaled data Jacobian (calibration practice: below 100).
 """
 
 from __future__ import annotations
