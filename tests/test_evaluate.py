@@ -26,6 +26,7 @@ from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.scenario import synthetic_scenario
 from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
+from wolfcal.sim.truth import TruthSpec
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 URDF_DIGITS_TOLERANCE = 1e-7  # [m], rotation-matrix entries: 9 printed digits of <origin> (1e-12 with 17)
@@ -62,8 +63,9 @@ def sim(tmp_path_factory, robot, camera):
     """A simulated robot (camera tilted by ~0.065 rad): fit on 22 poses, 10 other poses held out."""
     root = tmp_path_factory.mktemp("evaluate")
     simulate_capture(CONFIG, root / "all.mcap", SimOptions(samples=32, seed=5, binning=4), say=quiet)
-    split_capture(root / "all.mcap", {root / "fit.mcap": range(22), root / "held.mcap": range(22, 32)},
-                  robot, camera)
+    split_capture(
+        root / "all.mcap", {root / "fit.mcap": range(22), root / "held.mcap": range(22, 32)}, robot, camera
+    )
     run_fit([root / "fit.mcap"], CONFIG, root / "fit", FitOptions(free="camera"), say=quiet)
     return root
 
@@ -89,8 +91,10 @@ def test_metrics_are_zero_for_the_true_model(robot, camera):
 def test_ground_error_of_a_pitched_camera(robot, camera):
     """DESIGN facts: a 0.06 rad pitch error moves a ball seen 4.5 m away to about 6.8 m."""
     truth = Corrections(frames={robot.camera_joint: np.array([0, 0, 0, -0.06, 0, 0])})
-    rows = {r["distance_m"]: r["models"] for r in ground_errors(robot, camera, truth, {"before": Corrections(),
-                                                                                     "truth": truth})}
+    rows = {
+        r["distance_m"]: r["models"]
+        for r in ground_errors(robot, camera, truth, {"before": Corrections(), "truth": truth})
+    }
     assert 6.5 < rows[4.5]["before"]["landed_at_m"] < 7.2
     assert rows[4.5]["truth"]["error_m"] < 1e-9
     assert rows[1.0]["before"]["error_m"] < rows[2.0]["before"]["error_m"] < rows[4.5]["before"]["error_m"]
@@ -114,8 +118,12 @@ def test_report_is_self_contained(sim, held_out):
     out = sim / "report"
     page = (out / "report.html").read_text()
     figures = held_out["figures"]
-    assert {Path(f["file"]).name for f in figures} >= {"corner_histogram.png", "per_sample.png", "overlay_1.png",
-                                                       "correlation.png"}
+    assert {Path(f["file"]).name for f in figures} >= {
+        "corner_histogram.png",
+        "per_sample.png",
+        "overlay_1.png",
+        "correlation.png",
+    }
     assert page.count('src="data:image/png;base64,') == len(figures)
     assert 'src="figures' not in page and "<script" not in page
     markdown = (out / "report.md").read_text()
@@ -137,8 +145,13 @@ def test_deploy_urdfs_reproduce_the_model(tmp_path, robot, sim, held_out):
     truth.offsets = {j: float(rng.normal(0, 0.03)) for j in robot.joint_names}
     write_deploy_files(robot, truth, tmp_path)
     q = rng.uniform(-0.5, 0.5, size=(3, len(robot.joint_names)))
-    for out, corrections in ((sim / "report", Corrections.from_dict(yaml.safe_load(
-            (sim / "fit" / "result.yaml").read_text())["corrections"])), (tmp_path, truth)):
+    for out, corrections in (
+        (
+            sim / "report",
+            Corrections.from_dict(yaml.safe_load((sim / "fit" / "result.yaml").read_text())["corrections"]),
+        ),
+        (tmp_path, truth),
+    ):
         offsets = corrections.offset_vector(robot.joint_names)
         for qi in q:
             rising = _fk(out / "calibrated.urdf", dict(zip(robot.joint_names, qi + offsets)))
@@ -161,30 +174,48 @@ def test_camera_correction_is_the_fitted_frame_change(robot, sim, held_out):
     T[:3, 3] = [c["translation"][k] for k in "xyz"]
     fitted = Corrections.from_dict(yaml.safe_load((sim / "fit" / "result.yaml").read_text())["corrections"])
     np.testing.assert_allclose(T, transform_from_twist_params(fitted.frames[robot.camera_joint]), atol=1e-8)
-    assert c["parent_frame"] == "camera_optical_frame_uncalibrated" and "--child-frame-id camera_optical_frame" in \
-        c["static_transform_publisher"]
+    assert (
+        c["parent_frame"] == "camera_optical_frame_uncalibrated"
+        and "--child-frame-id camera_optical_frame" in c["static_transform_publisher"]
+    )
 
 
-def test_worse_fit_is_refused(sim, held_out):
-    """A fit whose camera correction points the wrong way (as a fit on a capture of outliers would) is refused."""
-    bad = sim / "bad_fit"
-    shutil.copytree(sim / "fit", bad)
-    result = yaml.safe_load((bad / "result.yaml").read_text())
-    camera_joint = next(iter(result["corrections"]["frames"]))
-    result["corrections"]["frames"][camera_joint] = [0.0, 0.0, 0.0, 0.08, 0.0, 0.0]
-    (bad / "result.yaml").write_text(yaml.safe_dump(result))
-    out = sim / "bad_report"
+def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
+    """A robot whose URDF is nearly right, fitted on a capture of outliers only (blurred images, stale joint
+    readings): the calibration makes clean held-out poses worse, so nothing deployable is written."""
+    good = TruthSpec(
+        camera_tilt=0.0,
+        camera_rotation=0.002,
+        camera_translation=0.0005,
+        tag_translation=0.0005,
+        tag_rotation=0.002,
+    )
+    for name, outliers in (("clean", 0.0), ("outliers", 1.0)):  # same seed: same truth and poses
+        options = SimOptions(samples=22, seed=7, binning=4, outlier_fraction=outliers, truth=good)
+        simulate_capture(CONFIG, tmp_path / f"{name}.mcap", options, say=quiet)
+    split_capture(tmp_path / "outliers.mcap", {tmp_path / "fit.mcap": range(14)}, robot, camera)
+    split_capture(tmp_path / "clean.mcap", {tmp_path / "held.mcap": range(14, 22)}, robot, camera)
+    run_fit([tmp_path / "fit.mcap"], CONFIG, tmp_path / "bad_fit", FitOptions(free="camera"), say=quiet)
+    out = tmp_path / "report"
     out.mkdir()
     (out / "calibrated.urdf").write_text("stale deploy file of an earlier run")
-    m = run_evaluate(bad, [sim / "held.mcap"], out, say=quiet)
+    m = run_evaluate(tmp_path / "bad_fit", [tmp_path / "held.mcap"], out, say=quiet)
     assert m["verdict"]["worse"] and not m["deploy"]["written"]
+    assert m["after"]["rms_px"] > m["before"]["rms_px"]
     assert not any((out / name).exists() for name in DEPLOY_FILES)
-    assert "worse" in (out / "report.html").read_text()
+    assert "makes held-out error worse" in (out / "report.html").read_text()
     runner = CliRunner()
-    refused = runner.invoke(app, ["evaluate", str(bad), "--capture", str(sim / "held.mcap"), "--out", str(out)])
+    args = [
+        "evaluate",
+        str(tmp_path / "bad_fit"),
+        "--capture",
+        str(tmp_path / "held.mcap"),
+        "--out",
+        str(out),
+    ]
+    refused = runner.invoke(app, args)
     assert refused.exit_code != 0 and "--force" in refused.output and "Traceback" not in refused.output
-    forced = runner.invoke(app, ["evaluate", str(bad), "--capture", str(sim / "held.mcap"), "--out", str(out),
-                                 "--force"])
+    forced = runner.invoke(app, args + ["--force"])
     assert forced.exit_code == 0, forced.output
     assert all((out / name).exists() for name in DEPLOY_FILES)
 

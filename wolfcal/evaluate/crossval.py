@@ -39,6 +39,8 @@ def cross_validate(
     models = []
     for k in range(folds):
         train = np.flatnonzero(fold_of != k)
-        say(f"fold {k + 1}/{folds}: fitting on {len(train)} sample(s), holding out {int(np.sum(fold_of == k))}")
+        say(
+            f"fold {k + 1}/{folds}: fitting on {len(train)} sample(s), holding out {int(np.sum(fold_of == k))}"
+        )
         models.append(fit_observations(robot, obs.subset(train), options).corrections)
     return fold_of, models

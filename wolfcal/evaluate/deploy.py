@@ -61,7 +61,9 @@ def joint_offsets_text(robot: Robot, corrections: Corrections) -> str:
     for name in robot.joint_names:
         if name in corrections.offsets:
             value = float(corrections.offsets[name])
-            lines.append(f"  {name}: {value:.9g}  # {np.rad2deg(value):+.3f} deg, {value * TICKS_PER_RAD:+.1f} ticks")
+            lines.append(
+                f"  {name}: {value:.9g}  # {np.rad2deg(value):+.3f} deg, {value * TICKS_PER_RAD:+.1f} ticks"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -72,7 +74,9 @@ def write_deploy_files(robot: Robot, corrections: Corrections, out_dir: Path) ->
     write_calibrated_urdf(urdf, model, corrections, paths[0], fold_offsets=False)
     write_calibrated_urdf(urdf, model, corrections, paths[1], fold_offsets=True)
     write_text_atomic(paths[2], joint_offsets_text(robot, corrections))
-    write_text_atomic(paths[3], yaml.safe_dump(camera_correction(robot, corrections), sort_keys=False, width=200))
+    write_text_atomic(
+        paths[3], yaml.safe_dump(camera_correction(robot, corrections), sort_keys=False, width=200)
+    )
     return paths
 
 

@@ -24,7 +24,9 @@ def png(image: np.ndarray) -> bytes:
     return data.tobytes()
 
 
-def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45, color=INK, anchor: str = "left"):
+def _text(
+    img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45, color=INK, anchor: str = "left"
+):
     (w, h), _ = cv2.getTextSize(text, FONT, scale, 1)
     x, y = org
     if anchor == "center":
@@ -37,8 +39,16 @@ def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45,
 class LogAxes:
     """A white canvas with a plot area; y (or x) on a log10 scale for errors that span orders of magnitude."""
 
-    def __init__(self, width: int, height: int, title: str, left: int = 70, right: int = 20, top: int = 40,
-                 bottom: int = 55):
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        title: str,
+        left: int = 70,
+        right: int = 20,
+        top: int = 64,
+        bottom: int = 55,
+    ):
         self.img = np.full((height, width, 3), 255, np.uint8)
         self.x0, self.x1, self.y0, self.y1 = left, width - right, top, height - bottom
         _text(self.img, title, (width // 2, 16), 0.55, anchor="center")
@@ -48,8 +58,8 @@ class LogAxes:
         for label, color in reversed(items):
             (w, _), _ = cv2.getTextSize(label, FONT, 0.45, 1)
             x -= w + 22
-            cv2.rectangle(self.img, (x, self.y0 + 6), (x + 12, self.y0 + 18), color, -1)
-            _text(self.img, label, (x + 16, self.y0 + 12))
+            cv2.rectangle(self.img, (x, self.y0 - 26), (x + 12, self.y0 - 14), color, -1)
+            _text(self.img, label, (x + 16, self.y0 - 20))
 
     def frame(self) -> None:
         cv2.rectangle(self.img, (self.x0, self.y0), (self.x1, self.y1), INK, 1)
@@ -70,28 +80,41 @@ def _tick_label(v: float) -> str:
     return f"{v:g}"
 
 
+def _count_ticks(top: int) -> list[int]:
+    """About four round tick values (1, 2 or 5 times a power of ten apart) from 0 to `top`."""
+    raw = top / 4
+    power = 10 ** np.floor(np.log10(max(raw, 1)))
+    step = int(next(m * power for m in (1, 2, 5, 10) if m * power >= raw))
+    return list(range(0, top + 1, max(step, 1)))
+
+
 def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str) -> bytes:
     """Histograms of two error samples (e.g. corner distances [px]) on a log-spaced x axis."""
-    ax = LogAxes(760, 340, title)
+    ax = LogAxes(760, 364, title)
     lo, hi = _log_range(np.concatenate([before, after]))
     edges = np.logspace(np.log10(lo), np.log10(hi), 41)
     counts = [np.histogram(np.clip(v, lo, hi), edges)[0] for v in (before, after)]
     top = max(1, max(int(c.max()) for c in counts))
+
     def x_of(v: float) -> int:
         return int(ax.x0 + (np.log10(v) - np.log10(lo)) / (np.log10(hi) - np.log10(lo)) * (ax.x1 - ax.x0))
+
     def y_of(c: float) -> int:
         return int(ax.y1 - c / top * (ax.y1 - ax.y0 - 30))
+
     for d in _decades(lo, hi):
         cv2.line(ax.img, (x_of(d), ax.y0), (x_of(d), ax.y1), GRID, 1)
         _text(ax.img, _tick_label(d), (x_of(d), ax.y1 + 14), anchor="center")
-    for k in range(1, 5):
-        c = top * k / 4
-        _text(ax.img, f"{c:.0f}", (ax.x0 - 6, y_of(c)), anchor="right")
+    for c in _count_ticks(top):
+        cv2.line(ax.img, (ax.x0, y_of(c)), (ax.x1, y_of(c)), GRID, 1)
+        _text(ax.img, str(c), (ax.x0 - 6, y_of(c)), anchor="right")
     overlay = ax.img.copy()
     for c, color in zip(counts, (BEFORE, AFTER)):
         for i, n in enumerate(c):
             if n:
-                cv2.rectangle(overlay, (x_of(edges[i]) + 1, y_of(n)), (x_of(edges[i + 1]) - 1, ax.y1), color, -1)
+                cv2.rectangle(
+                    overlay, (x_of(edges[i]) + 1, y_of(n)), (x_of(edges[i + 1]) - 1, ax.y1), color, -1
+                )
     ax.img[:] = cv2.addWeighted(overlay, 0.65, ax.img, 0.35, 0)
     ax.frame()
     ax.legend([("before (input URDF)", BEFORE), ("after (calibrated)", AFTER)])
@@ -100,14 +123,20 @@ def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str
     return png(ax.img)
 
 
-def per_sample_png(before: np.ndarray, after: np.ndarray, outliers: np.ndarray, ylabel: str, title: str) -> bytes:
+def per_sample_png(
+    before: np.ndarray, after: np.ndarray, outliers: np.ndarray, ylabel: str, title: str
+) -> bytes:
     """Paired bars per sample (log y axis); outlier samples get a grey background and an 'x' under their bars."""
     n = len(before)
-    ax = LogAxes(max(760, 60 + 22 * n), 340, title)
+    ax = LogAxes(max(760, 60 + 22 * n), 364, title)
     lo, hi = _log_range(np.concatenate([before, after]))
+
     def y_of(v: float) -> int:
         v = min(max(v, lo), hi)
-        return int(ax.y1 - (np.log10(v) - np.log10(lo)) / (np.log10(hi) - np.log10(lo)) * (ax.y1 - ax.y0 - 30))
+        return int(
+            ax.y1 - (np.log10(v) - np.log10(lo)) / (np.log10(hi) - np.log10(lo)) * (ax.y1 - ax.y0 - 30)
+        )
+
     for d in _decades(lo, hi):
         cv2.line(ax.img, (ax.x0, y_of(d)), (ax.x1, y_of(d)), GRID, 1)
         _text(ax.img, _tick_label(d), (ax.x0 - 6, y_of(d)), anchor="right")
@@ -124,8 +153,10 @@ def per_sample_png(before: np.ndarray, after: np.ndarray, outliers: np.ndarray, 
         if n <= 40 or i % 5 == 0:
             _text(ax.img, str(i), (int(x + width / 2), ax.y1 + 14), 0.38, anchor="center")
     ax.frame()
-    ax.legend([("before", BEFORE), ("after", AFTER)] + ([("outlier sample", (215, 215, 215))] if outliers.any()
-                                                       else []))
+    ax.legend(
+        [("before", BEFORE), ("after", AFTER)]
+        + ([("outlier sample", (215, 215, 215))] if outliers.any() else [])
+    )
     _text(ax.img, "sample", ((ax.x0 + ax.x1) // 2, ax.y1 + 44), anchor="center")
     _text(ax.img, ylabel, (8, ax.y0 - 12))
     return png(ax.img)
@@ -134,8 +165,15 @@ def per_sample_png(before: np.ndarray, after: np.ndarray, outliers: np.ndarray, 
 def _polyline(img: np.ndarray, uv: np.ndarray, color, thickness: int) -> None:
     finite = np.isfinite(uv).all(axis=1)
     for a, b in zip(uv[:-1][finite[:-1] & finite[1:]], uv[1:][finite[:-1] & finite[1:]]):
-        cv2.line(img, tuple(np.round(a * 16).astype(int)), tuple(np.round(b * 16).astype(int)), color, thickness,
-                 cv2.LINE_AA, shift=4)
+        cv2.line(
+            img,
+            tuple(np.round(a * 16).astype(int)),
+            tuple(np.round(b * 16).astype(int)),
+            color,
+            thickness,
+            cv2.LINE_AA,
+            shift=4,
+        )
 
 
 def overlay_png(
@@ -153,8 +191,11 @@ def overlay_png(
     """
     img = image if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     scale = width / img.shape[1]
-    img = cv2.resize(img, (width, int(round(img.shape[0] * scale))), interpolation=cv2.INTER_AREA
-                     if scale < 1 else cv2.INTER_LINEAR)
+    img = cv2.resize(
+        img,
+        (width, int(round(img.shape[0] * scale))),
+        interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR,
+    )
     img = (0.6 * img + 0.4 * 255).astype(np.uint8)  # lighten so the drawing stands out
 
     def to_view(uv: np.ndarray) -> np.ndarray:
@@ -201,6 +242,12 @@ def correlation_png(names: list[str], correlation: np.ndarray, title: str) -> by
             color = tuple(int(v) for v in white + abs(c) * (tone - white))
             x, y = label_w + j * cell, 40 + i * cell
             cv2.rectangle(img, (x, y), (x + cell - 1, y + cell - 1), color, -1)
-            _text(img, f"{c:+.1f}" if cell < 40 else f"{c:+.2f}", (x + cell // 2, y + cell // 2), 0.32,
-                  INK if abs(c) < 0.6 else (255, 255, 255), anchor="center")
+            _text(
+                img,
+                f"{round(c, 1) + 0.0:+.1f}" if cell < 40 else f"{round(c, 2) + 0.0:+.2f}",
+                (x + cell // 2, y + cell // 2),
+                0.32,
+                INK if abs(c) < 0.6 else (255, 255, 255),
+                anchor="center",
+            )
     return png(img)

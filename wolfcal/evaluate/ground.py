@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
@@ -35,10 +36,15 @@ def standing_pose(robot: Robot) -> np.ndarray:
 
 def tilt_joint(robot: Robot) -> str:
     """The joint that pitches the camera: the last movable joint between base and camera (HeadTilt on Wolfgang)."""
-    joints = [j.name for j in robot.model.joints_between(robot.config.base_link, robot.config.camera.frame)
-              if j.actuated]
+    joints = [
+        j.name
+        for j in robot.model.joints_between(robot.config.base_link, robot.config.camera.frame)
+        if j.actuated
+    ]
     if not joints:
-        raise WolfcalError(f"{robot.config.path}: no movable joint between base and camera; cannot aim the head")
+        raise WolfcalError(
+            f"{robot.config.path}: no movable joint between base and camera; cannot aim the head"
+        )
     return joints[-1]
 
 
@@ -76,14 +82,19 @@ def aim_head(robot: Robot, reference: Corrections, distance: float) -> np.ndarra
     grid = np.linspace(lo, hi, 721)
     best = grid[int(np.argmin(off_axis(grid)))]
     step = grid[1] - grid[0]
-    found = minimize_scalar(lambda v: float(off_axis(np.array([v]))[0]), bounds=(max(lo, best - step),
-                            min(hi, best + step)), method="bounded", options={"xatol": 1e-10})
+    found = minimize_scalar(
+        lambda v: float(off_axis(np.array([v]))[0]),
+        bounds=(max(lo, best - step), min(hi, best + step)),
+        method="bounded",
+        options={"xatol": 1e-10},
+    )
     q0[column] = found.x
     return q0
 
 
-def ground_point(robot: Robot, q: np.ndarray, corrections: Corrections, uv: np.ndarray,
-                 camera) -> np.ndarray:
+def ground_point(
+    robot: Robot, q: np.ndarray, corrections: Corrections, uv: np.ndarray, camera: CameraModel
+) -> np.ndarray:
     """(3,) where the ray through pixel uv meets the ground plane of the model, right-sole frame [m]; NaN above
     the horizon."""
     T_sole_camera, _ = _poses(robot, q[None], corrections)
@@ -94,14 +105,21 @@ def ground_point(robot: Robot, q: np.ndarray, corrections: Corrections, uv: np.n
     return origin + (-origin[2] / ray[2]) * ray
 
 
-def ground_errors(robot: Robot, camera, reference: Corrections, models: dict[str, Corrections],
-                  distances: tuple[float, ...] = DISTANCES_M) -> list[dict]:
+def ground_errors(
+    robot: Robot,
+    camera: CameraModel,
+    reference: Corrections,
+    models: dict[str, Corrections],
+    distances: tuple[float, ...] = DISTANCES_M,
+) -> list[dict]:
     """Per distance: the ball's true spot and, per model, where it lands (distance from the robot) and the error [m].
 
     An error of None means the model puts the ball's pixel above its horizon (the ball would be "in the sky").
     """
     if GROUND_LINK not in robot.model.links:
-        raise WolfcalError(f"{robot.config.urdf}: no '{GROUND_LINK}' frame; the ground error needs the sole plane")
+        raise WolfcalError(
+            f"{robot.config.urdf}: no '{GROUND_LINK}' frame; the ground error needs the sole plane"
+        )
     rows = []
     for d in distances:
         q = aim_head(robot, reference, d)

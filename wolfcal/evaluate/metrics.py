@@ -57,7 +57,10 @@ def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
         tag_id = int(obs.tag_ids[rows[0]])
         xy = obs.camera.undistort_normalized(obs.camera.pixels_to_normalized(obs.uv[rows]))
         ok, rvec, tvec = cv2.solvePnP(
-            tag_corners(robot.config.tag(tag_id).size), xy.reshape(4, 1, 2), np.eye(3), None,
+            tag_corners(robot.config.tag(tag_id).size),
+            xy.reshape(4, 1, 2),
+            np.eye(3),
+            None,
             flags=cv2.SOLVEPNP_IPPE_SQUARE,
         )
         T = np.full((4, 4), np.nan)
@@ -68,7 +71,9 @@ def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
         samples.append(int(obs.sample_index[rows[0]]))
         tags.append(tag_id)
         poses.append(T)
-    return TagViews(np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4))
+    return TagViews(
+        np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4)
+    )
 
 
 @dataclass
@@ -122,7 +127,9 @@ def model_errors(robot: Robot, obs: Observations, views: TagViews, corrections: 
     return ModelErrors(residuals, sample_rms, sample_max, grid, sample_grid)
 
 
-def merge_folds(obs: Observations, views: TagViews, fold_of_sample: np.ndarray, folds: list[ModelErrors]) -> ModelErrors:
+def merge_folds(
+    obs: Observations, views: TagViews, fold_of_sample: np.ndarray, folds: list[ModelErrors]
+) -> ModelErrors:
     """Per-fold errors (each computed on all samples) -> each sample's error under the model it was held out of."""
     corner_fold = fold_of_sample[obs.sample_index]
     view_fold = fold_of_sample[views.sample]

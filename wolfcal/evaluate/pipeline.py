@@ -18,11 +18,12 @@ import yaml
 import wolfcal
 from wolfcal.atomic import write_bytes_atomic, write_text_atomic
 from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate import figures as fig
 from wolfcal.evaluate.crossval import cross_validate
-from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, remove_deploy_files, write_deploy_files
-from wolfcal.evaluate.ground import DISTANCES_M, STANDING, ground_errors
+from wolfcal.evaluate.deploy import camera_correction, remove_deploy_files, write_deploy_files
+from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
 from wolfcal.evaluate.metrics import (
     ModelErrors,
     TagViews,
@@ -35,7 +36,6 @@ from wolfcal.evaluate.metrics import (
 from wolfcal.evaluate.report import Block, before_after_table, headline_rows, render_html, render_markdown
 from wolfcal.fit.pipeline import FitOptions
 from wolfcal.fit.result import load_result
-from wolfcal.geometry import invert_transform
 from wolfcal.io.reader import read_captures
 from wolfcal.io.samples import Sample
 from wolfcal.observations import Observations
@@ -94,7 +94,7 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
     return truths[0] if all(t.to_dict() == first for t in truths[1:]) else None
 
 
-def _skeleton(robot: Robot, q: np.ndarray, corrections: Corrections, camera) -> list[np.ndarray]:
+def _skeleton(robot: Robot, q: np.ndarray, corrections: Corrections, camera: CameraModel) -> list[np.ndarray]:
     """Every joint as a segment parent origin -> child origin, projected into the image [px] (NaN off-image)."""
     joints = list(robot.model.joints.values())
     links = sorted({j.parent for j in joints} | {j.child for j in joints})
@@ -125,55 +125,89 @@ def _overlay_samples(outliers: np.ndarray, after: ModelErrors) -> list[int]:
     """Which samples to show: inliers spread from best to worst after calibration, plus the worst outlier."""
     inliers = np.flatnonzero(~outliers)
     ranked = inliers[np.argsort(after.sample_rms[inliers])]
-    picks = [int(ranked[i]) for i in np.unique(np.linspace(0, len(ranked) - 1, OVERLAYS - 1).round().astype(int))]
+    picks = [
+        int(ranked[i]) for i in np.unique(np.linspace(0, len(ranked) - 1, OVERLAYS - 1).round().astype(int))
+    ]
     if outliers.any():
         bad = np.flatnonzero(outliers)
         picks.append(int(bad[np.argmax(after.sample_rms[bad])]))
     return picks
 
 
-def _sample_rows(obs: Observations, before: ModelErrors, after: ModelErrors, outliers: np.ndarray,
-                 fold_of: np.ndarray | None) -> list[dict]:
+def _sample_rows(
+    obs: Observations,
+    before: ModelErrors,
+    after: ModelErrors,
+    outliers: np.ndarray,
+    fold_of: np.ndarray | None,
+) -> list[dict]:
     def mm(v: float) -> float | None:
         return round(float(v) * 1000, 3) if np.isfinite(v) else None
 
     rows = []
     for s in range(obs.n_samples):
-        rows.append({
-            "index": s,
-            "source": Path(obs.sources[s]).name,
-            "stamp_ns": int(obs.stamps_ns[s]),
-            "tags": sorted({int(t) for t in obs.tag_ids[obs.sample_index == s]}),
-            "fold": None if fold_of is None else int(fold_of[s]),
-            "rms_before_px": round(float(before.sample_rms[s]), 4),
-            "rms_after_px": round(float(after.sample_rms[s]), 4),
-            "max_before_px": round(float(before.sample_max[s]), 4),
-            "max_after_px": round(float(after.sample_max[s]), 4),
-            "tag_grid_before_mm": mm(before.sample_grid[s]),
-            "tag_grid_after_mm": mm(after.sample_grid[s]),
-            "outlier": bool(outliers[s]),
-        })
+        rows.append(
+            {
+                "index": s,
+                "source": Path(obs.sources[s]).name,
+                "stamp_ns": int(obs.stamps_ns[s]),
+                "tags": sorted({int(t) for t in obs.tag_ids[obs.sample_index == s]}),
+                "fold": None if fold_of is None else int(fold_of[s]),
+                "rms_before_px": round(float(before.sample_rms[s]), 4),
+                "rms_after_px": round(float(after.sample_rms[s]), 4),
+                "max_before_px": round(float(before.sample_max[s]), 4),
+                "max_after_px": round(float(after.sample_max[s]), 4),
+                "tag_grid_before_mm": mm(before.sample_grid[s]),
+                "tag_grid_after_mm": mm(after.sample_grid[s]),
+                "outlier": bool(outliers[s]),
+            }
+        )
     return rows
 
 
-def _figures(robot: Robot, obs: Observations, samples: dict[tuple[str, int], Sample], before: ModelErrors,
-             after: ModelErrors, outliers: np.ndarray, after_of_sample: list[Corrections],
-             result: dict) -> tuple[dict[str, bytes], list[tuple[str, str]]]:
+def _figures(
+    robot: Robot,
+    obs: Observations,
+    samples: dict[tuple[str, int], Sample],
+    before: ModelErrors,
+    after: ModelErrors,
+    outliers: np.ndarray,
+    after_of_sample: list[Corrections],
+    result: dict,
+) -> tuple[dict[str, bytes], list[tuple[str, str]]]:
     """PNG pictures by file name, and (file name, caption) in report order."""
     pngs: dict[str, bytes] = {}
     captions: list[tuple[str, str]] = []
     inlier_corners = ~outliers[obs.sample_index]
     pngs["corner_histogram.png"] = fig.histogram_png(
-        before.corner_distance[inlier_corners], after.corner_distance[inlier_corners],
-        "distance between predicted and detected tag corner [px] (log scale)", "Held-out corner errors")
-    captions.append(("corner_histogram.png", "Distance between where each tag corner was detected and where the "
-                     "model predicts it, inlier samples: red with the input URDF, blue calibrated. Further left is "
-                     "better."))
-    pngs["per_sample.png"] = fig.per_sample_png(before.sample_rms, after.sample_rms, outliers,
-                                                "RMS per axis [px] (log scale)", "Reprojection error per sample")
-    captions.append(("per_sample.png", "Each held-out sample's reprojection RMS before (red) and after (blue); grey "
-                     "columns marked x are outlier samples (blurred image or a joint reading that does not match "
-                     "the image), left out of the headline numbers."))
+        before.corner_distance[inlier_corners],
+        after.corner_distance[inlier_corners],
+        "distance between predicted and detected tag corner [px] (log scale)",
+        "Held-out corner errors",
+    )
+    captions.append(
+        (
+            "corner_histogram.png",
+            "Distance between where each tag corner was detected and where the "
+            "model predicts it, inlier samples: red with the input URDF, blue calibrated. Further left is "
+            "better.",
+        )
+    )
+    pngs["per_sample.png"] = fig.per_sample_png(
+        before.sample_rms,
+        after.sample_rms,
+        outliers,
+        "RMS per axis [px] (log scale)",
+        "Reprojection error per sample",
+    )
+    captions.append(
+        (
+            "per_sample.png",
+            "Each held-out sample's reprojection RMS before (red) and after (blue); grey "
+            "columns marked x are outlier samples (blurred image or a joint reading that does not match "
+            "the image), left out of the headline numbers.",
+        )
+    )
     for k, s in enumerate(_overlay_samples(outliers, after)):
         sample = samples.get((obs.sources[s], int(obs.stamps_ns[s])))
         if sample is None:
@@ -181,25 +215,41 @@ def _figures(robot: Robot, obs: Observations, samples: dict[tuple[str, int], Sam
         name = f"overlay_{k + 1}.png"
         rows = obs.sample_index == s
         pngs[name] = fig.overlay_png(
-            sample.image(), obs.uv[rows],
-            {"before": _predicted_corners(robot, obs, s, Corrections()),
-             "after": _predicted_corners(robot, obs, s, after_of_sample[s])},
-            {"before": _skeleton(robot, obs.q_measured[s], Corrections(), obs.camera),
-             "after": _skeleton(robot, obs.q_measured[s], after_of_sample[s], obs.camera)},
+            sample.image(),
+            obs.uv[rows],
+            {
+                "before": _predicted_corners(robot, obs, s, Corrections()),
+                "after": _predicted_corners(robot, obs, s, after_of_sample[s]),
+            },
+            {
+                "before": _skeleton(robot, obs.q_measured[s], Corrections(), obs.camera),
+                "after": _skeleton(robot, obs.q_measured[s], after_of_sample[s], obs.camera),
+            },
             f"sample {s}: RMS {before.sample_rms[s]:.2f} px before, {after.sample_rms[s]:.2f} px after"
             + (" (outlier)" if outliers[s] else ""),
         )
-        captions.append((name, f"Sample {s} ({Path(obs.sources[s]).name}): detected tag corners (green rings), "
-                         "corners and the robot's kinematic skeleton (lines between joint origins) as each model "
-                         "predicts them from the joint readings: red input URDF, blue calibrated."))
-    names = result["covariance"]["names"]
-    cov = np.asarray(result["covariance"]["matrix"], dtype=float)
+        captions.append(
+            (
+                name,
+                f"Sample {s} ({Path(obs.sources[s]).name}): detected tag corners (green rings), "
+                "corners and the robot's kinematic skeleton (lines between joint origins) as each model "
+                "predicts them from the joint readings: red input URDF, blue calibrated.",
+            )
+        )
+    covariance = result.get("covariance") or {"names": [], "matrix": []}
+    names = covariance["names"]
+    cov = np.asarray(covariance["matrix"], dtype=float)
     if names:
         d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
         pngs["correlation.png"] = fig.correlation_png(names, cov / np.outer(d, d), "Parameter correlation")
-        captions.append(("correlation.png", "Correlation between the fitted parameters (from the fit's "
-                         "covariance). Near +1 or -1 (dark) means the data cannot tell the two apart: only their "
-                         "combination is determined."))
+        captions.append(
+            (
+                "correlation.png",
+                "Correlation between the fitted parameters (from the fit's "
+                "covariance). Near +1 or -1 (dark) means the data cannot tell the two apart: only their "
+                "combination is determined.",
+            )
+        )
     return pngs, captions
 
 
@@ -213,10 +263,37 @@ def _ground_text(reference_is_truth: bool) -> str:
         "the model puts the ball."
     )
     if reference_is_truth:
-        return common + " Reference: the simulator's truth (the held-out capture has a .truth.yaml beside it), so "\
+        return (
+            common
+            + " Reference: the simulator's truth (the held-out capture has a .truth.yaml beside it), so "
             "both columns are true errors."
-    return common + " Reference: the calibrated model (no ground truth is known for a real robot), so 'before' " \
+        )
+    return (
+        common + " Reference: the calibrated model (no ground truth is known for a real robot), so 'before' "
         "is how far the calibration moves the ball, and 'after' is 0 by definition."
+    )
+
+
+def _ground_blocks(ground: dict) -> list[Block]:
+    """The ground-error section (nothing when the robot has no sole frame to stand on)."""
+    if not ground["rows"]:
+        return []
+    rows = []
+    for row in ground["rows"]:
+        cells = [f"{row['distance_m']:g} m"]
+        for model in ("before", "after"):
+            g = row["models"][model]
+            cells += [
+                "above horizon" if g["landed_at_m"] is None else f"{g['landed_at_m']:.3f} m",
+                "n/a" if g["error_m"] is None else f"{g['error_m'] * 100:.1f} cm",
+            ]
+        rows.append(cells)
+    headers = ["ball at", "lands at, before", "error before", "lands at, after", "error after"]
+    return [
+        ("h2", "Where a ball lands on the field"),
+        ("p", _ground_text(ground["reference"] == "simulator truth")),
+        ("table", (headers, rows, set())),
+    ]
 
 
 def _blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:
@@ -225,47 +302,65 @@ def _blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:
     blocks.append(("banner", (not m["verdict"]["worse"], m["verdict"]["message"])))
     blocks.append(("p", m["mode_note"]))
     blocks.append(("h2", "Before and after"))
-    blocks.append(("p", "Before: the input URDF as it is. After: with the calibration. Every number comes from "
-                   f"samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
-                   "outlier sample(s) left out of these numbers and marked in the table below)."))
+    blocks.append(
+        (
+            "p",
+            "Before: the input URDF as it is. After: with the calibration. Every number comes from "
+            f"samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
+            "outlier sample(s) left out of these numbers and marked in the table below).",
+        )
+    )
     blocks.append(("table", (["", "before (input URDF)", "after (calibrated)"], headline_rows(m), set())))
-    blocks.append(("p", "Reprojection RMS per axis: sqrt(mean(du^2 + dv^2) / 2) over all tag corners, in pixels "
-                   "of the captured images; how far, on average, the model's prediction of a tag corner is from "
-                   "where the camera saw it. Largest corner error: the worst single corner (distance). Tag-grid "
-                   "mean distance: the 2019 study's metric, for comparison with its 38.2 mm -> 18.4 mm: the tag's "
-                   "pose measured from its four corners alone (PnP) versus predicted by the model, mean distance of "
-                   "a 5 x 4 grid of points on the tag; a single tag's depth is poorly measured, so it is noisier."))
-    blocks.append(("h2", "Where a ball lands on the field"))
-    blocks.append(("p", _ground_text(m["ground"]["reference"] == "simulator truth")))
-    rows = []
-    for row in m["ground"]["rows"]:
-        cells = [f"{row['distance_m']:g} m"]
-        for model in ("before", "after"):
-            g = row["models"][model]
-            cells += ["above horizon" if g["landed_at_m"] is None else f"{g['landed_at_m']:.3f} m",
-                      "n/a" if g["error_m"] is None else f"{g['error_m'] * 100:.1f} cm"]
-        rows.append(cells)
-    blocks.append(("table", (["ball at", "lands at, before", "error before", "lands at, after", "error after"],
-                             rows, set())))
+    blocks.append(
+        (
+            "p",
+            "Reprojection RMS per axis: sqrt(mean(du^2 + dv^2) / 2) over all tag corners, in pixels "
+            "of the captured images; how far, on average, the model's prediction of a tag corner is from "
+            "where the camera saw it. Largest corner error: the worst single corner (distance). Tag-grid "
+            "mean distance: the 2019 study's metric, for comparison with its 38.2 mm -> 18.4 mm: the tag's "
+            "pose measured from its four corners alone (PnP) versus predicted by the model, mean distance of "
+            "a 5 x 4 grid of points on the tag; a single tag's depth is poorly measured, so it is noisier.",
+        )
+    )
+    blocks += _ground_blocks(m["ground"])
     blocks.append(("h2", "Pictures"))
     blocks += [("figure", c) for c in captions]
     blocks.append(("h2", "Fitted parameters"))
-    blocks.append(("table", (["parameter", "value +- std", "information from data"],
-                             [[p["name"], p["display"], f"{p['data_share']:.0%}"] for p in m["parameters"]], set())))
+    blocks.append(
+        (
+            "table",
+            (
+                ["parameter", "value +- std", "information from data"],
+                [[p["name"], p["display"], f"{p['data_share']:.0%}"] for p in m["parameters"]],
+                set(),
+            ),
+        )
+    )
     blocks.append(("h2", "Per sample"))
-    blocks.append(("p", "RMS per axis and largest corner error in pixels, tag-grid distance in millimetres; "
-                   "outlier samples are marked (highlighted) and left out of the numbers above."))
+    blocks.append(
+        (
+            "p",
+            "RMS per axis and largest corner error in pixels, tag-grid distance in millimetres; "
+            "outlier samples are marked (highlighted) and left out of the numbers above.",
+        )
+    )
+    folds = m["folds"] is not None
+    headers = ["sample", "capture", "tags"] + (["fold"] if folds else [])
+    headers += ["RMS before", "RMS after", "max after", "grid before", "grid after", ""]
     rows, marked = [], set()
     for i, s in enumerate(m["samples"]):
-        rows.append([str(s["index"]), s["source"], " ".join(map(str, s["tags"])),
-                     "" if s["fold"] is None else str(s["fold"] + 1),
-                     f"{s['rms_before_px']:.3f}", f"{s['rms_after_px']:.3f}", f"{s['max_after_px']:.2f}",
-                     _fmt_mm(s["tag_grid_before_mm"]), _fmt_mm(s["tag_grid_after_mm"]),
-                     "OUTLIER" if s["outlier"] else ""])
+        row = [str(s["index"]), s["source"], " ".join(map(str, s["tags"]))]
+        row += [str(s["fold"] + 1)] if folds else []
+        row += [f"{s['rms_before_px']:.3f}", f"{s['rms_after_px']:.3f}", f"{s['max_after_px']:.2f}"]
+        row += [
+            _fmt_mm(s["tag_grid_before_mm"]),
+            _fmt_mm(s["tag_grid_after_mm"]),
+            "OUTLIER" if s["outlier"] else "",
+        ]
+        rows.append(row)
         if s["outlier"]:
             marked.add(i)
-    blocks.append(("table", (["sample", "capture", "tags", "fold", "RMS before", "RMS after", "max after",
-                              "grid before", "grid after", ""], rows, marked)))
+    blocks.append(("table", (headers, rows, marked)))
     blocks.append(("h2", "Files to deploy"))
     if m["deploy"]["written"]:
         blocks.append(("p", "Written beside this report:"))
@@ -277,8 +372,13 @@ def _blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:
     if m["warnings"]:
         blocks.append(("h2", "Notes"))
         blocks += [("p", w) for w in m["warnings"]]
-    blocks.append(("p", f"wolfcal {m['wolfcal_version']}, {m['created']}; fit: {m['fit_dir']}. Every number of "
-                   "this report is in metrics.json."))
+    blocks.append(
+        (
+            "p",
+            f"wolfcal {m['wolfcal_version']}, {m['created']}; fit: {m['fit_dir']}. Every number of "
+            "this report is in metrics.json.",
+        )
+    )
     return blocks
 
 
@@ -328,45 +428,72 @@ def run_evaluate(
     if held_out:
         after = model_errors(robot, obs, views, fitted)
         after_of_sample = [fitted] * obs.n_samples
-        mode_note = (f"Held-out evaluation on {', '.join(p.name for p in sources)}: samples the fit "
-                     f"({', '.join(Path(c).name for c in result['captures'])}) did not use.")
+        mode_note = (
+            f"Held-out evaluation on {', '.join(p.name for p in sources)}: samples the fit "
+            f"({', '.join(Path(c).name for c in result['captures'])}) did not use."
+        )
     else:
-        options = FitOptions(free=result["free"], side=result["side"], fix_tags=result["fix_tags"],
-                             huber_k=(result.get("robust_loss") or {}).get("threshold_sigma", 3.0))
+        options = FitOptions(
+            free=result["free"],
+            side=result["side"],
+            fix_tags=result["fix_tags"],
+            huber_k=(result.get("robust_loss") or {}).get("threshold_sigma", 3.0),
+        )
         fold_of, models = cross_validate(robot, obs, options, folds, say)
         after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
         after_of_sample = [models[k] for k in fold_of]
-        mode_note = (f"No held-out capture was given: {len(models)}-fold cross-validation over the fit's own "
-                     f"{obs.n_samples} sample(s). Each sample is judged by a calibration fitted on the other folds "
-                     "(sample i in fold i mod k), so no number here comes from a sample its model was fitted on. "
-                     "The deploy files hold the calibration fitted on all samples. A capture taken apart from the "
-                     "fit's (wolfcal evaluate FIT_DIR --capture HELDOUT.mcap) is the stronger test.")
+        mode_note = (
+            f"No held-out capture was given: {len(models)}-fold cross-validation over the fit's own "
+            f"{obs.n_samples} sample(s). Each sample is judged by a calibration fitted on the other folds "
+            "(sample i in fold i mod k), so no number here comes from a sample its model was fitted on. "
+            "The deploy files hold the calibration fitted on all samples. A capture taken apart from the "
+            "fit's (wolfcal evaluate FIT_DIR --capture HELDOUT.mcap) is the stronger test."
+        )
     outliers = outlier_samples(before, after)
     s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
     worse = s_after["rms_px"] > s_before["rms_px"]
     if worse:
-        verdict = (f"The calibration makes held-out error worse: reprojection RMS {s_after['rms_px']:.3f} px "
-                   f"calibrated vs {s_before['rms_px']:.3f} px with the input URDF. Keep the input URDF; refit "
-                   "with more varied poses, fewer free parameters, or without the outlier samples.")
+        verdict = (
+            f"The calibration makes held-out error worse: reprojection RMS {s_after['rms_px']:.3f} px "
+            f"calibrated vs {s_before['rms_px']:.3f} px with the input URDF. Keep the input URDF; refit "
+            "with more varied poses, fewer free parameters, or without the outlier samples."
+        )
     else:
-        verdict = (f"The calibration improves held-out error: reprojection RMS {s_before['rms_px']:.3f} px -> "
-                   f"{s_after['rms_px']:.3f} px.")
+        verdict = (
+            f"The calibration improves held-out error: reprojection RMS {s_before['rms_px']:.3f} px -> "
+            f"{s_after['rms_px']:.3f} px."
+        )
     truth = _truth_reference(sources)
     reference = truth if truth is not None else fitted
-    say("computing the ground error ...")
-    ground_rows = ground_errors(robot, obs.camera, reference, {"before": Corrections(), "after": fitted},
-                                DISTANCES_M)
+    ground_rows = []
+    if GROUND_LINK in robot.model.links:
+        say("computing the ground error ...")
+        models = {"before": Corrections(), "after": fitted}
+        ground_rows = ground_errors(robot, obs.camera, reference, models, DISTANCES_M)
+    else:
+        warnings.append(
+            f"{robot.config.urdf} has no '{GROUND_LINK}' frame: the ground error was not computed"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
     if worse and not force:
         removed = remove_deploy_files(out_dir)
-        deploy = {"written": False, "forced": False, "files": [],
-                  "reason": verdict.split(":")[0] + "; the deploy files were not written"
-                  + (f" (and {len(removed)} from an earlier run were removed)" if removed else "")
-                  + ". Pass --force to write them anyway."}
+        deploy = {
+            "written": False,
+            "forced": False,
+            "files": [],
+            "reason": verdict.split(":")[0]
+            + "; the deploy files were not written"
+            + (f" (and {len(removed)} from an earlier run were removed)" if removed else "")
+            + ". Pass --force to write them anyway.",
+        }
     else:
         paths = write_deploy_files(robot, fitted, out_dir)
-        deploy = {"written": True, "forced": bool(worse), "files": [p.name for p in paths],
-                  "reason": "written despite worse held-out error (--force)" if worse else None}
+        deploy = {
+            "written": True,
+            "forced": bool(worse),
+            "files": [p.name for p in paths],
+            "reason": "written despite worse held-out error (--force)" if worse else None,
+        }
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     pngs, captions = _figures(robot, obs, sample_by_key, before, after, outliers, after_of_sample, result)
     metrics = {
@@ -388,18 +515,23 @@ def run_evaluate(
             "max_px": "largest distance between a predicted and a detected corner [px], inlier samples",
             "median_corner_px": "median distance between predicted and detected corner [px], inlier samples",
             "tag_grid_mean_mm": "mean distance between a 5x4 grid on each tag placed by PnP of its detected corners "
-                                "and by the model [mm] (the 2019 study's metric), inlier samples",
+            "and by the model [mm] (the 2019 study's metric), inlier samples",
             "ground": "distance on the field between where the ball is and where the model puts it [m]",
         },
         "before": s_before,
         "after": s_after,
-        "ground": {"reference": "simulator truth" if truth is not None else "calibrated model",
-                   "standing_pose_rad": STANDING, "rows": ground_rows},
+        "ground": {
+            "reference": "simulator truth" if truth is not None else "calibrated model",
+            "standing_pose_rad": STANDING,
+            "rows": ground_rows,
+        },
         "verdict": {"worse": bool(worse), "message": verdict},
         "deploy": deploy,
         "camera_correction": camera_correction(robot, fitted),
-        "parameters": [{k: p[k] for k in ("name", "value", "std", "unit", "data_share", "display")}
-                       for p in result["parameters"]],
+        "parameters": [
+            {k: p[k] for k in ("name", "value", "std", "unit", "data_share", "display")}
+            for p in result["parameters"]
+        ],
         "correlated_pairs": result.get("correlated_pairs", []),
         "samples": _sample_rows(obs, before, after, outliers, fold_of),
         "figures": [{"file": f"figures/{name}", "caption": caption} for name, caption in captions],
@@ -408,7 +540,9 @@ def run_evaluate(
     blocks = _blocks(metrics, captions)
     for name, data in pngs.items():
         write_bytes_atomic(out_dir / "figures" / name, data)
-    write_text_atomic(out_dir / "report.html", render_html(blocks, pngs, f"wolfcal evaluation {robot.config.name}"))
+    write_text_atomic(
+        out_dir / "report.html", render_html(blocks, pngs, f"wolfcal evaluation {robot.config.name}")
+    )
     write_text_atomic(out_dir / "report.md", render_markdown(blocks, "figures"))
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     for line in before_after_table(metrics).splitlines():

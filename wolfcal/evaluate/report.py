@@ -23,16 +23,21 @@ def headline_rows(metrics: dict) -> list[list[str]]:
     rows = [
         ["reprojection RMS per axis [px]", _num(b["rms_px"], digits=3), _num(a["rms_px"], digits=3)],
         ["largest corner error [px]", _num(b["max_px"]), _num(a["max_px"])],
-        ["tag-grid mean distance (2019 study's metric) [mm]", _num(b["tag_grid_mean_mm"], digits=1),
-         _num(a["tag_grid_mean_mm"], digits=1)],
+        [
+            "tag-grid mean distance (2019 study's metric) [mm]",
+            _num(b["tag_grid_mean_mm"], digits=1),
+            _num(a["tag_grid_mean_mm"], digits=1),
+        ],
     ]
     for row in metrics["ground"]["rows"]:
         before, after = row["models"]["before"], row["models"]["after"]
-        rows.append([
-            f"ground error, ball at {row['distance_m']:g} m [cm]",
-            _num(before["error_m"], 100, 1) if before["error_m"] is not None else "above horizon",
-            _num(after["error_m"], 100, 1) if after["error_m"] is not None else "above horizon",
-        ])
+        rows.append(
+            [
+                f"ground error, ball at {row['distance_m']:g} m [cm]",
+                _num(before["error_m"], 100, 1) if before["error_m"] is not None else "above horizon",
+                _num(after["error_m"], 100, 1) if after["error_m"] is not None else "above horizon",
+            ]
+        )
     return rows
 
 
@@ -77,8 +82,10 @@ def render_html(blocks: list[Block], figures: dict[str, bytes], title: str) -> s
         elif kind == "figure":
             name, caption = payload
             data = base64.b64encode(figures[name]).decode("ascii")
-            out.append(f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
-                       f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+            out.append(
+                f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+            )
     out.append("</body></html>")
     return "\n".join(out) + "\n"
 
@@ -104,8 +111,10 @@ def render_markdown(blocks: list[Block], figure_dir: str) -> str:
             out.append(f"> **{'OK' if good else 'REFUSED'}**: {text}")
         elif kind == "table":
             headers, rows, marked = payload
-            lines = ["| " + " | ".join(_md_cell(h) for h in headers) + " |",
-                     "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
+            lines = [
+                "| " + " | ".join(_md_cell(h) for h in headers) + " |",
+                "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|",
+            ]
             for i, row in enumerate(rows):
                 cells = [_md_cell(c) for c in row]
                 if i in marked:

@@ -21,6 +21,7 @@ import multiprocessing
 import os
 import pty
 import select
+import signal
 import tempfile
 import time
 import tty
@@ -330,6 +331,10 @@ def read_true_angles(port: str) -> tuple[dict[str, float], str | None]:
             f"{port}: no `wolfcal emulate` serves this port (no {json_path}); the 'sim' camera needs the emulator"
         )
     info = json.loads(json_path.read_text())
+    try:
+        os.kill(info["pid"], 0)
+    except ProcessLookupError:
+        raise WolfcalError(f"{port}: the emulator that served this port (pid {info['pid']}) has ended") from None
     array = np.load(bin_path, mmap_mode="r")
     for _ in range(100):
         seq = array[0]
@@ -462,6 +467,10 @@ def emulate(
         say(port)
         say(f"emulating {len(spec.servos)} servos of {robot.config.path} on {port} (Ctrl-C to stop)")
 
+    def stop(signum: int, frame) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)  # clean up the published state on `kill` as on Ctrl-C
     try:
         serve(spec, ready)
     except KeyboardInterrupt:

@@ -41,9 +41,7 @@ class Calibration:
     rvecs: np.ndarray  # (V, 3) board -> camera rotation vectors
     tvecs: np.ndarray  # (V, 3) [m]
     residuals: list[np.ndarray]  # (N_v, 2) reprojection residuals per view [px]
-    rejected: list[tuple[Detection, float]] = field(
-        default_factory=list
-    )  # outlier views, their per-point RMS
+    rejected: list[tuple[Detection, float]] = field(default_factory=list)  # outlier views, their per-point RMS
 
     @property
     def view_rms(self) -> np.ndarray:
@@ -75,9 +73,7 @@ def _project_all(
 
 def _camera(template: CameraModel, intrinsics: np.ndarray) -> CameraModel:
     K = np.array([[intrinsics[0], 0, intrinsics[2]], [0, intrinsics[1], intrinsics[3]], [0, 0, 1]])
-    return CameraModel(
-        template.width, template.height, K, intrinsics[4:], template.distortion_model, template.name
-    )
+    return CameraModel(template.width, template.height, K, intrinsics[4:], template.distortion_model, template.name)
 
 
 def _intrinsics_std(
@@ -146,9 +142,7 @@ def _solve(
             )
         else:
             flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
-            _, K, D, rvecs, tvecs = cv2.calibrateCamera(
-                obj, img, size, None, None, flags=flags, criteria=criteria
-            )
+            _, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img, size, None, None, flags=flags, criteria=criteria)
     except cv2.error as exc:
         raise WolfcalError(
             f"the {model} calibration did not converge ({exc.err}); take more views with the board "
@@ -175,9 +169,7 @@ def calibrate_views(
         )
     sizes = {v.image_size for v in views}
     if len(sizes) > 1:
-        raise WolfcalError(
-            f"the views have different image sizes {sorted(sizes)}; calibrate one resolution at a time"
-        )
+        raise WolfcalError(f"the views have different image sizes {sorted(sizes)}; calibrate one resolution at a time")
     size = views[0].image_size
     used = list(views)
     rejected: list[tuple[Detection, float]] = []
@@ -199,6 +191,4 @@ def calibrate_views(
         rejected.append((used.pop(worst), float(rms[worst])))
     std = _intrinsics_std(camera, rvecs, tvecs, obj, img, view)
     names = ["fx", "fy", "cx", "cy", *DISTORTION_NAMES[model]]
-    return Calibration(
-        camera, dict(zip(names, map(float, std), strict=True)), used, rvecs, tvecs, residuals, rejected
-    )
+    return Calibration(camera, dict(zip(names, map(float, std), strict=True)), used, rvecs, tvecs, residuals, rejected)

@@ -21,9 +21,7 @@ import numpy as np
 from wolfcal.vision.board import Board
 
 METHODS = ("classic", "sb")
-_CLASSIC_MAX_SIDE = (
-    1000  # the classic detector searches a copy reduced to this size (speed), refines at full size
-)
+_CLASSIC_MAX_SIDE = 1000  # the classic detector searches a copy reduced to this size (speed), refines at full size
 _MIN_CHARUCO_CORNERS = 6
 _CHARUCO_WINDOW = 0.1  # ChArUco cornerSubPix half-window / corner spacing: larger windows reach the markers
 
@@ -66,29 +64,29 @@ def subpix_window(corners: np.ndarray, cols: int, rows: int) -> int:
     return int(np.clip(np.floor(spacing / 2) - 1, 2, 15))
 
 
-def _find_coarse(small: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
+def _find_coarse(small: np.ndarray, size: tuple[int, int], fallback: bool) -> np.ndarray | None:
     """Pixel-level corners: the classic search (two threshold settings), else the sector-based one."""
     base = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_FAST_CHECK
     for flags in (base | cv2.CALIB_CB_NORMALIZE_IMAGE, base):
         found, corners = cv2.findChessboardCorners(small, size, flags=flags)
         if found:
             return corners.reshape(-1, 2)
+    if not fallback:
+        return None
     found, corners = cv2.findChessboardCornersSB(small, size, flags=cv2.CALIB_CB_NORMALIZE_IMAGE)
     return corners.reshape(-1, 2) if found else None
 
 
-def _checkerboard_classic(gray: np.ndarray, board: Board) -> np.ndarray | None:
+def _checkerboard_classic(gray: np.ndarray, board: Board, fallback: bool) -> np.ndarray | None:
     scale = min(1.0, _CLASSIC_MAX_SIDE / max(gray.shape))
     small = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale < 1 else gray
-    corners = _find_coarse(small, (board.cols, board.rows))
+    corners = _find_coarse(small, (board.cols, board.rows), fallback)
     if corners is None:
         return None
     corners = (corners + 0.5) / scale - 0.5  # pixel centres at integers in both images
     win = subpix_window(corners, board.cols, board.rows)
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-    refined = cv2.cornerSubPix(
-        gray, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria
-    )
+    refined = cv2.cornerSubPix(gray, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria)
     return refined.reshape(-1, 2)
 
 
@@ -108,26 +106,29 @@ def _charuco(gray: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray] | 
     np.fill_diagonal(distance, np.inf)
     win = int(max(2, round(_CHARUCO_WINDOW * distance.min())))
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-    refined = cv2.cornerSubPix(
-        gray, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria
-    )
+    refined = cv2.cornerSubPix(gray, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria)
     return refined.reshape(-1, 2), ids.ravel().astype(int)
 
 
 def detect_board(
-    image: np.ndarray, board: Board, name: str = "image", method: str = "classic"
+    image: np.ndarray, board: Board, name: str = "image", method: str = "classic", fallback: bool = True
 ) -> Detection | Failure:
-    """Find the board's corners in one image (gray or colour)."""
+    """Find the board's corners in one image (gray or colour).
+
+    `fallback`: let the classic checkerboard search fall back to the slower sector-based one (off for live
+    frames, where a frame without a board must cost little).
+    """
     gray = to_gray(image)
     size = (gray.shape[1], gray.shape[0])
     if board.is_charuco:
         found = _charuco(gray, board)
         if found is None:
-            return Failure(
-                name, f"fewer than {_MIN_CHARUCO_CORNERS} ChArUco corners found ({board.describe()})"
-            )
+            return Failure(name, f"fewer than {_MIN_CHARUCO_CORNERS} ChArUco corners found ({board.describe()})")
         return Detection(name, found[0].astype(float), found[1], size)
-    corners = (_checkerboard_sb if method == "sb" else _checkerboard_classic)(gray, board)
+    if method == "sb":
+        corners = _checkerboard_sb(gray, board)
+    else:
+        corners = _checkerboard_classic(gray, board, fallback)
     if corners is None:
         return Failure(name, f"no {board.cols}x{board.rows} checkerboard found")
     return Detection(name, corners.astype(float), np.arange(board.n_corners), size)

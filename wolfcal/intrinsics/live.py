@@ -35,7 +35,7 @@ def collect_views(
 ) -> bool:
     """Feed frames to `selector` until coverage is complete (True) or the frames end (False)."""
     for count, (name, image) in enumerate(frames, start=1):
-        found = detect_board(image, selector.board, name, method)
+        found = detect_board(image, selector.board, name, method, fallback=False)
         detection = found if isinstance(found, Detection) else None
         if selector.offer(detection) and save_dir is not None:
             path = save_dir / f"view_{len(selector.kept):03d}.png"

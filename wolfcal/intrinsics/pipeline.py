@@ -12,7 +12,7 @@ import numpy as np
 
 from wolfcal.camera.camera_info import save_camera_info
 from wolfcal.errors import WolfcalError
-from wolfcal.intrinsics.calibrate import Calibration, calibrate_views
+from wolfcal.intrinsics.calibrate import DISTORTION_NAMES, Calibration, calibrate_views
 from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
 from wolfcal.intrinsics.live import LiveView, collect_views
@@ -97,10 +97,10 @@ def run_intrinsics(
     """Detect, calibrate, write `out` (camera_info YAML) and the report folder; return the calibration."""
     if options.method not in METHODS:
         raise WolfcalError(f"unknown --detector {options.method!r}; use one of {', '.join(METHODS)}")
+    if options.model not in DISTORTION_NAMES:
+        raise WolfcalError(f"unknown --model {options.model!r}; use one of {', '.join(DISTORTION_NAMES)}")
     if not inputs and camera is None:
-        raise WolfcalError(
-            "give images, folders or videos to calibrate from, or --camera for the live camera"
-        )
+        raise WolfcalError("give images, folders or videos to calibrate from, or --camera for the live camera")
     found = expand_inputs(inputs)
     if out.resolve() in {p.resolve() for p in found.images + found.videos}:
         raise WolfcalError(f"{out}: --out names one of the inputs; choose another output file")
@@ -129,9 +129,7 @@ def run_intrinsics(
             try:
                 if options.live_view:
                     with LiveView(options.min_views) as view:
-                        collect_views(
-                            frames, selector, options.min_views, options.method, options.save_frames, view
-                        )
+                        collect_views(frames, selector, options.min_views, options.method, options.save_frames, view)
                 else:
                     collect_views(frames, selector, options.min_views, options.method, options.save_frames)
             except KeyboardInterrupt:

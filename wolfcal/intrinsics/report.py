@@ -33,9 +33,7 @@ def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45,
     cv2.putText(img, text, org, _FONT, scale, color, 1, cv2.LINE_AA)
 
 
-def _bar_chart(
-    values: np.ndarray, colors: list[tuple[int, int, int]], title: str, xlabel: str, ticks: list[str]
-):
+def _bar_chart(values: np.ndarray, colors: list[tuple[int, int, int]], title: str, xlabel: str, ticks: list[str]):
     """White BGR chart of bars `values` (>= 0) with a y axis in the values' unit."""
     img = np.full((_H, _W, 3), 255, np.uint8)
     top = float(values.max()) * 1.1 if len(values) and values.max() > 0 else 1.0
@@ -126,13 +124,9 @@ def distortion_field(camera: CameraModel, step: int = 40) -> np.ndarray:
     distorted = np.stack([u, v], axis=-1)
     ideal = camera.normalized_to_pixels(camera.undistort_normalized(camera.pixels_to_normalized(distorted)))
     shift = np.linalg.norm(distorted - ideal, axis=-1)
-    for (u0, v0), (u1, v1) in zip(
-        ideal.reshape(-1, 2) * scale, distorted.reshape(-1, 2) * scale, strict=True
-    ):
+    for (u0, v0), (u1, v1) in zip(ideal.reshape(-1, 2) * scale, distorted.reshape(-1, 2) * scale, strict=True):
         if np.all(np.isfinite([u0, v0])):
-            cv2.arrowedLine(
-                img, (int(u0), int(v0)), (int(u1), int(v1)), (180, 80, 0), 1, cv2.LINE_AA, tipLength=0.2
-            )
+            cv2.arrowedLine(img, (int(u0), int(v0)), (int(u1), int(v1)), (180, 80, 0), 1, cv2.LINE_AA, tipLength=0.2)
     cx, cy = camera.cx * scale, camera.cy * scale
     cv2.drawMarker(img, (int(cx), int(cy)), (0, 0, 220), cv2.MARKER_CROSS, 14, 2)
     _text(
@@ -187,9 +181,7 @@ def write_report(
             {
                 "distortion_model": cam.distortion_model,
                 "image_size": [cam.width, cam.height],
-                "parameters": {
-                    k: {"value": float(values[k]), "std": calibration.std[k]} for k in calibration.std
-                },
+                "parameters": {k: {"value": float(values[k]), "std": calibration.std[k]} for k in calibration.std},
                 "rms_per_point_px": calibration.rms_per_point,
                 "rms_per_axis_px": calibration.rms_per_axis,
                 "views_used": len(calibration.views),
@@ -202,9 +194,7 @@ def write_report(
     write_text_atomic(folder / "summary.md", summary_markdown(calibration, failures, warnings, method))
 
 
-def summary_markdown(
-    calibration: Calibration, failures: list[Failure], warnings: list[str], method: str
-) -> str:
+def summary_markdown(calibration: Calibration, failures: list[Failure], warnings: list[str], method: str) -> str:
     """The human summary of a calibration."""
     cam = calibration.camera
     values = [cam.fx, cam.fy, cam.cx, cam.cy, *cam.D]
@@ -220,9 +210,7 @@ def summary_markdown(
         "| parameter | value | 1-sigma |",
         "|---|---|---|",
     ]
-    lines += [
-        f"| {k} | {v:.6g} | {s:.2g} |" for (k, s), v in zip(calibration.std.items(), values, strict=True)
-    ]
+    lines += [f"| {k} | {v:.6g} | {s:.2g} |" for (k, s), v in zip(calibration.std.items(), values, strict=True)]
     lines += [
         "",
         "1-sigma from the Jacobian of all residuals, scaled by the residual variance, poses marginalised.",
@@ -230,9 +218,7 @@ def summary_markdown(
     if warnings:
         lines += ["", "## Warnings", ""] + [f"- {w}" for w in warnings]
     if calibration.rejected:
-        lines += ["", "## Rejected views", ""] + [
-            f"- {v.name}: {rms:.3f} px" for v, rms in calibration.rejected
-        ]
+        lines += ["", "## Rejected views", ""] + [f"- {v.name}: {rms:.3f} px" for v, rms in calibration.rejected]
     if failures:
         lines += ["", "## Views without corners", ""] + [f"- {f.name}: {f.reason}" for f in failures]
     lines += [

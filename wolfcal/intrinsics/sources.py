@@ -34,9 +34,7 @@ def expand_inputs(arguments: list[str]) -> Inputs:
         if path.is_dir():
             paths = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
             if not paths:
-                found.missing.append(
-                    Failure(arg, "folder holds no images (" + ", ".join(sorted(IMAGE_SUFFIXES)) + ")")
-                )
+                found.missing.append(Failure(arg, "folder holds no images (" + ", ".join(sorted(IMAGE_SUFFIXES)) + ")"))
         elif path.is_file():
             paths = [path]
         elif glob.has_magic(arg):
@@ -72,9 +70,7 @@ def open_stream(source: str | int) -> cv2.VideoCapture:
     """A video file path, camera index or device path -> an opened capture; a clear error otherwise."""
     capture = cv2.VideoCapture(source)
     if not capture.isOpened():
-        what = (
-            f"camera {source}" if isinstance(source, int) or str(source).startswith("/dev/") else str(source)
-        )
+        what = f"camera {source}" if isinstance(source, int) or str(source).startswith("/dev/") else str(source)
         raise WolfcalError(
             f"{what}: cannot open (check the device or file, its permissions, and that no other "
             "program is using the camera)"

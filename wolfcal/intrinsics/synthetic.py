@@ -30,9 +30,7 @@ def random_board_poses(
         depth = camera.fx * extent / (share * camera.width)
         tilt = np.deg2rad(rng.uniform(-max_tilt_deg, max_tilt_deg, 2))
         R = exp_so3(np.array([tilt[0], tilt[1], 0.0])) @ exp_so3(np.array([0.0, 0.0, rng.uniform(-0.4, 0.4)]))
-        target = rng.uniform(
-            [0.15 * camera.width, 0.15 * camera.height], [0.85 * camera.width, 0.85 * camera.height]
-        )
+        target = rng.uniform([0.15 * camera.width, 0.15 * camera.height], [0.85 * camera.width, 0.85 * camera.height])
         ray = camera.unproject(target)
         T = np.eye(4)
         T[:3, :3] = R
@@ -74,7 +72,5 @@ def render_view(
 def example_camera(width: int = 640, height: int = 480) -> CameraModel:
     """A plumb_bob camera with moderate distortion, ~70 degrees horizontal field of view."""
     f = 0.72 * width
-    K = np.array(
-        [[f * 1.002, 0, width / 2 - 0.5 + 0.013 * width], [0, f, height / 2 - 0.5 - 0.01 * height], [0, 0, 1]]
-    )
+    K = np.array([[f * 1.002, 0, width / 2 - 0.5 + 0.013 * width], [0, f, height / 2 - 0.5 - 0.01 * height], [0, 0, 1]])
     return CameraModel(width, height, K, np.array([-0.28, 0.09, 0.0006, -0.0004, -0.012]), "plumb_bob")

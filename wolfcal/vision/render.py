@@ -9,11 +9,13 @@ centre of the top-left pixel is (0, 0).
 
 A pixel is the mean of `supersample` x `supersample` sub-pixel points, each shaded with the nearest texel of
 the nearest target its ray hits. Textures are crisp cells, so the mean approximates the pixel's area
-coverage (a box filter): an edge lands where the geometry puts it, with no half-pixel shift. Rays are
-unprojected exactly (`CameraModel.unproject`, distortion included) at the pixel corners and interpolated
-bilinearly inside a pixel (error < 3e-4 px at the corners of a strongly distorted 2048x1536 image). Only
-pixels whose corners see different texels (and their 8 neighbours, for target corners poking into a pixel)
-are supersampled; the others lie inside one texel (cells are convex) and take its value.
+coverage (a box filter): an edge lands where the geometry puts it, with no half-pixel shift. Rays come
+from `CameraModel.unproject` (distortion included): exact on a grid every 8 px, cubic interpolation to the
+pixel corners (< 1e-5 px error), bilinear interpolation inside a pixel (< 3e-4 px error at the corners of a
+strongly distorted 2048x1536 image). Only
+pixels whose corners see different grey values (or targets), and their 8 neighbours (for a corner of a
+region poking into a pixel), are supersampled; the others lie inside one uniform region and take its value.
+So texture features must be at least ~1 px wide in the image to be rendered (anything readable is).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.geometry import transform_points
 
 _OUTLINE_SAMPLES = 64  # points per target edge when bounding its (curved) image
+_CHUNK = 1 << 19  # rays shaded at once (bounds memory for targets that fill the image)
 
 
 @dataclass(frozen=True)
@@ -68,8 +71,8 @@ def _pixel_box(camera: CameraModel, target: PlanarTarget) -> tuple[int, int, int
     return int(u0), int(u1), int(v0), int(v1)
 
 
-def _shade(target: PlanarTarget, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rays (..., 3) with z = 1 -> depth z [m] (inf: missed), texel index (-1: missed), texel value."""
+def _shade(target: PlanarTarget, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rays (..., 3) with z = 1 -> depth z [m] of the hit (inf where the target is missed), texel value."""
     T = np.asarray(target.T_camera_target, float)
     R, t = T[:3, :3], T[:3, 3]
     normal = R[:, 2]
@@ -81,21 +84,50 @@ def _shade(target: PlanarTarget, rays: np.ndarray) -> tuple[np.ndarray, np.ndarr
     col = np.floor((local[..., 0] / target.width_m + 0.5) * w)
     row = np.floor((0.5 - local[..., 1] / target.height_m) * h)
     hit = (depth > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    texel = np.where(hit, row * w + col, -1).astype(np.int64)
-    value = np.where(hit, target.texture.ravel()[np.maximum(texel, 0)], 0).astype(float)
-    return np.where(hit, depth, np.inf), texel, value
+    texel = np.where(hit, row * w + col, 0).astype(np.int64)
+    return np.where(hit, depth, np.inf), target.texture.ravel()[texel].astype(float)
 
 
 def _nearest(targets: list[PlanarTarget], rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rays (..., 3) -> (key of the texel seen: target index * 2^32 + texel, -1 for none; its value)."""
+    """Rays (..., 3) -> (key of what is seen: target index * 2^16 + grey value, -1 for nothing; grey value)."""
     depth = np.full(rays.shape[:-1], np.inf)
     key = np.full(rays.shape[:-1], -1, dtype=np.int64)
     value = np.zeros(rays.shape[:-1])
     for i, target in enumerate(targets):
-        d, texel, val = _shade(target, rays)
+        d, val = _shade(target, rays)
         nearer = d < depth
-        depth[nearer], key[nearer], value[nearer] = d[nearer], (i << 32) + texel[nearer], val[nearer]
+        depth[nearer], value[nearer] = d[nearer], val[nearer]
+        key[nearer] = (i << 16) + np.rint(val[nearer]).astype(np.int64)
     return key, value
+
+
+def _cubic_weights(x: np.ndarray, step: float) -> np.ndarray:
+    """(len(x), nodes) 4-point Lagrange weights of increasing positions x on nodes x[0] - step + k * step."""
+    s = (x - x[0]) / step + 1.0
+    i = np.floor(s).astype(int)
+    t = s - i
+    W = np.zeros((len(x), i.max() + 3))
+    rows = np.arange(len(x))
+    W[rows, i - 1] = -t * (t - 1) * (t - 2) / 6
+    W[rows, i] = (t + 1) * (t - 1) * (t - 2) / 2
+    W[rows, i + 1] = -(t + 1) * t * (t - 2) / 2
+    W[rows, i + 2] = (t + 1) * t * (t - 1) / 6
+    return W
+
+
+def _unproject_grid(camera: CameraModel, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rays (len(v), len(u), 3), z = 1, through the regular pixel grid u x v.
+
+    Exact unprojection on a grid 8x coarser, cubic interpolation in between: the undistortion is smooth, the
+    error is < 1e-5 px even at the corners of a strongly distorted 2048x1536 image, for 1/64 of the cost.
+    """
+    step = 8.0
+    Wu, Wv = _cubic_weights(u, step), _cubic_weights(v, step)
+    nodes_u = u[0] + step * (np.arange(Wu.shape[1]) - 1)
+    nodes_v = v[0] + step * (np.arange(Wv.shape[1]) - 1)
+    coarse = camera.unproject(np.stack(np.meshgrid(nodes_u, nodes_v), axis=-1))
+    xy = [Wv @ coarse[..., c] @ Wu.T for c in range(2)]
+    return np.stack([*xy, np.ones_like(xy[0])], axis=-1)
 
 
 def _render_box(
@@ -107,24 +139,26 @@ def _render_box(
     n: int,
 ) -> None:
     """Shade the pixels of `box` (u0, u1, v0, v1) of `image` in place, over `background`, with n x n
-    sub-points in the pixels whose corners see different texels (and their neighbours)."""
+    sub-points in the pixels whose corners see different grey values (and their neighbours)."""
     u0, u1, v0, v1 = box
-    uc, vc = np.arange(u0, u1 + 1) - 0.5, np.arange(v0, v1 + 1) - 0.5
-    corner_rays = camera.unproject(np.stack(np.meshgrid(uc, vc), axis=-1))  # (H+1, W+1, 3)
+    corner_rays = _unproject_grid(camera, np.arange(u0, u1 + 1) - 0.5, np.arange(v0, v1 + 1) - 0.5)
     key, value = _nearest(targets, corner_rays)
     same = (key[:-1, :-1] == key[1:, :-1]) & (key[:-1, :-1] == key[:-1, 1:]) & (key[:-1, :-1] == key[1:, 1:])
     mixed = cv2.dilate((~same).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     region, behind = image[v0:v1, u0:u1], background[v0:v1, u0:u1]
     region[~mixed] = np.where(key[:-1, :-1] >= 0, value[:-1, :-1], behind)[~mixed]
-    rv, ru = np.nonzero(mixed)
     f = (np.arange(n) + 0.5) / n  # sub-point positions inside a pixel, from its top-left corner
     fy, fx = f[:, None, None], f[None, :, None]
-    c00, c01 = corner_rays[rv, ru][:, None, None], corner_rays[rv, ru + 1][:, None, None]
-    c10, c11 = corner_rays[rv + 1, ru][:, None, None], corner_rays[rv + 1, ru + 1][:, None, None]
-    rays = (1 - fy) * ((1 - fx) * c00 + fx * c01) + fy * ((1 - fx) * c10 + fx * c11)  # (P, n, n, 3)
-    sub_key, sub_value = _nearest(targets, rays)
-    sub_value = np.where(sub_key >= 0, sub_value, behind[rv, ru][:, None, None])
-    region[rv, ru] = sub_value.mean(axis=(1, 2))
+    mixed_v, mixed_u = np.nonzero(mixed)
+    step = max(1, _CHUNK // (n * n))
+    for i in range(0, len(mixed_v), step):
+        rv, ru = mixed_v[i : i + step], mixed_u[i : i + step]
+        c00, c01 = corner_rays[rv, ru][:, None, None], corner_rays[rv, ru + 1][:, None, None]
+        c10, c11 = corner_rays[rv + 1, ru][:, None, None], corner_rays[rv + 1, ru + 1][:, None, None]
+        rays = (1 - fy) * ((1 - fx) * c00 + fx * c01) + fy * ((1 - fx) * c10 + fx * c11)  # (P, n, n, 3)
+        sub_key, sub_value = _nearest(targets, rays)
+        sub_value = np.where(sub_key >= 0, sub_value, behind[rv, ru][:, None, None])
+        region[rv, ru] = sub_value.mean(axis=(1, 2))
 
 
 def _boxes_overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool:
