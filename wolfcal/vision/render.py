@@ -9,13 +9,13 @@ centre of the top-left pixel is (0, 0).
 
 A pixel is the mean of `supersample` x `supersample` sub-pixel points, each shaded with the nearest texel of
 the nearest target its ray hits. Textures are crisp cells, so the mean approximates the pixel's area
-coverage (a box filter): an edge lands where the geometry puts it, with no half-pixel shift. Rays come
-from `CameraModel.unproject` (distortion included): exact on a grid every 8 px, cubic interpolation to the
-pixel corners (< 1e-5 px error), bilinear interpolation inside a pixel (< 3e-4 px error at the corners of a
-strongly distorted 2048x1536 image). Only
-pixels whose corners see different grey values (or targets), and their 8 neighbours (for a corner of a
-region poking into a pixel), are supersampled; the others lie inside one uniform region and take its value.
-So texture features must be at least ~1 px wide in the image to be rendered (anything readable is).
+coverage (a box filter): an edge lands where the geometry puts it, with no half-pixel shift. Rays come from
+`CameraModel.unproject` (distortion included): exact on a grid every 8 px, cubic interpolation to the pixel
+corners (< 1e-5 px error), bilinear interpolation inside a pixel (< 3e-4 px error at the corners of a
+strongly distorted 2048x1536 image). Only pixels whose corners see different grey values (or targets), and
+their 8 neighbours (for a corner of a region poking into a pixel), are supersampled; the others lie inside
+one uniform region and take its value. So texture features must be at least ~1 px wide in the image to be
+rendered (anything readable is).
 """
 
 from __future__ import annotations

@@ -85,9 +85,7 @@ def _detector(family: str, refine: str) -> cv2.aruco.ArucoDetector:
     return cv2.aruco.ArucoDetector(_dictionary(family), params)
 
 
-def _edge_offsets(
-    profiles: np.ndarray, t: np.ndarray, dark: float, light: float, window: float
-) -> np.ndarray:
+def _edge_offsets(profiles: np.ndarray, t: np.ndarray, dark: float, light: float, window: float) -> np.ndarray:
     """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
 
     Area method: within `window` px (less near the profile's ends, at least 0.75 px) of the mid-grey crossing
