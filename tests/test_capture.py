@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -23,18 +24,19 @@ import pytest
 import yaml
 from rich.console import Console
 
-from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.camera.camera_info import load_camera_info, save_camera_info
+from wolfcal.capture.gating import GateSettings, StillnessWindow, sharpness, why_not_sharp
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.capture.poses import load_poses
 from wolfcal.errors import WolfcalError
-from wolfcal.hardware.bus import BusError, rad_to_ticks, ticks_to_rad
+from wolfcal.hardware.bus import BusError, DynamixelBus, JointState, rad_to_ticks, ticks_to_rad
 from wolfcal.hardware.camera import CameraError
-from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config
+from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config, state_paths
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recover import recover_capture
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.vision.tags import detect_tags, tag_corners
+from wolfcal.vision.tags import detect_tags, tag_corners, tag_texture
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ROOT / "configs" / "wolfgang"
@@ -210,8 +212,6 @@ def test_manual_mode_never_switches_torque_off_silently(robot, truth_file, tmp_p
         for ask, expected in ((None, "pass --yes"), (lambda question: False, "not confirmed")):
             with pytest.raises(WolfcalError, match=expected):
                 run_capture(options(tmp_path / "b.mcap", emu.port, manual=True, samples=1), quiet(), ask)
-        from wolfcal.hardware.bus import DynamixelBus
-
         with DynamixelBus(robot.config.servos, emu.port) as bus:
             torque = bus.torque_enabled()
     assert torque["HeadTilt"] and torque["RKnee"] and not torque["RElbow"]  # as the scripted capture left it
@@ -254,7 +254,7 @@ def test_bus_faults_are_reported_and_lose_no_sample(robot, truth_file, tmp_path,
             options(out, emu.port, poses=POSES, velocity=5.0), lambda: emu.inject(fault)
         )
     assert isinstance(error, BusError)
-    assert __import__("re").search(message, str(error))
+    assert re.search(message, str(error))
     kept = len(read_capture(out, robot.config).samples)
     assert kept >= 2 and f"{kept} sample(s) saved in {out}" in str(error)
 
@@ -265,8 +265,6 @@ def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scrip
     image = folder / "0.png"  # one image: consecutive frames agree
     cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].image())
     intrinsics = tmp_path / "camera.yaml"  # the images' own resolution: no binning for a folder source
-    from wolfcal.camera.camera_info import save_camera_info
-
     full = load_camera_info(robot.config.camera.intrinsics)
     save_camera_info(
         full.scaled(1 / BINNING, 1 / BINNING, full.width // BINNING, full.height // BINNING), intrinsics
@@ -331,3 +329,61 @@ def test_killed_capture_leaves_a_recoverable_file(robot, truth_file, tmp_path):
     count = recover_capture(partial, rescued)
     assert count >= 3
     assert len(read_capture(rescued, robot.config).samples) == count
+
+
+# --- gates and the command line --------------------------------------------------------------------------------
+def tag_image(shift_px: float = 0.0, blur_sigma: float = 0.0) -> np.ndarray:
+    """A 320x240 image with tag 43 (12 px per cell), optionally shifted right and blurred."""
+    texture = np.kron(tag_texture("tag36h11", 43), np.ones((12, 12), np.uint8))
+    image = np.full((240, 320), 128, np.uint8)
+    image[60 : 60 + texture.shape[0], 100 : 100 + texture.shape[1]] = texture
+    image = cv2.warpAffine(image, np.float32([[1, 0, shift_px], [0, 1, 0]]), (320, 240), flags=cv2.INTER_LINEAR,
+                           borderValue=128)
+    return cv2.GaussianBlur(image, (0, 0), blur_sigma) if blur_sigma else image
+
+
+def test_gates_say_why_a_moment_is_rejected():
+    settings = GateSettings(settle_s=0.3)
+    window = StillnessWindow(["HeadPan", "HeadTilt"], settings)
+    for k, t in enumerate(np.arange(0.0, 0.5, 0.01)):
+        window.add(t, JointState(np.array([2048, 1500 + (k > 40) * 3]), np.zeros(2, int)))
+    assert window.why_not_still(0.5) == "joints not still: HeadTilt moved 3 ticks in the last 0.3 s"
+    window.clear()
+    window.add(0.0, JointState(np.array([2048, 1500]), np.zeros(2, int)))
+    assert window.why_not_still(0.1).startswith("settling")
+    window.add(0.35, JointState(np.array([2049, 1500]), np.zeros(2, int)))
+    assert window.why_not_still(0.35) is None  # within a tick
+
+    sharp = tag_image()
+    corners = detect_tags(sharp, "tag36h11", {43})
+    assert why_not_sharp(sharp, corners, corners, settings)[0] is None
+    blurred = tag_image(blur_sigma=3.0)
+    reason, value = why_not_sharp(blurred, corners, detect_tags(blurred, "tag36h11", {43}), settings)
+    assert reason == f"image blurred: sharpness {value:.0f} < 100" and value < sharpness(sharp, corners) / 5
+    moved = detect_tags(tag_image(shift_px=1.5), "tag36h11", {43})
+    reason, _ = why_not_sharp(tag_image(shift_px=1.5), corners, moved, settings)
+    assert reason.startswith("tag corners moved 1.5") and "between consecutive frames" in reason
+    assert why_not_sharp(np.full((240, 320), 128, np.uint8), {}, {}, settings)[0] == "no tag in view"
+
+
+def test_command_line_emulate_and_capture_report_bus_problems_without_traceback(tmp_path):
+    emulate = subprocess.Popen(
+        [sys.executable, "-m", "wolfcal.cli", "emulate", "--robot", str(ROBOT), "--fault", "model:20=1020",
+         "--fault", "missing:7"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        port = emulate.stdout.readline().strip()
+        capture = subprocess.run(
+            [sys.executable, "-m", "wolfcal.cli", "capture", "--robot", str(ROBOT), "--port", port, "--camera", "sim",
+             "--poses", str(POSES), "--out", str(tmp_path / "x.mcap")],
+            cwd=ROOT, capture_output=True, text=True, timeout=60,
+        )
+    finally:
+        emulate.send_signal(signal.SIGTERM)
+        emulate.wait(10)
+    assert capture.returncode == 3 and "Traceback" not in capture.stderr
+    assert f"error: {port}: 2 servo problem(s):" in capture.stderr
+    assert "RHipYaw (id 7): no answer" in capture.stderr
+    assert "HeadTilt (id 20): model number 1020, expected 311" in capture.stderr
+    assert emulate.returncode == 0 and not state_paths(port)[1].exists()  # cleaned up on SIGTERM

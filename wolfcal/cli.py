@@ -68,13 +68,15 @@ def simulate(
     noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
     outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
     from wolfcal.camera.camera_info import load_camera_info
     from wolfcal.sim.simulate import SimOptions, simulate_capture
 
     options = SimOptions(
-        samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets
+        samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
+        truth_file=truth,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(robot, out, options, camera, say=typer.echo)

@@ -300,6 +300,7 @@ def _blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:
     m = metrics
     blocks: list[Block] = [("h1", f"wolfcal evaluation: {m['robot_name']}, --free {m['free']}")]
     blocks.append(("banner", (not m["verdict"]["worse"], m["verdict"]["message"])))
+    blocks.append(("p", INTRO))
     blocks.append(("p", m["mode_note"]))
     blocks.append(("h2", "Before and after"))
     blocks.append(
@@ -386,11 +387,22 @@ def _fmt_mm(value: float | None) -> str:
     return "" if value is None else f"{value:.1f}"
 
 
-DEPLOY_TEXT = """calibrated.urdf          offsets as <calibration rising="..."/>, frame corrections in <origin>
-calibrated_folded.urdf   offsets folded into the joint origins (for robot_state_publisher and other tools
-                         that ignore <calibration>); same kinematics for the same encoder readings
+INTRO = (
+    "What this is: the robot computes where its camera is, and so where things it sees are on the field, from its "
+    "joint readings and its kinematic model (the URDF). A calibration corrects that model (the camera's mounting, "
+    "the joints' zero positions). This report checks whether the corrected model predicts what the camera really "
+    "sees better than the model in use today, on images the calibration was not computed from, and gives the files "
+    "to load on the robot if it does."
+)
+DEPLOY_TEXT = """calibrated.urdf          the URDF with the calibration: camera (and any other frame) corrections in
+                         <origin>, encoder offsets as <calibration rising="offset"/> (ROS convention)
+calibrated_folded.urdf   the same model with each offset folded into its joint's <origin>, for
+                         robot_state_publisher and every tool that ignores <calibration>: publish it as
+                         robot_description with the encoder readings as they are
 joint_offsets.yaml       offset per joint [rad] for the hardware interface: add on read, subtract on write
-camera_correction.yaml   pose of the calibrated optical frame in the uncalibrated one (static transform)"""
+                         (use it with calibrated.urdf, never together with calibrated_folded.urdf)
+camera_correction.yaml   the camera correction alone: pose of the calibrated optical frame in the
+                         uncalibrated one, for a static-transform node (command below)"""
 
 
 def run_evaluate(

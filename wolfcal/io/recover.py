@@ -8,8 +8,6 @@ chunk per sample, so a torn capture loses at most the sample that was being adde
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import IO
 
@@ -18,6 +16,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 
+from wolfcal.atomic import atomic_output
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns
@@ -39,17 +38,8 @@ def recover_capture(src: str | Path, dst: str | Path) -> int:
     check_mcap(src)
     if dst.resolve() == src.resolve():
         raise WolfcalError(f"{src}: recovery never overwrites the torn file; give another --out FILE")
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as out, src.open("rb") as handle:
-            count = _copy_records(handle, out)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, dst)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_output(dst) as out, src.open("rb") as handle:
+        count = _copy_records(handle, out)
     return count
 
 

@@ -19,7 +19,7 @@ from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
-from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.sim.encoders import encoder_readings
@@ -41,6 +41,7 @@ class SimOptions:
     outlier_fraction: float = 0.0  # share of samples made outliers (motion blur or stale joint reading)
     offsets: str = "none"  # which joints get a true encoder offset: none | head | legs | all (head and legs)
     truth: TruthSpec = field(default_factory=TruthSpec)
+    truth_file: Path | None = None  # reuse the truth of an earlier simulation (e.g. for a held-out capture)
 
 
 def truth_paths(out: Path) -> tuple[Path, Path]:
@@ -80,6 +81,8 @@ def simulate_capture(
     rng = np.random.default_rng(options.seed)
     spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
     truth = random_truth(robot, spec, rng)
+    if options.truth_file is not None:
+        truth = load_corrections(options.truth_file, key="truth")
     q_true, visible = random_visible_poses(robot, image_camera, truth, options.samples, rng)
     offsets = truth.offset_vector(robot.joint_names)
     q_measured = encoder_readings(q_true, offsets)
