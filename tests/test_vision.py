@@ -125,6 +125,10 @@ def test_ids_filter_duplicates_and_empty():
     twins = render_targets(PINHOLE, [one, tag_target("tag36h11", 1, right)], rng=rng)
     assert detect_tags(twins) == {}  # ambiguous
     assert detect_tags(render_targets(PINHOLE, [], noise_sigma=2.0, rng=rng)) == {}
+    x = (-3.0 - PINHOLE.cx) / PINHOLE.fx * 0.5 + SIZE / 2
+    cut = make_transform(FACING, [x, 0, 0.5])  # left corners 3 px outside the image (aruco still finds it)
+    np.testing.assert_allclose(truth(PINHOLE, cut)[[0, 3], 0], -3.0)
+    assert detect_tags(render_targets(PINHOLE, [tag_target("tag36h11", 1, cut)], rng=rng)) == {}
 
 
 def half_plane(edge_u: float, z: float = 1.0) -> PlanarTarget:

@@ -103,8 +103,8 @@ def recover(
 def emulate(
     robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
     truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
-    fault: list[str] = typer.Option([], "--fault", help="KIND:ID[=VALUE][@SECONDS], KIND: no-answer, crc, "
-                                    "hw-error, missing, model. Repeatable."),
+    fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
+                                    "KIND: no-answer, crc, hw-error, missing, model. Repeatable."),
     operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
                                          "limp joints through (manual capture)."),
     hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
@@ -130,7 +130,7 @@ def capture(
                              "joints to switch torque off."),
     yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
-    velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed [rad/s]."),
+    velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed (rad/s)."),
     binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default 4)."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
     settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
@@ -234,6 +234,18 @@ def evaluate(
     metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
     if not metrics["deploy"]["written"]:
         raise WolfcalError(metrics["deploy"]["reason"])
+
+
+@app.command()
+@friendly_errors
+def demo(
+    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
+    root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
+) -> None:
+    """Fit and evaluate the shipped demo capture; prints the before/after table."""
+    from wolfcal.demo import run_demo
+
+    run_demo(root, out, say=typer.echo)
 
 
 def main() -> None:

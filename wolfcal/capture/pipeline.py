@@ -55,9 +55,7 @@ class CaptureOptions:
     binning: int | None = None  # default 4 for the sim camera (fast rendering), else 1
     intrinsics: Path | None = None
     velocity: float | None = None  # overrides the poses file [rad/s]
-    pose_timeout_s: float = (
-        10.0  # scripted: give up a pose that gives no sample within this time after arrival
-    )
+    pose_timeout_s: float = 5.0  # scripted: give up a pose that gives no sample within this time after arrival
     image_format: str = "png"
     gates: GateSettings = field(default_factory=GateSettings)
 
@@ -262,7 +260,7 @@ class Capture:
         while True:
             off = {j: abs(int(state.ticks[index[j]]) - t) for j, t in goal_ticks.items()}
             worst = max(off, key=off.get)
-            if off[worst] <= ARRIVAL_TICKS and not np.any(state.velocity_units):
+            if off[worst] <= ARRIVAL_TICKS:  # then the stillness gate waits for it to settle
                 return None
             if time.monotonic() > deadline:
                 return f"did not arrive: {worst} is {off[worst]} ticks from its goal"
@@ -309,14 +307,25 @@ def _image_camera(options: CaptureOptions, robot: Robot) -> tuple[CameraModel, i
     return camera, binning
 
 
-def _restore_torque(bus: DynamixelBus, initial: dict[str, bool], touched: list[str], mode: str) -> None:
+def _restore_torque(bus: DynamixelBus, initial: dict[str, bool], touched: list[str], mode: str) -> list[str]:
+    """Leave the torque of the touched joints as `mode` says, best effort; returns the joints that failed."""
     wanted = {j: (initial[j] if mode == "restore" else mode == "on") for j in touched}
     turn_on = [j for j, on in wanted.items() if on]
+    failed = []
     if turn_on:
-        state = bus.read_state()  # hold where it stands: no jump to an old goal
-        bus.set_goal_positions({j: float(state.positions[bus.joints.index(j)]) for j in turn_on})
-        bus.set_torque(turn_on, True)
-    bus.set_torque([j for j, on in wanted.items() if not on], False)
+        try:  # hold where it stands: no jump to an old goal
+            state = bus.read_state()
+            bus.set_goal_positions({j: float(state.positions[bus.joints.index(j)]) for j in turn_on})
+        except BusError:
+            failed, turn_on = turn_on, []
+    for joint in touched:
+        if joint in failed:
+            continue
+        try:
+            bus.set_torque([joint], wanted[joint])
+        except BusError:
+            failed.append(joint)
+    return failed
 
 
 def run_capture(
@@ -362,9 +371,11 @@ def run_capture(
         if limp and any(initial[j] for j in limp):
             _confirm_limp([j for j in limp if initial[j]], options.yes, ask)
         camera = open_camera(options.camera, image_camera, robot, bus.port_name)
-        writer = CaptureWriter(
-            options.out, robot.config, camera_model, (binning, binning), options.image_format
-        )
+        try:
+            writer = CaptureWriter(options.out, robot.config, camera_model, (binning, binning), options.image_format)
+        except WolfcalError:
+            camera.close()
+            raise
         view = LiveView(status, coverage, console)
         session = Capture(robot, bus, camera, writer, options, view, coverage, status)
         failure: BaseException | None = None
@@ -379,15 +390,14 @@ def run_capture(
         finally:
             session.summary.path = writer.close()
             camera.close()
-        if not isinstance(failure, BusError):
-            bus.recover_port()
-            _restore_torque(bus, initial, touched, options.exit_torque)
+        bus.recover_port()
+        failed = _restore_torque(bus, initial, touched, options.exit_torque)
     summary = session.summary
-    saved = (
-        f"{summary.samples} sample(s) saved in {summary.path}"
-        if summary.path
-        else "no sample taken, no file written"
-    )
+    saved = f"{summary.samples} sample(s) saved in {summary.path}" if summary.path else "no sample taken, no file"
+    if failed:
+        saved += (f"\ntorque could not be left as chosen (--exit-torque {options.exit_torque}) on {', '.join(failed)}: "
+                  "check these joints before touching the robot")
+        failure = failure if isinstance(failure, WolfcalError) else BusError(f"{bus.port_name}: bus failure at exit")
     if isinstance(failure, WolfcalError):
         raise type(failure)(f"{failure}\n{saved}") from None
     console.print(saved)

@@ -37,7 +37,7 @@ def _text(
 
 
 class LogAxes:
-    """A white canvas with a plot area; y (or x) on a log10 scale for errors that span orders of magnitude."""
+    """A white canvas with a title, a framed plot area and a legend above it; charts map their data into it."""
 
     def __init__(
         self,

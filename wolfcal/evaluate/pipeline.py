@@ -405,6 +405,27 @@ camera_correction.yaml   the camera correction alone: pose of the calibrated opt
                          uncalibrated one, for a static-transform node (command below)"""
 
 
+def _deploy(robot: Robot, fitted: Corrections, out_dir: Path, worse: bool, force: bool) -> dict:
+    """Write the deploy files, or (worse held-out error without force) remove any an earlier run left."""
+    if worse and not force:
+        removed = remove_deploy_files(out_dir)
+        earlier = f" ({len(removed)} file(s) of an earlier run removed)" if removed else ""
+        return {
+            "written": False,
+            "forced": False,
+            "files": [],
+            "reason": "The calibration makes held-out error worse, so the deploy files were not written"
+            f"{earlier}. Pass --force to write them anyway.",
+        }
+    paths = write_deploy_files(robot, fitted, out_dir)
+    return {
+        "written": True,
+        "forced": worse,
+        "files": [p.name for p in paths],
+        "reason": "written despite worse held-out error (--force)" if worse else None,
+    }
+
+
 def run_evaluate(
     fit_dir: Path,
     captures: list[Path],
@@ -422,6 +443,13 @@ def run_evaluate(
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot, fitted = _load_fit(fit_dir)
     held_out = bool(captures)
+    fitted_on = {Path(c).resolve() for c in result["captures"]}
+    reused = [str(c) for c in captures if Path(c).resolve() in fitted_on]
+    if reused:
+        raise WolfcalError(
+            f"{', '.join(reused)}: the fit used this capture, so it is not held out; give a capture the fit did not "
+            "use, or leave out --capture for cross-validation over the fit's samples"
+        )
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
     intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
     samples = _read_samples(robot, sources, intrinsics)
@@ -463,7 +491,7 @@ def run_evaluate(
         )
     outliers = outlier_samples(before, after)
     s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
-    worse = s_after["rms_px"] > s_before["rms_px"]
+    worse = bool(s_after["rms_px"] > s_before["rms_px"])
     if worse:
         verdict = (
             f"The calibration makes held-out error worse: reprojection RMS {s_after['rms_px']:.3f} px "
@@ -486,28 +514,11 @@ def run_evaluate(
         warnings.append(
             f"{robot.config.urdf} has no '{GROUND_LINK}' frame: the ground error was not computed"
         )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    if worse and not force:
-        removed = remove_deploy_files(out_dir)
-        deploy = {
-            "written": False,
-            "forced": False,
-            "files": [],
-            "reason": verdict.split(":")[0]
-            + "; the deploy files were not written"
-            + (f" (and {len(removed)} from an earlier run were removed)" if removed else "")
-            + ". Pass --force to write them anyway.",
-        }
-    else:
-        paths = write_deploy_files(robot, fitted, out_dir)
-        deploy = {
-            "written": True,
-            "forced": bool(worse),
-            "files": [p.name for p in paths],
-            "reason": "written despite worse held-out error (--force)" if worse else None,
-        }
+    say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     pngs, captions = _figures(robot, obs, sample_by_key, before, after, outliers, after_of_sample, result)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    deploy = _deploy(robot, fitted, out_dir, worse, force)
     metrics = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),

@@ -26,7 +26,7 @@ from wolfcal.robot.kinematics import KinematicModel
 
 
 def _fmt(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in values)
+    return " ".join(f"{float(v):.17g}" for v in values)
 
 
 def calibrated_urdf_bytes(
@@ -63,7 +63,7 @@ def calibrated_urdf_bytes(
             element = joints[name].find("calibration")
             if element is None:
                 element = etree.SubElement(joints[name], "calibration")
-            element.set("rising", f"{float(offset):.9g}")
+            element.set("rising", f"{float(offset):.17g}")
     return etree.tostring(tree, xml_declaration=True, encoding="utf-8")
 
 
