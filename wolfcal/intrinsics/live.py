@@ -83,6 +83,8 @@ class LiveView:
 
     def __exit__(self, *exc) -> None:
         self._live.__exit__(*exc)
+        if not self._live.console.is_terminal:  # a file or pipe gets the last view without a line end
+            self._live.console.line()
 
     def __call__(self, selector: ViewSelector, frames: int) -> None:
         self._live.update(render(selector, frames, self.min_views))

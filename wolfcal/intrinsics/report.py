@@ -115,27 +115,35 @@ def corner_map(views: list[Detection], image_size: tuple[int, int]) -> np.ndarra
     return img
 
 
-def distortion_field(camera: CameraModel, step: int = 40) -> np.ndarray:
-    """Arrows from where an ideal pinhole puts a point to where the lens puts it (true length), on a grid."""
+def distortion_field(camera: CameraModel) -> np.ndarray:
+    """Arrows from where an ideal pinhole puts a point to where the lens puts it, on a grid.
+
+    Arrows are drawn at their true length, or shortened by a stated factor so the longest spans ~1.5 grid steps;
+    the shift in pixels is written at every fourth grid point.
+    """
     width, height = camera.width, camera.height
     scale = min(1.0, 960 / width)
     img = np.full((int(round(height * scale)), int(round(width * scale)), 3), 255, np.uint8)
-    v, u = np.mgrid[step // 2 : height : step, step // 2 : width : step].astype(float)
+    step = max(width, height) / 24
+    v, u = np.mgrid[step / 2 : height : step, step / 2 : width : step]
     distorted = np.stack([u, v], axis=-1)
     ideal = camera.normalized_to_pixels(camera.undistort_normalized(camera.pixels_to_normalized(distorted)))
     shift = np.linalg.norm(distorted - ideal, axis=-1)
-    for (u0, v0), (u1, v1) in zip(ideal.reshape(-1, 2) * scale, distorted.reshape(-1, 2) * scale, strict=True):
-        if np.all(np.isfinite([u0, v0])):
-            cv2.arrowedLine(img, (int(u0), int(v0)), (int(u1), int(v1)), (180, 80, 0), 1, cv2.LINE_AA, tipLength=0.2)
-    cx, cy = camera.cx * scale, camera.cy * scale
-    cv2.drawMarker(img, (int(cx), int(cy)), (0, 0, 220), cv2.MARKER_CROSS, 14, 2)
-    _text(
-        img,
-        f"distortion ({camera.distortion_model}): pinhole -> lens, true length; max "
-        f"{np.nanmax(shift):.1f} px; red cross: principal point",
-        (6, 18),
-        0.45,
-    )
+    longest = float(np.nanmax(shift, initial=0.0))
+    factor = min(1.0, 1.5 * step / longest) if longest > 0 else 1.0
+    for (r, c), end in np.ndenumerate(shift):
+        p1 = distorted[r, c] * scale
+        p0 = p1 - (distorted[r, c] - ideal[r, c]) * factor * scale
+        if np.all(np.isfinite(p0)):
+            tip = (int(round(p1[0])), int(round(p1[1])))
+            cv2.arrowedLine(img, (int(round(p0[0])), int(round(p0[1]))), tip, (180, 80, 0), 1, cv2.LINE_AA,
+                            tipLength=0.25)  # fmt: skip
+            if r % 4 == 1 and c % 4 == 1:
+                _text(img, f"{end:.1f}", (tip[0] + 3, tip[1] - 3), 0.35, (60, 60, 60))
+    cv2.drawMarker(img, (int(camera.cx * scale), int(camera.cy * scale)), (0, 0, 220), cv2.MARKER_CROSS, 14, 2)
+    length = "true length" if factor == 1.0 else f"arrows x{factor:.2g}"
+    title = f"distortion ({camera.distortion_model}): pinhole -> lens [px], {length}; max {longest:.1f} px; "
+    _text(img, title + "red cross: principal point", (6, 18), 0.45)
     return img
 
 

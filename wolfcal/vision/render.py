@@ -147,8 +147,10 @@ def _render_box(
     mixed = cv2.dilate((~same).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     region, behind = image[v0:v1, u0:u1], background[v0:v1, u0:u1]
     region[~mixed] = np.where(key[:-1, :-1] >= 0, value[:-1, :-1], behind)[~mixed]
-    f = (np.arange(n) + 0.5) / n  # sub-point positions inside a pixel, from its top-left corner
-    fy, fx = f[:, None, None], f[None, :, None]
+    # Sub-point (j, i) inside a pixel, from its top-left corner, on a sheared grid: the n^2 points take n^2
+    # distinct x and y positions, so the coverage of a near-axis-aligned edge steps by 1/n^2, not 1/n.
+    j, i = np.mgrid[0:n, 0:n]
+    fx, fy = ((i + (j + 0.5) / n) / n)[..., None], ((j + (i + 0.5) / n) / n)[..., None]
     mixed_v, mixed_u = np.nonzero(mixed)
     step = max(1, _CHUNK // (n * n))
     for i in range(0, len(mixed_v), step):
