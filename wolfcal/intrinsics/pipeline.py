@@ -41,19 +41,22 @@ def _wrong_board_hint(failures: list[Failure], board: Board) -> str:
     if board.is_charuco:
         return ""
     sizes: Counter[tuple[int, int]] = Counter()
+    where: dict[tuple[int, int], str] = {}
     for failure in failures[:3]:
         try:
             size = probe_board_size(read_image(Path(failure.name)))
         except OSError:
             continue
         if size:  # in the orientation the user wrote --board in
-            sizes[tuple(sorted(size, reverse=board.cols >= board.rows))] += 1
+            key = (max(size), min(size)) if board.cols >= board.rows else (min(size), max(size))
+            sizes[key] += 1
+            where.setdefault(key, failure.name)
     if not sizes:
         return ""
-    cols, rows = sizes.most_common(1)[0][0]
+    (cols, rows), _ = sizes.most_common(1)[0]
     if (cols, rows) == (board.cols, board.rows):
         return ""
-    return f" (found a {cols}x{rows} checkerboard in {failures[0].name}: is --board {cols}x{rows} right?)"
+    return f" (found a {cols}x{rows} checkerboard in {where[cols, rows]}: is --board {cols}x{rows} right?)"
 
 
 def _check_sizes(views: list[Detection]) -> None:

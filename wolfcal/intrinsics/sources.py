@@ -68,20 +68,18 @@ def image_jobs(paths: list[Path]) -> list[Job]:
 
 def open_stream(source: str | int) -> cv2.VideoCapture:
     """A video file path, camera index or device path -> an opened capture; a clear error otherwise."""
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # the error below says it better
     capture = cv2.VideoCapture(source)
     if not capture.isOpened():
         what = f"camera {source}" if isinstance(source, int) or str(source).startswith("/dev/") else str(source)
         raise WolfcalError(
-            f"{what}: cannot open (check the device or file, its permissions, and that no other "
-            "program is using the camera)"
+            f"{what}: cannot open (check the device or file, its permissions, and that no other program is "
+            "using the camera)"
         )
     return capture
 
 
-def stream_frames(source: str | int, name: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
-    """Frames of a video file or camera as (name#index, image) until the stream ends."""
-    capture = open_stream(source)
-    label = name or str(source)
+def _frames(capture: cv2.VideoCapture, label: str) -> Iterator[tuple[str, np.ndarray]]:
     try:
         index = 0
         while True:
@@ -92,6 +90,11 @@ def stream_frames(source: str | int, name: str | None = None) -> Iterator[tuple[
             index += 1
     finally:
         capture.release()
+
+
+def stream_frames(source: str | int, name: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
+    """Open a video file or camera now (errors here), then yield (name#index, image) until the stream ends."""
+    return _frames(open_stream(source), name or str(source))
 
 
 def camera_source(text: str) -> str | int:

@@ -243,7 +243,7 @@ def tag_sheet(family: str, ids: list[int], size: float, paper: str = "a4", cell_
     width, height, columns = _tag_page(paper, len(ids), pitch_x, pitch_y)
     sheet = Sheet(width, height)
     for k, tag_id in enumerate(ids):
-        x = MARGIN + (k % columns) * pitch_x + quiet / 2
+        x = (width - columns * pitch_x) / 2 + (k % columns) * pitch_x + quiet / 2  # grid centred across
         y = MARGIN + (k // columns) * pitch_y + quiet / 2
         image = cv2.aruco.generateImageMarker(dictionary, tag_id, cells * cell_px, borderBits=1)
         sheet.images.append((image, x, y, size, size))

@@ -147,14 +147,12 @@ def _render_box(
     mixed = cv2.dilate((~same).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     region, behind = image[v0:v1, u0:u1], background[v0:v1, u0:u1]
     region[~mixed] = np.where(key[:-1, :-1] >= 0, value[:-1, :-1], behind)[~mixed]
-    # Sub-point (j, i) inside a pixel, from its top-left corner, on a sheared grid: the n^2 points take n^2
-    # distinct x and y positions, so the coverage of a near-axis-aligned edge steps by 1/n^2, not 1/n.
-    j, i = np.mgrid[0:n, 0:n]
-    fx, fy = ((i + (j + 0.5) / n) / n)[..., None], ((j + (i + 0.5) / n) / n)[..., None]
+    f = (np.arange(n) + 0.5) / n  # sub-point positions inside a pixel, from its top-left corner
+    fy, fx = f[:, None, None], f[None, :, None]
     mixed_v, mixed_u = np.nonzero(mixed)
     step = max(1, _CHUNK // (n * n))
-    for i in range(0, len(mixed_v), step):
-        rv, ru = mixed_v[i : i + step], mixed_u[i : i + step]
+    for start in range(0, len(mixed_v), step):
+        rv, ru = mixed_v[start : start + step], mixed_u[start : start + step]
         c00, c01 = corner_rays[rv, ru][:, None, None], corner_rays[rv, ru + 1][:, None, None]
         c10, c11 = corner_rays[rv + 1, ru][:, None, None], corner_rays[rv + 1, ru + 1][:, None, None]
         rays = (1 - fy) * ((1 - fx) * c00 + fx * c01) + fy * ((1 - fx) * c10 + fx * c11)  # (P, n, n, 3)

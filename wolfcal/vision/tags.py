@@ -25,6 +25,7 @@ REFINEMENTS = ("edges", "subpix", "apriltag", "contour", "none")
 
 
 def _dictionary(family: str) -> cv2.aruco.Dictionary:
+    """The OpenCV aruco dictionary of an AprilTag family name (e.g. "tag36h11")."""
     if family not in FAMILIES:
         raise WolfcalError(f"unknown tag family {family!r}; use one of {', '.join(FAMILIES)}")
     return cv2.aruco.getPredefinedDictionary(FAMILIES[family])
@@ -61,6 +62,7 @@ def tag_texture_width(family: str, size: float, texture: np.ndarray) -> float:
 
 
 def _to_gray(image: np.ndarray) -> np.ndarray:
+    """8-bit gray view of a gray, BGR or BGRA image (8- or 16-bit)."""
     image = np.asarray(image)
     if image.dtype == np.uint16:
         image = (image // 257).astype(np.uint8)
@@ -74,6 +76,7 @@ def _to_gray(image: np.ndarray) -> np.ndarray:
 
 
 def _detector(family: str, refine: str) -> cv2.aruco.ArucoDetector:
+    """A fresh detector per call: OpenCV detectors are not documented as thread-safe."""
     params = cv2.aruco.DetectorParameters()
     # The default (3 px) loses tags up to ~40 px from the image border under strong distortion (4% of the
     # bench views); partially visible tags are dropped in `detect_tags` instead.
@@ -169,16 +172,17 @@ def _edge_line(
     return corner + offset * n, e + slope * n
 
 
-def _refine_edges(gray: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
-    """Refine (4, 2) corners [px] by fitting the two black-square edges next to each corner, near that corner.
+def _refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
+    """Refine (4, 2) corners [px] in a float32 image by fitting the two black-square edges next to each
+    corner, near that corner.
 
-    Edge profiles start 2 px from the corner and reach along the edge for 2.5 cells, across it for one cell
-    (2-6 px) each way, so they see the black border and the white quiet zone only. The fit is local (a
-    parabola per edge), which keeps the corner exact under lens distortion that bends whole edges. A corner
-    whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
+    Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off), reach
+    along the edge for 2.5 cells and across it for one cell (2-6 px) each way, so they see the black border
+    and the white quiet zone only. The fit is local (a parabola per edge), which keeps the corner exact under
+    lens distortion that bends whole edges. A corner whose edges cannot be measured (image border, low
+    contrast) keeps its previous estimate.
     """
     corners = corners.astype(float).copy()
-    img = gray.astype(np.float32)
     for _ in range(iterations):
         cell = np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)) / cells
         half = float(np.clip(cell, 2.0, 6.0))
@@ -218,11 +222,12 @@ def detect_tags(
     result: dict[int, np.ndarray] = {}
     cells = tag_cells(family)
     h, w = gray.shape
+    img = gray.astype(np.float32)
     for tag_id, c in zip(found_ids, corners, strict=True):
         if found_ids.count(tag_id) > 1 or (ids is not None and tag_id not in ids):
             continue
         c = np.asarray(c, dtype=np.float64).reshape(4, 2)
         if (c < 1.0).any() or (c[:, 0] > w - 2).any() or (c[:, 1] > h - 2).any():
             continue  # cut by the image border
-        result[tag_id] = _refine_edges(gray, c, cells) if refine == "edges" else c
+        result[tag_id] = _refine_edges(img, c, cells) if refine == "edges" else c
     return result
