@@ -4,11 +4,12 @@ Unknowns are z = values / prior_sigma, so the prior residual is z itself. Data r
 r = project(K, D, T_camera_tag(q_s + offsets) @ p_corner) - u_detected [px].
 
 Noise model: the corners of one sample share the error of that sample's joint readings (encoder quantisation moves
-the whole tag), so each sample's residuals have covariance C_s = sigma_px^2 I + sigma_q^2 A_s A_s^T with
-A_s = d(uv_s)/d(q_s). Residuals are whitened by a block-diagonal W (W_s = chol(C_s)^-1), built once per solver
+the whole tag), and so do all frames taken at one still pose (identical readings, e.g. several frames of a
+recording). Each such group's residuals have covariance C_g = sigma_px^2 I + sigma_q^2 A_g A_g^T with
+A_g = d(uv_g)/d(q_g). Residuals are whitened by a block-diagonal W (W_g = chol(C_g)^-1), built once per solver
 round at the current estimate, then passed through a Huber-shaped function so a misdetected corner cannot drag the
 solution while priors stay purely quadratic. Everything is vectorised over corners; the only Python loops are over
-joints (inside FK and for A) and over samples when W is rebuilt, never inside the residual.
+joints (inside FK and for A) and over sample groups when W is rebuilt, never inside the residual.
 """
 
 from __future__ import annotations
@@ -52,6 +53,9 @@ class Problem:
         corners = np.stack([tag_corners(self.robot.config.tag(t).size) for t in self.tag_ids])
         self.p_tag = corners[self.tag_col, self.obs.corner_index]  # (M, 3) corner in its tag frame [m]
         self.q = self.obs.q_measured
+        _, group_of_sample = np.unique(self.q, axis=0, return_inverse=True)
+        self._n_groups = int(group_of_sample.max()) + 1 if len(self.q) else 0
+        self._group_of_corner = group_of_sample.ravel()[self.obs.sample_index]
         self.exclude(np.zeros(self.obs.n_samples, dtype=bool))
         self.linearize(np.zeros(len(self.params)))
 
@@ -91,21 +95,22 @@ class Problem:
         self.set_noise(self.sigma_px)
 
     def set_noise(self, sigma_px: float) -> None:
-        """Rebuild the whitening matrix of every sample for this corner noise [px] (encoder noise fixed)."""
+        """Rebuild the whitening matrix for this corner noise [px] (encoder noise fixed). One block per group of
+        samples with identical joint readings: frames of one still pose share its quantisation error."""
         self.sigma_px = sigma_px
         A = self._A
         rows, cols, vals = [], [], []
-        for s in range(self.obs.n_samples):
-            corners = np.flatnonzero(self.obs.sample_index == s)
+        for group in range(self._n_groups):
+            corners = np.flatnonzero(self._group_of_corner == group)
             if corners.size == 0:
                 continue
-            A_s = A[corners].reshape(-1, A.shape[-1])  # (2c, J), rows ordered u0 v0 u1 v1 ...
-            C = self.sigma_px**2 * np.eye(len(A_s)) + self.sigma_q**2 * (A_s @ A_s.T)
-            W_s = np.linalg.inv(np.linalg.cholesky(C))
+            A_g = A[corners].reshape(-1, A.shape[-1])  # (2c, J), rows ordered u0 v0 u1 v1 ...
+            C = self.sigma_px**2 * np.eye(len(A_g)) + self.sigma_q**2 * (A_g @ A_g.T)
+            W_g = np.linalg.inv(np.linalg.cholesky(C))
             index = np.stack([2 * corners, 2 * corners + 1], axis=1).ravel()
             rows.append(np.repeat(index, len(index)))
             cols.append(np.tile(index, len(index)))
-            vals.append(W_s.ravel())
+            vals.append(W_g.ravel())
         n = 2 * len(self.obs.uv)
         self.weights = scipy.sparse.csr_matrix(
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
