@@ -41,78 +41,34 @@ DEFAULT_ROBOT = Path("configs/wolfgang")
 
 @app.command()
 @friendly_errors
-def fit(
-    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on."),
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
-    free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
-    side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
-    fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's."),
-    out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
+def intrinsics(
+    inputs: list[str] = typer.Argument(None, help="Image files, globs, folders or video files."),
+    board: str = typer.Option(..., "--board", help="Inner corners COLSxROWS (OpenCV sample: 9x6)."),
+    square: float = typer.Option(..., "--square", help="Square edge [m]."),
+    out: Path = typer.Option(..., "--out", help="camera_info YAML to write."),
+    model: str = typer.Option("plumb_bob", "--model", help="plumb_bob | rational_polynomial | equidistant."),
+    charuco: str | None = typer.Option(None, "--charuco", help="ChArUco marker dictionary, e.g. 5X5_100."),
+    marker: float | None = typer.Option(None, "--marker", help="ChArUco marker edge [m] (0.75 square)."),
+    legacy: bool = typer.Option(False, "--legacy", help="ChArUco layout of OpenCV < 4.6 (older printouts)."),
+    camera: str | None = typer.Option(None, "--camera", help="Live camera: index (0) or device path."),
+    report: Path | None = typer.Option(None, "--report", help="Report folder (default: OUT_report)."),
+    save_frames: Path | None = typer.Option(None, "--save-frames", help="Save views kept from video/camera."),
+    min_views: int = typer.Option(10, "--min-views", help="Fewest views to calibrate from."),
+    detector: str = typer.Option("classic", "--detector", help="Checkerboard detector: classic | sb."),
+    no_reject: bool = typer.Option(False, "--no-reject", help="Keep outlier views."),
+    workers: int = typer.Option(2, "--workers", help="Detection threads."),
+    name: str = typer.Option("camera", "--name", help="camera_name in the YAML."),
 ) -> None:
-    """Estimate the chosen free parameters from one or more captures."""
-    from wolfcal.fit.pipeline import FitOptions, run_fit
+    """Calibrate camera intrinsics from checkerboard or ChArUco views -> camera_info YAML and a report."""
+    from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics
+    from wolfcal.vision.board import make_board
 
-    run_fit(captures, robot, out, FitOptions(free=free, side=side, fix_tags=fix_tags), intrinsics, say=typer.echo)
-
-
-@app.command()
-@friendly_errors
-def simulate(
-    out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap); truth goes beside it."),
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
-    samples: int = typer.Option(24, "--samples", help="Number of still poses."),
-    seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same capture)."),
-    offsets: str = typer.Option("none", "--offsets", help="Joints with true encoder offsets: none|head|legs|all."),
-    binning: int = typer.Option(1, "--binning", help="Sensor binning (4 gives 512x384 images of a 2048x1536 camera)."),
-    noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
-    outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
-    truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
-) -> None:
-    """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
-    from wolfcal.camera.camera_info import load_camera_info
-    from wolfcal.sim.simulate import SimOptions, simulate_capture
-
-    options = SimOptions(
-        samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth,
-    )
-    camera = load_camera_info(intrinsics) if intrinsics else None
-    simulate_capture(robot, out, options, camera, say=typer.echo)
-
-
-@app.command()
-@friendly_errors
-def recover(
-    file: Path = typer.Argument(..., help="Capture that did not finish, e.g. x.mcap.partial."),  # noqa: B008
-    out: Path | None = typer.Option(  # noqa: B008
-        None, "--out", help="Where to write the rescued capture (default: FILE.recovered.mcap)."
-    ),
-) -> None:
-    """Rescue every complete sample of a capture whose recording stopped before it finished."""
-    from wolfcal.io.recover import recover_capture, recovered_path
-
-    target = out or recovered_path(file)
-    count = recover_capture(file, target)
-    typer.echo(f"rescued {count} sample(s) from {file} into {target}")
-
-
-@app.command()
-@friendly_errors
-def emulate(
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
-    truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
-    fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
-                                    "KIND: no-answer, crc, hw-error, missing, model. Repeatable."),
-    operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
-                                         "limp joints through (manual capture)."),
-    hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
-) -> None:
-    """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
-    from wolfcal.hardware.emulator import emulate as run
-
-    run(robot, truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
+    options = IntrinsicsOptions(
+        model=model, method=detector, min_views=min_views, reject_outliers=not no_reject, workers=workers,
+        camera_name=name, report=report, save_frames=save_frames, live_view=True,
+    )  # fmt: skip
+    target = make_board(board, square, charuco, marker, legacy)
+    run_intrinsics(inputs or [], target, out, options, camera, say=typer.echo)
 
 
 @app.command()
@@ -151,34 +107,108 @@ def capture(
 
 @app.command()
 @friendly_errors
-def intrinsics(
-    inputs: list[str] = typer.Argument(None, help="Image files, globs, folders or video files."),
-    board: str = typer.Option(..., "--board", help="Inner corners COLSxROWS (OpenCV sample: 9x6)."),
-    square: float = typer.Option(..., "--square", help="Square edge [m]."),
-    out: Path = typer.Option(..., "--out", help="camera_info YAML to write."),
-    model: str = typer.Option("plumb_bob", "--model", help="plumb_bob | rational_polynomial | equidistant."),
-    charuco: str | None = typer.Option(None, "--charuco", help="ChArUco marker dictionary, e.g. 5X5_100."),
-    marker: float | None = typer.Option(None, "--marker", help="ChArUco marker edge [m] (0.75 square)."),
-    legacy: bool = typer.Option(False, "--legacy", help="ChArUco layout of OpenCV < 4.6 (older printouts)."),
-    camera: str | None = typer.Option(None, "--camera", help="Live camera: index (0) or device path."),
-    report: Path | None = typer.Option(None, "--report", help="Report folder (default: OUT_report)."),
-    save_frames: Path | None = typer.Option(None, "--save-frames", help="Save views kept from video/camera."),
-    min_views: int = typer.Option(10, "--min-views", help="Fewest views to calibrate from."),
-    detector: str = typer.Option("classic", "--detector", help="Checkerboard detector: classic | sb."),
-    no_reject: bool = typer.Option(False, "--no-reject", help="Keep outlier views."),
-    workers: int = typer.Option(2, "--workers", help="Detection threads."),
-    name: str = typer.Option("camera", "--name", help="camera_name in the YAML."),
+def fit(
+    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on."),
+    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
+    side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
+    fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's."),
+    out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
 ) -> None:
-    """Calibrate camera intrinsics from checkerboard or ChArUco views -> camera_info YAML and a report."""
-    from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics
-    from wolfcal.vision.board import make_board
+    """Estimate the chosen free parameters from one or more captures."""
+    from wolfcal.fit.pipeline import FitOptions, run_fit
 
-    options = IntrinsicsOptions(
-        model=model, method=detector, min_views=min_views, reject_outliers=not no_reject, workers=workers,
-        camera_name=name, report=report, save_frames=save_frames, live_view=True,
-    )  # fmt: skip
-    target = make_board(board, square, charuco, marker, legacy)
-    run_intrinsics(inputs or [], target, out, options, camera, say=typer.echo)
+    run_fit(captures, robot, out, FitOptions(free=free, side=side, fix_tags=fix_tags), intrinsics, say=typer.echo)
+
+
+@app.command()
+@friendly_errors
+def evaluate(
+    fit_dir: Path = typer.Argument(..., help="Folder written by `wolfcal fit` (holds result.yaml)."),
+    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap), not used by the fit. "
+                                       "Repeatable. Without it: k-fold cross-validation over the fit's samples."),
+    out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
+    folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
+    force: bool = typer.Option(False, "--force", help="Write the deploy files even if held-out error got worse."),
+) -> None:
+    """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
+    from wolfcal.evaluate.pipeline import run_evaluate
+
+    metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
+    if not metrics["deploy"]["written"]:
+        raise WolfcalError(metrics["deploy"]["reason"])
+
+
+@app.command()
+@friendly_errors
+def demo(
+    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
+    root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
+) -> None:
+    """Fit and evaluate the shipped demo capture; prints the before/after table."""
+    from wolfcal.demo import run_demo
+
+    run_demo(root, out, say=typer.echo)
+
+
+@app.command()
+@friendly_errors
+def simulate(
+    out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap); truth goes beside it."),
+    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    samples: int = typer.Option(24, "--samples", help="Number of still poses."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same capture)."),
+    offsets: str = typer.Option("none", "--offsets", help="Joints with true encoder offsets: none|head|legs|all."),
+    binning: int = typer.Option(1, "--binning", help="Sensor binning (4 gives 512x384 images of a 2048x1536 camera)."),
+    noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
+    outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
+) -> None:
+    """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
+    from wolfcal.camera.camera_info import load_camera_info
+    from wolfcal.sim.simulate import SimOptions, simulate_capture
+
+    options = SimOptions(
+        samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
+        truth_file=truth,
+    )
+    camera = load_camera_info(intrinsics) if intrinsics else None
+    simulate_capture(robot, out, options, camera, say=typer.echo)
+
+
+@app.command()
+@friendly_errors
+def emulate(
+    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
+    fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
+                                    "KIND: no-answer, crc, hw-error, missing, model. Repeatable."),
+    operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
+                                         "limp joints through (manual capture)."),
+    hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
+) -> None:
+    """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
+    from wolfcal.hardware.emulator import emulate as run
+
+    run(robot, truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
+
+
+@app.command()
+@friendly_errors
+def recover(
+    file: Path = typer.Argument(..., help="Capture that did not finish, e.g. x.mcap.partial."),  # noqa: B008
+    out: Path | None = typer.Option(  # noqa: B008
+        None, "--out", help="Where to write the rescued capture (default: FILE.recovered.mcap)."
+    ),
+) -> None:
+    """Rescue every complete sample of a capture whose recording stopped before it finished."""
+    from wolfcal.io.recover import recover_capture, recovered_path
+
+    target = out or recovered_path(file)
+    count = recover_capture(file, target)
+    typer.echo(f"rescued {count} sample(s) from {file} into {target}")
 
 
 @app.command("board")
@@ -216,36 +246,6 @@ def tags(
 
     paths = write_sheet(tag_sheet(family, parse_ids(ids), size, paper), out, dpi)
     typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
-
-
-@app.command()
-@friendly_errors
-def evaluate(
-    fit_dir: Path = typer.Argument(..., help="Folder written by `wolfcal fit` (holds result.yaml)."),
-    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap), not used by the fit. "
-                                       "Repeatable. Without it: k-fold cross-validation over the fit's samples."),
-    out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
-    folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
-    force: bool = typer.Option(False, "--force", help="Write the deploy files even if held-out error got worse."),
-) -> None:
-    """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
-    from wolfcal.evaluate.pipeline import run_evaluate
-
-    metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
-    if not metrics["deploy"]["written"]:
-        raise WolfcalError(metrics["deploy"]["reason"])
-
-
-@app.command()
-@friendly_errors
-def demo(
-    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
-    root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
-) -> None:
-    """Fit and evaluate the shipped demo capture; prints the before/after table."""
-    from wolfcal.demo import run_demo
-
-    run_demo(root, out, say=typer.echo)
 
 
 def main() -> None:
