@@ -35,7 +35,6 @@ from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, 
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recover import recover_capture
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.robot import load_robot
 from wolfcal.vision.tags import detect_tags, tag_corners, tag_texture
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,10 +55,6 @@ TRUTH = Corrections(
     },
 )
 
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot(ROBOT)
 
 
 @pytest.fixture(scope="module")

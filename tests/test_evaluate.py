@@ -10,7 +10,6 @@ import yaml
 import yourdfpy
 from typer.testing import CliRunner
 
-from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.deploy import DEPLOY_FILES, write_deploy_files
@@ -23,7 +22,6 @@ from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.robot.corrections import Corrections, load_corrections
-from wolfcal.robot.robot import load_robot
 from wolfcal.sim.scenario import synthetic_scenario
 from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
 from wolfcal.sim.truth import TruthSpec
@@ -36,14 +34,6 @@ def quiet(_text: str) -> None:
     pass
 
 
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot(CONFIG)
-
-
-@pytest.fixture(scope="module")
-def camera():
-    return load_camera_info(CONFIG / "basler_acA2040.yaml")
 
 
 def split_capture(src: Path, parts: dict[Path, range], robot, camera) -> None:

@@ -5,26 +5,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.fit.result import explain
-from wolfcal.robot.robot import load_robot
 from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.sim.scenario import synthetic_scenario
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 
 
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot(CONFIG)
-
-
-@pytest.fixture(scope="module")
-def camera():
-    """2048x1536, strong barrel distortion (k1 = -0.286)."""
-    return load_camera_info(CONFIG / "basler_acA2040.yaml")
 
 
 def z_scores(fit, truth):

@@ -14,10 +14,6 @@ from wolfcal.robot.robot import load_robot
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang" / "robot.yaml"
 
 
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot(CONFIG)
-
 
 def random_q(model, n, rng):
     lo = np.array([model.joints[j].lower for j in model.actuated_joint_names])

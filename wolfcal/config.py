@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.errors import WolfcalError
+from wolfcal.yamlfile import read_yaml
 
 TAG_FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 
@@ -200,12 +200,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     path = Path(path)
     if path.is_dir():
         path = path / "robot.yaml"
-    if not path.is_file():
-        raise WolfcalError(f"{path}: robot config not found (give --robot a robot.yaml or a folder holding one)")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, "robot config", "give --robot a robot.yaml or a folder holding one")
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link", "camera", "tags"), ("joint_states_topic", "servos", "priors")

@@ -10,6 +10,7 @@ import yaml
 from wolfcal.atomic import write_text_atomic
 from wolfcal.camera.model import MODELS, CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.yamlfile import read_yaml
 
 
 def _matrix(data: dict, key: str, rows: int, cols: int, path: Path) -> np.ndarray:
@@ -25,12 +26,7 @@ def _matrix(data: dict, key: str, rows: int, cols: int, path: Path) -> np.ndarra
 def load_camera_info(path: str | Path) -> CameraModel:
     """Read a ROS camera_info YAML file; errors name the file and the key."""
     path = Path(path)
-    if not path.is_file():
-        raise WolfcalError(f"{path}: camera_info file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, "camera_info file")
     if not isinstance(data, dict):
         raise WolfcalError(f"{path}: expected a camera_info mapping")
     for key in ("image_width", "image_height", "camera_matrix", "distortion_coefficients"):

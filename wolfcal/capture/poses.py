@@ -17,9 +17,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from wolfcal.errors import WolfcalError
+from wolfcal.yamlfile import read_yaml
 
 DEFAULT_VELOCITY = 0.5  # rad/s
 
@@ -50,12 +49,7 @@ def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> Pose
     Every problem (unknown joint, target outside the limits, bad value) is listed in one WolfcalError.
     """
     path = Path(path)
-    if not path.is_file():
-        raise WolfcalError(f"{path}: poses file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, "poses file")
     if not isinstance(data, dict) or not isinstance(data.get("poses"), list) or not data["poses"]:
         raise WolfcalError(f"{path}: expected a mapping with 'poses': a non-empty list of {{name, joints}}")
     unknown = sorted(set(data) - {"poses", "velocity"})

@@ -15,6 +15,7 @@ from wolfcal.fit.solver import Solution
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
+from wolfcal.yamlfile import read_yaml
 
 CONDITION_LIMIT = 100.0
 DATA_SHARE_LIMIT = 0.5
@@ -167,12 +168,7 @@ def load_result(path: str | Path) -> dict:
     path = Path(path)
     if path.is_dir():
         path = path / "result.yaml"
-    if not path.is_file():
-        raise WolfcalError(f"{path}: fit result not found (run `wolfcal fit ... --out DIR` first)")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, "fit result", "run `wolfcal fit ... --out DIR` first")
     for key in ("robot", "captures", "free", "parameters", "corrections"):
         if not isinstance(data, dict) or key not in data:
             raise WolfcalError(f"{path}: missing key '{key}'; is this a wolfcal fit result?")

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.errors import WolfcalError
+from wolfcal.yamlfile import read_yaml
 
 
 @dataclass
@@ -59,12 +59,7 @@ class Corrections:
 def load_corrections(path: str | Path, key: str | None = None) -> Corrections:
     """Read corrections from a YAML file (optionally from one key of it, e.g. 'truth' of a simulator's file)."""
     path = Path(path)
-    if not path.is_file():
-        raise WolfcalError(f"{path}: file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise WolfcalError(f"{path}: not valid YAML ({exc})") from None
+    data = read_yaml(path, "corrections file")
     if key is not None:
         if not isinstance(data, dict) or key not in data:
             raise WolfcalError(f"{path}: missing key '{key}'")
