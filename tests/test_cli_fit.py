@@ -116,3 +116,13 @@ def test_unknown_preset_and_missing_file(tmp_path):
     assert result.exit_code != 0 and "nope.mcap" in result.output
     result = run("fit", tmp_path / "nope.mcap", "--free", "arms", "--out", tmp_path / "fit")
     assert result.exit_code != 0 and "'arms' is not a preset" in result.output
+
+
+def test_capture_of_another_robot_is_refused(capture, tmp_path):
+    config = yaml.safe_load((ROBOT / "robot.yaml").read_text())
+    config.update(name="other_robot", urdf=str(ROBOT / "wolfgang.urdf"))
+    config["camera"]["intrinsics"] = str(ROBOT / "basler_acA2040.yaml")
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
+    result = run("fit", capture, "--robot", tmp_path / "robot.yaml", "--out", tmp_path / "fit")
+    assert result.exit_code != 0
+    assert "captured with robot 'wolfgang'" in result.output and "other_robot" in result.output

@@ -13,11 +13,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 import wolfcal
 from wolfcal.atomic import write_bytes_atomic, write_text_atomic
-from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate import figures as fig
@@ -34,9 +32,8 @@ from wolfcal.evaluate.metrics import (
     summary,
 )
 from wolfcal.evaluate.report import Block, before_after_table, headline_rows, render_html, render_markdown
-from wolfcal.fit.pipeline import FitOptions
+from wolfcal.fit.pipeline import FitOptions, load_samples
 from wolfcal.fit.result import load_result
-from wolfcal.io.reader import read_captures
 from wolfcal.io.samples import Sample
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections, load_corrections
@@ -59,27 +56,6 @@ def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
     robot = load_robot(robot_path)
     corrections = Corrections.from_dict(result["corrections"], f"{fit_dir}/result.yaml: corrections")
     return result, robot, corrections
-
-
-def _read_samples(robot: Robot, captures: list[Path], intrinsics: Path | None) -> list[Sample]:
-    """Samples of the captures; a capture recorded with another robot's config is refused."""
-    for path in captures:
-        if not Path(path).is_file():
-            raise WolfcalError(f"{path}: capture file not found")
-    camera = load_camera_info(intrinsics) if intrinsics else None
-    loaded = read_captures(captures, robot.config, camera)
-    for capture in loaded:
-        if capture.robot_config_text:
-            try:
-                name = (yaml.safe_load(capture.robot_config_text) or {}).get("name")
-            except (yaml.YAMLError, AttributeError):
-                name = None
-            if name is not None and name != robot.config.name:
-                raise WolfcalError(
-                    f"{capture.path}: captured with robot '{name}', but the fit is for robot "
-                    f"'{robot.config.name}' ({robot.config.path}); evaluate a capture of the same robot"
-                )
-    return [s for c in loaded for s in c.samples]
 
 
 def _truth_reference(captures: list[Path]) -> Corrections | None:
@@ -452,7 +428,7 @@ def run_evaluate(
         )
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
     intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
-    samples = _read_samples(robot, sources, intrinsics)
+    samples, _ = load_samples(robot, sources, intrinsics)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
     obs, warnings = detect_observations(samples, robot)
     tags = [t for t in result["tags_used"] if t in obs.observed_tag_ids]

@@ -6,6 +6,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.problem import Problem
@@ -84,11 +86,29 @@ def fit_observations(
 def load_samples(
     robot: Robot, captures: list[Path], intrinsics: Path | None
 ) -> tuple[list[Sample], list[str]]:
+    """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
+    config names another robot is refused."""
     camera = load_camera_info(intrinsics) if intrinsics else None
     loaded = read_captures(captures, robot.config, camera)
+    for capture in loaded:
+        name = attached_robot_name(capture.robot_config_text)
+        if name is not None and name != robot.config.name:
+            raise WolfcalError(
+                f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "
+                f"({robot.config.path}); use the config of the robot that was captured"
+            )
     samples = [s for c in loaded for s in c.samples]
     notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
     return samples, notes
+
+
+def attached_robot_name(config_text: str | None) -> str | None:
+    """The `name` of a robot config attached to a capture (None when absent or unreadable)."""
+    try:
+        data = yaml.safe_load(config_text) if config_text else None
+    except yaml.YAMLError:
+        return None
+    return data.get("name") if isinstance(data, dict) else None
 
 
 def run_fit(
