@@ -14,10 +14,12 @@ A joint not named in a pose keeps its previous target (at the start: where it st
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from wolfcal.errors import WolfcalError
+from wolfcal.robot.robot import Robot
 from wolfcal.yamlfile import read_yaml
 
 DEFAULT_VELOCITY = 0.5  # rad/s
@@ -41,6 +43,11 @@ class PoseScript:
         for pose in self.poses:
             seen.update(dict.fromkeys(pose.joints))
         return list(seen)
+
+
+def joint_limits(robot: Robot, joints: Iterable[str]) -> dict[str, tuple[float, float]]:
+    """URDF (lower, upper) limits [rad] of `joints`, as `load_poses` takes them."""
+    return {j: (robot.model.joints[j].lower, robot.model.joints[j].upper) for j in joints}
 
 
 def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> PoseScript:

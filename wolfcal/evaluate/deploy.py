@@ -89,3 +89,29 @@ def remove_deploy_files(out_dir: Path) -> list[Path]:
             path.unlink()
             removed.append(path)
     return removed
+
+
+def write_or_withhold_deploy_files(
+    robot: Robot, corrections: Corrections, out_dir: Path, worse: bool, force: bool
+) -> dict:
+    """Write the deploy files, or (worse held-out error without force) remove any an earlier run left.
+
+    Returns metrics.json's 'deploy' record: written, forced, files (names in out_dir), reason.
+    """
+    if worse and not force:
+        removed = remove_deploy_files(out_dir)
+        earlier = f" ({len(removed)} file(s) of an earlier run removed)" if removed else ""
+        return {
+            "written": False,
+            "forced": False,
+            "files": [],
+            "reason": "The calibration makes held-out error worse, so the deploy files were not written"
+            f"{earlier}. Pass --force to write them anyway.",
+        }
+    paths = write_deploy_files(robot, corrections, out_dir)
+    return {
+        "written": True,
+        "forced": worse,
+        "files": [p.name for p in paths],
+        "reason": "written despite worse held-out error (--force)" if worse else None,
+    }

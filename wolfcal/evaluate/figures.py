@@ -36,6 +36,19 @@ def _text(
     cv2.putText(img, text, (int(x), int(y + h // 2)), FONT, scale, color, 1, cv2.LINE_AA)
 
 
+def _legend(
+    img: np.ndarray, items: list[tuple[str, tuple[int, int, int]]], right: int, top: int, gap: int, text_y: int
+) -> None:
+    """Colour boxes (12 px, top edge at `top`) with their labels (centred at `text_y`), in one row ending at `right`
+    [px]."""
+    x = right
+    for label, color in reversed(items):
+        (w, _), _ = cv2.getTextSize(label, FONT, 0.45, 1)
+        x -= w + gap
+        cv2.rectangle(img, (x, top), (x + 12, top + 12), color, -1)
+        _text(img, label, (x + 16, text_y))
+
+
 class LogAxes:
     """A white canvas with a title, a framed plot area and a legend above it; charts map their data into it."""
 
@@ -54,12 +67,7 @@ class LogAxes:
         _text(self.img, title, (width // 2, 16), 0.55, anchor="center")
 
     def legend(self, items: list[tuple[str, tuple[int, int, int]]]) -> None:
-        x = self.x1 - 10
-        for label, color in reversed(items):
-            (w, _), _ = cv2.getTextSize(label, FONT, 0.45, 1)
-            x -= w + 22
-            cv2.rectangle(self.img, (x, self.y0 - 26), (x + 12, self.y0 - 14), color, -1)
-            _text(self.img, label, (x + 16, self.y0 - 20))
+        _legend(self.img, items, self.x1 - 10, self.y0 - 26, 22, self.y0 - 20)
 
     def frame(self) -> None:
         cv2.rectangle(self.img, (self.x0, self.y0), (self.x1, self.y1), INK, 1)
@@ -215,12 +223,7 @@ def overlay_png(
         cv2.circle(img, tuple(np.round(p * 16).astype(int)), 6 * 16, DETECTED, 2, cv2.LINE_AA, shift=4)
     banner = np.full((28, img.shape[1], 3), 255, np.uint8)
     _text(banner, caption, (8, 13))
-    x = img.shape[1] - 10
-    for label, color in reversed([("detected", DETECTED), ("before", BEFORE), ("after", AFTER)]):
-        (w, _), _ = cv2.getTextSize(label, FONT, 0.45, 1)
-        x -= w + 24
-        cv2.rectangle(banner, (x, 8), (x + 12, 20), color, -1)
-        _text(banner, label, (x + 16, 13))
+    _legend(banner, [("detected", DETECTED), ("before", BEFORE), ("after", AFTER)], img.shape[1] - 10, 8, 24, 13)
     return png(np.vstack([banner, img]))
 
 

@@ -66,8 +66,9 @@ def ball_position(robot: Robot, q: np.ndarray, reference: Corrections, distance:
 def aim_head(robot: Robot, reference: Corrections, distance: float) -> np.ndarray:
     """(J,) standing readings with the tilt joint set so the reference model's optical axis points at the ball."""
     q0 = standing_pose(robot)
-    column = robot.model.column(tilt_joint(robot))
-    joint = robot.model.joints[tilt_joint(robot)]
+    tilt = tilt_joint(robot)
+    column = robot.model.column(tilt)
+    joint = robot.model.joints[tilt]
     ball = ball_position(robot, q0, reference, distance)
 
     def off_axis(values: np.ndarray) -> np.ndarray:
@@ -124,7 +125,7 @@ def ground_errors(
     for d in distances:
         q = aim_head(robot, reference, d)
         ball = ball_position(robot, q, reference, d)
-        T_sole_camera, T_sole_base = _poses(robot, q[None], reference)
+        T_sole_camera, _ = _poses(robot, q[None], reference)
         p_camera = invert_transform(T_sole_camera[0]) @ np.append(ball, 1.0)
         uv = camera.project(p_camera[:3])
         row = {"distance_m": d, "pixel": [float(uv[0]), float(uv[1])], "models": {}}

@@ -7,9 +7,11 @@ joint and id and what to check.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import partial
+from operator import itemgetter
+from typing import TypeVar
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -19,8 +21,6 @@ from wolfcal.config import ServoConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware import protocol as P
 
-RAD_PER_TICK = 2.0 * math.pi / P.TICKS_PER_TURN
-RAD_S_PER_UNIT = P.RPM_PER_UNIT * 2.0 * math.pi / 60.0
 RETRIES = 3  # attempts per transaction before a communication error is reported
 READ_BLOCK_S = 0.002  # longest a serial read blocks before the SDK checks its packet timeout again
 
@@ -32,15 +32,30 @@ class BusError(WolfcalError):
 
 
 def ticks_to_rad(ticks: np.ndarray | int) -> np.ndarray | float:
-    return (np.asarray(ticks) - P.CENTRE_TICK) * RAD_PER_TICK
+    """Joint angle(s) [rad] of present position(s) [ticks]."""
+    return (np.asarray(ticks) - P.CENTRE_TICK) * P.RAD_PER_TICK
 
 
 def rad_to_ticks(rad: np.ndarray | float) -> np.ndarray | int:
-    return np.round(np.asarray(rad) / RAD_PER_TICK).astype(int) + P.CENTRE_TICK
+    """Position(s) [ticks] of joint angle(s) [rad], rounded to the nearest tick."""
+    return np.round(np.asarray(rad) / P.RAD_PER_TICK).astype(int) + P.CENTRE_TICK
 
 
 def _signed32(value: int) -> int:
     return value - (1 << 32) if value & 0x80000000 else value
+
+
+Outcome = TypeVar("Outcome")
+
+
+def _with_retries(transaction: Callable[[], Outcome], comm_result: Callable[[Outcome], int]) -> Outcome:
+    """The outcome of the first of RETRIES attempts of an SDK transaction that communicated, else of the last;
+    `comm_result` picks the communication result (`sdk.COMM_*`) out of an outcome."""
+    for _ in range(RETRIES):
+        outcome = transaction()
+        if comm_result(outcome) == sdk.COMM_SUCCESS:
+            break
+    return outcome
 
 
 @dataclass
@@ -58,10 +73,11 @@ class JointState:
     @property
     def velocities(self) -> np.ndarray:
         """(J,) joint velocities [rad/s]."""
-        return self.velocity_units * RAD_S_PER_UNIT
+        return self.velocity_units * P.RAD_S_PER_UNIT
 
 
 def hardware_error_text(bits: int) -> str:
+    """The names of the Hardware Error Status bits set in `bits`."""
     names = [name for bit, name in P.HW_ERROR_BITS.items() if bits & (1 << bit)]
     return ", ".join(names) or f"bits {bits:#04x}"
 
@@ -132,10 +148,7 @@ class DynamixelBus:
         """Ping every configured servo; one BusError lists every missing id and unexpected model number."""
         problems, models = [], {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
-            for _ in range(RETRIES):
-                model, result, _ = self.ph.ping(self.port, sid)
-                if result == sdk.COMM_SUCCESS:
-                    break
+            model, result, _ = _with_retries(partial(self.ph.ping, self.port, sid), itemgetter(1))
             if result != sdk.COMM_SUCCESS:
                 problems.append(f"{joint} (id {sid}): no answer ({self._comm_text(result)})")
                 continue
@@ -175,10 +188,9 @@ class DynamixelBus:
 
     # --- reading --------------------------------------------------------------------------------------------
     def _sync_read(self, group: sdk.GroupSyncRead, what: str) -> None:
-        for _ in range(RETRIES):
-            result = group.txRxPacket()
-            if result == sdk.COMM_SUCCESS:
-                return
+        result = _with_retries(group.txRxPacket, lambda result: result)
+        if result == sdk.COMM_SUCCESS:
+            return
         # the SDK stops at the first servo that failed; its data is left empty
         culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
         who = self._name(culprit) if culprit is not None else "a servo"
@@ -200,10 +212,8 @@ class DynamixelBus:
         sid = self.servos.ids[joint]
         addr, size = item
         write = {1: self.ph.write1ByteTxRx, 2: self.ph.write2ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
-        for _ in range(RETRIES):
-            result, error = write(self.port, sid, addr, value & ((1 << (8 * size)) - 1))
-            if result == sdk.COMM_SUCCESS:
-                break
+        unsigned = value & ((1 << (8 * size)) - 1)
+        result, error = _with_retries(partial(write, self.port, sid, addr, unsigned), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
             raise BusError(
                 f"{self.port_name}: writing address {addr} of {self._name(sid)} failed: "
@@ -222,12 +232,11 @@ class DynamixelBus:
             self._write(joint, P.TORQUE_ENABLE, int(on))
 
     def torque_enabled(self) -> dict[str, bool]:
+        """Torque Enable of every joint, read servo by servo."""
         result = {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
-            for _ in range(RETRIES):
-                value, comm, _ = self.ph.read1ByteTxRx(self.port, sid, P.TORQUE_ENABLE[0])
-                if comm == sdk.COMM_SUCCESS:
-                    break
+            read = partial(self.ph.read1ByteTxRx, self.port, sid, P.TORQUE_ENABLE[0])
+            value, comm, _ = _with_retries(read, itemgetter(1))
             if comm != sdk.COMM_SUCCESS:
                 raise BusError(
                     f"{self.port_name}: reading the torque state of {self._name(sid)} failed: "
@@ -238,7 +247,7 @@ class DynamixelBus:
 
     def set_profile_velocity(self, joints: Iterable[str], rad_s: float) -> None:
         """Limit the speed of position moves to `rad_s` (at least one unit of 0.229 rpm)."""
-        units = max(1, int(round(rad_s / RAD_S_PER_UNIT)))
+        units = max(1, int(round(rad_s / P.RAD_S_PER_UNIT)))
         for joint in joints:
             self._write(joint, P.PROFILE_VELOCITY, units)
 
@@ -253,6 +262,7 @@ class DynamixelBus:
             raise BusError(f"{self.port_name}: sending goal positions failed: {self._comm_text(result)}")
 
     def reboot(self, joint: str) -> None:
+        """Reboot a servo: clears its hardware error; its torque comes back off."""
         sid = self.servos.ids[joint]
         result, _ = self.ph.reboot(self.port, sid)
         if result != sdk.COMM_SUCCESS:

@@ -7,36 +7,24 @@ through `dynamixel_sdk`, which has its own implementation) and by tests.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
 
-PING, READ, WRITE, REBOOT, STATUS, SYNC_READ, SYNC_WRITE, BULK_READ = (
-    0x01,
-    0x02,
-    0x03,
-    0x08,
-    0x55,
-    0x82,
-    0x83,
-    0x92,
-)
+PING, READ, WRITE, REBOOT, STATUS, SYNC_READ, SYNC_WRITE = 0x01, 0x02, 0x03, 0x08, 0x55, 0x82, 0x83
 
-# Status error byte: bit 7 alert (hardware error), low bits an error number.
+# Status error byte: bit 7 alert (hardware error), low bits an error number (those the emulator sends).
 ERR_ALERT = 0x80
-ERR_RESULT_FAIL, ERR_INSTRUCTION, ERR_CRC, ERR_DATA_RANGE, ERR_DATA_LENGTH, ERR_DATA_LIMIT, ERR_ACCESS = (
-    range(1, 8)
-)
+ERR_RESULT_FAIL, ERR_INSTRUCTION, ERR_ACCESS = 1, 2, 7
 
 # Control table (X series and MX with 2.0 firmware): (address, size in bytes)
 MODEL_NUMBER = (0, 2)
 FIRMWARE_VERSION = (6, 1)
 ID = (7, 1)
-HOMING_OFFSET = (20, 4)
 TORQUE_ENABLE = (64, 1)
 HARDWARE_ERROR_STATUS = (70, 1)
-PROFILE_ACCELERATION = (108, 4)
 PROFILE_VELOCITY = (112, 4)
 GOAL_POSITION = (116, 4)
 MOVING = (122, 1)
@@ -56,6 +44,8 @@ HW_ERROR_BITS = {
 TICKS_PER_TURN = 4096
 CENTRE_TICK = 2048
 RPM_PER_UNIT = 0.229  # present/profile velocity unit
+RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_TURN  # position unit [rad]
+RAD_S_PER_UNIT = RPM_PER_UNIT * 2.0 * math.pi / 60.0  # velocity unit [rad/s]
 
 _CRC_TABLE: list[int] = []
 for _i in range(256):

@@ -1,0 +1,130 @@
+"""One capture session over an open bus, camera and writer: reads the bus, tracks stillness and takes a sample
+from a still moment; the scripted and manual modes decide when to try.
+
+A sample is one still moment: bus reading, frame, frame, bus reading, all within a tick of each other; the image
+is the second frame. Joint angles in rad, the robot's joint convention; times on the monotonic clock [s].
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.capture.gating import StillnessWindow, why_not_sharp
+from wolfcal.capture.options import CaptureOptions
+from wolfcal.capture.view import Coverage, LiveView, Status
+from wolfcal.hardware.bus import DynamixelBus, JointState
+from wolfcal.hardware.camera import CameraSource
+from wolfcal.io.writer import CaptureWriter
+from wolfcal.robot.robot import Robot
+from wolfcal.vision.tags import detect_tags
+
+HARDWARE_POLL_S = 1.0  # hardware error status is polled at most this often while reading
+POLL_S = 0.005  # pause between bus reads while waiting
+
+
+@dataclass
+class CaptureSummary:
+    path: Path | None
+    samples: int
+    rest_to_sample_s: list[float] = field(default_factory=list)  # from the robot at rest to the sample on disk
+    skipped: list[str] = field(default_factory=list)
+
+
+class CaptureSession:
+    """The bus, camera, writer and live view of one capture, and what it has taken so far (`summary`)."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        bus: DynamixelBus,
+        camera: CameraSource,
+        writer: CaptureWriter,
+        options: CaptureOptions,
+        view: LiveView,
+        coverage: Coverage,
+        status: Status,
+    ):
+        self.bus, self.camera, self.writer = bus, camera, writer
+        self.options, self.view, self.coverage, self.status = options, view, coverage, status
+        self.gates = options.gates
+        self.window = StillnessWindow(bus.joints, self.gates)
+        self.tag_ids = set(robot.config.tag_ids)
+        self.families = sorted({t.family for t in robot.config.tags})
+        self.summary = CaptureSummary(None, 0)
+        self.last_hw_poll = 0.0
+        self.rest_since: float | None = None  # when every joint last became still
+
+    def read(self) -> JointState:
+        """Read the bus into the stillness window (and poll hardware errors now and then)."""
+        now = time.monotonic()
+        if now - self.last_hw_poll > HARDWARE_POLL_S:
+            self.bus.check_hardware()
+            self.last_hw_poll = now
+        state = self.bus.read_state()
+        self.window.add(time.monotonic(), state)
+        if np.any(self.window.spread() > self.gates.tolerance_ticks):
+            self.rest_since = None
+        elif self.rest_since is None:
+            self.rest_since = self.window.readings[0][0]
+        return state
+
+    def detect(self, image: np.ndarray) -> dict[int, np.ndarray]:
+        """Corners [px] of the robot's tags in view, per tag id."""
+        corners: dict[int, np.ndarray] = {}
+        for family in self.families:
+            corners.update(detect_tags(image, family, self.tag_ids))
+        return corners
+
+    def done(self) -> bool:
+        """True once the requested number of samples is taken."""
+        return self.options.samples is not None and self.summary.samples >= self.options.samples
+
+    def try_sample(self) -> str | None:
+        """Take a sample if this moment is still and sharp; returns None on success, else why not."""
+        reason = self.window.why_not_still(time.monotonic())
+        if reason:
+            self.status.still = "no"
+            return reason
+        before = self.read()
+        frame_a = self.camera.grab()
+        corners_a = self.detect(frame_a)
+        frame_b = self.camera.grab()
+        stamp_ns = time.time_ns()
+        after = self.read()
+        corners_b = self.detect(frame_b)
+        self.status.tags = sorted(corners_b)
+        moved = np.abs(after.ticks - before.ticks)
+        reason = self.window.why_not_still(time.monotonic())
+        if reason is None and moved.max() > self.gates.tolerance_ticks:
+            k = int(np.argmax(moved))
+            reason = f"joints moved during the frames: {self.bus.joints[k]} by {int(moved[k])} ticks"
+        if reason:
+            self.status.still = "no"
+            return reason
+        self.status.still = "yes"
+        reason, self.status.sharpness = why_not_sharp(frame_b, corners_a, corners_b, self.gates)
+        if reason:
+            return reason
+        self.bus.check_hardware()
+        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, frame_b)
+        self._record(after, sorted(corners_b))
+        return None
+
+    def _record(self, state: JointState, tags: list[int]) -> None:
+        """Count a sample written to the file, in the summary and the live view."""
+        self.summary.samples += 1
+        if self.rest_since is not None:
+            self.summary.rest_to_sample_s.append(time.monotonic() - self.rest_since)
+        self.status.taken = self.summary.samples
+        self.coverage.add(self.bus.joints, state.positions)
+        target = f"/{self.options.samples}" if self.options.samples else ""
+        pose = f" ({self.status.pose})" if self.status.pose else ""
+        self.view.event(
+            f"sample {self.summary.samples}{target}{pose}: tags {', '.join(map(str, tags))}, "
+            f"sharpness {self.status.sharpness:.0f}"
+        )
+        self.view.refresh()

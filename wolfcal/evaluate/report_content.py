@@ -1,0 +1,258 @@
+"""What the evaluation report says: its texts, tables and per-sample records, as report blocks (see `report`).
+
+Everything here turns numbers already measured into words and rows; nothing is computed from the model. Units as
+displayed: pixels [px] of the captured images, millimetres [mm] for the tag-grid distance, metres [m] and
+centimetres [cm] on the field.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.evaluate.ground import STANDING
+from wolfcal.evaluate.metrics import ModelErrors
+from wolfcal.evaluate.report import Block, headline_rows
+from wolfcal.observations import Observations
+
+INTRO = (
+    "What this is: the robot computes where its camera is, and so where things it sees are on the field, from its "
+    "joint readings and its kinematic model (the URDF). A calibration corrects that model (the camera's mounting, "
+    "the joints' zero positions). This report checks whether the corrected model predicts what the camera really "
+    "sees better than the model in use today, on images the calibration was not computed from, and gives the files "
+    "to load on the robot if it does."
+)
+DEPLOY_TEXT = """calibrated.urdf          the URDF with the calibration: camera (and any other frame) corrections in
+                         <origin>, encoder offsets as <calibration rising="offset"/> (ROS convention)
+calibrated_folded.urdf   the same model with each offset folded into its joint's <origin>, for
+                         robot_state_publisher and every tool that ignores <calibration>: publish it as
+                         robot_description with the encoder readings as they are
+joint_offsets.yaml       offset per joint [rad] for the hardware interface: add on read, subtract on write
+                         (use it with calibrated.urdf, never together with calibrated_folded.urdf)
+camera_correction.yaml   the camera correction alone: pose of the calibrated optical frame in the
+                         uncalibrated one, for a static-transform node (command below)"""
+MEANINGS = {
+    "rms_px": "per-axis RMS of corner residuals sqrt(mean(du^2 + dv^2) / 2) [px], inlier samples",
+    "max_px": "largest distance between a predicted and a detected corner [px], inlier samples",
+    "median_corner_px": "median distance between predicted and detected corner [px], inlier samples",
+    "tag_grid_mean_mm": "mean distance between a 5x4 grid on each tag placed by PnP of its detected corners "
+    "and by the model [mm] (the 2019 study's metric), inlier samples",
+    "ground": "distance on the field between where the ball is and where the model puts it [m]",
+}
+
+
+def held_out_note(sources: list[Path], fit_captures: list[str]) -> str:
+    """How a held-out evaluation was made: which captures were judged, which the fit used."""
+    return (
+        f"Held-out evaluation on {', '.join(p.name for p in sources)}: samples the fit "
+        f"({', '.join(Path(c).name for c in fit_captures)}) did not use."
+    )
+
+
+def cross_validation_note(n_folds: int, n_samples: int) -> str:
+    """How a k-fold cross-validation was made, and why a held-out capture is the stronger test."""
+    return (
+        f"No held-out capture was given: {n_folds}-fold cross-validation over the fit's own "
+        f"{n_samples} sample(s). Each sample is judged by a calibration fitted on the other folds "
+        "(sample i in fold i mod k), so no number here comes from a sample its model was fitted on. "
+        "The deploy files hold the calibration fitted on all samples. A capture taken apart from the "
+        "fit's (wolfcal evaluate FIT_DIR --capture HELDOUT.mcap) is the stronger test."
+    )
+
+
+def verdict_message(before: dict, after: dict, worse: bool) -> str:
+    """The one-line verdict from the two `metrics.summary` dicts (reprojection RMS [px])."""
+    if worse:
+        return (
+            f"The calibration makes held-out error worse: reprojection RMS {after['rms_px']:.3f} px "
+            f"calibrated vs {before['rms_px']:.3f} px with the input URDF. Keep the input URDF; refit "
+            "with more varied poses, fewer free parameters, or without the outlier samples."
+        )
+    return (
+        f"The calibration improves held-out error: reprojection RMS {before['rms_px']:.3f} px -> "
+        f"{after['rms_px']:.3f} px."
+    )
+
+
+def sample_rows(
+    obs: Observations,
+    before: ModelErrors,
+    after: ModelErrors,
+    outliers: np.ndarray,
+    fold_of: np.ndarray | None,
+) -> list[dict]:
+    """One record per sample for metrics.json: errors in px (4 decimals) and tag-grid distance in mm (3 decimals,
+    None without a fully seen tag)."""
+
+    def mm(v: float) -> float | None:
+        return round(float(v) * 1000, 3) if np.isfinite(v) else None
+
+    rows = []
+    for s in range(obs.n_samples):
+        rows.append(
+            {
+                "index": s,
+                "source": Path(obs.sources[s]).name,
+                "stamp_ns": int(obs.stamps_ns[s]),
+                "tags": sorted({int(t) for t in obs.tag_ids[obs.sample_index == s]}),
+                "fold": None if fold_of is None else int(fold_of[s]),
+                "rms_before_px": round(float(before.sample_rms[s]), 4),
+                "rms_after_px": round(float(after.sample_rms[s]), 4),
+                "max_before_px": round(float(before.sample_max[s]), 4),
+                "max_after_px": round(float(after.sample_max[s]), 4),
+                "tag_grid_before_mm": mm(before.sample_grid[s]),
+                "tag_grid_after_mm": mm(after.sample_grid[s]),
+                "outlier": bool(outliers[s]),
+            }
+        )
+    return rows
+
+
+def ground_text(reference_is_truth: bool) -> str:
+    """What the ground-error table means, and what it is measured against."""
+    pose = ", ".join(f"{k} = {v:+.4f} rad" for k, v in STANDING.items())
+    common = (
+        f"A standing robot (straight legs: {pose}, all other joints 0 as read by the encoders) tilts its head to "
+        "look at a ball on the ground straight ahead. The pixel where the ball appears is turned back into a spot "
+        "on the field through each model (the ground is the model's sole plane); the error is the distance on the "
+        "field between that spot and where the ball really is. 'Lands at' is the distance from the robot where "
+        "the model puts the ball."
+    )
+    if reference_is_truth:
+        return (
+            common
+            + " Reference: the simulator's truth (the held-out capture has a .truth.yaml beside it), so "
+            "both columns are true errors."
+        )
+    return (
+        common + " Reference: the calibrated model (no ground truth is known for a real robot), so 'before' "
+        "is how far the calibration moves the ball, and 'after' is 0 by definition."
+    )
+
+
+def ground_blocks(ground: dict) -> list[Block]:
+    """The ground-error section from metrics['ground'] (nothing when the robot has no sole frame to stand on)."""
+    if not ground["rows"]:
+        return []
+    rows = []
+    for row in ground["rows"]:
+        cells = [f"{row['distance_m']:g} m"]
+        for model in ("before", "after"):
+            g = row["models"][model]
+            cells += [
+                "above horizon" if g["landed_at_m"] is None else f"{g['landed_at_m']:.3f} m",
+                "n/a" if g["error_m"] is None else f"{g['error_m'] * 100:.1f} cm",
+            ]
+        rows.append(cells)
+    headers = ["ball at", "lands at, before", "error before", "lands at, after", "error after"]
+    return [
+        ("h2", "Where a ball lands on the field"),
+        ("p", ground_text(ground["reference"] == "simulator truth")),
+        ("table", (headers, rows, set())),
+    ]
+
+
+def report_blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:
+    """The whole report, in order, from metrics.json's content and the figures' (file name, caption)."""
+    m = metrics
+    blocks: list[Block] = [("h1", f"wolfcal evaluation: {m['robot_name']}, --free {m['free']}")]
+    blocks.append(("banner", (not m["verdict"]["worse"], m["verdict"]["message"])))
+    blocks.append(("p", INTRO))
+    blocks.append(("p", m["mode_note"]))
+    blocks += _headline_blocks(m)
+    blocks += ground_blocks(m["ground"])
+    blocks.append(("h2", "Pictures"))
+    blocks += [("figure", c) for c in captions]
+    blocks += _parameter_blocks(m["parameters"])
+    blocks += _per_sample_blocks(m["samples"], m["folds"] is not None)
+    blocks += _deploy_blocks(m)
+    if m["warnings"]:
+        blocks.append(("h2", "Notes"))
+        blocks += [("p", w) for w in m["warnings"]]
+    blocks.append(
+        (
+            "p",
+            f"wolfcal {m['wolfcal_version']}, {m['created']}; fit: {m['fit_dir']}. Every number of "
+            "this report is in metrics.json.",
+        )
+    )
+    return blocks
+
+
+def _headline_blocks(m: dict) -> list[Block]:
+    """The before/after table and what its numbers mean."""
+    return [
+        ("h2", "Before and after"),
+        (
+            "p",
+            "Before: the input URDF as it is. After: with the calibration. Every number comes from "
+            f"samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
+            "outlier sample(s) left out of these numbers and marked in the table below).",
+        ),
+        ("table", (["", "before (input URDF)", "after (calibrated)"], headline_rows(m), set())),
+        (
+            "p",
+            "Reprojection RMS per axis: sqrt(mean(du^2 + dv^2) / 2) over all tag corners, in pixels "
+            "of the captured images; how far, on average, the model's prediction of a tag corner is from "
+            "where the camera saw it. Largest corner error: the worst single corner (distance). Tag-grid "
+            "mean distance: the 2019 study's metric, for comparison with its 38.2 mm -> 18.4 mm: the tag's "
+            "pose measured from its four corners alone (PnP) versus predicted by the model, mean distance of "
+            "a 5 x 4 grid of points on the tag; a single tag's depth is poorly measured, so it is noisier.",
+        ),
+    ]
+
+
+def _parameter_blocks(parameters: list[dict]) -> list[Block]:
+    """The fitted parameters with their uncertainty and how much of them the data determined."""
+    rows = [[p["name"], p["display"], f"{p['data_share']:.0%}"] for p in parameters]
+    return [
+        ("h2", "Fitted parameters"),
+        ("table", (["parameter", "value +- std", "information from data"], rows, set())),
+    ]
+
+
+def _per_sample_blocks(samples: list[dict], folds: bool) -> list[Block]:
+    """The per-sample table from `sample_rows`; outlier rows are marked."""
+    headers = ["sample", "capture", "tags"] + (["fold"] if folds else [])
+    headers += ["RMS before", "RMS after", "max after", "grid before", "grid after", ""]
+    rows, marked = [], set()
+    for i, s in enumerate(samples):
+        row = [str(s["index"]), s["source"], " ".join(map(str, s["tags"]))]
+        row += [str(s["fold"] + 1)] if folds else []
+        row += [f"{s['rms_before_px']:.3f}", f"{s['rms_after_px']:.3f}", f"{s['max_after_px']:.2f}"]
+        row += [
+            _fmt_mm(s["tag_grid_before_mm"]),
+            _fmt_mm(s["tag_grid_after_mm"]),
+            "OUTLIER" if s["outlier"] else "",
+        ]
+        rows.append(row)
+        if s["outlier"]:
+            marked.add(i)
+    return [
+        ("h2", "Per sample"),
+        (
+            "p",
+            "RMS per axis and largest corner error in pixels, tag-grid distance in millimetres; "
+            "outlier samples are marked (highlighted) and left out of the numbers above.",
+        ),
+        ("table", (headers, rows, marked)),
+    ]
+
+
+def _deploy_blocks(m: dict) -> list[Block]:
+    """The deploy files and the static-transform command, or why they were not written."""
+    blocks: list[Block] = [("h2", "Files to deploy")]
+    if m["deploy"]["written"]:
+        blocks.append(("p", "Written beside this report:"))
+        blocks.append(("pre", DEPLOY_TEXT))
+        blocks.append(("p", "Camera correction as a static transform:"))
+        blocks.append(("pre", m["camera_correction"]["static_transform_publisher"]))
+    else:
+        blocks.append(("banner", (False, m["deploy"]["reason"])))
+    return blocks
+
+
+def _fmt_mm(value: float | None) -> str:
+    """A tag-grid distance [mm] with one decimal; empty when unknown."""
+    return "" if value is None else f"{value:.1f}"

@@ -1,0 +1,59 @@
+"""The emulator in a process of its own (the SDK busy-waits holding the GIL, so the two cannot share one)."""
+
+from __future__ import annotations
+
+import multiprocessing
+from multiprocessing.connection import Connection
+
+from wolfcal.errors import WolfcalError
+from wolfcal.hardware.emulator.faults import Fault
+from wolfcal.hardware.emulator.serve import serve
+from wolfcal.hardware.emulator.spec import EmulatorSpec
+
+START_TIMEOUT_S = 30.0
+
+
+def _child(spec: EmulatorSpec, conn: Connection) -> None:
+    try:
+        serve(spec, conn.send, conn)
+    except KeyboardInterrupt:
+        pass
+
+
+class EmulatorProcess:
+    """The emulator in its own process: `with EmulatorProcess(spec) as emu: ... emu.port ...`."""
+
+    def __init__(self, spec: EmulatorSpec):
+        self.port = ""
+        ctx = multiprocessing.get_context("spawn")
+        self.conn, child_conn = ctx.Pipe()
+        self.process = ctx.Process(target=_child, args=(spec, child_conn), daemon=True)
+        self.process.start()
+        child_conn.close()
+        if not self.conn.poll(START_TIMEOUT_S):
+            self.stop()
+            raise WolfcalError(f"the bus emulator did not start within {START_TIMEOUT_S:.0f} s")
+        self.port = self.conn.recv()
+
+    def inject(self, fault: Fault) -> None:
+        """Inject a fault now."""
+        self.conn.send(fault)
+
+    def stop(self) -> None:
+        """Ask the emulator to stop; terminate it if it has not within 5 s."""
+        if self.process.is_alive():
+            try:
+                self.conn.send("stop")
+            except OSError:
+                pass
+            self.process.join(5)
+            if self.process.is_alive():
+                self.process.terminate()
+                self.process.join(5)
+        self.conn.close()
+
+    def __enter__(self) -> EmulatorProcess:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
