@@ -11,11 +11,11 @@ from typer.testing import CliRunner
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.cli import app
+from wolfcal.encoders import encoder_readings
 from wolfcal.geometry import invert_transform, rotation_angle
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.encoders import encoder_readings
 from wolfcal.sim.poses import tag_visibility
 from wolfcal.sim.scene import SimScene
 

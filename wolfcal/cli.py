@@ -190,7 +190,7 @@ def emulate(
     hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
 ) -> None:
     """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
-    from wolfcal.hardware.emulator import emulate as run
+    from wolfcal.capture.emulate import emulate as run
 
     run(robot, truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
 

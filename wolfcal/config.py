@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
 from wolfcal.yamlfile import read_yaml
 
@@ -56,7 +57,7 @@ class PriorConfig:
     camera_rotation: float = 0.1  # [rad]
     tag_translation: float = 0.005  # [m]
     tag_rotation: float = 0.05  # [rad]
-    encoder_noise: float = 0.00044  # joint reading noise [rad]: 4096-tick quantisation, tick / sqrt(12)
+    encoder_noise: float = float(QUANTISATION_NOISE)  # joint reading noise [rad]: tick / sqrt(12) = 0.44 mrad
     pixel_noise: float = 0.2  # corner detection noise per axis [px], the starting value before it is estimated
 
 

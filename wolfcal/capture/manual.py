@@ -12,17 +12,16 @@ from collections.abc import Callable
 import numpy as np
 
 from wolfcal.capture.session import POLL_S, CaptureSession
+from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.errors import WolfcalError
-from wolfcal.hardware.protocol import RAD_PER_TICK
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.truth import leg_and_head_joints
 
 
 def joint_groups(robot: Robot) -> dict[str, list[str]]:
     """Groups of the servo joints: head (base -> camera), legs (base -> foot tags), arms (the rest), all."""
     servo_joints = list(robot.config.servos.ids)
-    head = [j for j in leg_and_head_joints(robot, sides=()) if j in servo_joints]
-    legs = [j for j in leg_and_head_joints(robot) if j in servo_joints and j not in head]
+    head = [j for j in robot.camera_and_leg_joints(sides=()) if j in servo_joints]
+    legs = [j for j in robot.camera_and_leg_joints() if j in servo_joints and j not in head]
     arms = [j for j in servo_joints if j not in head and j not in legs]
     return {"head": head, "legs": legs, "arms": arms, "all": servo_joints}
 

@@ -20,6 +20,7 @@ from wolfcal.capture.options import CaptureOptions, check_options
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
+from wolfcal.capture.sim_camera import SimCamera
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
@@ -71,7 +72,10 @@ def run_capture(
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
             confirm_limp([j for j in limp if initial[j]], options.yes, ask)
-        camera = open_camera(options.camera, image_camera, robot, bus.port_name)
+        if options.camera == "sim":
+            camera = SimCamera(robot, bus.port_name, image_camera)
+        else:
+            camera = open_camera(options.camera, image_camera)
         try:
             writer = CaptureWriter(options.out, robot.config, camera_model, (binning, binning), options.image_format)
         except WolfcalError:

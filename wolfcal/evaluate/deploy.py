@@ -19,13 +19,13 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from wolfcal.atomic import write_text_atomic
+from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 
 DEPLOY_FILES = ("calibrated.urdf", "calibrated_folded.urdf", "joint_offsets.yaml", "camera_correction.yaml")
-TICKS_PER_RAD = 4096 / (2 * np.pi)  # Dynamixel position resolution
 
 
 def camera_correction(robot: Robot, corrections: Corrections) -> dict:
@@ -62,7 +62,7 @@ def joint_offsets_text(robot: Robot, corrections: Corrections) -> str:
         if name in corrections.offsets:
             value = float(corrections.offsets[name])
             lines.append(
-                f"  {name}: {value:.9g}  # {np.rad2deg(value):+.3f} deg, {value * TICKS_PER_RAD:+.1f} ticks"
+                f"  {name}: {value:.9g}  # {np.rad2deg(value):+.3f} deg, {value / RAD_PER_TICK:+.1f} ticks"
             )
     return "\n".join(lines) + "\n"
 

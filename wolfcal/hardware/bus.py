@@ -18,6 +18,7 @@ import numpy as np
 import serial
 
 from wolfcal.config import ServoConfig
+from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware import protocol as P
 
@@ -33,12 +34,12 @@ class BusError(WolfcalError):
 
 def ticks_to_rad(ticks: np.ndarray | int) -> np.ndarray | float:
     """Joint angle(s) [rad] of present position(s) [ticks]."""
-    return (np.asarray(ticks) - P.CENTRE_TICK) * P.RAD_PER_TICK
+    return (np.asarray(ticks) - P.CENTRE_TICK) * RAD_PER_TICK
 
 
 def rad_to_ticks(rad: np.ndarray | float) -> np.ndarray | int:
     """Position(s) [ticks] of joint angle(s) [rad], rounded to the nearest tick."""
-    return np.round(np.asarray(rad) / P.RAD_PER_TICK).astype(int) + P.CENTRE_TICK
+    return np.round(np.asarray(rad) / RAD_PER_TICK).astype(int) + P.CENTRE_TICK
 
 
 def _signed32(value: int) -> int:

@@ -97,34 +97,10 @@ class FolderCamera:
         pass
 
 
-class SimCamera:
-    """Renders the robot as the bus emulator on `port` holds it (true angles, true frames and tags)."""
-
-    def __init__(self, robot, port: str, camera: CameraModel, seed: int = 0):
-        from wolfcal.hardware.emulator import load_truth, read_true_angles
-        from wolfcal.robot.corrections import Corrections
-        from wolfcal.sim.scene import SimScene
-
-        self.name, self.port, self.robot = "sim", port, robot
-        self._read = read_true_angles
-        _, truth_path = read_true_angles(port)
-        truth = load_truth(Path(truth_path)) if truth_path else Corrections()
-        self.scene = SimScene(robot, truth, camera, seed=seed)
-
-    def grab(self) -> np.ndarray:
-        angles, _ = self._read(self.port)
-        q_true = np.array([angles.get(n, 0.0) for n in self.robot.joint_names])
-        return self.scene.render_true(q_true)
-
-    def close(self) -> None:
-        pass
-
-
-def open_camera(source: str, camera: CameraModel, robot=None, port: str | None = None) -> CameraSource:
-    """A camera source from the --camera text; `camera` is the intrinsics at the images' resolution."""
+def open_camera(source: str, camera: CameraModel) -> CameraSource:
+    """A camera source from the --camera text (device, video file, image folder); `camera` is the intrinsics at
+    the images' resolution. The simulated camera (`sim`) is `wolfcal.capture.sim_camera.SimCamera`."""
     size = (camera.width, camera.height)
-    if source == "sim":
-        return SimCamera(robot, port, camera)
     path = Path(source)
     if source.isdigit() or source.startswith("/dev/video"):
         return OpenCVCamera(source, size, live=True)

@@ -41,10 +41,8 @@ HW_ERROR_BITS = {
     5: "overload",
 }
 
-TICKS_PER_TURN = 4096
 CENTRE_TICK = 2048
 RPM_PER_UNIT = 0.229  # present/profile velocity unit
-RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_TURN  # position unit [rad]
 RAD_S_PER_UNIT = RPM_PER_UNIT * 2.0 * math.pi / 60.0  # velocity unit [rad/s]
 
 _CRC_TABLE: list[int] = []

@@ -18,9 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.encoders import RAD_PER_TICK
+
 PAIR_TOLERANCE_NS = 20_000_000  # 20 ms: a joint moving at STILL_VELOCITY turns by < 1/2 tick in this time
 STILL_WINDOW_NS = 250_000_000  # +-0.25 s around the image
-ENCODER_TICK = 2 * np.pi / 4096  # [rad] Dynamixel resolution
+ENCODER_TICK = RAD_PER_TICK  # [rad] Dynamixel resolution
 STILL_VELOCITY = 0.03  # [rad/s] about one Dynamixel velocity unit (0.229 rpm = 0.024 rad/s)
 
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.encoders import encoder_readings
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.encoders import encoder_readings
 from wolfcal.vision.tags import tag_corners
 
 

@@ -17,15 +17,15 @@ import yaml
 from wolfcal.atomic import write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.encoders import encoder_readings
 from wolfcal.sim.poses import random_visible_poses
 from wolfcal.sim.scene import SimScene
-from wolfcal.sim.truth import TruthSpec, leg_and_head_joints, random_truth
+from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
 
 OFFSET_SETS = ("none", "head", "legs", "all")
@@ -53,8 +53,8 @@ def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
     """The joints that get a true encoder offset: none, head (base -> camera), legs (base -> foot tags), all."""
     if which not in OFFSET_SETS:
         raise WolfcalError(f"--offsets {which!r} must be one of {', '.join(OFFSET_SETS)}")
-    head = leg_and_head_joints(robot, sides=())
-    everything = leg_and_head_joints(robot)
+    head = robot.camera_and_leg_joints(sides=())
+    everything = robot.camera_and_leg_joints()
     legs = tuple(j for j in everything if j not in head)
     return {"none": (), "head": head, "legs": legs, "all": everything}[which]
 
@@ -89,7 +89,7 @@ def simulate_capture(
     n_out = int(round(options.outlier_fraction * options.samples))
     outlier_index = rng.choice(options.samples, size=n_out, replace=False) if n_out else np.array([], int)
     kinds = {int(i): ("motion_blur" if k % 2 == 0 else "stale_joints") for k, i in enumerate(outlier_index)}
-    moving = [robot.model.column(j) for j in leg_and_head_joints(robot)]
+    moving = [robot.model.column(j) for j in robot.camera_and_leg_joints()]
     scene = SimScene(robot, truth, image_camera, seed=options.seed + 1, noise_sigma=options.noise_sigma)
     with CaptureWriter(out, robot.config, camera, binning=(b, b)) as writer:
         for i in range(options.samples):

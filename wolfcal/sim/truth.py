@@ -23,18 +23,6 @@ class TruthSpec:
     tag_rotation: float = 0.01  # per axis [rad]
 
 
-def leg_and_head_joints(robot: Robot, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
-    """The actuated joints between base and camera and between base and each foot tag of the given sides."""
-    base = robot.config.base_link
-    links = [robot.config.camera.frame] + [t.link for t in robot.config.tags if t.side in sides]
-    joints: list[str] = []
-    for link in links:
-        for joint in robot.model.joints_between(base, link):
-            if joint.actuated and joint.name not in joints:
-                joints.append(joint.name)
-    return tuple(joints)
-
-
 def random_truth(robot: Robot, spec: TruthSpec, rng: np.random.Generator) -> Corrections:
     camera = np.concatenate(
         [rng.normal(0.0, spec.camera_translation, 3), rng.normal(0.0, spec.camera_rotation, 3)]

@@ -14,12 +14,11 @@ Modules, one job each:
 - `bus`: the emulated bus over time (servos, operator, faults; bytes in, bytes out);
 - `true_state`: the true joint angles shared with the simulated camera;
 - `serve`: the pty serving loop;
-- `process`: the emulator in a process of its own;
-- `command`: `wolfcal emulate`.
+- `process`: the emulator in a process of its own.
+The `wolfcal emulate` command is `wolfcal.capture.emulate` (it reads robot configs and poses files).
 The names imported below are the package's public interface.
 """
 
-from wolfcal.hardware.emulator.command import emulate
 from wolfcal.hardware.emulator.faults import Fault, parse_fault
 from wolfcal.hardware.emulator.process import EmulatorProcess
 from wolfcal.hardware.emulator.spec import EmulatorSpec, load_truth, spec_from_config
@@ -29,7 +28,6 @@ __all__ = [
     "EmulatorProcess",
     "EmulatorSpec",
     "Fault",
-    "emulate",
     "load_truth",
     "parse_fault",
     "read_true_angles",

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.hardware import protocol as P
 
 FIRMWARE = 46  # firmware version reported by every servo
@@ -60,7 +61,7 @@ class EmulatedServo:
 
     def reading(self) -> int:
         """The present position [ticks] its encoder gives for the true angle."""
-        return int(round((self.angle - self.spec.offset) / P.RAD_PER_TICK)) + P.CENTRE_TICK
+        return int(round((self.angle - self.spec.offset) / RAD_PER_TICK)) + P.CENTRE_TICK
 
     def update_present(self) -> None:
         self.write(P.PRESENT_POSITION, self.reading())
@@ -70,7 +71,7 @@ class EmulatedServo:
         """Move for `dt` seconds: to the goal under torque, else to the operator's target [rad] at `operator_speed`
         [rad/s] when there is one."""
         if self.torque_on:
-            target = (self.read(P.GOAL_POSITION, signed=True) - P.CENTRE_TICK) * P.RAD_PER_TICK + self.spec.offset
+            target = (self.read(P.GOAL_POSITION, signed=True) - P.CENTRE_TICK) * RAD_PER_TICK + self.spec.offset
             profile = self.read(P.PROFILE_VELOCITY)
             vmax = profile * P.RAD_S_PER_UNIT if profile else MAX_SPEED
         elif operator_target is not None:

@@ -6,9 +6,11 @@ import signal
 from collections.abc import Callable
 from pathlib import Path
 
+from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.hardware.emulator.faults import parse_fault
 from wolfcal.hardware.emulator.serve import serve
 from wolfcal.hardware.emulator.spec import load_truth, spec_from_config
+from wolfcal.robot.robot import load_robot
 
 
 def emulate(
@@ -21,9 +23,6 @@ def emulate(
 ) -> None:
     """Emulate the bus of the robot config at `robot_path`: true offsets from `truth`, `--fault` texts, the
     operator's poses file (manual capture), each held `hold_s` seconds."""
-    from wolfcal.capture.poses import joint_limits, load_poses
-    from wolfcal.robot.robot import load_robot
-
     robot = load_robot(robot_path)
     corrections = load_truth(truth) if truth is not None else None
     poses = []
