@@ -29,6 +29,18 @@ class Observations:
     def n_samples(self) -> int:
         return int(self.q_measured.shape[0])
 
+    def tags_in_sample(self, sample: int) -> list[int]:
+        """The ids of the tags detected in one sample, ascending."""
+        return sorted({int(t) for t in self.tag_ids[self.sample_index == sample]})
+
+    def per_sample_rms(self, values: np.ndarray) -> np.ndarray:
+        """(S,) per-axis RMS of per-corner 2-vectors (M, 2) (e.g. pixel residuals), NaN for samples without
+        corners."""
+        sq = np.bincount(self.sample_index, weights=np.sum(values**2, axis=1), minlength=self.n_samples)
+        count = np.bincount(self.sample_index, minlength=self.n_samples) * 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.sqrt(sq / count)
+
     @property
     def observed_tag_ids(self) -> list[int]:
         return sorted(int(t) for t in np.unique(self.tag_ids))

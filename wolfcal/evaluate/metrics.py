@@ -20,6 +20,7 @@ import numpy as np
 
 from wolfcal.fit.problem import BEHIND_CAMERA_PX
 from wolfcal.observations import Observations
+from wolfcal.projection import corner_points, project_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
@@ -97,18 +98,10 @@ def model_errors(robot: Robot, obs: Observations, views: TagViews, corrections: 
     tag_ids = obs.observed_tag_ids
     column = {t: i for i, t in enumerate(tag_ids)}
     _, T_camera_tag = robot.camera_and_tag_poses(obs.q_measured, tag_ids, corrections)
-    col = np.array([column[int(t)] for t in obs.tag_ids], dtype=int)
-    corners = np.stack([tag_corners(robot.config.tag(t).size) for t in tag_ids])
-    T = T_camera_tag[obs.sample_index, col]
-    p = np.einsum("mij,mj->mi", T[:, :3, :3], corners[col, obs.corner_index]) + T[:, :3, 3]
-    residuals = obs.camera.project(p) - obs.uv
+    residuals = project_corners(obs, T_camera_tag, corner_points(robot, obs, tag_ids)) - obs.uv
     residuals = np.where(np.isfinite(residuals), residuals, BEHIND_CAMERA_PX)
     n = obs.n_samples
-    count = np.bincount(obs.sample_index, minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sample_rms = np.sqrt(
-            np.bincount(obs.sample_index, weights=np.sum(residuals**2, axis=1), minlength=n) / (2 * count)
-        )
+    sample_rms = obs.per_sample_rms(residuals)
     distance = np.linalg.norm(residuals, axis=1)
     sample_max = np.full(n, np.nan)
     np.fmax.at(sample_max, obs.sample_index, distance)

@@ -95,7 +95,7 @@ def sample_rows(
                 "index": s,
                 "source": Path(obs.sources[s]).name,
                 "stamp_ns": int(obs.stamps_ns[s]),
-                "tags": sorted({int(t) for t in obs.tag_ids[obs.sample_index == s]}),
+                "tags": obs.tags_in_sample(s),
                 "fold": None if fold_of is None else int(fold_of[s]),
                 "rms_before_px": round(float(before.sample_rms[s]), 4),
                 "rms_after_px": round(float(after.sample_rms[s]), 4),

@@ -20,10 +20,10 @@ import numpy as np
 import scipy.sparse
 
 from wolfcal.observations import Observations
+from wolfcal.projection import corner_points, predict_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 BEHIND_CAMERA_PX = 1e4  # residual given to a corner that a candidate model puts behind the camera
 JOINT_STEP = 1e-6  # finite-difference step for d(uv)/d(q) [rad]
@@ -48,10 +48,7 @@ class Problem:
     weights: scipy.sparse.csr_matrix | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        column = {t: i for i, t in enumerate(self.tag_ids)}
-        self.tag_col = np.array([column[int(t)] for t in self.obs.tag_ids], dtype=int)
-        corners = np.stack([tag_corners(self.robot.config.tag(t).size) for t in self.tag_ids])
-        self.p_tag = corners[self.tag_col, self.obs.corner_index]  # (M, 3) corner in its tag frame [m]
+        self._points = corner_points(self.robot, self.obs, self.tag_ids)
         self.q = self.obs.q_measured
         _, group_of_sample = np.unique(self.q, axis=0, return_inverse=True)
         self._n_groups = int(group_of_sample.max()) + 1 if len(self.q) else 0
@@ -67,12 +64,7 @@ class Problem:
 
     def predict(self, z: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
         """Predicted pixel positions (M, 2) of the observed corners (NaN behind the camera)."""
-        _, T_camera_tag = self.robot.camera_and_tag_poses(
-            self.q if q is None else q, self.tag_ids, self.corrections(z)
-        )
-        T = T_camera_tag[self.obs.sample_index, self.tag_col]  # (M, 4, 4)
-        p_camera = np.einsum("mij,mj->mi", T[:, :3, :3], self.p_tag) + T[:, :3, 3]
-        return self.obs.camera.project(p_camera)
+        return predict_corners(self.robot, self.obs, self.corrections(z), self.tag_ids, q, self._points)
 
     def pixel_residuals(self, z: np.ndarray) -> np.ndarray:
         """(M, 2) predicted minus detected [px]; corners behind the camera get a large finite value."""

@@ -85,13 +85,12 @@ def result_dict(
 ) -> dict:
     samples = []
     for i in range(obs.n_samples):
-        tags = sorted({int(t) for t in obs.tag_ids[obs.sample_index == i]})
         samples.append(
             {
                 "index": i,
                 "source": Path(obs.sources[i]).name,
                 "stamp_ns": int(obs.stamps_ns[i]),
-                "tags": tags,
+                "tags": obs.tags_in_sample(i),
                 "rms_before_px": round(float(solution.sample_rms_before[i]), 4),
                 "rms_after_px": round(float(solution.sample_rms_after[i]), 4),
                 "outlier": bool(solution.outlier_samples[i]),

@@ -57,21 +57,12 @@ class Solution:
 
 def per_sample_rms(problem: Problem, residuals_px: np.ndarray) -> np.ndarray:
     """Per-axis RMS [px] of each sample's corner residuals (NaN for samples with no corner)."""
-    s = problem.obs.sample_index
-    sq = np.bincount(s, weights=np.sum(residuals_px**2, axis=1), minlength=problem.obs.n_samples)
-    count = np.bincount(s, minlength=problem.obs.n_samples) * 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.sqrt(sq / count)
+    return problem.obs.per_sample_rms(residuals_px)
 
 
 def per_sample_whitened_rms(problem: Problem, z: np.ndarray) -> np.ndarray:
     """(S,) RMS of each sample's whitened residuals: about 1 where the noise model explains the sample."""
-    w = problem.whitened_all(z).reshape(-1, 2)
-    s = problem.obs.sample_index
-    sq = np.bincount(s, weights=np.sum(w**2, axis=1), minlength=problem.obs.n_samples)
-    count = np.bincount(s, minlength=problem.obs.n_samples) * 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.sqrt(sq / count)
+    return problem.obs.per_sample_rms(problem.whitened_all(z).reshape(-1, 2))
 
 
 def flag_outliers(problem: Problem, z: np.ndarray, floor_px: float) -> np.ndarray:
