@@ -77,7 +77,7 @@ def fit_observations(
         )
     priors = robot.config.priors
     problem = Problem(
-        robot, obs, params, tag_ids, Corrections(), priors.pixel_noise, priors.encoder_noise, options.huber_k
+        robot, obs, params, tag_ids, priors.pixel_noise, priors.encoder_noise, options.huber_k
     )
     solution = solve(problem, outlier_floor_px=options.outlier_floor_px, progress=say)
     return Fit(robot, obs, tag_ids, params, problem, solution)

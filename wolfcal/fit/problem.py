@@ -41,7 +41,6 @@ class Problem:
     obs: Observations
     params: ParameterSet
     tag_ids: list[int]  # tags whose observations are used, in column order of T_camera_tag
-    base: Corrections  # known corrections held fixed (e.g. none)
     sigma_px: float = 0.2  # corner noise per axis [px]
     sigma_q: float = 0.00044  # joint reading noise [rad]
     huber_k: float = 3.0  # robust threshold in whitened units (standard deviations)
@@ -60,7 +59,7 @@ class Problem:
         return np.asarray(z) * self.params.prior_sigmas
 
     def corrections(self, z: np.ndarray) -> Corrections:
-        return self.params.corrections(self.values(z), self.base)
+        return self.params.corrections(self.values(z))
 
     def predict(self, z: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
         """Predicted pixel positions (M, 2) of the observed corners (NaN behind the camera)."""

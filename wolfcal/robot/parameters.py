@@ -41,13 +41,9 @@ class ParameterSet:
     def __len__(self) -> int:
         return len(self.parameters)
 
-    def corrections(self, values: np.ndarray, base: Corrections | None = None) -> Corrections:
-        """Corrections with these parameter values [SI], on top of `base` (fixed, known corrections)."""
-        out = Corrections(
-            offsets=dict(base.offsets) if base else {},
-            frames={k: v.copy() for k, v in base.frames.items()} if base else {},
-            tags={k: v.copy() for k, v in base.tags.items()} if base else {},
-        )
+    def corrections(self, values: np.ndarray) -> Corrections:
+        """The corrections these parameter values [SI] stand for."""
+        out = Corrections()
         for p, value in zip(self.parameters, np.asarray(values, dtype=float)):
             if p.kind == "offset":
                 out.offsets[p.target] = out.offsets.get(p.target, 0.0) + float(value)
