@@ -55,7 +55,8 @@ def run(name: str, seed: int, binning: int, folder: Path) -> str:
     line = (
         f"{name:8s} seed {seed}: camera {np.rad2deg(rot.max()):.4f} deg / {trans.max() * 1000:.2f} mm (max over "
         f"head range), max |z| {z.max():.2f}, rms {fit.solution.rms_before_px:.1f} -> {fit.solution.rms_after_px:.3f}"
-        f" px, outliers flagged {int(fit.solution.outlier_samples.sum())}"
+        f" px, outliers left out: {int(fit.solution.outlier_samples.sum())} sample(s), "
+        f"{len(fit.solution.outlier_views)} tag view(s)"
     )
     if name == "leg":
         rng = np.random.default_rng(seed)

@@ -65,3 +65,17 @@ def test_too_few_samples_is_a_clear_error(robot, camera):
     scenario = synthetic_scenario(robot, camera, n=4, seed=15)
     with pytest.raises(WolfcalError, match="too few samples"):
         fit_observations(robot, scenario.obs, FitOptions(free="leg"))
+
+
+def test_a_misdetected_tag_is_left_out_but_not_its_sample(robot, camera):
+    scenario = synthetic_scenario(robot, camera, n=24, seed=16)
+    obs = scenario.obs
+    two_tags = [s for s in range(obs.n_samples) if len(obs.tags_in_sample(s)) == 2]
+    s = two_tags[0]
+    bad = (obs.sample_index == s) & (obs.tag_ids == 44)
+    obs.uv[bad] += [4.0, -3.0]  # e.g. the other foot's tag covers this tag's corners
+    fit = fit_observations(robot, obs, FitOptions(free="camera"))
+    assert fit.solution.outlier_views == [(s, 44)]
+    assert not fit.solution.outlier_samples[s]
+    rot, _ = camera_pose_errors(robot, fit.corrections, scenario.truth)
+    assert np.rad2deg(rot.max()) < 0.05

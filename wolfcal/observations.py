@@ -13,6 +13,14 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 
 
+def rms_by(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups,) per-axis RMS of 2-vectors (M, 2) grouped by `group` (M,); NaN for empty groups."""
+    sq = np.bincount(group, weights=np.sum(values**2, axis=1), minlength=n_groups)
+    count = np.bincount(group, minlength=n_groups) * 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(sq / count)
+
+
 @dataclass
 class Observations:
     joint_names: list[str]
@@ -36,10 +44,7 @@ class Observations:
     def per_sample_rms(self, values: np.ndarray) -> np.ndarray:
         """(S,) per-axis RMS of per-corner 2-vectors (M, 2) (e.g. pixel residuals), NaN for samples without
         corners."""
-        sq = np.bincount(self.sample_index, weights=np.sum(values**2, axis=1), minlength=self.n_samples)
-        count = np.bincount(self.sample_index, minlength=self.n_samples) * 2
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.sqrt(sq / count)
+        return rms_by(self.sample_index, values, self.n_samples)
 
     @property
     def observed_tag_ids(self) -> list[int]:

@@ -52,7 +52,13 @@ class Problem:
         _, group_of_sample = np.unique(self.q, axis=0, return_inverse=True)
         self._n_groups = int(group_of_sample.max()) + 1 if len(self.q) else 0
         self._group_of_corner = group_of_sample.ravel()[self.obs.sample_index]
-        self.exclude(np.zeros(self.obs.n_samples, dtype=bool))
+        # A view is one tag seen in one sample: the unit in which outliers are left out.
+        views, self.view_of_corner = np.unique(
+            np.stack([self.obs.sample_index, self.obs.tag_ids], axis=1), axis=0, return_inverse=True
+        )
+        self.view_of_corner = self.view_of_corner.ravel()
+        self.view_sample, self.view_tag = views[:, 0], views[:, 1]
+        self.exclude(np.zeros(len(views), dtype=bool))
         self.linearize(np.zeros(len(self.params)))
 
     def values(self, z: np.ndarray) -> np.ndarray:
@@ -107,17 +113,18 @@ class Problem:
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
         )
 
-    def exclude(self, samples: np.ndarray) -> None:
-        """Give the residuals of these samples (bool mask (S,)) zero weight."""
-        self.excluded = np.asarray(samples, dtype=bool).copy()
-        self._row_weight = np.repeat(~self.excluded[self.obs.sample_index], 2).astype(float)
+    def exclude(self, views: np.ndarray) -> None:
+        """Give the residuals of these views (bool mask (V,) over (sample, tag) pairs) zero weight."""
+        self.excluded = np.asarray(views, dtype=bool).copy()
+        self.inlier_corners = ~self.excluded[self.view_of_corner]
+        self._row_weight = np.repeat(self.inlier_corners, 2).astype(float)
 
     def whitened_all(self, z: np.ndarray) -> np.ndarray:
-        """Whitened data residuals (2M,) of every sample, excluded ones included."""
+        """Whitened data residuals (2M,) of every view, excluded ones included."""
         return self.weights @ self.pixel_residuals(z).ravel()
 
     def whitened(self, z: np.ndarray) -> np.ndarray:
-        """Whitened data residuals (2M,) without the robust function (zero for excluded samples)."""
+        """Whitened data residuals (2M,) without the robust function (zero for excluded views)."""
         return self.whitened_all(z) * self._row_weight
 
     def residuals(self, z: np.ndarray) -> np.ndarray:

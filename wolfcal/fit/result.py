@@ -94,6 +94,7 @@ def result_dict(
                 "rms_before_px": round(float(solution.sample_rms_before[i]), 4),
                 "rms_after_px": round(float(solution.sample_rms_after[i]), 4),
                 "outlier": bool(solution.outlier_samples[i]),
+                "outlier_tags": sorted(t for s, t in solution.outlier_views if s == i),
             }
         )
     return {
@@ -119,6 +120,7 @@ def result_dict(
         "robust_loss": {"kind": "huber", "threshold_sigma": huber_k},
         "n_samples": obs.n_samples,
         "n_outlier_samples": int(solution.outlier_samples.sum()),
+        "n_outlier_tag_views": len(solution.outlier_views),
         "n_corners_used": solution.n_corners,
         "converged": bool(solution.converged),
         "condition_number": float(solution.condition_number) if np.isfinite(solution.condition_number) else None,
@@ -177,8 +179,8 @@ def load_result(path: str | Path) -> dict:
 def summary_lines(data: dict) -> list[str]:
     """A short human summary of a result dict."""
     lines = [
-        f"samples: {data['n_samples']} ({data['n_outlier_samples']} outlier(s) left out), corners used: "
-        f"{data['n_corners_used']}",
+        f"samples: {data['n_samples']} ({data['n_outlier_samples']} left out as outliers, "
+        f"{data['n_outlier_tag_views']} outlier tag view(s) in all), corners used: {data['n_corners_used']}",
         f"reprojection RMS (per axis, inliers): {data['rms_before_px']:.3f} px before -> "
         f"{data['rms_after_px']:.3f} px after (max {data['max_after_px']:.2f} px)",
         f"condition number (column-scaled Jacobian): {data['condition_number'] or float('inf'):.1f}",

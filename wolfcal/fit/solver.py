@@ -1,11 +1,12 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust trf solve -> flag outlier samples (whitened per-sample RMS far above the others; they get zero
-weight) -> estimate the corner noise from the whitened inlier residuals (the encoder noise is a known property of
-the servos and stays fixed) -> rebuild the weights at the new estimate; until the outlier set and the noise level
-settle. Then the uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each
-parameter's share of information from the data is 1 - posterior variance / prior variance; correlated pairs;
-condition number of the column-scaled data Jacobian (calibration practice: below 100).
+Rounds: robust trf solve -> flag outlier tag views (one tag in one sample whose whitened RMS is far above the
+others': a misdetected tag, or every tag of a sample with a stale joint reading; they get zero weight) -> estimate
+the corner noise from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
+fixed) -> rebuild the weights at the new estimate; until the outlier set and the noise level settle. Then the
+uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each parameter's share
+of information from the data is 1 - posterior variance / prior variance; correlated pairs; condition number of
+the column-scaled data Jacobian (calibration practice: below 100).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from wolfcal.fit.problem import Problem
+from wolfcal.observations import rms_by
 
 # Bounds of the estimated corner noise [px]. The floor is the detector's systematic error: its corner errors of
 # 0.02-0.05 px repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of them,
@@ -40,7 +42,8 @@ class Solution:
     sigma_q: float  # joint reading noise of the final noise model [rad]
     sample_rms_before: np.ndarray  # (S,) [px] per-axis RMS with the nominal model
     sample_rms_after: np.ndarray  # (S,)
-    outlier_samples: np.ndarray  # (S,) bool
+    outlier_samples: np.ndarray  # (S,) bool: every tag seen in the sample was left out
+    outlier_views: list[tuple[int, int]]  # (sample, tag id) of each tag view left out
     rms_before_px: float  # inlier corners, per axis, nominal model
     rms_after_px: float
     max_after_px: float
@@ -55,30 +58,20 @@ class Solution:
         return sorted(pairs, key=lambda p: -abs(p[2]))
 
 
-def per_sample_rms(problem: Problem, residuals_px: np.ndarray) -> np.ndarray:
-    """Per-axis RMS [px] of each sample's corner residuals (NaN for samples with no corner)."""
-    return problem.obs.per_sample_rms(residuals_px)
-
-
-def per_sample_whitened_rms(problem: Problem, z: np.ndarray) -> np.ndarray:
-    """(S,) RMS of each sample's whitened residuals: about 1 where the noise model explains the sample."""
-    return problem.obs.per_sample_rms(problem.whitened_all(z).reshape(-1, 2))
-
-
 def flag_outliers(problem: Problem, z: np.ndarray, floor_px: float) -> np.ndarray:
-    """Samples that the noise model explains far worse than the others (whitened RMS above 4x the median)
-    and that are off by more than `floor_px` in pixels."""
-    t = per_sample_whitened_rms(problem, z)
-    pixels = per_sample_rms(problem, problem.pixel_residuals(z))
-    finite = np.isfinite(t)
-    median = np.median(t[finite]) if np.any(finite) else 0.0
-    return finite & (t > OUTLIER_FACTOR * median) & (pixels > floor_px)
+    """(V,) views (one tag in one sample) that the noise model explains far worse than the others (whitened RMS
+    above 4x the median) and that are off by more than `floor_px` in pixels."""
+    n_views = len(problem.view_sample)
+    t = rms_by(problem.view_of_corner, problem.whitened_all(z).reshape(-1, 2), n_views)
+    pixels = rms_by(problem.view_of_corner, problem.pixel_residuals(z), n_views)
+    median = np.median(t)
+    return (t > OUTLIER_FACTOR * median) & (pixels > floor_px)
 
 
 def residual_scale(problem: Problem, z: np.ndarray) -> float:
     """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for dof."""
     w = problem.whitened(z)
-    w = w[np.repeat(~problem.excluded[problem.obs.sample_index], 2)]
+    w = w[np.repeat(problem.inlier_corners, 2)]
     if w.size <= len(z):
         return 1.0
     return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - len(z))))
@@ -117,7 +110,7 @@ def solve(
     n_params = len(problem.params)
     z = np.zeros(n_params)
     r_before = problem.pixel_residuals(z)
-    rms_before_samples = per_sample_rms(problem, r_before)
+    rms_before_samples = problem.obs.per_sample_rms(r_before)
     evaluations, converged = 0, False
     for round_index in range(max_rounds):
         result = least_squares(problem.residuals, z, method="trf", x_scale=1.0, max_nfev=100 * (n_params + 1))
@@ -129,8 +122,9 @@ def solve(
         previous = problem.sigma_px
         scale = estimate_pixel_noise(problem, z)
         say(
-            f"round {round_index + 1}: {int(outliers.sum())} outlier sample(s), noise model {problem.sigma_px:.3f} px "
-            f"per corner + {problem.sigma_q * 1000:.3f} mrad per joint (residual scale {scale:.2f})"
+            f"round {round_index + 1}: {int(outliers.sum())} outlier tag view(s), noise model "
+            f"{problem.sigma_px:.3f} px per corner + {problem.sigma_q * 1000:.3f} mrad per joint "
+            f"(residual scale {scale:.2f})"
         )
         if not changed and abs(problem.sigma_px / previous - 1.0) < 0.1:
             break  # the last solve used (nearly) this noise model and inlier set
@@ -149,7 +143,8 @@ def solve(
     else:
         s = np.linalg.svd(J_data / norms, compute_uv=False)
         condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    inlier = ~problem.excluded[problem.obs.sample_index]
+    inlier = problem.inlier_corners
+    kept_views = np.bincount(problem.view_sample[~problem.excluded], minlength=problem.obs.n_samples)
     r_after = problem.pixel_residuals(z)
     return Solution(
         values=z * sig,
@@ -161,8 +156,11 @@ def solve(
         sigma_px=problem.sigma_px,
         sigma_q=problem.sigma_q,
         sample_rms_before=rms_before_samples,
-        sample_rms_after=per_sample_rms(problem, r_after),
-        outlier_samples=problem.excluded.copy(),
+        sample_rms_after=problem.obs.per_sample_rms(r_after),
+        outlier_samples=kept_views == 0,
+        outlier_views=[
+            (int(s), int(t)) for s, t in zip(problem.view_sample[problem.excluded], problem.view_tag[problem.excluded])
+        ],
         rms_before_px=float(np.sqrt(np.mean(r_before[inlier] ** 2))),
         rms_after_px=float(np.sqrt(np.mean(r_after[inlier] ** 2))),
         max_after_px=float(np.max(np.abs(r_after[inlier]))) if inlier.any() else 0.0,
