@@ -17,7 +17,7 @@ from wolfcal.io.reader import read_captures
 from wolfcal.io.samples import Sample
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.parameters import PRESETS, SIDES, ParameterSet, build_parameter_set, tags_for_preset
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
@@ -32,10 +32,7 @@ class FitOptions:
     outlier_floor_px: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.free not in PRESETS:
-            raise WolfcalError(f"--free {self.free!r} is not a preset; use one of {', '.join(PRESETS)}")
-        if self.side not in SIDES:
-            raise WolfcalError(f"--side {self.side!r} must be one of {', '.join(SIDES)}")
+        check_preset(self.free, self.side)  # before any file is read
 
 
 @dataclass

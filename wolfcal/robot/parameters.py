@@ -78,6 +78,14 @@ def offset_parameter(joint: str, sigma: float) -> Parameter:
     return Parameter(f"{joint}.offset", "offset", joint, 0, "rad", sigma)
 
 
+def check_preset(preset: str, side: str) -> None:
+    """A clear error for an unknown --free preset or --side."""
+    if preset not in PRESETS:
+        raise WolfcalError(f"--free {preset!r} is not a preset; use one of {', '.join(PRESETS)}")
+    if side not in SIDES:
+        raise WolfcalError(f"--side {side!r} must be one of {', '.join(SIDES)}")
+
+
 def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side: str) -> list[int]:
     """The observed tags whose observations the preset uses (the leg preset keeps the chosen side's tags)."""
     if preset != "leg" or side == "both":
@@ -93,26 +101,16 @@ def build_parameter_set(
     camera: camera frame correction + mounts of the tags used; head_camera: + offsets of the joints between base
     and camera; leg: + offsets of the joints between base and each used tag's link (the chain camera -> tag).
     """
-    if preset not in PRESETS:
-        raise WolfcalError(f"--free {preset!r} is not a preset; use one of {', '.join(PRESETS)}")
-    if side not in SIDES:
-        raise WolfcalError(f"--side {side!r} must be one of {', '.join(SIDES)}")
+    check_preset(preset, side)
     priors = robot.config.priors
-    model = robot.model
-    base = robot.config.base_link
     camera_joint = robot.camera_joint
     params = frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation, priors.camera_rotation)
-    joints: list[str] = []
+    links = []
     if preset in ("head_camera", "leg"):
-        joints += [j.name for j in model.joints_between(base, robot.config.camera.frame) if j.actuated]
+        links.append(robot.config.camera.frame)
     if preset == "leg":
-        for tag_id in tag_ids:
-            joints += [j.name for j in model.joints_between(base, robot.config.tag(tag_id).link) if j.actuated]
-    seen: set[str] = set()
-    for joint in joints:
-        if joint not in seen:
-            seen.add(joint)
-            params.append(offset_parameter(joint, priors.offset))
+        links += [robot.config.tag(tag_id).link for tag_id in tag_ids]
+    params += [offset_parameter(joint, priors.offset) for joint in robot.actuated_joints_to(links)]
     if not fix_tags:
         for tag_id in tag_ids:
             params += frame_parameters(f"tag{tag_id}", "tag", str(tag_id), priors.tag_translation, priors.tag_rotation)

@@ -28,17 +28,21 @@ class Robot:
         """The joint whose origin places the camera frame: its frame correction is the camera extrinsic."""
         return self.model.parent_joint(self.config.camera.frame).name
 
-    def camera_and_leg_joints(self, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
-        """The actuated joints between base and camera, then those between base and each tag of the given sides
-        (in chain order, each once): the joints whose encoder offsets a camera-to-foot calibration can see."""
-        base = self.config.base_link
-        links = [self.config.camera.frame] + [t.link for t in self.config.tags if t.side in sides]
+    def actuated_joints_to(self, links: list[str]) -> tuple[str, ...]:
+        """The actuated joints between the base and each of `links`, in chain order, each once."""
         joints: list[str] = []
         for link in links:
-            for joint in self.model.joints_between(base, link):
+            for joint in self.model.joints_between(self.config.base_link, link):
                 if joint.actuated and joint.name not in joints:
                     joints.append(joint.name)
         return tuple(joints)
+
+    def camera_and_leg_joints(self, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
+        """The actuated joints between base and camera, then those between base and each tag of the given sides:
+        the joints whose encoder offsets a camera-to-foot calibration can see."""
+        return self.actuated_joints_to(
+            [self.config.camera.frame] + [t.link for t in self.config.tags if t.side in sides]
+        )
 
     def T_link_tag(self, tag_id: int, corrections: Corrections | None = None) -> np.ndarray:
         """(4, 4) mount of a tag in its link, with its correction applied."""
