@@ -49,9 +49,13 @@ class Problem:
     def __post_init__(self) -> None:
         self._points = corner_points(self.robot, self.obs, self.tag_ids)
         self.q = self.obs.q_measured
+        # One whitening block per group of samples with identical joint readings (fixed: derived once here).
         _, group_of_sample = np.unique(self.q, axis=0, return_inverse=True)
-        self._n_groups = int(group_of_sample.max()) + 1 if len(self.q) else 0
-        self._group_of_corner = group_of_sample.ravel()[self.obs.sample_index]
+        group_of_corner = group_of_sample.ravel()[self.obs.sample_index]
+        self._blocks = [np.flatnonzero(group_of_corner == g) for g in np.unique(group_of_corner)]
+        rows = [np.stack([2 * c, 2 * c + 1], axis=1).ravel() for c in self._blocks]  # u0 v0 u1 v1 ...
+        self._weight_rows = np.concatenate([np.repeat(r, len(r)) for r in rows])
+        self._weight_cols = np.concatenate([np.tile(r, len(r)) for r in rows])
         # A view is one tag seen in one sample: the unit in which outliers are left out.
         views, self.view_of_corner = np.unique(
             np.stack([self.obs.sample_index, self.obs.tag_ids], axis=1), axis=0, return_inverse=True
@@ -96,21 +100,14 @@ class Problem:
         samples with identical joint readings: frames of one still pose share its quantisation error."""
         self.sigma_px = sigma_px
         A = self._A
-        rows, cols, vals = [], [], []
-        for group in range(self._n_groups):
-            corners = np.flatnonzero(self._group_of_corner == group)
-            if corners.size == 0:
-                continue
+        vals = []
+        for corners in self._blocks:
             A_g = A[corners].reshape(-1, A.shape[-1])  # (2c, J), rows ordered u0 v0 u1 v1 ...
             C = self.sigma_px**2 * np.eye(len(A_g)) + self.sigma_q**2 * (A_g @ A_g.T)
-            W_g = np.linalg.inv(np.linalg.cholesky(C))
-            index = np.stack([2 * corners, 2 * corners + 1], axis=1).ravel()
-            rows.append(np.repeat(index, len(index)))
-            cols.append(np.tile(index, len(index)))
-            vals.append(W_g.ravel())
+            vals.append(np.linalg.inv(np.linalg.cholesky(C)).ravel())
         n = 2 * len(self.obs.uv)
         self.weights = scipy.sparse.csr_matrix(
-            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+            (np.concatenate(vals), (self._weight_rows, self._weight_cols)), shape=(n, n)
         )
 
     def exclude(self, views: np.ndarray) -> None:
@@ -119,14 +116,12 @@ class Problem:
         self.inlier_corners = ~self.excluded[self.view_of_corner]
         self._row_weight = np.repeat(self.inlier_corners, 2).astype(float)
 
-    def whitened_all(self, z: np.ndarray) -> np.ndarray:
-        """Whitened data residuals (2M,) of every view, excluded ones included."""
-        return self.weights @ self.pixel_residuals(z).ravel()
-
-    def whitened(self, z: np.ndarray) -> np.ndarray:
-        """Whitened data residuals (2M,) without the robust function (zero for excluded views)."""
-        return self.whitened_all(z) * self._row_weight
+    def whiten(self, residuals_px: np.ndarray) -> np.ndarray:
+        """Whitened residuals (2M,) of pixel residuals (M, 2) under the current noise model, every view included."""
+        return self.weights @ residuals_px.ravel()
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
-        """Robust whitened data residuals followed by the prior residuals z (unit-variance Gaussian priors)."""
-        return np.concatenate([huber_sqrt(self.whitened(z), self.huber_k), np.asarray(z, dtype=float)])
+        """Robust whitened data residuals (zero for excluded views) followed by the prior residuals z
+        (unit-variance Gaussian priors)."""
+        whitened = self.whiten(self.pixel_residuals(z)) * self._row_weight
+        return np.concatenate([huber_sqrt(whitened, self.huber_k), np.asarray(z, dtype=float)])

@@ -62,33 +62,36 @@ def flag_outliers(problem: Problem, z: np.ndarray, floor_px: float) -> np.ndarra
     """(V,) views (one tag in one sample) that the noise model explains far worse than the others (whitened RMS
     above 4x the median) and that are off by more than `floor_px` in pixels."""
     n_views = len(problem.view_sample)
-    t = rms_by(problem.view_of_corner, problem.whitened_all(z).reshape(-1, 2), n_views)
-    pixels = rms_by(problem.view_of_corner, problem.pixel_residuals(z), n_views)
+    r = problem.pixel_residuals(z)
+    t = rms_by(problem.view_of_corner, problem.whiten(r).reshape(-1, 2), n_views)
+    pixels = rms_by(problem.view_of_corner, r, n_views)
     median = np.median(t)
     return (t > OUTLIER_FACTOR * median) & (pixels > floor_px)
 
 
-def residual_scale(problem: Problem, z: np.ndarray) -> float:
-    """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for dof."""
-    w = problem.whitened(z)
-    w = w[np.repeat(problem.inlier_corners, 2)]
-    if w.size <= len(z):
+def residual_scale(problem: Problem, residuals_px: np.ndarray) -> float:
+    """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
+    freedom the free parameters take."""
+    w = problem.whiten(residuals_px)[np.repeat(problem.inlier_corners, 2)]
+    n_params = len(problem.params)
+    if w.size <= n_params:
         return 1.0
-    return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - len(z))))
+    return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
 
 
 def estimate_pixel_noise(problem: Problem, z: np.ndarray) -> float:
     """Set sigma_px so that the whitened inlier residuals have unit scale, holding the encoder noise (a known
     property of the servos) fixed; bisection on log(sigma_px). Returns the residual scale reached."""
+    r = problem.pixel_residuals(z)  # z is fixed: only the weights change during the search
     lo, hi = np.log(MIN_SIGMA_PX), np.log(MAX_SIGMA_PX)
     for _ in range(14):
         problem.set_noise(float(np.exp(0.5 * (lo + hi))))
-        if residual_scale(problem, z) > 1.0:
+        if residual_scale(problem, r) > 1.0:
             lo = np.log(problem.sigma_px)
         else:
             hi = np.log(problem.sigma_px)
     problem.set_noise(float(np.exp(hi)))
-    return residual_scale(problem, z)
+    return residual_scale(problem, r)
 
 
 def central_jacobian(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray, step: float = 1e-6) -> np.ndarray:
