@@ -1,7 +1,8 @@
 """Observations: tag corners detected in the samples of one or more captures, ready for the estimation problem.
 
-One row per detected corner (vectorised over everything): which sample, which tag, which corner (aruco order:
-top-left, top-right, bottom-right, bottom-left) and where it was seen, in pixels (OpenCV convention).
+One `Observations` holds what one camera saw: the head camera (`HEAD_CAMERA`) or an external camera of the robot
+config (its `name`). One row per detected corner (vectorised over everything): which sample, which tag, which corner
+(aruco order: top-left, top-right, bottom-right, bottom-left) and where it was seen, in pixels (OpenCV convention).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+
+HEAD_CAMERA = "head"  # camera name of the robot's own camera (config `camera:`); external cameras use their names
 
 
 def rms_by(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
@@ -32,6 +35,7 @@ class Observations:
     tag_ids: np.ndarray  # (M,) int
     corner_index: np.ndarray  # (M,) int in 0..3
     uv: np.ndarray  # (M, 2) detected corner [px]
+    camera_name: str = HEAD_CAMERA  # which camera saw these corners
 
     @property
     def n_samples(self) -> int:
@@ -68,6 +72,7 @@ class Observations:
             tag_ids=self.tag_ids[keep],
             corner_index=self.corner_index[keep],
             uv=self.uv[keep],
+            camera_name=self.camera_name,
         )
 
     def only_tags(self, tag_ids: list[int]) -> Observations:
