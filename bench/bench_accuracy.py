@@ -54,9 +54,9 @@ def run(name: str, seed: int, binning: int, folder: Path) -> str:
     rot, trans = camera_pose_errors(robot, fit.corrections, truth)
     line = (
         f"{name:8s} seed {seed}: camera {np.rad2deg(rot.max()):.4f} deg / {trans.max() * 1000:.2f} mm (max over "
-        f"head range), max |z| {z.max():.2f}, rms {fit.solution.rms_before_px:.1f} -> {fit.solution.rms_after_px:.3f}"
-        f" px, outliers left out: {int(fit.solution.outlier_samples.sum())} sample(s), "
-        f"{len(fit.solution.outlier_views)} tag view(s)"
+        f"head range), max |z| {z.max():.2f}, rms {fit.solution.blocks[0].rms_before:.1f} -> {fit.solution.blocks[0].rms_after:.3f}"
+        f" px, outliers left out: {int(fit.solution.blocks[0].outlier_samples.sum())} sample(s), "
+        f"{len(fit.solution.blocks[0].outlier_views)} tag view(s)"
     )
     if name == "leg":
         rng = np.random.default_rng(seed)

@@ -28,7 +28,7 @@ def test_camera_preset_recovers_camera_pose_over_whole_head_range(robot, camera)
     assert trans.max() < 0.002
     assert np.all(np.abs(z_scores(fit, scenario.truth)) < 3.0)
     # Before the fit the camera was off by the simulated hand-tuning error (~0.065 rad tilt).
-    assert fit.solution.rms_before_px > 20 * fit.solution.rms_after_px
+    assert fit.solution.blocks[0].rms_before > 20 * fit.solution.blocks[0].rms_after
 
 
 def test_leg_preset_puts_soles_within_3mm(robot, camera):
@@ -49,7 +49,7 @@ def test_leg_preset_puts_soles_within_3mm(robot, camera):
 def test_outlier_samples_are_flagged_and_do_not_drag_the_camera(robot, camera):
     scenario = synthetic_scenario(robot, camera, n=30, seed=13, outlier_fraction=0.1)
     fit = fit_observations(robot, scenario.obs, FitOptions(free="camera"))
-    np.testing.assert_array_equal(fit.solution.outlier_samples, scenario.outliers)
+    np.testing.assert_array_equal(fit.solution.blocks[0].outlier_samples, scenario.outliers)
     rot, _ = camera_pose_errors(robot, fit.corrections, scenario.truth)
     assert np.rad2deg(rot.max()) < 0.1
 
@@ -75,7 +75,7 @@ def test_a_misdetected_tag_is_left_out_but_not_its_sample(robot, camera):
     bad = (obs.sample_index == s) & (obs.tag_ids == 44)
     obs.uv[bad] += [4.0, -3.0]  # e.g. the other foot's tag covers this tag's corners
     fit = fit_observations(robot, obs, FitOptions(free="camera"))
-    assert fit.solution.outlier_views == [(s, 44)]
-    assert not fit.solution.outlier_samples[s]
+    assert fit.solution.blocks[0].outlier_views == [(s, 44)]
+    assert not fit.solution.blocks[0].outlier_samples[s]
     rot, _ = camera_pose_errors(robot, fit.corrections, scenario.truth)
     assert np.rad2deg(rot.max()) < 0.05

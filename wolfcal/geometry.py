@@ -128,3 +128,15 @@ def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply transforms (..., 4, 4) to points (..., P, 3) -> (..., P, 3)."""
     return points @ np.swapaxes(T[..., :3, :3], -1, -2) + T[..., None, :3, 3]
+
+
+def right_jacobian_so3(rotvec: np.ndarray) -> np.ndarray:
+    """J_r (..., 3, 3) of rotation vectors (..., 3): Exp(r + dr) = Exp(r) @ Exp(J_r(r) @ dr) to first order."""
+    r = np.asarray(rotvec, dtype=float)
+    theta = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = theta < 1e-6
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (safe - np.sin(safe)) / safe**3)
+    return np.eye(3) - a * K + b * (K @ K)

@@ -9,6 +9,8 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
 
+BEHIND_CAMERA_PX = 1e4  # residual given to a corner that a model puts behind the camera [px]
+
 
 def corner_points(robot: Robot, obs: Observations, tag_ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """Per observed corner: its column in `tag_ids` (M,) and its position in its tag frame (M, 3) [m]."""

@@ -18,9 +18,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from wolfcal.fit.problem import BEHIND_CAMERA_PX
 from wolfcal.observations import Observations
-from wolfcal.projection import corner_points, project_corners
+from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, project_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners

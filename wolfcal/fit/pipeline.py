@@ -6,21 +6,27 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.blocks import Block
+from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
 from wolfcal.io.reader import read_captures
 from wolfcal.io.samples import Sample
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
+
+SYSTEMS = ("head", "external", "all")
 
 
 @dataclass(frozen=True)
@@ -29,24 +35,40 @@ class FitOptions:
     side: str = "both"
     fix_tags: bool = False
     huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    outlier_floor_px: float = 0.5
+    system: str | None = None  # 'head' | 'external' | 'all'; None: every system the captures contain
+    external_moving: bool = False  # one external-camera pose per sample instead of one per capture file
 
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)  # before any file is read
+        if self.system is not None and self.system not in SYSTEMS:
+            raise WolfcalError(f"--system {self.system!r} must be one of {', '.join(SYSTEMS)}")
 
 
 @dataclass
 class Fit:
     robot: Robot
-    obs: Observations
-    tag_ids: list[int]
-    params: ParameterSet
+    observations: dict[str, Observations]  # per camera, only the tags used
+    blocks: list[Block]
+    chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
     problem: Problem
     solution: Solution
 
     @property
+    def params(self) -> ParameterSet:
+        """Every unknown: the chain parameters, then each block's own (e.g. external camera poses)."""
+        return self.problem.params
+
+    @property
+    def tag_ids(self) -> list[int]:
+        return sorted({t for b in self.blocks for t in b.tag_ids})
+
+    @property
     def corrections(self) -> Corrections:
-        return self.params.corrections(self.solution.values)
+        return self.chain.corrections(self.solution.values[: len(self.chain)])
+
+    @property
+    def head(self) -> Observations | None:
+        return self.observations.get(HEAD_CAMERA)
 
 
 def minimum_samples(n_params: int) -> int:
@@ -54,30 +76,80 @@ def minimum_samples(n_params: int) -> int:
     return max(3, -(-2 * n_params // 8))
 
 
+def _placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
+    """Placement of each sample of an external camera and the placements' names: one per capture file (in the
+    order of the files), or one per sample of a moving camera."""
+    if moving:
+        return np.arange(obs.n_samples), [f"{obs.camera_name}@s{i + 1}" for i in range(obs.n_samples)]
+    files = list(dict.fromkeys(obs.sources))
+    index = np.array([files.index(s) for s in obs.sources], dtype=int)
+    if len(files) == 1:
+        return index, [obs.camera_name]
+    return index, [f"{obs.camera_name}@{k + 1}" for k in range(len(files))]
+
+
+def _systems(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
+    """The cameras the fit uses, by --system (default: every one the captures contain)."""
+    system = options.system or "all"
+    chosen = {
+        name: obs for name, obs in observations.items()
+        if system == "all" or (system == "head") == (name == HEAD_CAMERA)
+    }  # fmt: skip
+    if not chosen:
+        found = ", ".join(sorted(observations)) or "none"
+        raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
+    if options.free in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
+        raise WolfcalError(
+            f"--free {options.free} estimates the head camera, but the captures used (--system {system}) hold no "
+            "head-camera images; use --free leg for an external camera, or add a head-camera capture"
+        )
+    return chosen
+
+
 def fit_observations(
-    robot: Robot, obs: Observations, options: FitOptions, say: Callable[[str], None] | None = None
+    robot: Robot,
+    observations: dict[str, Observations] | Observations,
+    options: FitOptions,
+    say: Callable[[str], None] | None = None,
 ) -> Fit:
-    """Choose the free parameters for the observed tags, check there is enough data, solve."""
-    tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
-    if not tag_ids:
+    """Choose the free parameters for the observed tags of each camera, check there is enough data, solve."""
+    if isinstance(observations, Observations):
+        observations = {observations.camera_name: observations}
+    observations = _systems(robot, observations, options)
+    used: dict[str, Observations] = {}
+    for name, obs in observations.items():
+        tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
+        if name != HEAD_CAMERA:  # the external camera's pose rests on the tags fixed to the base
+            tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
+                                             if robot.fixed_to_base(robot.config.tag(t).link)})
+        if tag_ids:
+            used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
+    if not used:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
-    if set(tag_ids) != set(obs.observed_tag_ids):
-        obs = obs.only_tags(tag_ids)
-    params = build_parameter_set(robot, options.free, tag_ids, options.side, options.fix_tags)
-    needed = minimum_samples(len(params))
-    if obs.n_samples < needed:
+    blocks: list[Block] = []
+    for name, obs in used.items():
+        if name == HEAD_CAMERA:
+            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids))
+        else:
+            placement, names = _placements(obs, options.external_moving)
+            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
+    chain = build_parameter_set(
+        robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags
+    )
+    n_params = len(chain) + sum(len(b.nuisance) for b in blocks)
+    n_samples = max(obs.n_samples for obs in used.values())
+    needed = minimum_samples(n_params)
+    if sum(obs.n_samples for obs in used.values()) < needed:
         raise WolfcalError(
-            f"too few samples for the free parameters: {obs.n_samples} sample(s) with tags for {len(params)} free "
+            f"too few samples for the free parameters: {n_samples} sample(s) with tags for {n_params} free "
             f"parameters (--free {options.free}); capture at least {needed}, or free fewer parameters"
         )
     priors = robot.config.priors
-    problem = Problem(
-        robot, obs, params, tag_ids, priors.pixel_noise, priors.encoder_noise, options.huber_k
-    )
-    solution = solve(problem, outlier_floor_px=options.outlier_floor_px, progress=say)
-    return Fit(robot, obs, tag_ids, params, problem, solution)
+    problem = Problem(chain, blocks, [priors.pixel_noise] * len(blocks), priors.encoder_noise, options.huber_k)
+    solution = solve(problem, progress=say)
+    return Fit(robot, used, blocks, chain, problem, solution)
 
 
 def load_samples(
@@ -120,32 +192,22 @@ def run_fit(
     robot = load_robot(robot_path)
     samples, warnings = load_samples(robot, captures, intrinsics)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    obs, detect_warnings = detect_observations(samples, robot)
+    observations, detect_warnings = detect_observations(samples, robot)
+    if isinstance(observations, Observations):
+        observations = {observations.camera_name: observations}
     warnings += detect_warnings
-    say(f"{obs.n_samples} sample(s) with tags, {len(obs.uv)} corners; fitting --free {options.free} ...")
-    fit = fit_observations(robot, obs, options, say)
-    data = result_dict(
-        robot_path=robot.config.path,
-        urdf_path=robot.config.urdf,
-        captures=captures,
-        intrinsics=intrinsics,
-        preset=options.free,
-        side=options.side,
-        fix_tags=options.fix_tags,
-        tag_ids=fit.tag_ids,
-        params=fit.params,
-        solution=fit.solution,
-        obs=fit.obs,
-        corrections=fit.corrections,
-        huber_k=options.huber_k,
-        warnings=warnings,
-    )
+    for name, obs in observations.items():
+        say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
+    say(f"fitting --free {options.free} ...")
+    fit = fit_observations(robot, observations, options, say)
+    data = result_dict(fit, options, captures, intrinsics, warnings)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_result(out_dir / "result.yaml", data)
     write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+    write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
     for line in summary_lines(data):
         say(line)
     for line in explain(fit.params, fit.solution) + warnings:
         say(f"note: {line}")
-    say(f"wrote {out_dir / 'result.yaml'} and {out_dir / 'calibrated.urdf'}")
+    say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
     return data

@@ -1,127 +1,158 @@
-"""The estimation problem: pixel residuals of tag corners plus Gaussian priors, in normalised units.
+"""The estimation problem: one parameter vector, a list of measurement blocks, Gaussian priors.
 
-Unknowns are z = values / prior_sigma, so the prior residual is z itself. Data residual per corner and axis:
-r = project(K, D, T_camera_tag(q_s + offsets) @ p_corner) - u_detected [px].
-
-Noise model: the corners of one sample share the error of that sample's joint readings (encoder quantisation moves
-the whole tag), and so do all frames taken at one still pose (identical readings, e.g. several frames of a
-recording). Each such group's residuals have covariance C_g = sigma_px^2 I + sigma_q^2 A_g A_g^T with
-A_g = d(uv_g)/d(q_g). Residuals are whitened by a block-diagonal W (W_g = chol(C_g)^-1), built once per solver
-round at the current estimate, then passed through a Huber-shaped function so a misdetected corner cannot drag the
-solution while priors stay purely quadratic. Everything is vectorised over corners; the only Python loops are over
-joints (inside FK and for A) and over sample groups when W is rebuilt, never inside the residual.
+Unknowns are prior-normalised, z = (value - reference) / prior_sigma, so a prior residual is z itself. The first
+`n_chain` unknowns change the robot model (shared by every block); each block's own unknowns follow. Data residuals
+of a block are whitened by its noise model (`GroupedWhitening`, rebuilt per solver round at the current estimate)
+and passed through a Huber-shaped function, so a misdetected view cannot drag the solution while priors stay
+quadratic. Residuals and the Jacobian come from one linearisation per parameter vector (analytic derivatives);
+the Jacobian is sparse when the blocks bring many unknowns (e.g. one camera pose per sample).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import scipy.sparse
 
-from wolfcal.observations import Observations
-from wolfcal.projection import corner_points, predict_corners
-from wolfcal.robot.corrections import Corrections
+from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.noise import GroupedWhitening
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.robot.robot import Robot
 
-BEHIND_CAMERA_PX = 1e4  # residual given to a corner that a candidate model puts behind the camera
-JOINT_STEP = 1e-6  # finite-difference step for d(uv)/d(q) [rad]
+DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
+MAD_TO_SIGMA = 1.4826  # standard deviation of a normal distribution per median absolute deviation
 
 
-def huber_sqrt(r: np.ndarray, k: float) -> np.ndarray:
-    """Residual transform whose square is the Huber loss: r for |r| <= k, sign(r) sqrt(2k|r| - k^2) beyond."""
+def huber_sqrt(r: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """Residual transform whose square is the Huber loss (r for |r| <= k, sign(r) sqrt(2k|r| - k^2) beyond), and
+    its derivative."""
     a = np.abs(r)
-    return np.where(a <= k, r, np.sign(r) * np.sqrt(np.maximum(2.0 * k * a - k * k, 0.0)))
+    inside = a <= k
+    root = np.sqrt(np.maximum(2.0 * k * a - k * k, 1e-300))
+    return np.where(inside, r, np.sign(r) * root), np.where(inside, 1.0, k / root)
 
 
-@dataclass
+class BlockState:
+    """A block's place in the problem and its current noise model and outlier set."""
+
+    def __init__(self, block: Block, start: int, sigma: float, sigma_q: float) -> None:
+        self.block, self.start, self.sigma, self.sigma_q = block, start, sigma, sigma_q
+        self.excluded = np.zeros(block.n_views, dtype=bool)
+        self.groups = block.noise_groups()
+        self.whitening: GroupedWhitening | None = None
+        self.W: scipy.sparse.csr_matrix | None = None
+
+    @property
+    def inlier_units(self) -> np.ndarray:
+        return ~self.excluded[self.block.view_of_unit]
+
+    def rows_of(self, units: np.ndarray) -> np.ndarray:
+        d = self.block.dim
+        return (units[:, None] * d + np.arange(d)).ravel()
+
+    def rebuild(self, lin: Linearization) -> None:
+        """Noise groups over the inlier units at this linearisation (left-out views are in no group)."""
+        A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
+        inlier = self.inlier_units
+        groups = [self.rows_of(np.flatnonzero(inlier & (self.groups == g))) for g in np.unique(self.groups)]
+        self.whitening = GroupedWhitening([g for g in groups if len(g)], A, self.sigma_q)
+        self.set_sigma(self.sigma)
+
+    def set_sigma(self, sigma: float) -> None:
+        self.sigma = sigma
+        self.W = self.whitening.matrix(sigma)
+
+
 class Problem:
-    robot: Robot
-    obs: Observations
-    params: ParameterSet
-    tag_ids: list[int]  # tags whose observations are used, in column order of T_camera_tag
-    sigma_px: float = 0.2  # corner noise per axis [px]
-    sigma_q: float = 0.00044  # joint reading noise [rad]
-    huber_k: float = 3.0  # robust threshold in whitened units (standard deviations)
-    weights: scipy.sparse.csr_matrix | None = field(default=None, repr=False)
+    """See the module docstring. `chain` holds the robot-model parameters; blocks bring their own."""
 
-    def __post_init__(self) -> None:
-        self._points = corner_points(self.robot, self.obs, self.tag_ids)
-        self.q = self.obs.q_measured
-        # One whitening block per group of samples with identical joint readings (fixed: derived once here).
-        _, group_of_sample = np.unique(self.q, axis=0, return_inverse=True)
-        group_of_corner = group_of_sample.ravel()[self.obs.sample_index]
-        self._blocks = [np.flatnonzero(group_of_corner == g) for g in np.unique(group_of_corner)]
-        rows = [np.stack([2 * c, 2 * c + 1], axis=1).ravel() for c in self._blocks]  # u0 v0 u1 v1 ...
-        self._weight_rows = np.concatenate([np.repeat(r, len(r)) for r in rows])
-        self._weight_cols = np.concatenate([np.tile(r, len(r)) for r in rows])
-        # A view is one tag seen in one sample: the unit in which outliers are left out.
-        views, self.view_of_corner = np.unique(
-            np.stack([self.obs.sample_index, self.obs.tag_ids], axis=1), axis=0, return_inverse=True
-        )
-        self.view_of_corner = self.view_of_corner.ravel()
-        self.view_sample, self.view_tag = views[:, 0], views[:, 1]
-        self.exclude(np.zeros(len(views), dtype=bool))
-        self.linearize(np.zeros(len(self.params)))
+    def __init__(
+        self, chain: ParameterSet, blocks: list[Block], sigmas: list[float], sigma_q: float, huber_k: float = 3.0
+    ) -> None:
+        self.chain, self.blocks, self.huber_k, self.sigma_q = chain, blocks, huber_k, sigma_q
+        self.n_chain = len(chain)
+        params, self.states, start = chain, [], len(chain)
+        for block, sigma in zip(blocks, sigmas):
+            self.states.append(BlockState(block, start, sigma, sigma_q))
+            params = params + block.nuisance
+            start += len(block.nuisance)
+        self.params = params
+        self._cache: tuple[bytes, list[Linearization]] | None = None
+        z0 = np.zeros(len(self.params))
+        for state, lin in zip(self.states, self.evaluate(z0)):
+            # Start each block's noise level at the spread of its residuals under the nominal model (at least
+            # the configured value), so the first solve is least squares rather than a long walk along the
+            # Huber loss's linear arms; the rounds then estimate it.
+            r = lin.residual[np.all(np.abs(lin.residual) < 1e3, axis=1)]
+            spread = MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r, axis=0)))) if r.size else 0.0
+            state.sigma = max(state.sigma, spread)
+        self.linearize(z0)
 
     def values(self, z: np.ndarray) -> np.ndarray:
-        return np.asarray(z) * self.params.prior_sigmas
+        return self.params.values(z)
 
-    def corrections(self, z: np.ndarray) -> Corrections:
-        return self.params.corrections(self.values(z))
+    def local_values(self, values: np.ndarray, state: BlockState) -> np.ndarray:
+        return values[state.start : state.start + len(state.block.nuisance)]
 
-    def predict(self, z: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
-        """Predicted pixel positions (M, 2) of the observed corners (NaN behind the camera)."""
-        return predict_corners(self.robot, self.obs, self.corrections(z), self.tag_ids, q, self._points)
-
-    def pixel_residuals(self, z: np.ndarray) -> np.ndarray:
-        """(M, 2) predicted minus detected [px]; corners behind the camera get a large finite value."""
-        r = self.predict(z) - self.obs.uv
-        return np.where(np.isfinite(r), r, BEHIND_CAMERA_PX)
-
-    def joint_sensitivity(self, z: np.ndarray) -> np.ndarray:
-        """(M, 2, J) d(uv)/d(q) of every corner with respect to its sample's joint readings [px/rad]."""
-        uv0 = self.predict(z)
-        columns = []
-        for j in range(self.q.shape[1]):
-            q = self.q.copy()
-            q[:, j] += JOINT_STEP
-            columns.append((self.predict(z, q) - uv0) / JOINT_STEP)
-        return np.nan_to_num(np.stack(columns, axis=-1))
+    def evaluate(self, z: np.ndarray) -> list[Linearization]:
+        """Each block's linearisation at z (the last one is cached)."""
+        key = np.asarray(z, dtype=float).tobytes()
+        if self._cache is None or self._cache[0] != key:
+            values = self.values(z)
+            chain_values = values[: self.n_chain]
+            lins = [s.block.linearize(chain_values, self.local_values(values, s), self.chain) for s in self.states]
+            self._cache = (key, lins)
+        return self._cache[1]
 
     def linearize(self, z: np.ndarray) -> None:
-        """Recompute d(uv)/d(q) at z and rebuild the whitening for the current noise levels."""
-        self._A = self.joint_sensitivity(z)
-        self.set_noise(self.sigma_px)
+        """Rebuild every block's noise model at z (joint sensitivities and inlier groups)."""
+        for state, lin in zip(self.states, self.evaluate(z)):
+            state.rebuild(lin)
 
-    def set_noise(self, sigma_px: float) -> None:
-        """Rebuild the whitening matrix for this corner noise [px] (encoder noise fixed). One block per group of
-        samples with identical joint readings: frames of one still pose share its quantisation error."""
-        self.sigma_px = sigma_px
-        A = self._A
-        vals = []
-        for corners in self._blocks:
-            A_g = A[corners].reshape(-1, A.shape[-1])  # (2c, J), rows ordered u0 v0 u1 v1 ...
-            C = self.sigma_px**2 * np.eye(len(A_g)) + self.sigma_q**2 * (A_g @ A_g.T)
-            vals.append(np.linalg.inv(np.linalg.cholesky(C)).ravel())
-        n = 2 * len(self.obs.uv)
-        self.weights = scipy.sparse.csr_matrix(
-            (np.concatenate(vals), (self._weight_rows, self._weight_cols)), shape=(n, n)
-        )
+    def raw_residuals(self, z: np.ndarray) -> list[np.ndarray]:
+        """Per block: (U, dim) predicted minus measured [the block's unit]."""
+        return [lin.residual for lin in self.evaluate(z)]
 
-    def exclude(self, views: np.ndarray) -> None:
-        """Give the residuals of these views (bool mask (V,) over (sample, tag) pairs) zero weight."""
-        self.excluded = np.asarray(views, dtype=bool).copy()
-        self.inlier_corners = ~self.excluded[self.view_of_corner]
-        self._row_weight = np.repeat(self.inlier_corners, 2).astype(float)
-
-    def whiten(self, residuals_px: np.ndarray) -> np.ndarray:
-        """Whitened residuals (2M,) of pixel residuals (M, 2) under the current noise model, every view included."""
-        return self.weights @ residuals_px.ravel()
+    def _whitened(self, z: np.ndarray) -> list[np.ndarray]:
+        return [s.W @ lin.residual.ravel() for s, lin in zip(self.states, self.evaluate(z))]
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
-        """Robust whitened data residuals (zero for excluded views) followed by the prior residuals z
-        (unit-variance Gaussian priors)."""
-        whitened = self.whiten(self.pixel_residuals(z)) * self._row_weight
-        return np.concatenate([huber_sqrt(whitened, self.huber_k), np.asarray(z, dtype=float)])
+        """Robust whitened data residuals of every block (zero for left-out views), then the priors z."""
+        parts = [huber_sqrt(w, self.huber_k)[0] for w in self._whitened(z)]
+        return np.concatenate(parts + [np.asarray(z, dtype=float)])
+
+    def data_jacobian(self, z: np.ndarray, robust: bool = True) -> np.ndarray | scipy.sparse.csr_matrix:
+        """d(whitened data residuals)/dz, (R, P); sparse above DENSE_LIMIT unknowns."""
+        n = len(self.params)
+        sparse = n > DENSE_LIMIT
+        parts = []
+        for state, lin, w in zip(self.states, self.evaluate(z), self._whitened(z)):
+            rows = lin.residual.size
+            J_chain = lin.jac_chain.reshape(rows, -1)
+            if sparse:
+                empty = scipy.sparse.csr_matrix((rows, n - self.n_chain))
+                J = scipy.sparse.hstack([scipy.sparse.csr_matrix(J_chain), empty]).tocsr()
+            else:
+                J = np.zeros((rows, n))
+                J[:, : self.n_chain] = J_chain
+            if lin.jac_local is not None:
+                L = lin.jac_local.shape[-1]
+                r_idx = np.repeat(np.arange(rows), L)
+                c_idx = state.start + np.repeat(lin.local_cols, state.block.dim, axis=0).ravel()
+                vals = lin.jac_local.reshape(rows, L).ravel()
+                local = scipy.sparse.csr_matrix((vals, (r_idx, c_idx)), shape=(rows, n))
+                J = (J + local).tocsr() if sparse else J + local.toarray()
+            J = state.W @ J
+            if robust:
+                scale = huber_sqrt(w, self.huber_k)[1]
+                J = scipy.sparse.diags(scale) @ J if sparse else J * scale[:, None]
+            parts.append(J)
+        stacked = scipy.sparse.vstack(parts).tocsr() if sparse else np.vstack(parts)
+        sig = self.params.prior_sigmas
+        return stacked @ scipy.sparse.diags(sig) if sparse else stacked * sig
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray | scipy.sparse.csr_matrix:
+        """d(residuals)/dz: the robust data Jacobian above the identity of the priors."""
+        J = self.data_jacobian(z)
+        n = len(self.params)
+        if scipy.sparse.issparse(J):
+            return scipy.sparse.vstack([J, scipy.sparse.identity(n, format="csr")]).tocsr()
+        return np.vstack([J, np.eye(n)])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -12,10 +13,12 @@ import wolfcal
 from wolfcal.atomic import write_text_atomic
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.solver import Solution
-from wolfcal.observations import Observations
-from wolfcal.robot.corrections import Corrections
+from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.yamlfile import read_yaml
+
+if TYPE_CHECKING:
+    from wolfcal.fit.pipeline import Fit, FitOptions
 
 CONDITION_LIMIT = 100.0
 DATA_SHARE_LIMIT = 0.5
@@ -40,7 +43,8 @@ def correlated_groups(names: list[str], pairs: list[tuple[str, str, float]]) -> 
 def explain(params: ParameterSet, solution: Solution) -> list[str]:
     """Plain sentences on what the data cannot tell apart and which values rest on the priors."""
     lines = []
-    pairs = solution.correlated_pairs(params.names)
+    u = solution.uncertainty
+    pairs = u.correlated_pairs(params.names)
     for members in correlated_groups(params.names, pairs):
         strongest = max(abs(c) for a, b, c in pairs if a in members)
         lines.append(
@@ -48,15 +52,15 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
             "cannot tell them apart, so how the correction splits between them comes from the priors; the model "
             "they give together is still determined. Add poses that move them differently, or fix some of them."
         )
-    for name, share in zip(params.names, solution.data_share):
+    for name, share in zip(params.names, u.data_share):
         if share < DATA_SHARE_LIMIT:
             lines.append(
                 f"{name}: only {share:.0%} of its information comes from the data; its value stays near the nominal "
                 "model (prior)."
             )
-    if solution.condition_number > CONDITION_LIMIT:
+    if u.condition_number > CONDITION_LIMIT:
         lines.append(
-            f"condition number {solution.condition_number:.3g} of the column-scaled Jacobian is above "
+            f"condition number {u.condition_number:.3g} of the column-scaled Jacobian is above "
             f"{CONDITION_LIMIT:.0f}: some parameter combinations are weakly or not at all observable in these poses."
         )
     return lines
@@ -66,64 +70,112 @@ def _display(value: float, unit: str) -> str:
     return f"{np.rad2deg(value):+.3f} deg" if unit == "rad" else f"{value * 1000:+.2f} mm"
 
 
-def result_dict(
-    *,
-    robot_path: Path,
-    urdf_path: Path,
-    captures: list[Path],
-    intrinsics: Path | None,
-    preset: str,
-    side: str,
-    fix_tags: bool,
-    tag_ids: list[int],
-    params: ParameterSet,
-    solution: Solution,
-    obs: Observations,
-    corrections: Corrections,
-    huber_k: float,
-    warnings: list[str],
-) -> dict:
+def _measured_by(fit: Fit) -> list[list[str]]:
+    """Per parameter, the measurement systems whose data inform it (non-zero Jacobian column)."""
+    z = np.zeros(len(fit.params))
+    out: list[list[str]] = [[] for _ in fit.params.parameters]
+    start = len(fit.chain)
+    for state, lin in zip(fit.problem.states, fit.problem.evaluate(z)):
+        chain = np.abs(lin.jac_chain).reshape(-1, len(fit.chain)).max(axis=0) if len(fit.chain) else np.zeros(0)
+        for i in np.flatnonzero(chain > 0):
+            out[i].append(state.block.name)
+        for i in range(len(state.block.nuisance)):
+            out[start + i].append(state.block.name)
+        start += len(state.block.nuisance)
+    return out
+
+
+def _block_dict(fit: Fit, k: int) -> dict:
+    """The result of one measurement block: residuals, noise, outliers, per-sample errors."""
+    b, block = fit.solution.blocks[k], fit.blocks[k]
+    obs = block.obs
+    unit = b.unit
     samples = []
     for i in range(obs.n_samples):
-        samples.append(
-            {
-                "index": i,
-                "source": Path(obs.sources[i]).name,
-                "stamp_ns": int(obs.stamps_ns[i]),
-                "tags": obs.tags_in_sample(i),
-                "rms_before_px": round(float(solution.sample_rms_before[i]), 4),
-                "rms_after_px": round(float(solution.sample_rms_after[i]), 4),
-                "outlier": bool(solution.outlier_samples[i]),
-                "outlier_tags": sorted(t for s, t in solution.outlier_views if s == i),
-            }
-        )
+        samples.append({
+            "index": i,
+            "source": Path(obs.sources[i]).name,
+            "stamp_ns": int(obs.stamps_ns[i]),
+            "tags": obs.tags_in_sample(i),
+            f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
+            f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
+            "outlier": bool(b.outlier_samples[i]),
+            "outlier_tags": sorted(t for s, t in b.outlier_views if s == i),
+        })  # fmt: skip
     return {
+        "name": b.name,
+        "system": b.system,
+        "camera": block.camera_name,
+        "unit": unit,
+        "tags_used": block.tag_ids,
+        "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views",
+        f"rms_before_{unit}": round(b.rms_before, 4),
+        f"rms_after_{unit}": round(b.rms_after, 4),
+        f"max_after_{unit}": round(b.max_after, 4),
+        f"noise_sigma_{unit}": round(b.sigma, 4),
+        "n_samples": obs.n_samples,
+        "n_outlier_samples": sum(s["outlier"] for s in samples),
+        "n_outlier_views": len(b.outlier_views),
+        "n_units_used": b.n_units,
+        "samples": samples,
+    }
+
+
+def external_camera_poses(fit: Fit) -> dict:
+    """T_base_camera of every external camera placement, as xyz [m] and rpy [rad] with the 4x4 matrix."""
+    out = {}
+    for block in fit.blocks:
+        for name in dict.fromkeys(p.target for p in block.nuisance.parameters if p.kind == "pose"):
+            idx = [i for i, p in enumerate(fit.params.parameters) if p.kind == "pose" and p.target == name]
+            T = transform_from_twist_params(fit.solution.values[idx])
+            out[name] = {
+                "camera": block.camera_name,
+                "xyz": [float(v) for v in T[:3, 3]],
+                "rpy": [float(v) for v in matrix_to_rpy(T[:3, :3])],
+                "T_base_camera": np.round(T, 12).tolist(),
+            }
+    return out
+
+
+def result_dict(fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None,
+                warnings: list[str]) -> dict:
+    """Everything `result.yaml` holds, as plain data."""
+    config = fit.robot.config
+    solution, params = fit.solution, fit.params
+    u = solution.uncertainty
+    blocks = [_block_dict(fit, k) for k in range(len(fit.blocks))]
+    head = next((b for b in blocks if b["system"] == "head"), None)
+    data = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "robot": str(robot_path.resolve()),
-        "urdf": str(urdf_path.resolve()),
+        "robot": str(config.path.resolve()),
+        "urdf": str(config.urdf.resolve()),
         "captures": [str(Path(c).resolve()) for c in captures],
         "intrinsics": str(intrinsics.resolve()) if intrinsics else None,
-        "free": preset,
-        "side": side,
-        "fix_tags": fix_tags,
-        "tags_used": tag_ids,
-        "rms_meaning": "per-axis RMS of corner residuals in pixels (sqrt(mean(du^2 + dv^2) / 2)), inlier samples",
-        "rms_before_px": round(solution.rms_before_px, 4),
-        "rms_after_px": round(solution.rms_after_px, 4),
-        "max_after_px": round(solution.max_after_px, 4),
+        "free": options.free,
+        "side": options.side,
+        "fix_tags": options.fix_tags,
+        "system": options.system or "all",
+        "external_moving": options.external_moving,
+        "systems_used": [b["name"] for b in blocks],
+        "tags_used": fit.tag_ids,
+    }
+    if head is not None:  # the head camera's figures at the top level, as before
+        data.update({k: head[k] for k in ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")})
+    data.update({
         "noise_model": {
-            "corner_sigma_px": round(solution.sigma_px, 4),
             "joint_sigma_rad": float(f"{solution.sigma_q:.4g}"),
-            "meaning": "per-sample residual covariance sigma_px^2 I + sigma_q^2 A A^T, A = d(pixels)/d(joint readings)",
+            "per_block_sigma": {b["name"]: b[f"noise_sigma_{b['unit']}"] for b in blocks},
+            "meaning": "per still pose and block: residual covariance sigma^2 I + sigma_q^2 A A^T, A = d(residuals)"
+            "/d(joint readings); sigma per measured number (pixel axis or metre axis)",
         },
-        "robust_loss": {"kind": "huber", "threshold_sigma": huber_k},
-        "n_samples": obs.n_samples,
-        "n_outlier_samples": int(solution.outlier_samples.sum()),
-        "n_outlier_tag_views": len(solution.outlier_views),
-        "n_corners_used": solution.n_corners,
+        "robust_loss": {"kind": "huber", "threshold_sigma": options.huber_k},
+        "n_samples": sum(b["n_samples"] for b in blocks),
+        "n_outlier_samples": sum(b["n_outlier_samples"] for b in blocks),
+        "n_outlier_tag_views": sum(b["n_outlier_views"] for b in blocks),
+        "n_corners_used": sum(b["n_units_used"] for b in blocks),
         "converged": bool(solution.converged),
-        "condition_number": float(solution.condition_number) if np.isfinite(solution.condition_number) else None,
+        "condition_number": float(u.condition_number) if np.isfinite(u.condition_number) else None,
         "parameters": [
             {
                 "name": p.name,
@@ -132,19 +184,23 @@ def result_dict(
                 "unit": p.unit,
                 "prior_sigma": p.prior_sigma,
                 "data_share": round(float(share), 4),
+                "measured_by": by,
                 "display": f"{_display(v, p.unit)} +- {_display(s, p.unit)[1:]}",
             }
-            for p, v, s, share in zip(params.parameters, solution.values, solution.std, solution.data_share)
+            for p, v, s, share, by in zip(params.parameters, solution.values, u.std, u.data_share, _measured_by(fit))
         ],
         "correlated_pairs": [
-            {"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in solution.correlated_pairs(params.names)
+            {"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in u.correlated_pairs(params.names)
         ],
-        "covariance": {"names": params.names, "matrix": np.round(solution.covariance, 15).tolist()},
+        "covariance": {"names": params.names, "matrix": np.round(u.covariance, 15).tolist()},
         "explanations": explain(params, solution),
         "warnings": warnings,
-        "samples": samples,
-        "corrections": corrections.to_dict(),
-    }
+        "blocks": blocks,
+        "external_cameras": external_camera_poses(fit),
+        "samples": head["samples"] if head is not None else blocks[0]["samples"],
+        "corrections": fit.corrections.to_dict(),
+    })  # fmt: skip
+    return data
 
 
 def plain(value):
@@ -178,11 +234,16 @@ def load_result(path: str | Path) -> dict:
 
 def summary_lines(data: dict) -> list[str]:
     """A short human summary of a result dict."""
-    lines = [
-        f"samples: {data['n_samples']} ({data['n_outlier_samples']} left out as outliers, "
-        f"{data['n_outlier_tag_views']} outlier tag view(s) in all), corners used: {data['n_corners_used']}",
-        f"reprojection RMS (per axis, inliers): {data['rms_before_px']:.3f} px before -> "
-        f"{data['rms_after_px']:.3f} px after (max {data['max_after_px']:.2f} px)",
+    lines = []
+    for b in data["blocks"]:
+        u = b["unit"]
+        lines += [
+            f"{b['name']}: {b['n_samples']} samples ({b['n_outlier_samples']} left out as outliers, "
+            f"{b['n_outlier_views']} outlier tag view(s) in all), corners used: {b['n_units_used']}",
+            f"  reprojection RMS (per axis, inliers): {b[f'rms_before_{u}']:.3f} {u} before -> "
+            f"{b[f'rms_after_{u}']:.3f} {u} after (max {b[f'max_after_{u}']:.2f} {u})",
+        ]
+    lines += [
         f"condition number (column-scaled Jacobian): {data['condition_number'] or float('inf'):.1f}",
         "parameters (value +- std, share of information from data):",
     ]

@@ -1,12 +1,11 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust trf solve -> flag outlier tag views (one tag in one sample whose whitened RMS is far above the
-others': a misdetected tag, or every tag of a sample with a stale joint reading; they get zero weight) -> estimate
-the corner noise from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
-fixed) -> rebuild the weights at the new estimate; until the outlier set and the noise level settle. Then the
-uncertainty at the solution: posterior covariance (J^T J)^-1 in prior-normalised units, so each parameter's share
-of information from the data is 1 - posterior variance / prior variance; correlated pairs; condition number of
-the column-scaled data Jacobian (calibration practice: below 100).
+Rounds: robust trf solve (analytic Jacobian) -> per block, flag outlier views (one tag in one image: its residuals,
+whitened with the covariance of that view alone so that no other view's error leaks in, far above the other
+views' and off by more than the block's floor; they get zero weight) -> per block, estimate the noise level from
+the whitened inlier residuals (the encoder noise is a known property of the servos and stays fixed) -> rebuild
+the weights at the new estimate; until the outlier sets and noise levels settle. Then `uncertainty` at the
+solution.
 """
 
 from __future__ import annotations
@@ -17,157 +16,167 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from wolfcal.fit.problem import Problem
+from wolfcal.fit.lm import levenberg_marquardt
+from wolfcal.fit.noise import GroupedWhitening
+from wolfcal.fit.problem import DENSE_LIMIT, MAD_TO_SIGMA, BlockState, Problem
+from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import rms_by
 
-# Bounds of the estimated corner noise [px]. The floor is the detector's systematic error: its corner errors of
-# 0.02-0.05 px repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of them,
-# so the residuals alone would understate it (measured: bench/bench_vision.py, tests/test_other_robot.py).
-MIN_SIGMA_PX = 0.05
-MAX_SIGMA_PX = 50.0
-CORRELATION_LIMIT = 0.9
-MAD_TO_SIGMA = 1.4826
-OUTLIER_FACTOR = 4.0
+# Bounds of a pixel block's estimated noise [px]. The floor is the detector's systematic error: its corner errors
+# of 0.02-0.05 px repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of
+# them, so the residuals alone would understate it (measured: bench/bench_vision.py, tests/test_other_robot.py).
+MIN_SIGMA = {"px": 0.05, "m": 1e-5}
+MAX_SIGMA = {"px": 50.0, "m": 0.1}
+OUTLIER_FACTOR = 4.0  # a view is an outlier when its whitened RMS exceeds this many times the median view's
+
+
+@dataclass
+class BlockResult:
+    """What one measurement block says about the fit, in its own unit."""
+
+    name: str
+    system: str
+    unit: str  # 'px' | 'm'
+    sigma: float  # noise per measured number of the final noise model [unit]
+    rms_before: float  # inlier units, per axis, nominal model [unit]
+    rms_after: float
+    max_after: float  # largest inlier unit distance [unit]
+    n_units: int  # inlier units (corners, markers)
+    sample_rms_before: np.ndarray  # (S_block,) per-axis RMS per sample [unit]
+    sample_rms_after: np.ndarray
+    outlier_views: list[tuple[int, int]]  # (sample, tag or marker id) of each view left out
+    outlier_samples: np.ndarray  # (S_block,) bool: every view of the sample was left out
 
 
 @dataclass
 class Solution:
-    values: np.ndarray  # (P,) [SI]
-    std: np.ndarray  # (P,) [SI]
-    covariance: np.ndarray  # (P, P) [SI]
-    correlation: np.ndarray  # (P, P)
-    data_share: np.ndarray  # (P,) in [0, 1]: information from the data rather than the prior
-    condition_number: float
-    sigma_px: float  # corner noise per axis of the final noise model [px]
-    sigma_q: float  # joint reading noise of the final noise model [rad]
-    sample_rms_before: np.ndarray  # (S,) [px] per-axis RMS with the nominal model
-    sample_rms_after: np.ndarray  # (S,)
-    outlier_samples: np.ndarray  # (S,) bool: every tag seen in the sample was left out
-    outlier_views: list[tuple[int, int]]  # (sample, tag id) of each tag view left out
-    rms_before_px: float  # inlier corners, per axis, nominal model
-    rms_after_px: float
-    max_after_px: float
-    n_corners: int
+    values: np.ndarray  # (P,) [SI], every unknown of the problem (chain first)
+    uncertainty: Uncertainty
+    blocks: list[BlockResult]
+    sigma_q: float  # joint reading noise of the noise model [rad]
     evaluations: int
     converged: bool
 
-    def correlated_pairs(self, names: list[str], limit: float = CORRELATION_LIMIT) -> list[tuple[str, str, float]]:
-        i, j = np.triu_indices(len(names), k=1)
-        strong = np.abs(self.correlation[i, j]) > limit
-        pairs = [(names[a], names[b], float(self.correlation[a, b])) for a, b in zip(i[strong], j[strong])]
-        return sorted(pairs, key=lambda p: -abs(p[2]))
+    @property
+    def std(self) -> np.ndarray:
+        return self.uncertainty.std
 
 
-def flag_outliers(problem: Problem, z: np.ndarray, floor_px: float) -> np.ndarray:
-    """(V,) views (one tag in one sample) that the noise model explains far worse than the others (whitened RMS
-    above 4x the median) and that are off by more than `floor_px` in pixels."""
-    n_views = len(problem.view_sample)
-    r = problem.pixel_residuals(z)
-    t = rms_by(problem.view_of_corner, problem.whiten(r).reshape(-1, 2), n_views)
-    pixels = rms_by(problem.view_of_corner, r, n_views)
-    median = np.median(t)
-    return (t > OUTLIER_FACTOR * median) & (pixels > floor_px)
+def view_rms(state: BlockState, residual: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
+    block = state.block
+    views = [state.rows_of(np.flatnonzero(block.view_of_unit == v)) for v in range(block.n_views)]
+    w = GroupedWhitening(views, A.reshape(-1, A.shape[-1]), state.sigma_q)
+    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / np.maximum([len(v) for v in views], 1))
 
 
-def residual_scale(problem: Problem, residuals_px: np.ndarray) -> float:
+def flag_outliers(state: BlockState, residual: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """(V,) views the noise model explains far worse than the others and that are off by more than the floor."""
+    block = state.block
+    t = view_rms(state, residual, A)
+    size = rms_by(block.view_of_unit, residual, block.n_views) if block.dim == 2 else np.sqrt(
+        np.bincount(block.view_of_unit, np.sum(residual**2, axis=1), block.n_views)
+        / np.maximum(np.bincount(block.view_of_unit, minlength=block.n_views) * block.dim, 1)
+    )
+    return (t > OUTLIER_FACTOR * np.median(t)) & (size > block.outlier_floor)
+
+
+def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
     """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
     freedom the free parameters take."""
-    w = problem.whiten(residuals_px)[np.repeat(problem.inlier_corners, 2)]
-    n_params = len(problem.params)
+    w = state.whitening.whitened(residual.ravel(), sigma)
     if w.size <= n_params:
         return 1.0
     return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
 
 
-def estimate_pixel_noise(problem: Problem, z: np.ndarray) -> float:
-    """Set sigma_px so that the whitened inlier residuals have unit scale, holding the encoder noise (a known
-    property of the servos) fixed; bisection on log(sigma_px). Returns the residual scale reached."""
-    r = problem.pixel_residuals(z)  # z is fixed: only the weights change during the search
-    lo, hi = np.log(MIN_SIGMA_PX), np.log(MAX_SIGMA_PX)
-    for _ in range(14):
-        problem.set_noise(float(np.exp(0.5 * (lo + hi))))
-        if residual_scale(problem, r) > 1.0:
-            lo = np.log(problem.sigma_px)
+def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float) -> float:
+    """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log);
+    returns the residual scale reached."""
+    lo, hi = np.log(MIN_SIGMA[state.block.unit]), np.log(MAX_SIGMA[state.block.unit])
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if residual_scale(state, residual, float(np.exp(mid)), n_params) > 1.0:
+            lo = mid
         else:
-            hi = np.log(problem.sigma_px)
-    problem.set_noise(float(np.exp(hi)))
-    return residual_scale(problem, r)
+            hi = mid
+    state.set_sigma(float(np.exp(hi)))
+    return residual_scale(state, residual, state.sigma, n_params)
 
 
-def central_jacobian(fun: Callable[[np.ndarray], np.ndarray], z: np.ndarray, step: float = 1e-6) -> np.ndarray:
-    columns = []
-    for i in range(len(z)):
-        dz = np.zeros_like(z)
-        dz[i] = step
-        columns.append((fun(z + dz) - fun(z - dz)) / (2 * step))
-    return np.stack(columns, axis=1)
+def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> BlockResult:
+    block = state.block
+    inlier = state.inlier_units
+    n_samples = len(block.q_measured)
+    view_sample = np.array([s for s, _ in block.view_labels], dtype=int)
+
+    def per_sample(r: np.ndarray) -> np.ndarray:
+        sq = np.bincount(block.sample_of_unit, np.sum(r**2, axis=1), n_samples)
+        count = np.bincount(block.sample_of_unit, minlength=n_samples) * block.dim
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.sqrt(sq / count)
+
+    def rms(r: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(r[inlier] ** 2))) if inlier.any() else float("nan")
+
+    return BlockResult(
+        name=block.name, system=block.system, unit=block.unit, sigma=state.sigma,
+        rms_before=rms(before), rms_after=rms(after),
+        max_after=float(np.max(np.linalg.norm(after[inlier], axis=1))) if inlier.any() else 0.0,
+        n_units=int(inlier.sum()),
+        sample_rms_before=per_sample(before), sample_rms_after=per_sample(after),
+        outlier_views=[block.view_labels[v] for v in np.flatnonzero(state.excluded)],
+        outlier_samples=np.bincount(view_sample[~state.excluded], minlength=n_samples) == 0,
+    )  # fmt: skip
 
 
-def solve(
-    problem: Problem,
-    outlier_floor_px: float = 1.0,
-    max_rounds: int = 5,
-    progress: Callable[[str], None] | None = None,
-) -> Solution:
+def minimize(problem: Problem, z: np.ndarray):
+    """Robust least squares from z: Levenberg-Marquardt on the normal equations for a dense problem, scipy's
+    trf with LSMR when the blocks bring many unknowns (a sparse Jacobian)."""
+    if len(problem.params) <= DENSE_LIMIT:
+        return levenberg_marquardt(problem.residuals, problem.jacobian, z)
+    return least_squares(problem.residuals, z, jac=problem.jacobian, method="trf", tr_solver="lsmr", x_scale=1.0)
+
+
+def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
     say = progress or (lambda _msg: None)
     n_params = len(problem.params)
     z = np.zeros(n_params)
-    r_before = problem.pixel_residuals(z)
-    rms_before_samples = problem.obs.per_sample_rms(r_before)
+    before = [r.copy() for r in problem.raw_residuals(z)]
+    rows_total = sum(r.size for r in before)
     evaluations, converged = 0, False
     for round_index in range(max_rounds):
-        result = least_squares(problem.residuals, z, method="trf", x_scale=1.0, max_nfev=100 * (n_params + 1))
+        result = minimize(problem, z)
         z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
+        changed, settled = False, True
+        lins = problem.evaluate(z)
+        for state, lin in zip(problem.states, lins):
+            outliers = flag_outliers(state, lin.residual, lin.joint_sensitivity)
+            changed |= not np.array_equal(outliers, state.excluded)
+            state.excluded = outliers
         problem.linearize(z)
-        outliers = flag_outliers(problem, z, outlier_floor_px)
-        changed = not np.array_equal(outliers, problem.excluded)
-        problem.exclude(outliers)
-        previous = problem.sigma_px
-        scale = estimate_pixel_noise(problem, z)
-        say(
-            f"round {round_index + 1}: {int(outliers.sum())} outlier tag view(s), noise model "
-            f"{problem.sigma_px:.3f} px per corner + {problem.sigma_q * 1000:.3f} mrad per joint "
-            f"(residual scale {scale:.2f})"
-        )
-        if not changed and abs(problem.sigma_px / previous - 1.0) < 0.1:
-            break  # the last solve used (nearly) this noise model and inlier set
+        notes = []
+        for state, lin in zip(problem.states, lins):
+            previous = state.sigma
+            share = n_params * lin.residual.size / rows_total
+            scale = estimate_noise(state, lin.residual, share)
+            settled &= abs(state.sigma / previous - 1.0) < 0.1
+            notes.append(
+                f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
+                f"{state.block.unit} (scale {scale:.2f})"
+            )
+        say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
+        if not changed and settled:
+            break
     else:
-        result = least_squares(problem.residuals, z, method="trf", x_scale=1.0)
+        result = minimize(problem, z)
         z, evaluations = result.x, evaluations + result.nfev
-    J = central_jacobian(problem.residuals, z)
-    n_data = J.shape[0] - n_params
-    cov_z = np.linalg.pinv(J.T @ J)
-    d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
-    sig = problem.params.prior_sigmas
-    J_data = J[:n_data]
-    norms = np.linalg.norm(J_data, axis=0)
-    if np.any(norms < 1e-12):
-        condition = float("inf")
-    else:
-        s = np.linalg.svd(J_data / norms, compute_uv=False)
-        condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    inlier = problem.inlier_corners
-    kept_views = np.bincount(problem.view_sample[~problem.excluded], minlength=problem.obs.n_samples)
-    r_after = problem.pixel_residuals(z)
+    after = problem.raw_residuals(z)
     return Solution(
-        values=z * sig,
-        std=d * sig,
-        covariance=cov_z * np.outer(sig, sig),
-        correlation=cov_z / np.outer(d, d),
-        data_share=np.clip(1.0 - np.diag(cov_z), 0.0, 1.0),
-        condition_number=condition,
-        sigma_px=problem.sigma_px,
+        values=problem.values(z),
+        uncertainty=uncertainty(problem.data_jacobian(z), problem.params.prior_sigmas),
+        blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
-        sample_rms_before=rms_before_samples,
-        sample_rms_after=problem.obs.per_sample_rms(r_after),
-        outlier_samples=kept_views == 0,
-        outlier_views=[
-            (int(s), int(t)) for s, t in zip(problem.view_sample[problem.excluded], problem.view_tag[problem.excluded])
-        ],
-        rms_before_px=float(np.sqrt(np.mean(r_before[inlier] ** 2))),
-        rms_after_px=float(np.sqrt(np.mean(r_after[inlier] ** 2))),
-        max_after_px=float(np.max(np.abs(r_after[inlier]))) if inlier.any() else 0.0,
-        n_corners=int(inlier.sum()),
         evaluations=evaluations,
         converged=converged and result.status > 0,
     )

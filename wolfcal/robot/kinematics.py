@@ -22,6 +22,15 @@ from wolfcal.robot.corrections import Corrections
 ACTUATED_TYPES = ("revolute", "continuous", "prismatic")
 
 
+@dataclass
+class Walk:
+    """The poses one forward-kinematics pass visits, all in the root frame (N, 4, 4) [m]."""
+
+    T_root_link: dict[str, np.ndarray]  # every link on the walked paths
+    T_root_origin: dict[str, np.ndarray]  # per walked joint: its <origin> frame, before the frame correction
+    T_root_frame: dict[str, np.ndarray]  # per walked joint: after the frame correction, before the joint's motion
+
+
 @dataclass(frozen=True)
 class JointModel:
     name: str
@@ -144,54 +153,49 @@ class KinematicModel:
         base: str | None = None,
     ) -> dict[str, np.ndarray]:
         """T_base_link (N, 4, 4) for each requested link, from measured joint values q (N, J) [rad or m]."""
+        links = list(links)
+        base = base or self.root
+        walk = self.walk(q, links + [base], corrections)
+        T_root_base = walk.T_root_link[base]
+        if base == self.root:
+            return {link: walk.T_root_link[link] for link in links}
+        T_base_root = invert_transform(T_root_base)
+        return {link: T_base_root @ walk.T_root_link[link] for link in links}
+
+    def walk(self, q: np.ndarray, links: Iterable[str], corrections: Corrections | None = None) -> Walk:
+        """One forward-kinematics pass from the root to `links`: every link pose on the way, T_root_link
+        (N, 4, 4), and every joint's frame before and after its frame correction (see `Walk`)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         if q.shape[1] != len(self.actuated_joint_names):
             raise ValueError(f"q has {q.shape[1]} columns, the model has {len(self.actuated_joint_names)} joints")
         corrections = corrections or Corrections()
         offsets = corrections.offset_vector(self.actuated_joint_names)
         n = q.shape[0]
-        links = list(links)
-        base = base or self.root
-        cache: dict[str, np.ndarray] = {self.root: np.broadcast_to(np.eye(4), (n, 4, 4))}
-
-        def pose(link: str) -> np.ndarray:
-            if link in cache:
-                return cache[link]
-            for joint in self.path_from_root(link):
-                if joint.child in cache:
-                    continue
-                T = cache[joint.parent] @ self._joint_transform(joint, q, offsets, corrections)
-                cache[joint.child] = T
-            return cache[link]
-
-        T_root_base = pose(base)
-        T_base_root = None if base == self.root else invert_transform(T_root_base)
-        out = {}
+        walk = Walk({self.root: np.broadcast_to(np.eye(4), (n, 4, 4))}, {}, {})
         for link in links:
-            T = pose(link)
-            out[link] = T if T_base_root is None else T_base_root @ T
-        return out
+            for joint in self.path_from_root(link):
+                if joint.child in walk.T_root_link:
+                    continue
+                T_root_origin = walk.T_root_link[joint.parent] @ joint.T_parent_origin
+                delta = corrections.frames.get(joint.name)
+                T_root_frame = T_root_origin if delta is None else T_root_origin @ transform_from_twist_params(delta)
+                walk.T_root_origin[joint.name] = T_root_origin
+                walk.T_root_frame[joint.name] = T_root_frame
+                if joint.actuated or joint.mimic is not None:
+                    T_root_frame = T_root_frame @ self._motion(joint, self.joint_values(joint, q, offsets))
+                walk.T_root_link[joint.child] = T_root_frame
+        return walk
 
-    def _joint_transform(
-        self, joint: JointModel, q: np.ndarray, offsets: np.ndarray, corrections: Corrections
-    ) -> np.ndarray:
-        """T_parent_child (N, 4, 4) of one joint for all samples."""
-        origin = joint.T_parent_origin
-        delta = corrections.frames.get(joint.name)
-        if delta is not None:
-            origin = origin @ transform_from_twist_params(delta)
-        if not joint.actuated and joint.mimic is None:
-            return np.broadcast_to(origin, (q.shape[0], 4, 4))
-        values = self.joint_values(joint, q, offsets)
-        out = np.zeros((q.shape[0], 4, 4))
+    @staticmethod
+    def _motion(joint: JointModel, values: np.ndarray) -> np.ndarray:
+        """(N, 4, 4) motion of a joint by `values` (N,) about/along its axis, in the joint frame."""
+        out = np.zeros((len(values), 4, 4))
         out[:, 3, 3] = 1.0
         if joint.type == "prismatic":
-            out[:, :3, :3] = origin[:3, :3]
-            out[:, :3, 3] = origin[:3, 3] + values[:, None] * (origin[:3, :3] @ joint.axis)
+            out[:, :3, :3] = np.eye(3)
+            out[:, :3, 3] = values[:, None] * joint.axis
             return out
         # Rodrigues with the fixed unit axis: R = I + sin(q) K + (1 - cos(q)) K^2.
         K = skew(joint.axis)
-        R = np.eye(3) + np.sin(values)[:, None, None] * K + (1.0 - np.cos(values))[:, None, None] * (K @ K)
-        out[:, :3, :3] = origin[:3, :3] @ R
-        out[:, :3, 3] = origin[:3, 3]
+        out[:, :3, :3] = np.eye(3) + np.sin(values)[:, None, None] * K + (1.0 - np.cos(values))[:, None, None] * (K @ K)
         return out

@@ -23,11 +23,17 @@ SIDES = ("right", "left", "both")
 @dataclass(frozen=True)
 class Parameter:
     name: str
-    kind: str  # 'offset' | 'frame' | 'tag'
-    target: str  # joint name, or tag id as text
+    kind: str  # 'offset' | 'frame' | 'tag' (chain parameters) | 'pose' (a measurement block's own unknown)
+    target: str  # joint name, tag id as text, or the block's name for its unknowns (e.g. 'tripod@1')
     component: int  # index in (x, y, z, rx, ry, rz); 0 for offsets
     unit: str  # 'rad' | 'm'
-    prior_sigma: float  # standard deviation of the Gaussian prior around 0, in `unit`
+    prior_sigma: float  # standard deviation of the Gaussian prior around `reference`, in `unit`
+    reference: float = 0.0  # prior mean and starting value (0: the nominal model) [unit]
+
+    @property
+    def in_chain(self) -> bool:
+        """Whether the parameter changes the robot model (rather than a measurement block's own unknowns)."""
+        return self.kind in ("offset", "frame", "tag")
 
 
 class ParameterSet:
@@ -37,14 +43,24 @@ class ParameterSet:
         self.parameters = parameters
         self.names = [p.name for p in parameters]
         self.prior_sigmas = np.array([p.prior_sigma for p in parameters], dtype=float)
+        self.references = np.array([p.reference for p in parameters], dtype=float)
 
     def __len__(self) -> int:
         return len(self.parameters)
+
+    def __add__(self, other: ParameterSet) -> ParameterSet:
+        return ParameterSet(self.parameters + other.parameters)
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        """Parameter values [SI] from prior-normalised unknowns z = (value - reference) / prior_sigma."""
+        return self.references + np.asarray(z, dtype=float) * self.prior_sigmas
 
     def corrections(self, values: np.ndarray) -> Corrections:
         """The corrections these parameter values [SI] stand for."""
         out = Corrections()
         for p, value in zip(self.parameters, np.asarray(values, dtype=float)):
+            if not p.in_chain:
+                continue
             if p.kind == "offset":
                 out.offsets[p.target] = out.offsets.get(p.target, 0.0) + float(value)
             else:
@@ -58,7 +74,9 @@ class ParameterSet:
         """The parameter values a `Corrections` object holds (e.g. a simulator's truth) [SI]."""
         values = []
         for p in self.parameters:
-            if p.kind == "offset":
+            if not p.in_chain:
+                values.append(p.reference)
+            elif p.kind == "offset":
                 values.append(corrections.offsets.get(p.target, 0.0))
             else:
                 store = corrections.frames if p.kind == "frame" else corrections.tags
@@ -94,24 +112,29 @@ def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side
 
 
 def build_parameter_set(
-    robot: Robot, preset: str, tag_ids: list[int], side: str = "both", fix_tags: bool = False
+    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False
 ) -> ParameterSet:
-    """Free parameters of a preset for the tags used.
+    """Free chain parameters of a preset for the tags each camera ('head' or an external camera's name) uses.
 
-    camera: camera frame correction + mounts of the tags used; head_camera: + offsets of the joints between base
-    and camera; leg: + offsets of the joints between base and each used tag's link (the chain camera -> tag).
+    With the head camera: camera = its frame correction + the mounts of the tags used; head_camera = + offsets of
+    the joints between base and camera; leg = + offsets of the joints between base and each used tag's link (the
+    chain camera -> tag). With an external camera, leg frees the offsets of the joints between the base and the
+    links of the tags it sees (the torso-to-foot chains) and those tags' mounts (the torso tag's too).
     """
     check_preset(preset, side)
     priors = robot.config.priors
-    camera_joint = robot.camera_joint
-    params = frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation, priors.camera_rotation)
-    links = []
-    if preset in ("head_camera", "leg"):
-        links.append(robot.config.camera.frame)
+    params: list[Parameter] = []
+    links: list[str] = []
+    if "head" in tags_by_camera:
+        camera_joint = robot.camera_joint
+        params += frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation,
+                                   priors.camera_rotation)  # fmt: skip
+        if preset in ("head_camera", "leg"):
+            links.append(robot.config.camera.frame)
     if preset == "leg":
-        links += [robot.config.tag(tag_id).link for tag_id in tag_ids]
+        links += [robot.config.tag(t).link for tags in tags_by_camera.values() for t in tags]
     params += [offset_parameter(joint, priors.offset) for joint in robot.actuated_joints_to(links)]
     if not fix_tags:
-        for tag_id in tag_ids:
+        for tag_id in sorted({t for tags in tags_by_camera.values() for t in tags}):
             params += frame_parameters(f"tag{tag_id}", "tag", str(tag_id), priors.tag_translation, priors.tag_rotation)
     return ParameterSet(params)

@@ -37,6 +37,10 @@ class Robot:
                     joints.append(joint.name)
         return tuple(joints)
 
+    def fixed_to_base(self, link: str) -> bool:
+        """Whether no actuated joint lies between the base link and `link` (e.g. the torso)."""
+        return not self.actuated_joints_to([link])
+
     def camera_and_leg_joints(self, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
         """The actuated joints between base and camera, then those between base and each tag of the given sides:
         the joints whose encoder offsets a camera-to-foot calibration can see."""

@@ -9,20 +9,29 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
-from wolfcal.observations import Observations
+from wolfcal.geometry import invert_transform
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
 
 
-def synthetic_observations(
-    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, visible: np.ndarray,
-    noise_px: float, rng: np.random.Generator,
-) -> Observations:
-    """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids) seen at the true kinematics."""
-    tag_ids = robot.config.tag_ids
+def true_base_tag_poses(robot: Robot, truth: Corrections, q_true: np.ndarray, tag_ids: list[int]) -> np.ndarray:
+    """T_base_tag (N, T, 4, 4) of the tags at true joint angles (N, J), with the true frame and mount errors."""
     frames = Corrections(frames=truth.frames, tags=truth.tags)
-    _, T_camera_tag = robot.camera_and_tag_poses(q_true, tag_ids, frames)
+    links = [robot.config.tag(t).link for t in tag_ids]
+    poses = robot.model.link_poses(q_true, links, frames, base=robot.config.base_link)
+    return np.stack([poses[link] @ robot.T_link_tag(t, frames) for t, link in zip(tag_ids, links)], axis=1)
+
+
+def observations_from_poses(
+    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, T_camera_tag: np.ndarray,
+    visible: np.ndarray, noise_px: float, rng: np.random.Generator, camera_name: str = HEAD_CAMERA,
+    sources: list[str] | None = None,
+) -> Observations:
+    """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids, poses T_camera_tag (N, T, 4, 4))
+    with Gaussian pixel noise [px], and the encoder readings a real robot would report."""
+    tag_ids = robot.config.tag_ids
     s_idx, t_idx = np.nonzero(visible)
     corners = np.stack([tag_corners(robot.config.tag(t).size) for t in tag_ids])  # (T, 4, 3)
     T = T_camera_tag[s_idx, t_idx]  # (V, 4, 4)
@@ -33,10 +42,29 @@ def synthetic_observations(
         joint_names=list(robot.joint_names),
         q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
         stamps_ns=np.arange(n, dtype=np.int64),
-        sources=["synthetic"] * n,
+        sources=sources or ["synthetic"] * n,
         camera=camera,
         sample_index=np.repeat(s_idx, 4),
         tag_ids=np.repeat(np.array(tag_ids)[t_idx], 4),
         corner_index=np.tile(np.arange(4), len(s_idx)),
         uv=uv.reshape(-1, 2),
+        camera_name=camera_name,
     )
+
+
+def synthetic_observations(
+    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, visible: np.ndarray,
+    noise_px: float, rng: np.random.Generator,
+) -> Observations:
+    """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids) seen by the head camera."""
+    frames = Corrections(frames=truth.frames, tags=truth.tags)
+    _, T_camera_tag = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, frames)
+    return observations_from_poses(robot, camera, truth, q_true, T_camera_tag, visible, noise_px, rng)
+
+
+def external_tag_poses(
+    robot: Robot, truth: Corrections, q_true: np.ndarray, T_base_camera: np.ndarray
+) -> np.ndarray:
+    """T_camera_tag (N, T, 4, 4) of every configured tag seen by an external camera at T_base_camera (4, 4)."""
+    T_base_tag = true_base_tag_poses(robot, truth, q_true, robot.config.tag_ids)
+    return invert_transform(T_base_camera) @ T_base_tag

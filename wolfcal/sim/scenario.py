@@ -7,11 +7,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.observations import synthetic_observations
-from wolfcal.sim.poses import random_visible_poses
+from wolfcal.sim.observations import external_tag_poses, observations_from_poses, synthetic_observations
+from wolfcal.sim.placement import random_tripod_placement, visible_tags
+from wolfcal.sim.poses import random_visible_poses, sampling_bounds
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
 
@@ -41,3 +43,53 @@ def synthetic_scenario(
     outliers[rng.choice(n, size=int(round(outlier_fraction * n)), replace=False)] = True
     obs.q_measured[outliers] += rng.normal(0.0, 0.04, size=(int(outliers.sum()), obs.q_measured.shape[1]))
     return Scenario(obs, truth, q_true, outliers)
+
+
+@dataclass
+class ExternalScenario:
+    obs: Observations  # the external camera's corners, samples of every placement in order
+    truth: Corrections
+    q_true: np.ndarray  # (S, J) [rad]
+    T_base_camera: list[np.ndarray]  # true pose of each placement (4, 4)
+
+
+def synthetic_external_scenario(
+    robot: Robot, camera: CameraModel, n: int, seed: int, offsets: str = "legs", noise_px: float = 0.15,
+    placements: int = 1, camera_name: str = "tripod",
+) -> ExternalScenario:
+    """n samples (split evenly over `placements` tripod placements, one capture file each) in which an external
+    camera sees a tag fixed to the base and at least one other tag; legs move, the base stays fixed."""
+    rng = np.random.default_rng(seed)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
+    fixed = np.array([robot.fixed_to_base(t.link) for t in robot.config.tags])
+    sizes = np.array([t.size for t in robot.config.tags])
+    lo, hi = sampling_bounds(robot)
+    qs, poses, visibility, sources, cameras = [], [], [], [], []
+    for k in range(placements):
+        count = n // placements + (1 if k < n % placements else 0)
+        for _ in range(50):
+            T_base_camera = random_tripod_placement(rng)
+            kept_q, kept_v, kept_T = [], [], []
+            for _ in range(20):
+                q = rng.uniform(lo, hi, size=(2000, len(lo)))
+                T_camera_tag = external_tag_poses(robot, truth, q, T_base_camera)
+                vis = visible_tags(camera, T_camera_tag, sizes, 0.03 * camera.width, 0.015 * camera.width)
+                good = np.any(vis & fixed, axis=1) & np.any(vis & ~fixed, axis=1)
+                kept_q.append(q[good])
+                kept_v.append(vis[good])
+                kept_T.append(T_camera_tag[good])
+                if sum(len(x) for x in kept_q) >= count:
+                    break
+            if sum(len(x) for x in kept_q) >= count:
+                break
+        else:
+            raise WolfcalError(f"no tripod placement sees the torso tag and a foot tag of {robot.config.path}")
+        qs.append(np.concatenate(kept_q)[:count])
+        visibility.append(np.concatenate(kept_v)[:count])
+        poses.append(np.concatenate(kept_T)[:count])
+        sources += [f"placement{k + 1}.mcap"] * count
+        cameras.append(T_base_camera)
+    q_true = np.concatenate(qs)
+    obs = observations_from_poses(robot, camera, truth, q_true, np.concatenate(poses), np.concatenate(visibility),
+                                  noise_px, rng, camera_name, sources)  # fmt: skip
+    return ExternalScenario(obs, truth, q_true, cameras)

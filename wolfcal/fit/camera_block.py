@@ -1,0 +1,193 @@
+"""Camera blocks: tag corners seen by the head camera or by an external camera, in pixels.
+
+Residual per corner: project(K, D, p_camera) - u_detected [px], p_camera the corner in the camera's optical frame:
+- head camera: T_camera_tag = T_root_camera^-1 @ T_root_tag(q + offsets), both through the robot's chain;
+- external camera: T_camera_tag = T_base_camera^-1 @ T_base_tag(q + offsets), with T_base_camera an unknown of the
+  block: one per placement (capture file) or one per sample (a moving camera), as Trans(x, y, z) @ Exp(rx, ry, rz)
+  [m, rad], named `<camera>.x ...` (or `<camera>@<n>.x ...`), started from PnP of the tags it sees.
+Derivatives are analytic (`wolfcal.robot.derivatives`) except d(pixel)/d(point), a 3-point central difference of
+the camera model per corner.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from wolfcal.errors import WolfcalError
+from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.geometry import (
+    exp_so3,
+    invert_transform,
+    log_so3,
+    right_jacobian_so3,
+    skew,
+    transform_from_twist_params,
+)
+from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.projection import BEHIND_CAMERA_PX
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.derivatives import ChainDerivatives, point_motion, tag_key
+from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
+from wolfcal.robot.robot import Robot
+from wolfcal.vision.tags import tag_corners
+
+OUTLIER_FLOOR_PX = 0.5  # a tag view is left out only if also off by more than this [px]
+POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
+POSE_PRIOR_RAD = 1.0  # [rad]
+
+
+def pixel_jacobian(camera, p_camera: np.ndarray) -> np.ndarray:
+    """(M, 2, 3) d(pixel)/d(point in the optical frame) by central differences [px/m]."""
+    h = 1e-6 * np.maximum(np.abs(p_camera[:, 2]), 1e-3)
+    out = np.empty((len(p_camera), 2, 3))
+    for k in range(3):
+        step = np.zeros_like(p_camera)
+        step[:, k] = h
+        out[:, :, k] = (camera.project(p_camera + step) - camera.project(p_camera - step)) / (2 * h[:, None])
+    return out
+
+
+class CameraBlock(Block):
+    """Corners of the tags one camera saw; see the module docstring."""
+
+    unit, dim = "px", 2
+    outlier_floor = OUTLIER_FLOOR_PX
+
+    def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
+                 placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None) -> None:
+        self.robot, self.obs, self.tag_ids, self.external = robot, obs, list(tag_ids), external
+        self.camera_name = obs.camera_name
+        self.system = "external" if external else "head"
+        self.name = f"external camera {self.camera_name}" if external else "head camera"
+        column = {t: i for i, t in enumerate(self.tag_ids)}
+        self.tag_col = np.array([column[int(t)] for t in obs.tag_ids], dtype=int)
+        corners = np.stack([tag_corners(robot.config.tag(t).size) for t in self.tag_ids])
+        self.p_tag = corners[self.tag_col, obs.corner_index]  # (M, 3) corner in its tag frame [m]
+        self.sample_of_unit = obs.sample_index
+        self.q_measured = obs.q_measured
+        views, view_of_unit = np.unique(np.stack([obs.sample_index, obs.tag_ids], axis=1), axis=0, return_inverse=True)
+        self.view_of_unit = view_of_unit.ravel()
+        self.view_labels = [(int(s), int(t)) for s, t in views]
+        if external:
+            self.viewer = robot.config.base_link
+            self.placement_of_sample = np.asarray(placement_of_sample, dtype=int)
+            self.nuisance = self._pose_parameters(placement_names or [self.camera_name])
+        else:
+            self.viewer = robot.config.camera.frame
+            self.placement_of_sample = None
+            self.nuisance = ParameterSet([])
+
+    # --- the external camera's pose ----------------------------------------------------------------------------
+    def _pose_parameters(self, names: list[str]) -> ParameterSet:
+        init = initial_camera_poses(self.robot, self.obs, self.placement_of_sample, len(names))
+        params = []
+        for k, name in enumerate(names):
+            values = np.concatenate([init[k][:3, 3], log_so3(init[k][:3, :3])])
+            params += [
+                Parameter(f"{name}.{c}", "pose", name, i, "m" if i < 3 else "rad",
+                          POSE_PRIOR_M if i < 3 else POSE_PRIOR_RAD, float(values[i]))
+                for i, c in enumerate(COMPONENTS)
+            ]
+        return ParameterSet(params)
+
+    # --- predictions and derivatives ---------------------------------------------------------------------------
+    def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
+        corrections: Corrections = chain.corrections(chain_values)
+        d = ChainDerivatives(self.robot, self.q_measured, corrections, chain, [self.viewer], self.tag_ids)
+        s, t = self.sample_of_unit, self.tag_col
+        keys = [tag_key(tag) for tag in self.tag_ids]
+        T_root_tag = np.stack([d.T_root[k] for k in keys])[t, s]  # (M, 4, 4)
+        p_root = np.einsum("mij,mj->mi", T_root_tag[:, :3, :3], self.p_tag) + T_root_tag[:, :3, 3]
+        dp_p = point_motion(np.stack([d.twist_p(k) for k in keys])[t, s] - d.twist_p(self.viewer)[s], p_root)
+        dp_q = point_motion(np.stack([d.twist_q(k) for k in keys])[t, s] - d.twist_q(self.viewer)[s], p_root)
+        T_root_viewer = d.T_root[self.viewer][s]
+        R_viewer_root = np.swapaxes(T_root_viewer[:, :3, :3], 1, 2)
+        p_view = np.einsum("mij,mj->mi", R_viewer_root, p_root - T_root_viewer[:, :3, 3])
+        dp_p, dp_q = R_viewer_root @ dp_p, R_viewer_root @ dp_q
+        jac_local = local_cols = None
+        if self.external:
+            p_view, dp_p, dp_q, jac_local, local_cols = self._through_camera_pose(local_values, p_view, dp_p, dp_q)
+        camera = self.obs.camera
+        uv = camera.project(p_view)
+        D = pixel_jacobian(camera, p_view)
+        residual = uv - self.obs.uv
+        bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
+        residual[bad] = BEHIND_CAMERA_PX
+        D[bad] = 0.0
+        return Linearization(
+            residual=residual,
+            jac_chain=D @ dp_p,
+            jac_local=None if jac_local is None else D @ jac_local,
+            local_cols=local_cols,
+            joint_sensitivity=D @ dp_q,
+        )
+
+    def _through_camera_pose(self, pose_values: np.ndarray, p_base, dp_p, dp_q):
+        """Points, derivatives and pose derivatives in the external camera's frame from those in the base frame."""
+        k = self.placement_of_sample[self.sample_of_unit]  # (M,) placement of each corner
+        pose = pose_values.reshape(-1, 6)[k]  # (M, 6) T_base_camera as (x, y, z, rx, ry, rz)
+        R_camera_base = np.swapaxes(exp_so3(pose[:, 3:]), 1, 2)
+        p_camera = np.einsum("mij,mj->mi", R_camera_base, p_base - pose[:, :3])
+        jac_local = np.concatenate([-R_camera_base, skew(p_camera) @ right_jacobian_so3(pose[:, 3:])], axis=2)
+        local_cols = 6 * k[:, None] + np.arange(6)
+        return p_camera, R_camera_base @ dp_p, R_camera_base @ dp_q, jac_local, local_cols
+
+
+def _pnp(camera, uv: np.ndarray, size: float) -> np.ndarray | None:
+    """T_camera_tag (4, 4) from the four corners of one tag (IPPE square on undistorted points), or None."""
+    xy = camera.undistort_normalized(camera.pixels_to_normalized(uv))
+    ok, rvec, tvec = cv2.solvePnP(tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None,
+                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        return None
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.ravel()
+    return T
+
+
+def initial_camera_poses(
+    robot: Robot, obs: Observations, placement_of_sample: np.ndarray, n_placements: int
+) -> list[np.ndarray]:
+    """T_base_camera (4, 4) per placement from PnP of the tags on links fixed to the base (e.g. the torso tag),
+    median over the placement's views; a clear error for a placement in which no such tag was seen."""
+    fixed = [t for t in obs.observed_tag_ids if robot.fixed_to_base(robot.config.tag(t).link)]
+    base_tag = {t: robot.model.link_poses(np.zeros((1, len(robot.joint_names))), [robot.config.tag(t).link],
+                                          base=robot.config.base_link)[robot.config.tag(t).link][0]
+                @ robot.T_link_tag(t) for t in fixed}
+    poses = []
+    for k in range(n_placements):
+        candidates = []
+        for s in np.flatnonzero(placement_of_sample == k):
+            for t in fixed:
+                rows = np.flatnonzero((obs.sample_index == s) & (obs.tag_ids == t))
+                if len(rows) != 4:
+                    continue
+                rows = rows[np.argsort(obs.corner_index[rows])]
+                T_camera_tag = _pnp(obs.camera, obs.uv[rows], robot.config.tag(t).size)
+                if T_camera_tag is not None:
+                    candidates.append(base_tag[t] @ invert_transform(T_camera_tag))
+        if not candidates:
+            sources = sorted({obs.sources[s] for s in np.flatnonzero(placement_of_sample == k)})
+            fixed_ids = [tg.id for tg in robot.config.tags if robot.fixed_to_base(tg.link)]
+            raise WolfcalError(
+                f"{', '.join(sources)}: external camera '{obs.camera_name}' never saw a tag fixed to the base link "
+                f"({'tag ' + ', '.join(map(str, fixed_ids)) if fixed_ids else 'none is configured'}) in this "
+                "placement, so its pose cannot be found; capture poses in which the torso tag is in view"
+            )
+        stack = np.stack(candidates)
+        t_med = np.median(stack[:, :3, 3], axis=0)
+        best = int(np.argmin(np.linalg.norm(stack[:, :3, 3] - t_med, axis=1)))
+        T = stack[best].copy()
+        T[:3, 3] = t_med
+        poses.append(T)
+    return poses
+
+
+def camera_pose(values: np.ndarray) -> np.ndarray:
+    """T_base_camera (4, 4) from the six pose values (x, y, z, rx, ry, rz) [m, rad]."""
+    return transform_from_twist_params(np.asarray(values, dtype=float))
+
+
+__all__ = ["CameraBlock", "HEAD_CAMERA", "camera_pose", "initial_camera_poses", "pixel_jacobian"]

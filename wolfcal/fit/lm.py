@@ -1,0 +1,69 @@
+"""Levenberg-Marquardt on the normal equations, for problems with few unknowns and many residuals.
+
+scipy's trf decomposes the whole (R, P) Jacobian by SVD at every step; with R in the thousands and P in the tens
+that dominates a fit. Here each step solves the (P, P) damped normal equations (J^T J + mu diag(J^T J)) dz = -J^T r
+(Marquardt's scaling, Nielsen's damping update). Residuals and Jacobian come from the caller (`Problem`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class LMResult:
+    x: np.ndarray
+    cost: float  # 0.5 * sum of squared residuals at x
+    nfev: int
+    status: int  # > 0 converged (1: small step, 2: small cost change, 3: small gradient), 0: iteration limit
+
+
+def levenberg_marquardt(
+    fun: Callable[[np.ndarray], np.ndarray],
+    jac: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+    max_iterations: int = 200,
+    xtol: float = 1e-8,
+    ftol: float = 1e-8,
+    gtol: float = 1e-8,
+) -> LMResult:
+    """Minimise 0.5 * |fun(x)|^2 with a dense Jacobian jac(x) (R, P)."""
+    x = np.asarray(x0, dtype=float).copy()
+    r = fun(x)
+    cost, nfev = float(r @ r), 1
+    J = jac(x)
+    H, g = J.T @ J, J.T @ r
+    scale = np.maximum(np.diag(H), 1e-12)
+    mu, nu = 1e-4, 2.0
+    for _ in range(max_iterations):
+        if np.max(np.abs(g)) < gtol:
+            return LMResult(x, 0.5 * cost, nfev, 3)
+        try:
+            dx = np.linalg.solve(H + mu * np.diag(scale), -g)
+        except np.linalg.LinAlgError:
+            mu, nu = mu * nu, nu * 2
+            continue
+        if np.linalg.norm(dx) < xtol * (np.linalg.norm(x) + xtol):
+            return LMResult(x, 0.5 * cost, nfev, 1)
+        x_new = x + dx
+        r_new = fun(x_new)
+        nfev += 1
+        cost_new = float(r_new @ r_new)
+        predicted = -(2.0 * g @ dx + dx @ H @ dx)
+        rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        if rho > 0 and np.isfinite(cost_new):
+            small_change = cost - cost_new < ftol * max(cost, 1e-300)
+            x, r, cost = x_new, r_new, cost_new
+            J = jac(x)
+            H, g = J.T @ J, J.T @ r
+            scale = np.maximum(scale, np.diag(H))
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            if small_change:
+                return LMResult(x, 0.5 * cost, nfev, 2)
+        else:
+            mu, nu = mu * nu, nu * 2.0
+    return LMResult(x, 0.5 * cost, nfev, 0)

@@ -1,0 +1,59 @@
+"""How far to trust each estimated number: one function for the fit, the evaluation and pose planning.
+
+Input: the Jacobian of the whitened data residuals with respect to the prior-normalised unknowns z (unit-variance
+Gaussian priors on z). The posterior covariance of z is (J^T J + I)^-1, so each parameter's share of information
+from the data is 1 - posterior variance (the prior's variance is 1). The condition number is that of the data
+Jacobian with unit-norm columns (calibration practice: below 100).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+
+CORRELATION_LIMIT = 0.9
+
+
+@dataclass
+class Uncertainty:
+    std: np.ndarray  # (P,) [SI]
+    covariance: np.ndarray  # (P, P) [SI]
+    correlation: np.ndarray  # (P, P)
+    data_share: np.ndarray  # (P,) in [0, 1]: information from the data rather than the prior
+    condition_number: float
+
+    def correlated_pairs(self, names: list[str], limit: float = CORRELATION_LIMIT) -> list[tuple[str, str, float]]:
+        """Pairs with |correlation| above `limit`, strongest first."""
+        i, j = np.triu_indices(len(names), k=1)
+        strong = np.abs(self.correlation[i, j]) > limit
+        pairs = [(names[a], names[b], float(self.correlation[a, b])) for a, b in zip(i[strong], j[strong])]
+        return sorted(pairs, key=lambda p: -abs(p[2]))
+
+
+def uncertainty(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.ndarray) -> Uncertainty:
+    """Uncertainty of the unknowns from the whitened data Jacobian (R, P) in prior-normalised units."""
+    information = J_data.T @ J_data
+    information = information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
+    n = len(prior_sigmas)
+    cov_z = np.linalg.inv(information + np.eye(n))
+    d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
+    norms = np.sqrt(np.clip(np.diag(information), 0.0, None))
+    if n == 0:
+        condition = 1.0
+    elif np.any(norms < 1e-12):
+        condition = float("inf")
+    elif scipy.sparse.issparse(J_data):
+        s = np.linalg.eigvalsh(information / np.outer(norms, norms))
+        condition = float(np.sqrt(s[-1] / s[0])) if s[0] > 0 else float("inf")
+    else:  # singular values of the column-scaled Jacobian, through its (P, P) triangular factor
+        s = np.linalg.svd(np.linalg.qr(np.asarray(J_data) / norms, mode="r"), compute_uv=False)
+        condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    return Uncertainty(
+        std=d * prior_sigmas,
+        covariance=cov_z * np.outer(prior_sigmas, prior_sigmas),
+        correlation=cov_z / np.outer(d, d),
+        data_share=np.clip(1.0 - np.diag(cov_z), 0.0, 1.0),
+        condition_number=condition,
+    )

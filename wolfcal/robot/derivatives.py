@@ -1,0 +1,128 @@
+"""Analytic first derivatives of forward kinematics: how points on links move when joints or parameters change.
+
+Every small change of a joint reading or a free parameter moves the links below it rigidly. That motion is a
+spatial twist in the root frame, (v0, w): a point x [m, root frame] moves by dx = v0 + w x x per unit change.
+`ChainDerivatives` gathers, for each link (and each tag mounted on a link), the twists of every joint column
+(S, J, 6) and of every chain parameter (S, P, 6). A point seen from a viewer frame then moves by
+R_root_viewer^T [(twist of the point's frame - twist of the viewer's frame) at the point]: parameters above both
+cancel. One forward-kinematics pass gives all of it; no residual is evaluated per parameter.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wolfcal.geometry import right_jacobian_so3
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.kinematics import JointModel, Walk
+from wolfcal.robot.parameters import ParameterSet
+from wolfcal.robot.robot import Robot
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis (broadcast), without np.cross's overhead."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def tag_key(tag_id: int) -> str:
+    """The key of a tag's frame among the links in `ChainDerivatives`."""
+    return f"tag:{tag_id}"
+
+
+def _motion_twist(joint: JointModel, T_root_frame: np.ndarray) -> np.ndarray:
+    """(S, 6) spatial twist (v0, w) of one unit of a joint's motion."""
+    axis = T_root_frame[:, :3, :3] @ joint.axis
+    if joint.type == "prismatic":
+        return np.concatenate([axis, np.zeros_like(axis)], axis=1)
+    return np.concatenate([cross(T_root_frame[:, :3, 3], axis), axis], axis=1)
+
+
+def _frame_twists(T_root_origin: np.ndarray, T_root_frame: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """(S, 6, 6) spatial twists of the six parameters (x, y, z, rx, ry, rz) of a frame correction
+    Delta = Trans(x, y, z) @ Exp(rx, ry, rz) placed after T_root_origin (giving T_root_frame), at value `delta`."""
+    n = len(T_root_origin)
+    out = np.zeros((n, 6, 6))
+    out[:, :3, :3] = np.swapaxes(T_root_origin[:, :3, :3], 1, 2)  # translation i moves along origin axis i
+    w = T_root_frame[:, :3, :3] @ right_jacobian_so3(delta[3:])  # (S, 3, 3): column i = w of rotation param i
+    w = np.swapaxes(w, 1, 2)  # (S, 3 params, 3)
+    out[:, 3:, 3:] = w
+    out[:, 3:, :3] = cross(T_root_frame[:, None, :3, 3], w)
+    return out
+
+
+class ChainDerivatives:
+    """Poses and twists of the links and tags that a set of observations needs, at one set of readings q (S, J).
+
+    Parameters of kind 'offset', 'frame' and 'tag' are chain parameters; others (e.g. an external camera's pose)
+    have zero twist here and are handled by the measurement block that owns them.
+    """
+
+    def __init__(
+        self, robot: Robot, q: np.ndarray, corrections: Corrections, params: ParameterSet, links: list[str],
+        tag_ids: list[int],
+    ) -> None:
+        self.robot, self.params = robot, params
+        model = robot.model
+        tag_links = [robot.config.tag(t).link for t in tag_ids]
+        walk: Walk = model.walk(q, list(dict.fromkeys(links + tag_links)), corrections)
+        self.T_root: dict[str, np.ndarray] = dict(walk.T_root_link)
+        n, n_joints, n_params = len(np.atleast_2d(q)), len(robot.joint_names), len(params)
+        # Per walked joint: (columns it moves with their multipliers, its unit motion twist).
+        self._joint_q: dict[str, list[tuple[int, np.ndarray]]] = {}
+        self._joint_p: dict[str, list[tuple[int, np.ndarray]]] = {}
+        offset_cols = {p.target: i for i, p in enumerate(params.parameters) if p.kind == "offset"}
+        frame_cols: dict[str, list[int]] = {}
+        for i, p in enumerate(params.parameters):
+            if p.kind == "frame":
+                frame_cols.setdefault(p.target, []).append(i)
+        for name, T_root_frame in walk.T_root_frame.items():
+            joint = model.joints[name]
+            q_terms, p_terms = [], []
+            if joint.actuated or joint.mimic is not None:
+                master, multiplier = (joint.name, 1.0) if joint.mimic is None else (joint.mimic[0], joint.mimic[1])
+                twist = multiplier * _motion_twist(joint, T_root_frame)
+                q_terms.append((model.column(master), twist))
+                if master in offset_cols:
+                    p_terms.append((offset_cols[master], twist))
+            if name in frame_cols:
+                delta = corrections.frames.get(name, np.zeros(6))
+                twists = _frame_twists(walk.T_root_origin[name], T_root_frame, delta)
+                p_terms += [(i, twists[:, params.parameters[i].component]) for i in frame_cols[name]]
+            self._joint_q[name], self._joint_p[name] = q_terms, p_terms
+        self._twist_q: dict[str, np.ndarray] = {}
+        self._twist_p: dict[str, np.ndarray] = {}
+        for link in dict.fromkeys(links + tag_links):
+            tq, tp = np.zeros((n, n_joints, 6)), np.zeros((n, n_params, 6))
+            for joint in model.path_from_root(link):
+                for col, twist in self._joint_q.get(joint.name, []):
+                    tq[:, col] += twist
+                for col, twist in self._joint_p.get(joint.name, []):
+                    tp[:, col] += twist
+            self._twist_q[link], self._twist_p[link] = tq, tp
+        for tag_id, link in zip(tag_ids, tag_links):
+            key = tag_key(tag_id)
+            T_root_mount = self.T_root[link] @ robot.T_link_tag(tag_id)
+            self.T_root[key] = self.T_root[link] @ robot.T_link_tag(tag_id, corrections)
+            tp = self._twist_p[link].copy()
+            cols = [i for i, p in enumerate(params.parameters) if p.kind == "tag" and int(p.target) == tag_id]
+            if cols:
+                twists = _frame_twists(T_root_mount, self.T_root[key], corrections.tags.get(tag_id, np.zeros(6)))
+                for i in cols:
+                    tp[:, i] += twists[:, params.parameters[i].component]
+            self._twist_q[key], self._twist_p[key] = self._twist_q[link], tp
+
+    def twist_q(self, frame: str) -> np.ndarray:
+        """(S, J, 6) twists of the joint readings for a link or tag key."""
+        return self._twist_q[frame]
+
+    def twist_p(self, frame: str) -> np.ndarray:
+        """(S, P, 6) twists of the chain parameters for a link or tag key."""
+        return self._twist_p[frame]
+
+
+def point_motion(twists: np.ndarray, p_root: np.ndarray) -> np.ndarray:
+    """(M, 3, K) motion of points p_root (M, 3) [m, root frame] under twists (M, K, 6)."""
+    dp = twists[:, :, :3] + cross(twists[:, :, 3:], p_root[:, None, :])
+    return np.swapaxes(dp, 1, 2)
