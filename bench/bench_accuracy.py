@@ -52,11 +52,12 @@ def run(name: str, seed: int, binning: int, folder: Path) -> str:
     fitted = time.perf_counter() - start
     z = np.abs(fit.solution.values - fit.params.values_from(truth)) / fit.solution.std
     rot, trans = camera_pose_errors(robot, fit.corrections, truth)
+    head = fit.solution.blocks[0]
     line = (
         f"{name:8s} seed {seed}: camera {np.rad2deg(rot.max()):.4f} deg / {trans.max() * 1000:.2f} mm (max over "
-        f"head range), max |z| {z.max():.2f}, rms {fit.solution.blocks[0].rms_before:.1f} -> {fit.solution.blocks[0].rms_after:.3f}"
-        f" px, outliers left out: {int(fit.solution.blocks[0].outlier_samples.sum())} sample(s), "
-        f"{len(fit.solution.blocks[0].outlier_views)} tag view(s)"
+        f"head range), max |z| {z.max():.2f}, rms {head.rms_before:.1f} -> {head.rms_after:.3f}"
+        f" px, outliers left out: {int(head.outlier_samples.sum())} sample(s), "
+        f"{len(head.outlier_views)} tag view(s)"
     )
     if name == "leg":
         rng = np.random.default_rng(seed)

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
 
 
 @dataclass
@@ -30,12 +31,12 @@ def levenberg_marquardt(
     ftol: float = 1e-8,
     gtol: float = 1e-8,
 ) -> LMResult:
-    """Minimise 0.5 * |fun(x)|^2 with a dense Jacobian jac(x) (R, P)."""
+    """Minimise 0.5 * |fun(x)|^2 with a Jacobian jac(x) (R, P), dense or sparse (the normal equations are
+    solved densely: P up to a few thousand)."""
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost, nfev = float(r @ r), 1
-    J = jac(x)
-    H, g = J.T @ J, J.T @ r
+    H, g = _normal_equations(jac(x), r)
     scale = np.maximum(np.diag(H), 1e-12)
     mu, nu = 1e-4, 2.0
     for _ in range(max_iterations):
@@ -57,8 +58,7 @@ def levenberg_marquardt(
         if rho > 0 and np.isfinite(cost_new):
             small_change = cost - cost_new < ftol * max(cost, 1e-300)
             x, r, cost = x_new, r_new, cost_new
-            J = jac(x)
-            H, g = J.T @ J, J.T @ r
+            H, g = _normal_equations(jac(x), r)
             scale = np.maximum(scale, np.diag(H))
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
@@ -67,3 +67,9 @@ def levenberg_marquardt(
         else:
             mu, nu = mu * nu, nu * 2.0
     return LMResult(x, 0.5 * cost, nfev, 0)
+
+
+def _normal_equations(J, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """J^T J (dense) and J^T r."""
+    H = J.T @ J
+    return (H.toarray() if scipy.sparse.issparse(H) else H), np.asarray(J.T @ r).ravel()

@@ -71,11 +71,6 @@ class Fit:
         return self.observations.get(HEAD_CAMERA)
 
 
-def minimum_samples(n_params: int) -> int:
-    """Samples needed for a free-parameter set: each tag view gives 8 numbers; ask for twice the unknowns."""
-    return max(3, -(-2 * n_params // 8))
-
-
 def _placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
     """Placement of each sample of an external camera and the placements' names: one per capture file (in the
     order of the files), or one per sample of a moving camera."""
@@ -139,12 +134,14 @@ def fit_observations(
         robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags
     )
     n_params = len(chain) + sum(len(b.nuisance) for b in blocks)
-    n_samples = max(obs.n_samples for obs in used.values())
-    needed = minimum_samples(n_params)
-    if sum(obs.n_samples for obs in used.values()) < needed:
+    n_numbers = sum(b.n_units * b.dim for b in blocks)
+    if n_numbers < 2 * n_params:  # ask for twice as many measured numbers as unknowns
+        n_samples = sum(obs.n_samples for obs in used.values())
+        needed = max(3, int(np.ceil(n_samples * 2 * n_params / max(n_numbers, 1))))
         raise WolfcalError(
-            f"too few samples for the free parameters: {n_samples} sample(s) with tags for {n_params} free "
-            f"parameters (--free {options.free}); capture at least {needed}, or free fewer parameters"
+            f"too few samples for the free parameters: {n_samples} sample(s) with tags give {n_numbers} measured "
+            f"numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free fewer "
+            "parameters"
         )
     priors = robot.config.priors
     problem = Problem(chain, blocks, [priors.pixel_noise] * len(blocks), priors.encoder_noise, options.huber_k)

@@ -14,11 +14,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening
-from wolfcal.fit.problem import DENSE_LIMIT, MAD_TO_SIGMA, BlockState, Problem
+from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import rms_by
 
@@ -130,14 +129,6 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
     )  # fmt: skip
 
 
-def minimize(problem: Problem, z: np.ndarray):
-    """Robust least squares from z: Levenberg-Marquardt on the normal equations for a dense problem, scipy's
-    trf with LSMR when the blocks bring many unknowns (a sparse Jacobian)."""
-    if len(problem.params) <= DENSE_LIMIT:
-        return levenberg_marquardt(problem.residuals, problem.jacobian, z)
-    return least_squares(problem.residuals, z, jac=problem.jacobian, method="trf", tr_solver="lsmr", x_scale=1.0)
-
-
 def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
     say = progress or (lambda _msg: None)
     n_params = len(problem.params)
@@ -146,7 +137,7 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     rows_total = sum(r.size for r in before)
     evaluations, converged = 0, False
     for round_index in range(max_rounds):
-        result = minimize(problem, z)
+        result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
         z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
         changed, settled = False, True
         lins = problem.evaluate(z)
@@ -169,7 +160,7 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
         if not changed and settled:
             break
     else:
-        result = minimize(problem, z)
+        result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
         z, evaluations = result.x, evaluations + result.nfev
     after = problem.raw_residuals(z)
     return Solution(
