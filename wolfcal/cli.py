@@ -122,11 +122,16 @@ def fit(
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's."),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
+    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | all "
+                                      "(default: every system the captures contain)."),
+    external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
+                                         "one pose per sample instead of one per capture file."),
 ) -> None:
     """Estimate the chosen free parameters from one or more captures."""
     from wolfcal.fit.pipeline import FitOptions, run_fit
 
-    run_fit(captures, robot, out, FitOptions(free=free, side=side, fix_tags=fix_tags), intrinsics, say=typer.echo)
+    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving)
+    run_fit(captures, robot, out, options, intrinsics, say=typer.echo)
 
 
 @app.command()
