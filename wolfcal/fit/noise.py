@@ -14,6 +14,16 @@ import numpy as np
 import scipy.sparse
 
 
+def split_rows(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> list[np.ndarray]:
+    """Row indices of each group of units: unit u (label labels[u]) owns rows u*dim .. u*dim+dim-1; units with
+    keep False are left out; groups in ascending label order, empty groups dropped."""
+    units = np.arange(len(labels)) if keep is None else np.flatnonzero(keep)
+    order = units[np.argsort(labels[units], kind="stable")]
+    bounds = np.flatnonzero(np.diff(labels[order])) + 1
+    rows = (order[:, None] * dim + np.arange(dim)).ravel()
+    return np.split(rows, bounds * dim) if len(order) else []
+
+
 class GroupedWhitening:
     """Whitening of residual rows split into groups (list of row-index arrays), at joint sensitivities A (R, J)."""
 

@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.noise import GroupedWhitening
+from wolfcal.fit.noise import GroupedWhitening, split_rows
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
@@ -44,16 +44,11 @@ class BlockState:
     def inlier_units(self) -> np.ndarray:
         return ~self.excluded[self.block.view_of_unit]
 
-    def rows_of(self, units: np.ndarray) -> np.ndarray:
-        d = self.block.dim
-        return (units[:, None] * d + np.arange(d)).ravel()
-
     def rebuild(self, lin: Linearization) -> None:
         """Noise groups over the inlier units at this linearisation (left-out views are in no group)."""
         A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
-        inlier = self.inlier_units
-        groups = [self.rows_of(np.flatnonzero(inlier & (self.groups == g))) for g in np.unique(self.groups)]
-        self.whitening = GroupedWhitening([g for g in groups if len(g)], A, self.sigma_q)
+        groups = split_rows(self.groups, self.block.dim, self.inlier_units)
+        self.whitening = GroupedWhitening(groups, A, self.sigma_q)
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.fit.lm import levenberg_marquardt
-from wolfcal.fit.noise import GroupedWhitening
+from wolfcal.fit.noise import GroupedWhitening, split_rows
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import rms_by
@@ -64,7 +64,7 @@ class Solution:
 def view_rms(state: BlockState, residual: np.ndarray, A: np.ndarray) -> np.ndarray:
     """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
     block = state.block
-    views = [state.rows_of(np.flatnonzero(block.view_of_unit == v)) for v in range(block.n_views)]
+    views = split_rows(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
     w = GroupedWhitening(views, A.reshape(-1, A.shape[-1]), state.sigma_q)
     return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / np.maximum([len(v) for v in views], 1))
 
