@@ -34,6 +34,7 @@ from wolfcal.hardware.camera import CameraError
 from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config, state_paths
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recover import recover_capture
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.vision.tags import detect_tags, tag_corners, tag_texture
 
@@ -113,11 +114,11 @@ def assert_same_still_moment(robot, capture) -> None:
     Detection noise on these small binned tags is up to ~1.5 px a corner; joints from another moment would be
     off by tens of pixels.
     """
-    camera = capture.samples[0].camera
+    camera = capture.samples[0].images[HEAD_CAMERA].camera
     for sample in capture.samples:
         errors = []
         q = sample.joint_positions(robot.joint_names) + TRUTH.offset_vector(robot.joint_names)
-        found = detect_tags(sample.image(), "tag36h11", {43, 44})
+        found = detect_tags(sample.images[HEAD_CAMERA].decode(), "tag36h11", {43, 44})
         assert found, sample.stamp_ns
         ids = sorted(found)
         _, T_camera_tag = robot.camera_and_tag_poses(
@@ -148,7 +149,7 @@ def test_scripted_capture_is_exact_to_the_tick_and_from_one_still_moment(robot, 
     poses = load_poses(POSES, {j: (-9, 9) for j in robot.joint_names}).poses
     assert summary.samples == len(capture.samples) == len(poses) and not summary.skipped
     for sample, pose in zip(capture.samples, poses, strict=True):
-        assert sample.camera.width == 2048 // BINNING
+        assert sample.images[HEAD_CAMERA].camera.width == 2048 // BINNING
         for joint, value in zip(sample.joint_names, sample.positions, strict=True):
             # pose joints at their goal tick; the others where they stood: true angle - true offset, quantised
             start = round((before[joint] - TRUTH.offsets.get(joint, 0.0)) / (2 * math.pi / 4096)) + 2048
@@ -260,7 +261,7 @@ def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scrip
     folder = tmp_path / "frames"
     folder.mkdir()
     image = folder / "0.png"  # one image: consecutive frames agree
-    cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].image())
+    cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].images[HEAD_CAMERA].decode())
     intrinsics = tmp_path / "camera.yaml"  # the images' own resolution: no binning for a folder source
     full = load_camera_info(robot.config.camera.intrinsics)
     save_camera_info(

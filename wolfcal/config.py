@@ -253,7 +253,7 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
         return None
     intrinsics = _resolve(base, r.string("intrinsics"))
     if not intrinsics.is_file():
-        r.fail(f"'intrinsics' file {intrinsics} not found")
+        raise WolfcalError(f"{r.path}: '{r.sub('intrinsics')}' file {intrinsics} not found")
     return intrinsics
 
 

@@ -26,6 +26,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
 from wolfcal.hardware.camera import CameraError, open_camera
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot, load_robot
 
 __all__ = ["CaptureOptions", "CaptureSummary", "run_capture"]
@@ -77,7 +78,9 @@ def run_capture(
         else:
             camera = open_camera(options.camera, image_camera)
         try:
-            writer = CaptureWriter(options.out, robot.config, camera_model, (binning, binning), options.image_format)
+            writer = CaptureWriter(
+                options.out, robot.config, {HEAD_CAMERA: (camera_model, (binning, binning))}, options.image_format
+            )
         except WolfcalError:
             camera.close()
             raise

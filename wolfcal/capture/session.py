@@ -19,6 +19,7 @@ from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.hardware.bus import DynamixelBus, JointState
 from wolfcal.hardware.camera import CameraSource
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import detect_tags
 
@@ -110,7 +111,7 @@ class CaptureSession:
         if reason:
             return reason
         self.bus.check_hardware()
-        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, frame_b)
+        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, {HEAD_CAMERA: frame_b})
         self._record(after, sorted(corners_b))
         return None
 

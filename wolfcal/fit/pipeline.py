@@ -13,14 +13,14 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
-from wolfcal.io.reader import read_captures
+from wolfcal.io.reader import read_captures, require_cameras
 from wolfcal.io.samples import Sample
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.vision.observe import detect_observations
+from wolfcal.vision.observe import detect_observations, observations_of
 
 
 @dataclass(frozen=True)
@@ -81,10 +81,10 @@ def fit_observations(
 
 
 def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None
+    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,)
 ) -> tuple[list[Sample], list[str]]:
     """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
-    config names another robot is refused."""
+    config names another robot is refused, and so is one without images of each of `cameras`."""
     camera = load_camera_info(intrinsics) if intrinsics else None
     loaded = read_captures(captures, robot.config, camera)
     for capture in loaded:
@@ -94,6 +94,7 @@ def load_samples(
                 f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "
                 f"({robot.config.path}); use the config of the robot that was captured"
             )
+    require_cameras(loaded, cameras, robot.config)
     samples = [s for c in loaded for s in c.samples]
     notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
     return samples, notes
@@ -120,7 +121,8 @@ def run_fit(
     robot = load_robot(robot_path)
     samples, warnings = load_samples(robot, captures, intrinsics)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    obs, detect_warnings = detect_observations(samples, robot)
+    observations, detect_warnings = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
+    obs = observations_of(observations, HEAD_CAMERA, captures)
     warnings += detect_warnings
     say(f"{obs.n_samples} sample(s) with tags, {len(obs.uv)} corners; fitting --free {options.free} ...")
     fit = fit_observations(robot, obs, options, say)

@@ -20,6 +20,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
@@ -73,9 +74,9 @@ def simulate_capture(
         raise WolfcalError("--samples must be at least 1")
     robot = load_robot(robot_path)
     if camera is None:
-        if robot.config.camera.intrinsics is None:
+        if robot.config.head_camera().intrinsics is None:
             raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
-        camera = load_camera_info(robot.config.camera.intrinsics)
+        camera = load_camera_info(robot.config.head_camera().intrinsics)
     b = options.binning
     image_camera = camera if b == 1 else camera.scaled(1 / b, 1 / b, camera.width // b, camera.height // b)
     rng = np.random.default_rng(options.seed)
@@ -91,7 +92,7 @@ def simulate_capture(
     kinds = {int(i): ("motion_blur" if k % 2 == 0 else "stale_joints") for k, i in enumerate(outlier_index)}
     moving = [robot.model.column(j) for j in robot.camera_and_leg_joints()]
     scene = SimScene(robot, truth, image_camera, seed=options.seed + 1, noise_sigma=options.noise_sigma)
-    with CaptureWriter(out, robot.config, camera, binning=(b, b)) as writer:
+    with CaptureWriter(out, robot.config, {HEAD_CAMERA: (camera, (b, b))}) as writer:
         for i in range(options.samples):
             image = scene.render_true(q_true[i])
             reading = q_measured[i].copy()
@@ -101,7 +102,7 @@ def simulate_capture(
             elif kinds.get(i) == "stale_joints":
                 reading[moving] += rng.normal(0.0, 0.04, len(moving))
             stamp = START_NS + i * 2_000_000_000
-            writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), image)
+            writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), {HEAD_CAMERA: image})
             seen = ", ".join(str(t) for t, v in zip(robot.config.tag_ids, visible[i]) if v)
             say(f"sample {i + 1}/{options.samples}: tags {seen}" + (f" ({kinds[i]})" if i in kinds else ""))
     truth_yaml, truth_urdf = truth_paths(out)
