@@ -163,8 +163,16 @@ def simulate(
     binning: int = typer.Option(1, "--binning", help="Sensor binning (4 gives 512x384 images of a 2048x1536 camera)."),
     noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
     outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
+                                           "the config's)."),
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
+    system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
+                               "| all (both in every sample)."),
+    external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
+                                        "(default: the first)."),
+    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
+                                         "(m, rad; body frame x forward, y left, z up) in base_link; default random "
+                                         "1-2 m in front, looking at the robot."),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
     from wolfcal.camera.camera_info import load_camera_info
@@ -172,7 +180,7 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth,
+        truth_file=truth, system=system, external=external, placement=placement,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(robot, out, options, camera, say=typer.echo)
