@@ -5,8 +5,9 @@ in front sees them well only when the feet are lifted forward and tilted towards
 `EXTERNAL_RANGES` (hips swung forward up to about 90 deg, knees bent, ankles pitched both ways, small yaw and roll;
 head and arms at 0), and a pose is kept when the external camera sees the torso tag (every tag on a link rigidly
 fixed to the base) and at least one foot tag fully inside the image (margin 2 % of the width), at least 1.5 % of the
-width per edge, and facing it (less than `MAX_ANGLE_RAD` off the viewing ray). Occlusion by the robot's body is not
-modelled (tags hide each other in the rendering).
+width per edge, facing it (less than `MAX_ANGLE_RAD` off the viewing ray), and apart from every other tag in the
+image (bounding boxes grown by `SEPARATION` of their size must not overlap: a foot tag lifted in front of the torso
+tag would hide it or break its white border). Occlusion by the robot's body is not modelled.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.poses import visible_in_view
+from wolfcal.vision.tags import tag_corners
 
 EXTERNAL_RANGES = {
     "RHipYaw": (-0.3, 0.3),
@@ -35,6 +37,7 @@ EXTERNAL_RANGES = {
     "LAnkleRoll": (-0.3, 0.3),
 }
 MAX_ANGLE_RAD = np.deg2rad(55.0)
+SEPARATION = 0.3  # share of a tag's image size kept free around it
 
 
 def external_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
@@ -78,7 +81,23 @@ def external_visibility(
     tag_ids = robot.config.tag_ids
     T_camera_tag = external_tag_poses(robot, T_base_camera, q_true, truth, tag_ids)
     sizes = np.array([robot.config.tag(t).size for t in tag_ids])
-    return visible_in_view(camera, T_camera_tag, sizes, 0.02 * camera.width, 0.015 * camera.width, MAX_ANGLE_RAD)
+    visible = visible_in_view(camera, T_camera_tag, sizes, 0.02 * camera.width, 0.015 * camera.width, MAX_ANGLE_RAD)
+    return visible & _apart(camera, T_camera_tag, sizes)
+
+
+def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """(N, T) bool: the tag's grown image box overlaps no other tag's in front of the camera."""
+    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
+    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
+    in_front = np.all(p[..., 2] > 0, axis=-1)  # (N, T)
+    uv = camera.project(np.where(p[..., 2:] > 0, p, np.nan))
+    lo, hi = np.nanmin(uv, axis=2), np.nanmax(uv, axis=2)  # (N, T, 2)
+    grow = SEPARATION * (hi - lo).max(axis=-1, keepdims=True)
+    lo, hi = lo - grow, hi + grow
+    overlap = np.all((lo[:, :, None] < hi[:, None, :]) & (lo[:, None, :] < hi[:, :, None]), axis=-1)  # (N, T, T)
+    overlap &= in_front[:, :, None] & in_front[:, None, :]
+    overlap[:, np.arange(len(sizes)), np.arange(len(sizes))] = False
+    return ~np.any(overlap, axis=2)
 
 
 def external_pose_ok(robot: Robot, visible: np.ndarray) -> np.ndarray:
