@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors
@@ -45,7 +46,7 @@ def run(name: str, seed: int, binning: int, folder: Path) -> str:
     truth = load_corrections(truth_paths(capture)[0], key="truth")
     start = time.perf_counter()
     samples, _ = load_samples(robot, [capture], None)
-    obs, _ = detect_observations(samples, robot)
+    obs = detect_observations(samples, robot)[0][HEAD_CAMERA]
     detected = time.perf_counter() - start
     start = time.perf_counter()
     fit = fit_observations(robot, obs, options)

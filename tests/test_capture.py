@@ -34,7 +34,9 @@ from wolfcal.hardware.camera import CameraError
 from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config, state_paths
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recover import recover_capture
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
+from wolfcal.vision.observe import detect_observations
 from wolfcal.vision.tags import detect_tags, tag_corners, tag_texture
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -113,11 +115,11 @@ def assert_same_still_moment(robot, capture) -> None:
     Detection noise on these small binned tags is up to ~1.5 px a corner; joints from another moment would be
     off by tens of pixels.
     """
-    camera = capture.samples[0].camera
+    camera = capture.samples[0].images[HEAD_CAMERA].camera
     for sample in capture.samples:
         errors = []
         q = sample.joint_positions(robot.joint_names) + TRUTH.offset_vector(robot.joint_names)
-        found = detect_tags(sample.image(), "tag36h11", {43, 44})
+        found = detect_tags(sample.images[HEAD_CAMERA].decode(), "tag36h11", {43, 44})
         assert found, sample.stamp_ns
         ids = sorted(found)
         _, T_camera_tag = robot.camera_and_tag_poses(
@@ -148,7 +150,7 @@ def test_scripted_capture_is_exact_to_the_tick_and_from_one_still_moment(robot, 
     poses = load_poses(POSES, {j: (-9, 9) for j in robot.joint_names}).poses
     assert summary.samples == len(capture.samples) == len(poses) and not summary.skipped
     for sample, pose in zip(capture.samples, poses, strict=True):
-        assert sample.camera.width == 2048 // BINNING
+        assert sample.images[HEAD_CAMERA].camera.width == 2048 // BINNING
         for joint, value in zip(sample.joint_names, sample.positions, strict=True):
             # pose joints at their goal tick; the others where they stood: true angle - true offset, quantised
             start = round((before[joint] - TRUTH.offsets.get(joint, 0.0)) / (2 * math.pi / 4096)) + 2048
@@ -260,7 +262,7 @@ def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scrip
     folder = tmp_path / "frames"
     folder.mkdir()
     image = folder / "0.png"  # one image: consecutive frames agree
-    cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].image())
+    cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].images[HEAD_CAMERA].decode())
     intrinsics = tmp_path / "camera.yaml"  # the images' own resolution: no binning for a folder source
     full = load_camera_info(robot.config.camera.intrinsics)
     save_camera_info(
@@ -277,6 +279,43 @@ def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scrip
     assert isinstance(error, CameraError) and "cannot read this image" in str(error)
     kept = len(read_capture(out, robot.config).samples)
     assert kept >= 2 and f"{kept} sample(s) saved" in str(error)
+
+
+TRIPOD_POSES = """velocity: 5.0
+poses:
+  - name: stand
+    joints: {RKnee: -0.26, LKnee: 0.26}
+  - name: feet_up
+    joints: {RHipPitch: -0.6, RKnee: -1.0, RAnklePitch: 0.2, LHipPitch: 0.6, LKnee: 1.0, LAnklePitch: -0.2}
+  - name: feet_forward
+    joints: {RHipPitch: -0.4, RKnee: -0.6, RAnklePitch: -0.2, LHipPitch: 0.4, LKnee: 0.6, LAnklePitch: 0.2}
+"""
+
+
+def test_external_camera_alone_records_the_tripod_view(robot, truth_file, tmp_path):
+    poses = tmp_path / "legs.yaml"
+    poses.write_text(TRIPOD_POSES)
+    out = tmp_path / "tripod.mcap"
+    with emulator(robot, truth_file) as emu:
+        opts = options(out, emu.port, poses=poses, camera=None, external=["tripod=sim"])
+        summary = run_capture(opts, quiet())
+    capture = read_capture(out, robot.config)
+    assert capture.cameras == ["tripod"] and summary.samples == len(capture.samples) == 3
+    assert all(set(s.images) == {"tripod"} for s in capture.samples)
+    assert capture.samples[0].images["tripod"].camera.width == 1920 // 2  # sim external default binning 2
+    observations, warnings = detect_observations(capture.samples, robot)
+    assert set(observations) == {"tripod"} and not warnings
+    tripod = observations["tripod"]
+    assert tripod.n_samples == 3 and all(tripod.tags_in_sample(i) == [42, 43, 44] for i in range(3))
+
+
+def test_capture_needs_a_camera_and_known_external_names(robot, tmp_path):
+    with pytest.raises(WolfcalError, match="at least one camera"):
+        run_capture(options(tmp_path / "a.mcap", "/dev/null", poses=POSES, camera=None), quiet())
+    with pytest.raises(WolfcalError, match=r"no external camera named 'crane' \(configured: tripod\)"):
+        run_capture(options(tmp_path / "a.mcap", "/dev/null", poses=POSES, external=["crane=sim"]), quiet())
+    with pytest.raises(WolfcalError, match="NAME=SOURCE"):
+        run_capture(options(tmp_path / "a.mcap", "/dev/null", poses=POSES, external=["tripod"]), quiet())
 
 
 def test_missing_servo_stops_the_capture_before_it_starts(robot, truth_file, tmp_path):

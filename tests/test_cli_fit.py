@@ -11,6 +11,7 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.cli import app
 from wolfcal.io.reader import read_capture
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.accuracy import camera_pose_errors
@@ -69,6 +70,7 @@ def test_missing_topics_name_the_topics(capture, tmp_path):
     config = yaml.safe_load((ROBOT / "robot.yaml").read_text())
     config["urdf"] = str(ROBOT / "wolfgang.urdf")
     config["camera"]["intrinsics"] = str(ROBOT / "basler_acA2040.yaml")
+    config["external_cameras"][0]["intrinsics"] = str(ROBOT / "tripod_webcam.yaml")
     config["joint_states_topic"] = "/other/joint_states"
     (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
     result = run("fit", capture, "--robot", tmp_path / "robot.yaml", "--out", tmp_path / "fit")
@@ -79,9 +81,9 @@ def test_missing_topics_name_the_topics(capture, tmp_path):
 def write_capture(path, joint_names, image):
     robot = load_robot(ROBOT)
     camera = load_camera_info(ROBOT / "basler_acA2040.yaml")
-    with CaptureWriter(path, robot.config, camera, binning=(4, 4)) as writer:
+    with CaptureWriter(path, robot.config, {HEAD_CAMERA: (camera, (4, 4))}) as writer:
         for i in range(4):
-            writer.add_sample(10**9 * (i + 1), joint_names, np.zeros(len(joint_names)), None, image)
+            writer.add_sample(10**9 * (i + 1), joint_names, np.zeros(len(joint_names)), None, {HEAD_CAMERA: image})
 
 
 def test_joints_missing_from_joint_states(tmp_path):
@@ -103,9 +105,11 @@ def test_too_few_samples(capture, tmp_path):
     small = tmp_path / "small.mcap"
     robot = load_robot(ROBOT)
     samples = read_capture(capture, robot.config).samples[:3]
-    with CaptureWriter(small, robot.config, load_camera_info(ROBOT / "basler_acA2040.yaml"), (4, 4)) as writer:
+    head = {HEAD_CAMERA: (load_camera_info(ROBOT / "basler_acA2040.yaml"), (4, 4))}
+    with CaptureWriter(small, robot.config, head) as writer:
         for s in samples:
-            writer.add_sample(s.stamp_ns, s.joint_names, s.positions, None, s.image())
+            image = s.images[HEAD_CAMERA].decode()
+            writer.add_sample(s.stamp_ns, s.joint_names, s.positions, None, {HEAD_CAMERA: image})
     result = run("fit", small, "--free", "leg", "--out", tmp_path / "fit")
     assert result.exit_code != 0
     assert "too few samples" in result.output
@@ -122,6 +126,7 @@ def test_capture_of_another_robot_is_refused(capture, tmp_path):
     config = yaml.safe_load((ROBOT / "robot.yaml").read_text())
     config.update(name="other_robot", urdf=str(ROBOT / "wolfgang.urdf"))
     config["camera"]["intrinsics"] = str(ROBOT / "basler_acA2040.yaml")
+    config["external_cameras"][0]["intrinsics"] = str(ROBOT / "tripod_webcam.yaml")
     (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
     result = run("fit", capture, "--robot", tmp_path / "robot.yaml", "--out", tmp_path / "fit")
     assert result.exit_code != 0

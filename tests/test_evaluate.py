@@ -21,6 +21,7 @@ from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.sim.scenario import synthetic_scenario
 from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
@@ -39,12 +40,13 @@ def quiet(_text: str) -> None:
 def split_capture(src: Path, parts: dict[Path, range], robot, camera) -> None:
     """Write samples of one simulated capture into several files (same robot, same truth, different poses)."""
     samples = read_capture(src, robot.config).samples
-    binning = camera.width // samples[0].camera.width
+    binning = camera.width // samples[0].images[HEAD_CAMERA].camera.width
     for dst, indices in parts.items():
-        with CaptureWriter(dst, robot.config, camera, binning=(binning, binning)) as writer:
+        with CaptureWriter(dst, robot.config, {HEAD_CAMERA: (camera, (binning, binning))}) as writer:
             for i in indices:
                 s = samples[i]
-                writer.add_sample(s.stamp_ns, s.joint_names, s.positions, None, s.image())
+                image = s.images[HEAD_CAMERA].decode()
+                writer.add_sample(s.stamp_ns, s.joint_names, s.positions, None, {HEAD_CAMERA: image})
         shutil.copy(truth_paths(src)[0], truth_paths(dst)[0])
 
 

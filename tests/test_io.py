@@ -28,6 +28,7 @@ from wolfcal.io.reader import read_capture, read_captures
 from wolfcal.io.recording import ENCODER_TICK, JointStates, Paired, pair_frame
 from wolfcal.io.recover import recover_capture
 from wolfcal.io.writer import CaptureWriter, camera_info_message
+from wolfcal.observations import HEAD_CAMERA
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "wolfgang" / "robot.yaml"
@@ -54,10 +55,10 @@ def sample_data(i: int, shape=(384, 512)) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def write_capture(path: Path, config: RobotConfig, camera: CameraModel, n: int, binning=(4, 4)) -> None:
-    with CaptureWriter(path, config, camera, binning=binning) as writer:
+    with CaptureWriter(path, config, {HEAD_CAMERA: (camera, binning)}) as writer:
         for i in range(n):
             q, v, image = sample_data(i, (camera.height // binning[1], camera.width // binning[0]))
-            writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, image)
+            writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, {HEAD_CAMERA: image})
 
 
 def assert_same_camera(a: CameraModel, b: CameraModel) -> None:
@@ -81,8 +82,8 @@ def test_round_trip_keeps_joints_images_camera_and_attachments(tmp_path, config,
         assert sample.stamp_ns == T0 + i * 1_000_000_000
         assert sample.joint_names == JOINTS
         assert np.array_equal(sample.positions, q) and np.array_equal(sample.velocities, v)
-        assert sample.image_format == "png" and np.array_equal(sample.image(), image)
-        assert_same_camera(sample.camera, binned)
+        assert sample.images[HEAD_CAMERA].format == "png" and np.array_equal(sample.images[HEAD_CAMERA].decode(), image)
+        assert_same_camera(sample.images[HEAD_CAMERA].camera, binned)
         assert sample.source == str(path)
     assert capture.urdf_text == config.urdf.read_text()
     assert capture.robot_config_text == config.path.read_text()
@@ -91,12 +92,12 @@ def test_round_trip_keeps_joints_images_camera_and_attachments(tmp_path, config,
 def test_colour_jpeg_and_no_velocities(tmp_path, config, camera):
     path = tmp_path / "colour.mcap"
     image = np.random.default_rng(0).integers(0, 256, (96, 128, 3), np.uint8)
-    with CaptureWriter(path, config, camera, binning=(16, 16), image_format="jpeg") as writer:
-        writer.add_sample(T0, JOINTS, np.zeros(4), None, image)
+    with CaptureWriter(path, config, {HEAD_CAMERA: (camera, (16, 16))}, image_format="jpeg") as writer:
+        writer.add_sample(T0, JOINTS, np.zeros(4), None, {HEAD_CAMERA: image})
     (sample,) = read_capture(path, config).samples
-    assert sample.image_format == "jpeg" and sample.velocities is None
-    assert sample.image().shape == (96, 128, 3)
-    assert image_size(sample.image_data) == (128, 96)
+    assert sample.images[HEAD_CAMERA].format == "jpeg" and sample.velocities is None
+    assert sample.images[HEAD_CAMERA].decode().shape == (96, 128, 3)
+    assert image_size(sample.images[HEAD_CAMERA].data) == (128, 96)
 
 
 def test_file_is_a_ros2_mcap_with_statistics_schemas_and_attachments(tmp_path, config, camera):
@@ -131,10 +132,10 @@ def test_file_is_a_ros2_mcap_with_statistics_schemas_and_attachments(tmp_path, c
 
 def test_exception_inside_with_keeps_every_sample(tmp_path, config, camera):
     path = tmp_path / "capture.mcap"
-    with pytest.raises(RuntimeError), CaptureWriter(path, config, camera, binning=(4, 4)) as writer:
+    with pytest.raises(RuntimeError), CaptureWriter(path, config, {HEAD_CAMERA: (camera, (4, 4))}) as writer:
         for i in range(2):
             q, v, image = sample_data(i)
-            writer.add_sample(T0 + i, JOINTS, q, v, image)
+            writer.add_sample(T0 + i, JOINTS, q, v, {HEAD_CAMERA: image})
         raise RuntimeError("servo bus lost")
     assert len(read_capture(path, config).samples) == 2
     assert not (tmp_path / "capture.mcap.partial").exists()
@@ -142,13 +143,13 @@ def test_exception_inside_with_keeps_every_sample(tmp_path, config, camera):
 
 def test_writer_refuses_wrong_image_size_and_a_leftover_partial(tmp_path, config, camera):
     path = tmp_path / "capture.mcap"
-    with CaptureWriter(path, config, camera, binning=(4, 4)) as writer:
+    with CaptureWriter(path, config, {HEAD_CAMERA: (camera, (4, 4))}) as writer:
         with pytest.raises(WolfcalError, match="512x384"):
-            writer.add_sample(T0, JOINTS, np.zeros(4), None, np.zeros((100, 100), np.uint8))
+            writer.add_sample(T0, JOINTS, np.zeros(4), None, {HEAD_CAMERA: np.zeros((100, 100), np.uint8)})
     assert not path.exists()  # no sample: no file, nothing replaced
     (tmp_path / "capture.mcap.partial").write_bytes(b"torn")
     with pytest.raises(WolfcalError, match="wolfcal recover"):
-        CaptureWriter(path, config, camera)
+        CaptureWriter(path, config, {HEAD_CAMERA: (camera, (1, 1))})
 
 
 def test_intrinsics_override_is_scaled_to_the_image(tmp_path, config, camera):
@@ -158,7 +159,7 @@ def test_intrinsics_override_is_scaled_to_the_image(tmp_path, config, camera):
     K[0, 0] += 10.0
     override = CameraModel(2048, 1536, K, camera.D)
     (sample,) = read_capture(path, config, intrinsics=override).samples
-    assert_same_camera(sample.camera, override.scaled(0.25, 0.25, 512, 384))
+    assert_same_camera(sample.images[HEAD_CAMERA].camera, override.scaled(0.25, 0.25, 512, 384))
     wrong_aspect = CameraModel(1920, 1080, K, camera.D)
     with pytest.raises(WolfcalError, match="aspect ratio"):
         read_capture(path, config, intrinsics=wrong_aspect)
@@ -175,14 +176,15 @@ WRITER_SCRIPT = textwrap.dedent(
     from wolfcal.camera.camera_info import load_camera_info
     from wolfcal.config import load_robot_config
     from wolfcal.io.writer import CaptureWriter
+    from wolfcal.observations import HEAD_CAMERA
 
     config = load_robot_config({config!r})
     camera = load_camera_info(config.camera.intrinsics)
-    writer = CaptureWriter(Path({path!r}), config, camera, binning=(4, 4))
+    writer = CaptureWriter(Path({path!r}), config, {{HEAD_CAMERA: (camera, (4, 4))}})
     i = 0
     while True:
         q, v, image = sample_data(i)
-        writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, image)
+        writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, {{HEAD_CAMERA: image}})
         print(i, flush=True)
         i += 1
     """
@@ -217,7 +219,7 @@ def test_sigkill_mid_capture_then_recover_rescues_every_confirmed_sample(tmp_pat
     for i, sample in enumerate(samples[:6]):
         q, v, image = sample_data(i)
         assert sample.stamp_ns == T0 + i * 1_000_000_000
-        assert np.array_equal(sample.positions, q) and np.array_equal(sample.image(), image)
+        assert np.array_equal(sample.positions, q) and np.array_equal(sample.images[HEAD_CAMERA].decode(), image)
     assert partial.is_file()  # the source is never touched
 
 
@@ -225,10 +227,10 @@ def torn_copy(tmp_path: Path, config: RobotConfig, camera: CameraModel, complete
     """A torn capture: `complete` samples, then half of the next sample's chunk."""
     path = tmp_path / "capture.mcap"
     torn = tmp_path / "torn.mcap"
-    with CaptureWriter(path, config, camera, binning=(8, 8)) as writer:
+    with CaptureWriter(path, config, {HEAD_CAMERA: (camera, (8, 8))}) as writer:
         for i in range(complete + 1):
             q, v, image = sample_data(i, (192, 256))
-            writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, image)
+            writer.add_sample(T0 + i * 1_000_000_000, JOINTS, q, v, {HEAD_CAMERA: image})
             if i == complete - 1:
                 shutil.copy(writer.partial, torn)
                 size = torn.stat().st_size
@@ -356,7 +358,7 @@ def test_recording_keeps_only_still_frames_paired_with_the_nearest_joint_state(t
         nearest = int(round((sample.stamp_ns - T0) / 1e9 * RATE_HZ))
         assert np.array_equal(sample.positions, q[nearest]) and np.array_equal(sample.velocities, v[nearest])
         differs_from_neighbour |= not np.array_equal(q[nearest], q[nearest + 1])
-        assert_same_camera(sample.camera, info_camera.scaled(0.5, 0.5, 256, 192))
+        assert_same_camera(sample.images[HEAD_CAMERA].camera, info_camera.scaled(0.5, 0.5, 256, 192))
     assert differs_from_neighbour  # the pairing is tested, not only the phase
 
 
@@ -365,7 +367,7 @@ def test_recording_without_camera_info_uses_the_config_intrinsics(tmp_path, conf
     write_recording(path, config)
     capture = read_capture(path, config)
     assert len(capture.samples) == len(expected_still_images())
-    assert_same_camera(capture.samples[0].camera, camera.scaled(0.125, 0.125, 256, 192))
+    assert_same_camera(capture.samples[0].images[HEAD_CAMERA].camera, camera.scaled(0.125, 0.125, 256, 192))
 
 
 def test_missing_topic_lists_present_and_expected_topics(tmp_path, config):

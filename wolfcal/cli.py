@@ -83,8 +83,11 @@ def intrinsics(
 def capture(
     robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
     port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
-    camera: str = typer.Option(..., "--camera", help="V4L index or /dev/video path, video file, image folder, "
-                               "or 'sim' (renders the robot served by `wolfcal emulate`)."),
+    camera: str | None = typer.Option(None, "--camera", help="Head camera: V4L index or /dev/video path, video file, "
+                                      "image folder, or 'sim' (renders the robot served by `wolfcal emulate`)."),
+    external: list[str] = typer.Option([], "--external", help="External camera NAME=SOURCE (NAME from the config's "
+                                       "external_cameras, SOURCE as for --camera), e.g. tripod=/dev/video2. "
+                                       "Repeatable; beside or instead of --camera."),
     poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on)."),
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
     samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
@@ -94,19 +97,21 @@ def capture(
     yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
     velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed (rad/s)."),
-    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default 4)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of every camera's images (sim "
+                                       "default: 4 head, 2 external)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: the "
+                                           "config's; external cameras use their config 'intrinsics')."),
     settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
     min_sharpness: float = typer.Option(100.0, "--min-sharpness", help="Minimum variance of the Laplacian."),
 ) -> None:
-    """Capture still poses (joint angles + image + camera info) into an MCAP file."""
+    """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
     from wolfcal.capture.gating import GateSettings
     from wolfcal.capture.pipeline import CaptureOptions, run_capture
 
     options = CaptureOptions(
         robot=robot, out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples, limp=limp,
         yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
-        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness),
+        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -120,7 +125,8 @@ def fit(
     free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
+                                           "(head camera only)."),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
     system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | all "
                                       "(default: every system the captures contain)."),
@@ -175,8 +181,16 @@ def simulate(
     binning: int = typer.Option(1, "--binning", help="Sensor binning (4 gives 512x384 images of a 2048x1536 camera)."),
     noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
     outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML (default: the config's)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
+                                           "the config's)."),
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
+    system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
+                               "| all (both in every sample)."),
+    external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
+                                        "(default: the first)."),
+    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
+                                         "(m, rad; body frame x forward, y left, z up) in base_link; default random "
+                                         "1-2 m in front, looking at the robot."),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
     from wolfcal.camera.camera_info import load_camera_info
@@ -184,7 +198,7 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth,
+        truth_file=truth, system=system, external=external, placement=placement,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(robot, out, options, camera, say=typer.echo)

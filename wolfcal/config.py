@@ -6,6 +6,7 @@ Lengths in metres, angles in radians.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,9 +14,11 @@ import numpy as np
 
 from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.yamlfile import read_yaml
 
 TAG_FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 
 
 @dataclass(frozen=True)
@@ -36,6 +39,16 @@ class CameraConfig:
     frame: str
     topic: str
     info_topic: str
+    intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
+
+
+@dataclass(frozen=True)
+class ExternalCameraConfig:
+    """A camera not on the robot (e.g. on a tripod); its name appears in parameter names (`<name>.x`) and the CLI."""
+
+    name: str
+    image_topic: str  # sensor_msgs/msg/CompressedImage
+    info_topic: str  # sensor_msgs/msg/CameraInfo
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
 
 
@@ -67,11 +80,49 @@ class RobotConfig:
     name: str
     urdf: Path
     base_link: str
-    camera: CameraConfig
+    camera: CameraConfig | None  # the head camera; None for a robot config used with external cameras only
     joint_states_topic: str
     tags: tuple[TagConfig, ...]
     servos: ServoConfig | None = None
     priors: PriorConfig = PriorConfig()
+    external_cameras: tuple[ExternalCameraConfig, ...] = ()
+
+    def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
+        """The head camera's config; a WolfcalError naming the file when the config has none."""
+        if self.camera is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'camera:'; {why}")
+        return self.camera
+
+    def external_camera(self, name: str) -> ExternalCameraConfig:
+        """The external camera called `name`; a WolfcalError listing the configured ones otherwise."""
+        for camera in self.external_cameras:
+            if camera.name == name:
+                return camera
+        known = ", ".join(c.name for c in self.external_cameras) or "none"
+        raise WolfcalError(
+            f"{self.path}: no external camera named {name!r} (configured: {known}); add it under "
+            "'external_cameras:' with its name, image_topic and info_topic"
+        )
+
+    def camera_topics(self, name: str) -> tuple[str, str]:
+        """(image topic, camera-info topic) of the camera called `name` ('head' or an external camera)."""
+        if name == HEAD_CAMERA:
+            camera = self.head_camera()
+            return camera.topic, camera.info_topic
+        external = self.external_camera(name)
+        return external.image_topic, external.info_topic
+
+    def camera_intrinsics(self, name: str) -> tuple[Path | None, str]:
+        """The configured camera_info YAML of a camera (or None) and the config key that sets it."""
+        if name == HEAD_CAMERA:
+            return self.head_camera().intrinsics, "camera.intrinsics"
+        index = [c.name for c in self.external_cameras].index(self.external_camera(name).name)
+        return self.external_cameras[index].intrinsics, f"external_cameras[{index}].intrinsics"
+
+    @property
+    def camera_names(self) -> list[str]:
+        """'head' (when the config has a head camera) and the names of the external cameras, in config order."""
+        return ([HEAD_CAMERA] if self.camera is not None else []) + [c.name for c in self.external_cameras]
 
     def tag(self, tag_id: int) -> TagConfig:
         for tag in self.tags:
@@ -196,6 +247,55 @@ def _priors(path: Path, data) -> PriorConfig:
     return PriorConfig(**{k: r.number(k, positive=True) for k in names if k in r.data})
 
 
+def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
+    """The optional `intrinsics` camera_info YAML of a camera mapping, resolved and checked to exist."""
+    if "intrinsics" not in r.data:
+        return None
+    intrinsics = _resolve(base, r.string("intrinsics"))
+    if not intrinsics.is_file():
+        raise WolfcalError(f"{r.path}: '{r.sub('intrinsics')}' file {intrinsics} not found")
+    return intrinsics
+
+
+def _camera(path: Path, data) -> CameraConfig:
+    cam = _Reader(path, data, "camera")
+    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
+    return CameraConfig(
+        frame=cam.string("frame"),
+        topic=cam.string("topic", "/camera/image_raw/compressed"),
+        info_topic=cam.string("info_topic", "/camera/camera_info"),
+        intrinsics=_intrinsics_path(cam, path.parent),
+    )
+
+
+def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
+    if not isinstance(data, list):
+        raise WolfcalError(f"{path}: 'external_cameras' must be a list of cameras ({{name, image_topic, info_topic}})")
+    cameras = []
+    for i, item in enumerate(data):
+        r = _Reader(path, item, f"external_cameras[{i}]")
+        r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))
+        name = r.string("name")
+        if not _NAME.fullmatch(name):
+            r.fail(
+                f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
+                "(it is used in parameter names such as tripod.x)"
+            )
+        if name == HEAD_CAMERA:
+            r.fail(f"'name' must not be {HEAD_CAMERA!r}: that name means the robot's own camera ('camera:')")
+        if name in {c.name for c in cameras}:
+            r.fail(f"'name' {name!r} is used by another external camera; names must be unique")
+        cameras.append(
+            ExternalCameraConfig(
+                name=name,
+                image_topic=r.string("image_topic"),
+                info_topic=r.string("info_topic"),
+                intrinsics=_intrinsics_path(r, path.parent),
+            )
+        )
+    return tuple(cameras)
+
+
 def load_robot_config(path: str | Path) -> RobotConfig:
     """Read and check a robot config; the URDF's existence is checked, its content by `wolfcal.robot`."""
     path = Path(path)
@@ -204,24 +304,17 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     data = read_yaml(path, "robot config", "give --robot a robot.yaml or a folder holding one")
     r = _Reader(path, data, "")
     r.check_keys(
-        ("name", "urdf", "base_link", "camera", "tags"), ("joint_states_topic", "servos", "priors")
+        ("name", "urdf", "base_link", "tags"),
+        ("camera", "external_cameras", "joint_states_topic", "servos", "priors"),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
         raise WolfcalError(f"{path}: 'urdf' file {urdf} not found")
-    cam = _Reader(path, r.data["camera"], "camera")
-    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
-    intrinsics = None
-    if "intrinsics" in cam.data:
-        intrinsics = _resolve(path.parent, cam.string("intrinsics"))
-        if not intrinsics.is_file():
-            raise WolfcalError(f"{path}: 'camera.intrinsics' file {intrinsics} not found")
-    camera = CameraConfig(
-        frame=cam.string("frame"),
-        topic=cam.string("topic", "/camera/image_raw/compressed"),
-        info_topic=cam.string("info_topic", "/camera/camera_info"),
-        intrinsics=intrinsics,
-    )
+    camera = _camera(path, r.data["camera"]) if r.data.get("camera") is not None else None
+    external = _external_cameras(path, r.data["external_cameras"]) if r.data.get("external_cameras") else ()
+    if camera is None and not external:
+        r.fail("needs a head camera ('camera:') or at least one camera under 'external_cameras:'")
+    _check_topics_distinct(path, camera, external)
     tags_data = r.data["tags"]
     if not isinstance(tags_data, list) or not tags_data:
         r.fail("'tags' must be a non-empty list of tags")
@@ -238,4 +331,20 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         tags=tags,
         servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
+        external_cameras=external,
     )
+
+
+def _check_topics_distinct(
+    path: Path, camera: CameraConfig | None, external: tuple[ExternalCameraConfig, ...]
+) -> None:
+    """Two cameras on one topic could not be told apart in a capture."""
+    owners: dict[str, str] = {}
+    topics = [] if camera is None else [(camera.topic, "camera.topic"), (camera.info_topic, "camera.info_topic")]
+    for i, c in enumerate(external):
+        topics += [(c.image_topic, f"external_cameras[{i}].image_topic"),
+                   (c.info_topic, f"external_cameras[{i}].info_topic")]  # fmt: skip
+    for topic, key in topics:
+        if topic in owners:
+            raise WolfcalError(f"{path}: '{key}' {topic} is also '{owners[topic]}'; each camera needs its own topics")
+        owners[topic] = key

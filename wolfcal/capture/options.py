@@ -15,7 +15,7 @@ EXIT_TORQUE = ("restore", "on", "off")
 class CaptureOptions:
     robot: Path
     out: Path
-    camera: str
+    camera: str | None = None  # head camera source (--camera); None: external cameras only
     port: str | None = None
     poses: Path | None = None
     manual: bool = False
@@ -29,12 +29,29 @@ class CaptureOptions:
     pose_timeout_s: float = 5.0  # scripted: give up a pose that gives no sample within this time after arrival
     image_format: str = "png"
     gates: GateSettings = field(default_factory=GateSettings)
+    external: list[str] = field(default_factory=list)  # --external NAME=SOURCE, one per external camera
+
+
+def parse_external(text: str) -> tuple[str, str]:
+    """(camera name, source) of an `--external NAME=SOURCE` value."""
+    name, _, source = text.partition("=")
+    if not name.strip() or not source.strip():
+        raise WolfcalError(
+            f"--external {text!r}: give NAME=SOURCE, e.g. tripod=/dev/video2 (NAME as under 'external_cameras:' "
+            "in the robot config; SOURCE a device index or path, video file, image folder or 'sim')"
+        )
+    return name.strip(), source.strip()
 
 
 def check_options(options: CaptureOptions) -> None:
     """Refuse contradictory or out-of-range options and an output file that exists (WolfcalError)."""
     if options.manual == (options.poses is not None):
         raise WolfcalError("give exactly one of --poses POSES.yaml (scripted) or --manual")
+    if options.camera is None and not options.external:
+        raise WolfcalError("give at least one camera: --camera SOURCE (head camera) and/or --external NAME=SOURCE")
+    names = [parse_external(text)[0] for text in options.external]
+    if len(set(names)) != len(names):
+        raise WolfcalError(f"--external names a camera twice ({', '.join(names)}); give each camera once")
     if options.out.suffix != ".mcap":
         raise WolfcalError(f"{options.out}: the capture file name must end in .mcap")
     if options.out.exists():

@@ -1,7 +1,8 @@
-"""`wolfcal capture`: still poses of the robot -> samples (joint angles, image, camera info) in an MCAP file.
+"""`wolfcal capture`: still poses of the robot -> samples (joint angles, an image and camera info per camera) in an
+MCAP file.
 
-Checks everything it can before anything moves, opens the bus, camera and writer, runs the scripted mode
-(`scripted`) or the manual one (`manual`) in a live view, then leaves the torque as --exit-torque says
+Checks everything it can before anything moves, opens the bus, the cameras (`cameras`) and the writer, runs the
+scripted mode (`scripted`) or the manual one (`manual`) in a live view, then leaves the torque as --exit-torque says
 (`exit_torque`). The file is written through `CaptureWriter` (each sample durable on return); Ctrl-C, a bus or
 camera failure finish the file with every sample taken so far before the error is reported.
 """
@@ -12,38 +13,21 @@ from collections.abc import Callable
 
 from rich.console import Console
 
-from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.camera.model import CameraModel
+from wolfcal.capture.cameras import close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
 from wolfcal.capture.manual import confirm_limp, parse_limp, run_manual
 from wolfcal.capture.options import CaptureOptions, check_options
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
-from wolfcal.capture.sim_camera import SimCamera
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
-from wolfcal.hardware.camera import CameraError, open_camera
+from wolfcal.hardware.camera import CameraError
 from wolfcal.io.writer import CaptureWriter
-from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.robot.robot import load_robot
 
 __all__ = ["CaptureOptions", "CaptureSummary", "run_capture"]
-
-
-def _cameras(options: CaptureOptions, robot: Robot) -> tuple[CameraModel, CameraModel, int]:
-    """(full-resolution intrinsics, intrinsics of the binned images, binning)."""
-    path = options.intrinsics or robot.config.camera.intrinsics
-    if path is None:
-        raise WolfcalError(f"{robot.config.path}: no 'camera.intrinsics'; pass --intrinsics camera_info.yaml")
-    camera = load_camera_info(path)
-    binning = options.binning or (4 if options.camera == "sim" else 1)
-    if binning < 1 or camera.width % binning or camera.height % binning:
-        raise WolfcalError(f"--binning {binning}: must divide the camera size {camera.width}x{camera.height}")
-    if binning == 1:
-        return camera, camera, binning
-    binned = camera.scaled(1 / binning, 1 / binning, camera.width // binning, camera.height // binning)
-    return camera, binned, binning
 
 
 def run_capture(
@@ -60,7 +44,7 @@ def run_capture(
     limits = joint_limits(robot, robot.config.servos.ids)
     script = load_poses(options.poses, limits) if options.poses else None  # refused before anything moves
     limp = parse_limp(options.limp, robot) if options.manual else []
-    camera_model, image_camera, binning = _cameras(options, robot)
+    cameras = plan_cameras(options, robot)
     touched = script.joints if script else limp
     status = Status(
         "scripted" if script else "manual", options.samples or (len(script.poses) if script else None)
@@ -72,17 +56,16 @@ def run_capture(
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
             confirm_limp([j for j in limp if initial[j]], options.yes, ask)
-        if options.camera == "sim":
-            camera = SimCamera(robot, bus.port_name, image_camera)
-        else:
-            camera = open_camera(options.camera, image_camera)
+        open_sources(cameras, robot, bus.port_name)
         try:
-            writer = CaptureWriter(options.out, robot.config, camera_model, (binning, binning), options.image_format)
+            streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
+            writer = CaptureWriter(options.out, robot.config, streams, options.image_format)
         except WolfcalError:
-            camera.close()
+            close_sources(cameras)
             raise
         view = LiveView(status, coverage, console)
-        session = CaptureSession(robot, bus, camera, writer, options, view, coverage, status)
+        sources = {name: c.source for name, c in cameras.items()}
+        session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
         failure: BaseException | None = None
         try:
             with view:
@@ -94,7 +77,7 @@ def run_capture(
             failure = exc
         finally:
             session.summary.path = writer.close()
-            camera.close()
+            close_sources(cameras)
         bus.recover_port()
         failed = leave_torque(bus, initial, touched, options.exit_torque)
     summary = session.summary

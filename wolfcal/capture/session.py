@@ -1,8 +1,10 @@
-"""One capture session over an open bus, camera and writer: reads the bus, tracks stillness and takes a sample
+"""One capture session over an open bus, cameras and writer: reads the bus, tracks stillness and takes a sample
 from a still moment; the scripted and manual modes decide when to try.
 
-A sample is one still moment: bus reading, frame, frame, bus reading, all within a tick of each other; the image
-is the second frame. Joint angles in rad, the robot's joint convention; times on the monotonic clock [s].
+A sample is one still moment: bus reading, a frame of every camera, another frame of every camera, bus reading, all
+within a tick of each other; each camera's image is its second frame, and the sample is written only when every
+camera's frames pass the gates (tags in view, sharp, corners still). Joint angles in rad, the robot's joint
+convention; times on the monotonic clock [s].
 """
 
 from __future__ import annotations
@@ -41,14 +43,14 @@ class CaptureSession:
         self,
         robot: Robot,
         bus: DynamixelBus,
-        camera: CameraSource,
+        cameras: dict[str, CameraSource],
         writer: CaptureWriter,
         options: CaptureOptions,
         view: LiveView,
         coverage: Coverage,
         status: Status,
     ):
-        self.bus, self.camera, self.writer = bus, camera, writer
+        self.bus, self.cameras, self.writer = bus, cameras, writer
         self.options, self.view, self.coverage, self.status = options, view, coverage, status
         self.gates = options.gates
         self.window = StillnessWindow(bus.joints, self.gates)
@@ -90,13 +92,13 @@ class CaptureSession:
             self.status.still = "no"
             return reason
         before = self.read()
-        frame_a = self.camera.grab()
-        corners_a = self.detect(frame_a)
-        frame_b = self.camera.grab()
+        frames_a = {name: camera.grab() for name, camera in self.cameras.items()}
+        frames_b = {name: camera.grab() for name, camera in self.cameras.items()}
         stamp_ns = time.time_ns()
         after = self.read()
-        corners_b = self.detect(frame_b)
-        self.status.tags = sorted(corners_b)
+        corners_a = {name: self.detect(frame) for name, frame in frames_a.items()}
+        corners_b = {name: self.detect(frame) for name, frame in frames_b.items()}
+        self.status.tags = sorted({t for corners in corners_b.values() for t in corners})
         moved = np.abs(after.ticks - before.ticks)
         reason = self.window.why_not_still(time.monotonic())
         if reason is None and moved.max() > self.gates.tolerance_ticks:
@@ -106,15 +108,20 @@ class CaptureSession:
             self.status.still = "no"
             return reason
         self.status.still = "yes"
-        reason, self.status.sharpness = why_not_sharp(frame_b, corners_a, corners_b, self.gates)
-        if reason:
-            return reason
+        values = []
+        for name, frame in frames_b.items():
+            reason, value = why_not_sharp(frame, corners_a[name], corners_b[name], self.gates)
+            values.append(value)
+            if reason:
+                self.status.sharpness = min(values)
+                return f"{name}: {reason}" if len(frames_b) > 1 else reason
+        self.status.sharpness = min(values)
         self.bus.check_hardware()
-        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, frame_b)
-        self._record(after, sorted(corners_b))
+        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, frames_b)
+        self._record(after, {name: sorted(corners) for name, corners in corners_b.items()})
         return None
 
-    def _record(self, state: JointState, tags: list[int]) -> None:
+    def _record(self, state: JointState, tags: dict[str, list[int]]) -> None:
         """Count a sample written to the file, in the summary and the live view."""
         self.summary.samples += 1
         if self.rest_since is not None:
@@ -123,8 +130,10 @@ class CaptureSession:
         self.coverage.add(self.bus.joints, state.positions)
         target = f"/{self.options.samples}" if self.options.samples else ""
         pose = f" ({self.status.pose})" if self.status.pose else ""
+        seen = "; ".join(
+            ", ".join(map(str, ids)) + (f" ({name})" if len(tags) > 1 else "") for name, ids in tags.items()
+        )
         self.view.event(
-            f"sample {self.summary.samples}{target}{pose}: tags {', '.join(map(str, tags))}, "
-            f"sharpness {self.status.sharpness:.0f}"
+            f"sample {self.summary.samples}{target}{pose}: tags {seen}, sharpness {self.status.sharpness:.0f}"
         )
         self.view.refresh()

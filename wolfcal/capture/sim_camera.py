@@ -1,4 +1,9 @@
-"""The `sim` camera source of `wolfcal capture`: renders the simulated robot as the bus emulator holds it."""
+"""The `sim` camera source of `wolfcal capture`: renders the simulated robot as the bus emulator holds it.
+
+The head camera at its true kinematics, or an external camera (`external=NAME`) from its placement in the emulator's
+truth file (`external_cameras.<NAME>.T_base_camera`, as `wolfcal simulate --system external` writes it), else from
+`DEFAULT_PLACEMENT`: 1.2 m in front of base_link, 0.5 m above it, looking at the legs.
+"""
 
 from __future__ import annotations
 
@@ -10,18 +15,26 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.hardware.emulator import load_truth, read_true_angles
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
+from wolfcal.sim.external_truth import load_external_truth
+from wolfcal.sim.placement import TARGET_BASE, look_at
 from wolfcal.sim.scene import SimScene
+
+DEFAULT_PLACEMENT = look_at(np.array([1.2, 0.0, 0.5]), TARGET_BASE)  # (4, 4) T_base_camera
 
 
 class SimCamera:
     """Renders the robot as the bus emulator on `port` holds it (true angles, true frames and tags)."""
 
-    def __init__(self, robot: Robot, port: str, camera: CameraModel, seed: int = 0):
+    def __init__(self, robot: Robot, port: str, camera: CameraModel, seed: int = 0, external: str | None = None):
         self.name, self.port, self.robot = "sim", port, robot
         self._read = read_true_angles
         _, truth_path = read_true_angles(port)
         truth = load_truth(Path(truth_path)) if truth_path else Corrections()
-        self.scene = SimScene(robot, truth, camera, seed=seed)
+        T_base_camera = None
+        if external is not None:
+            placements = load_external_truth(Path(truth_path)) if truth_path else {}
+            T_base_camera = placements.get(external, DEFAULT_PLACEMENT)
+        self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera)
 
     def grab(self) -> np.ndarray:
         angles, _ = self._read(self.port)

@@ -34,11 +34,11 @@ from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.fit.pipeline import FitOptions, load_samples
 from wolfcal.fit.result import load_result
 from wolfcal.io.samples import Sample
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.sim.simulate import truth_paths
-from wolfcal.vision.observe import detect_observations
+from wolfcal.vision.observe import detect_observations, observations_of
 
 
 def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
@@ -72,7 +72,8 @@ def _observe(
     intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
     samples, _ = load_samples(robot, sources, intrinsics)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
-    obs, warnings = detect_observations(samples, robot)
+    observations, warnings = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
+    obs = observations_of(observations, HEAD_CAMERA, sources)
     tags = [t for t in result["tags_used"] if t in obs.observed_tag_ids]
     if not tags:
         raise WolfcalError(

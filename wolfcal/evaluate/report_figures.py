@@ -15,7 +15,7 @@ from wolfcal.evaluate import figures as fig
 from wolfcal.evaluate.metrics import ModelErrors
 from wolfcal.geometry import transform_points
 from wolfcal.io.samples import Sample
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
@@ -150,7 +150,7 @@ def _overlays(
         name = f"overlay_{k + 1}.png"
         models = {"before": Corrections(), "after": after_of_sample[s]}
         pngs[name] = fig.overlay_png(
-            sample.image(),
+            sample.images[HEAD_CAMERA].decode(),
             obs.uv[obs.sample_index == s],
             {key: predicted_corners_px(robot, obs, s, c) for key, c in models.items()},
             {key: skeleton_px(robot, obs.q_measured[s], c, obs.camera) for key, c in models.items()},

@@ -16,7 +16,7 @@ from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
-from wolfcal.io.reader import read_captures
+from wolfcal.io.reader import read_captures, require_cameras
 from wolfcal.io.samples import Sample
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.config_writer import write_calibrated_config
@@ -93,6 +93,8 @@ def _systems(robot: Robot, observations: dict[str, Observations], options: FitOp
     if not chosen:
         found = ", ".join(sorted(observations)) or "none"
         raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
+    if options.free in ("camera", "head_camera"):
+        robot.config.head_camera()  # a clear error when the robot config has no head camera
     if options.free in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
         raise WolfcalError(
             f"--free {options.free} estimates the head camera, but the captures used (--system {system}) hold no "
@@ -150,10 +152,10 @@ def fit_observations(
 
 
 def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None
+    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,)
 ) -> tuple[list[Sample], list[str]]:
     """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
-    config names another robot is refused."""
+    config names another robot is refused, and so is one without images of each of `cameras`."""
     camera = load_camera_info(intrinsics) if intrinsics else None
     loaded = read_captures(captures, robot.config, camera)
     for capture in loaded:
@@ -163,6 +165,7 @@ def load_samples(
                 f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "
                 f"({robot.config.path}); use the config of the robot that was captured"
             )
+    require_cameras(loaded, cameras, robot.config)
     samples = [s for c in loaded for s in c.samples]
     notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
     return samples, notes
@@ -187,11 +190,12 @@ def run_fit(
 ) -> dict:
     """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml."""
     robot = load_robot(robot_path)
-    samples, warnings = load_samples(robot, captures, intrinsics)
+    required = (HEAD_CAMERA,) if options.system == "head" else ()
+    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    observations, detect_warnings = detect_observations(samples, robot)
-    if isinstance(observations, Observations):
-        observations = {observations.camera_name: observations}
+    wanted = None if options.system in (None, "all") else [HEAD_CAMERA] if options.system == "head" else [
+        c.name for c in robot.config.external_cameras]
+    observations, detect_warnings = detect_observations(samples, robot, cameras=wanted)
     warnings += detect_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")

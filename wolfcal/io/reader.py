@@ -1,36 +1,45 @@
 """Read capture files and plain ROS 2 recordings (MCAP) into `Capture`s of still samples.
 
-A capture file (written by `CaptureWriter`) holds one JointState per image, with the image's stamp: every
-image is a sample. Any other file is read as a recording: each image is paired with the joint states around
-it and kept only when the robot was still (see `wolfcal.io.recording`). Images stay encoded;
-`Sample.image()` decodes on demand.
-
-Intrinsics of a sample, at its image's resolution, come from (first that applies): the `intrinsics`
-argument (`--intrinsics FILE`), the CameraInfo stamped nearest to the image (binning applied, ROS
-convention; an uncalibrated one, K all zero, counts as none), the robot config's `camera.intrinsics`.
-Any of them at another resolution than the image is scaled to it (same aspect ratio only).
+Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) and the config's external cameras
+(`image_topic` / `info_topic`); a file may hold any of them (at least one), see `capture_topics`. A capture file
+(written by `CaptureWriter`) holds one JointState per sample, with the stamp of the sample's images: every image is
+used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
+kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
+(see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
+camera only). Two passes: the first decides which frames to keep from stamps and image headers, the second fetches
+the encoded bytes of the kept frames only (a long recording's images need not fit in memory); `SampleImage.decode()`
+decodes on demand.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.reader import McapReader, make_reader
+from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.camera.model import MODELS, CameraModel
+from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
+from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.images import image_kind, image_size
+from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, recover_hint, torn_error
-from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns
-from wolfcal.io.recording import JointStates, Paired, pair_frame
-from wolfcal.io.samples import Capture, Sample
+from wolfcal.io.msgdefs import header_stamp_ns
+from wolfcal.io.recording import (
+    SAMPLE_TOLERANCE_NS,
+    JointStates,
+    Paired,
+    check_finite_positions,
+    group_by_stamp,
+    pair_frame,
+)
+from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
 
@@ -44,7 +53,10 @@ def read_captures(
 def read_capture(
     path: str | Path, robot_config: RobotConfig, intrinsics: CameraModel | None = None
 ) -> Capture:
-    """Read one capture file or ROS 2 recording; WolfcalError naming the file when it gives no samples."""
+    """Read one capture file or ROS 2 recording; WolfcalError naming the file when it gives no samples.
+
+    `intrinsics` (`--intrinsics`) replaces the head camera's; external cameras use their own CameraInfo or config.
+    """
     path = Path(path)
     check_mcap(path)
     if not is_finished(path):
@@ -56,147 +68,108 @@ def read_capture(
         raise WolfcalError(f"{path}: damaged MCAP file ({exc}); {recover_hint(path)}") from None
 
 
-def _check_topics(path: Path, reader: McapReader, config: RobotConfig) -> bool:
-    """Check the config's topics are present with the right types; returns whether camera info is."""
-    summary = reader.get_summary()
-    if summary is None:
-        raise WolfcalError(f"{path}: the MCAP file has no summary (no channel list); {recover_hint(path)}")
-    counts = summary.statistics.channel_message_counts if summary.statistics else {}
-    present: dict[str, str] = {}
-    for channel in summary.channels.values():
-        if counts.get(channel.id, 1):  # a channel without messages counts as missing
-            schema = summary.schemas.get(channel.schema_id)
-            present[channel.topic] = schema.name if schema else "(no schema)"
-    wanted = {
-        config.joint_states_topic: JOINT_STATE,
-        config.camera.topic: COMPRESSED_IMAGE,
-        config.camera.info_topic: CAMERA_INFO,
-    }
-    missing = [t for t in (config.joint_states_topic, config.camera.topic) if t not in present]
-    if missing:
-        listing = ", ".join(f"{t} ({present[t]})" for t in sorted(present)) or "none"
-        raise WolfcalError(
-            f"{path}: no messages on topic(s) {', '.join(missing)}. Topics in the file: {listing}. "
-            f"The robot config {config.path} expects joint states on {config.joint_states_topic}, images on "
-            f"{config.camera.topic} and camera info on {config.camera.info_topic} (optional); record these "
-            "topics or set 'joint_states_topic' / 'camera.topic' / 'camera.info_topic' in the config"
-        )
-    for topic, datatype in wanted.items():
-        if topic in present and present[topic].replace("/msg/", "/") != datatype.replace("/msg/", "/"):
-            raise WolfcalError(
-                f"{path}: topic {topic} carries {present[topic]}, wolfcal reads {datatype} there; record the "
-                "matching topic (images: image_transport's compressed topic) or fix the topics in the config"
-            )
-    return config.camera.info_topic in present
-
-
-def _camera_info_model(path: Path, message) -> tuple[CameraModel, tuple[int, int]] | None:
-    """(full-resolution model, binning) of a CameraInfo; None for an uncalibrated one (K all zero)."""
-    K = np.asarray(message.k, dtype=float).reshape(3, 3)
-    if not np.any(K) or message.width == 0 or message.height == 0:
-        return None
-    model = message.distortion_model or "plumb_bob"
-    if model not in MODELS:
-        raise WolfcalError(
-            f"{path}: CameraInfo uses distortion model {model!r}, wolfcal knows {', '.join(MODELS)}; "
-            "pass --intrinsics FILE with a supported model"
-        )
-    camera = CameraModel(int(message.width), int(message.height), K, np.asarray(message.d, float), model)
-    return camera, (max(int(message.binning_x), 1), max(int(message.binning_y), 1))
-
-
-class _Intrinsics:
-    """Chooses and scales the intrinsics of each image, caching one model per source and image size."""
-
-    def __init__(self, path: Path, config: RobotConfig, override: CameraModel | None) -> None:
-        self.path, self.config, self.override = path, config, override
-        self.cache: dict[tuple, CameraModel] = {}
-        self.fallback: CameraModel | None = None
-
-    def for_image(
-        self, size: tuple[int, int], info: tuple[CameraModel, tuple[int, int]] | None
-    ) -> CameraModel:
-        """Intrinsics for an image of `size` (width, height) given the CameraInfo nearest to it (or None)."""
-        if self.override is not None:
-            base, binning, what = self.override, (1, 1), "the --intrinsics"
-        elif info is not None:
-            base, binning, what = info[0], info[1], "the CameraInfo"
-        else:
-            base, binning, what = self._config_intrinsics(), (1, 1), f"{self.config.camera.intrinsics}"
-        key = (id(base), binning, size)
-        if key not in self.cache:
-            self.cache[key] = self._at_size(base, binning, size, what)
-        return self.cache[key]
-
-    def _config_intrinsics(self) -> CameraModel:
-        if self.fallback is None:
-            if self.config.camera.intrinsics is None:
+def require_cameras(captures: Iterable[Capture], cameras: Iterable[str], config: RobotConfig) -> None:
+    """WolfcalError naming file and topic when a capture holds no image of one of `cameras` (e.g. the cameras a
+    fit was asked to use). A camera the config does not name is refused first, with the config's message."""
+    cameras = list(cameras)
+    topics = {name: config.camera_topics(name)[0] for name in cameras}
+    for capture in captures:
+        for name in cameras:
+            if not capture.samples_of(name):
+                held = ", ".join(f"'{c}' ({config.camera_topics(c)[0]})" for c in capture.cameras) or "none"
                 raise WolfcalError(
-                    f"{self.path}: no CameraInfo on {self.config.camera.info_topic} and no intrinsics "
-                    f"given; pass --intrinsics FILE or set 'camera.intrinsics' in {self.config.path}"
+                    f"{capture.path}: no images of camera '{name}' (topic {topics[name]}); the file holds images of "
+                    f"{held}. Give a capture of that camera, or choose the cameras the capture holds"
                 )
-            self.fallback = load_camera_info(self.config.camera.intrinsics)
-        return self.fallback
-
-    def _at_size(
-        self, base: CameraModel, binning: tuple[int, int], size: tuple[int, int], what: str
-    ) -> CameraModel:
-        if binning != (1, 1):
-            bx, by = binning
-            base = base.scaled(1 / bx, 1 / by, base.width // bx, base.height // by)
-        width, height = size
-        if (base.width, base.height) == (width, height):
-            return base
-        sx, sy = width / base.width, height / base.height
-        if abs(sx / sy - 1) > 0.01:
-            raise WolfcalError(
-                f"{self.path}: {what} intrinsics are for {base.width}x{base.height} px images, the "
-                f"images are {width}x{height} px (another aspect ratio); pass --intrinsics FILE "
-                "calibrated for these images"
-            )
-        return base.scaled(sx, sy, width, height)
 
 
-def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: CameraModel | None) -> Capture:
-    """Both passes over an open file: pair and select frames, then fetch the kept frames' bytes."""
-    reader = make_reader(handle, decoder_factories=[DecoderFactory()])
-    use_info = _check_topics(path, reader, config) and intrinsics is None
-    joint_messages, images, infos = [], [], []  # images: (stamp, kind, size) - the bytes come in pass 2
-    info_models: dict[tuple, tuple[CameraModel, tuple[int, int]] | None] = {}
-    topics = [config.joint_states_topic, config.camera.topic] + (
-        [config.camera.info_topic] if use_info else []
-    )
+@dataclass
+class _Frame:
+    camera: str
+    stamp: int
+    image: SampleImage  # bytes filled in pass 2
+    paired: Paired
+
+
+def _pass_one(path: Path, reader, config: RobotConfig, cameras: list[str], info_cameras: set[str]):
+    """Joint-state messages, per-camera image headers (stamp, kind, size) and per-camera CameraInfo models."""
+    image_topics = {config.camera_topics(n)[0]: n for n in cameras}
+    info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
+    joint_messages: list[tuple] = []
+    images: dict[str, list[tuple[int, str | None, tuple[int, int] | None]]] = {n: [] for n in cameras}
+    infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
+    models: dict[tuple, InfoModel | None] = {}
+    topics = [config.joint_states_topic, *image_topics, *info_topics]
     for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
             joint_messages.append((stamp, decoded.name, decoded.position, decoded.velocity))
-        elif channel.topic == config.camera.topic:
-            images.append((stamp, image_kind(decoded.data), image_size(decoded.data)))
+        elif channel.topic in image_topics:
+            images[image_topics[channel.topic]].append((stamp, image_kind(decoded.data), image_size(decoded.data)))
         else:
-            key = (
-                decoded.width,
-                decoded.height,
-                decoded.distortion_model,
-                tuple(decoded.k),
-                tuple(decoded.d),
-            )
-            key += (decoded.binning_x, decoded.binning_y)
-            if key not in info_models:  # one model per distinct CameraInfo
-                info_models[key] = _camera_info_model(path, decoded)
-            infos.append((stamp, info_models[key]))
-    attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
+            key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
+                   tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
+            if key not in models:  # one model per distinct CameraInfo
+                models[key] = camera_info_model(path, channel.topic, decoded)
+            infos[info_topics[channel.topic]].append((stamp, models[key]))
+    return joint_messages, images, infos
 
+
+def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: CameraModel | None) -> Capture:
+    """Both passes over an open file: pair and select frames per camera, group them, fetch the kept bytes."""
+    reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+    found = check_topics(path, reader, config)
+    info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
+    joint_messages, images, infos = _pass_one(path, reader, config, found.cameras, info_cameras)
+    attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     states = JointStates.from_messages(joint_messages)
-    # a capture file: one joint state per image, with the image's stamp
-    exact = len(joint_messages) == len(images) and {i[0] for i in images} <= {m[0] for m in joint_messages}
+    check_finite_positions(path, config.joint_states_topic, states)
+    image_stamps = {s for frames in images.values() for s, _, _ in frames}
+    # a capture file: one joint state per sample, with the stamp of the sample's images
+    exact = len(joint_messages) == len(image_stamps) and image_stamps <= {m[0] for m in joint_messages}
+    frames: list[_Frame] = []
+    skipped: list[str] = []
+    for name in found.cameras:
+        frames += _keep_frames(path, config, name, images[name], infos[name], states, exact, intrinsics, skipped)
+    if not frames:
+        counts = ", ".join(f"{len(images[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}" for n in images)
+        why = f"; e.g. {skipped[0]}" if skipped else ""
+        raise WolfcalError(
+            f"{path}: no usable samples ({counts}, {len(joint_messages)} joint state(s) on "
+            f"{config.joint_states_topic}{why}); record the robot holding still poses with the camera running"
+        )
+    samples = _group(path, states, frames, 0 if exact else SAMPLE_TOLERANCE_NS)
+    _fetch_bytes(reader, config, frames)
+    return Capture(
+        path=path,
+        samples=samples,
+        urdf_text=attachments.get(URDF_ATTACHMENT),
+        robot_config_text=attachments.get(CONFIG_ATTACHMENT),
+        skipped=skipped,
+        cameras=[n for n in found.cameras if any(f.camera == n for f in frames)],
+    )
+
+
+def _keep_frames(
+    path: Path,
+    config: RobotConfig,
+    name: str,
+    images: list[tuple[int, str | None, tuple[int, int] | None]],
+    infos: list[tuple[int, InfoModel | None]],
+    states: JointStates,
+    exact: bool,
+    intrinsics: CameraModel | None,
+    skipped: list[str],
+) -> list[_Frame]:
+    """The still (or, in a capture file, stamped) frames of one camera; reasons for the others go to `skipped`."""
+    chooser = IntrinsicsChooser(path, config, name, intrinsics)
+    topic = config.camera_topics(name)[0]
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
-    chooser = _Intrinsics(path, config, intrinsics)
-    images.sort(key=lambda item: item[0])
+    images = sorted(images, key=lambda item: item[0])
     start = images[0][0] if images else 0
-    kept: dict[int, Sample] = {}
-    skipped = []
+    kept: dict[int, _Frame] = {}
     for stamp, kind, size in images:
-        where = f"image {(stamp - start) / 1e9:.3f} s after the first (stamp {stamp} ns)"
+        where = f"'{name}' image {(stamp - start) / 1e9:.3f} s after its first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
             continue
@@ -208,32 +181,35 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
             skipped.append(f"{where}: a second image with the same stamp")
             continue
         info = infos[int(np.argmin(np.abs(info_stamps - stamp)))][1] if len(infos) else None
-        kept[stamp] = Sample(
-            stamp_ns=stamp,
-            joint_names=list(states.names),
-            positions=paired.positions,
-            image_data=b"",
-            image_format=kind,
-            camera=chooser.for_image(size, info),
-            velocities=paired.velocities,
-            source=str(path),
+        image = SampleImage(b"", kind, chooser.for_image(size, info), f"{path}: {topic}", stamp)
+        kept[stamp] = _Frame(name, stamp, image, paired)
+    return list(kept.values())
+
+
+def _group(path: Path, states: JointStates, frames: list[_Frame], tolerance_ns: int) -> list[Sample]:
+    """Samples of frames grouped by stamp; a sample's stamp and joint readings are those of its first frame."""
+    groups = group_by_stamp([f.stamp for f in frames], [f.camera for f in frames], tolerance_ns)
+    samples = []
+    for group in groups:
+        first = frames[group[0]]
+        samples.append(
+            Sample(
+                stamp_ns=first.stamp,
+                joint_names=list(states.names),
+                positions=first.paired.positions,
+                images={frames[i].camera: frames[i].image for i in group},
+                velocities=first.paired.velocities,
+                source=str(path),
+            )
         )
-    if not kept:
-        why = f"; e.g. {skipped[0]}" if skipped else ""
-        raise WolfcalError(
-            f"{path}: no usable samples ({len(images)} image(s) on {config.camera.topic}, "
-            f"{len(joint_messages)} joint state(s) on {config.joint_states_topic}{why}); record the robot "
-            "holding still poses with the camera running"
-        )
-    # pass 2: the encoded bytes of the kept frames only (a long recording's images need not fit in memory)
-    for _, _, message, decoded in reader.iter_decoded_messages(topics=[config.camera.topic]):
-        sample = kept.get(header_stamp_ns(decoded.header, message.log_time))
-        if sample is not None and not sample.image_data:
-            sample.image_data = bytes(decoded.data)
-    return Capture(
-        path=path,
-        samples=list(kept.values()),
-        urdf_text=attachments.get(URDF_ATTACHMENT),
-        robot_config_text=attachments.get(CONFIG_ATTACHMENT),
-        skipped=skipped,
-    )
+    return samples
+
+
+def _fetch_bytes(reader, config: RobotConfig, frames: list[_Frame]) -> None:
+    """Pass 2: the encoded bytes of the kept frames only."""
+    wanted = {(config.camera_topics(f.camera)[0], f.stamp): f.image for f in frames}
+    topics = sorted({topic for topic, _ in wanted})
+    for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
+        image = wanted.get((channel.topic, header_stamp_ns(decoded.header, message.log_time)))
+        if image is not None and not image.data:
+            image.data = bytes(decoded.data)

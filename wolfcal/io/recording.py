@@ -9,21 +9,28 @@ for every joint:
   sparse to span it, every reported |velocity| in the window must be at most `STILL_VELOCITY`.
 Joint states are kept per joint, so recordings in which several publishers share the topic (e.g. legs and
 head on separate messages) pair too.
+
+Several cameras: each camera's frames are paired and tested on their own; kept frames of different cameras whose
+stamps lie within `SAMPLE_TOLERANCE_NS` of the group's first frame form one sample (one frame per camera), others
+are separate samples. In a capture file the frames of one sample share one stamp exactly.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from wolfcal.encoders import RAD_PER_TICK
+from wolfcal.errors import WolfcalError
 
 PAIR_TOLERANCE_NS = 20_000_000  # 20 ms: a joint moving at STILL_VELOCITY turns by < 1/2 tick in this time
 STILL_WINDOW_NS = 250_000_000  # +-0.25 s around the image
 ENCODER_TICK = RAD_PER_TICK  # [rad] Dynamixel resolution
 STILL_VELOCITY = 0.03  # [rad/s] about one Dynamixel velocity unit (0.229 rpm = 0.024 rad/s)
+SAMPLE_TOLERANCE_NS = 20_000_000  # 20 ms: frames of different cameras this close form one sample (recordings)
 
 
 @dataclass(frozen=True)
@@ -117,3 +124,33 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
         )
     v = np.asarray(velocities)
     return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
+
+
+def check_finite_positions(path: Path | str, topic: str, states: JointStates) -> None:
+    """WolfcalError naming file, topic, joint and count when a joint reading is NaN or infinite."""
+    bad = {name: int(np.count_nonzero(~np.isfinite(s.positions))) for name, s in states.series.items()}
+    bad = {name: count for name, count in bad.items() if count}
+    if bad:
+        listing = ", ".join(f"{name} ({count} of {len(states.series[name].positions)})" for name, count in bad.items())
+        raise WolfcalError(
+            f"{path}: topic {topic} holds NaN or infinite joint positions: {listing}; a joint reading that is "
+            "not a number cannot be calibrated against. Check the driver that published them"
+        )
+
+
+def group_by_stamp(stamps: Sequence[int], cameras: Sequence[str], tolerance_ns: int) -> list[list[int]]:
+    """Indices of frames grouped into samples: in stamp order, a frame joins the current group when it is within
+    `tolerance_ns` of the group's first frame and its camera is not in the group yet."""
+    order = np.argsort(np.asarray(stamps, dtype=np.int64), kind="stable")
+    groups: list[list[int]] = []
+    for i in (int(k) for k in order):
+        group = groups[-1] if groups else None
+        if (
+            group is not None
+            and stamps[i] - stamps[group[0]] <= tolerance_ns
+            and cameras[i] not in {cameras[j] for j in group}
+        ):
+            group.append(i)
+        else:
+            groups.append([i])
+    return groups

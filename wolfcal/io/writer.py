@@ -1,4 +1,8 @@
-"""Write capture files: one still sample = JointState + CompressedImage + CameraInfo with one header stamp.
+"""Write capture files: one still sample = a JointState plus, for each camera that took part, a CompressedImage and a
+CameraInfo, all with one header stamp. Cameras are the head camera (`HEAD_CAMERA`, topics `camera.topic` /
+`camera.info_topic`) and external cameras (their `image_topic` / `info_topic`); the file's metadata record
+`wolfcal.cameras` maps each recorded camera name to its image topic, so a reader can tell a camera the robot config
+does not know.
 
 The file is an MCAP file with ROS 2 messages (CDR, `ros2msg` schemas, profile `ros2`), so `ros2 bag` and
 Foxglove open it. Durability: every sample is its own chunk, written, flushed and fsynced into
@@ -26,10 +30,13 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.images import encode_image
 from wolfcal.io.mcapfile import partial_path
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
+from wolfcal.observations import HEAD_CAMERA
 
 URDF_ATTACHMENT = "robot.urdf"
 CONFIG_ATTACHMENT = "robot.yaml"
+CAMERAS_METADATA = "wolfcal.cameras"  # metadata record: camera name -> image topic
 LIBRARY = "wolfcal"
+CameraStreams = dict[str, tuple[CameraModel, tuple[int, int]]]  # camera name -> (full-resolution model, binning)
 # Chunks close only when a sample is complete (flush), never inside one: a torn file holds whole samples.
 _NEVER = 2**62
 
@@ -56,7 +63,8 @@ def camera_info_message(camera: CameraModel, binning: tuple[int, int], stamp_ns:
 class CaptureWriter:
     """Context manager writing one capture file; see the module docstring for the guarantees.
 
-    `camera` is the full-resolution model; images given to `add_sample` must have the binned size
+    `cameras` maps each camera to record ('head' or an external camera of the config) to its full-resolution model
+    and binning; images given to `add_sample` must have the binned size
     (camera.width // binning[0], camera.height // binning[1]).
     """
 
@@ -64,25 +72,32 @@ class CaptureWriter:
         self,
         path: str | Path,
         robot_config: RobotConfig,
-        camera: CameraModel,
-        binning: tuple[int, int] = (1, 1),
+        cameras: CameraStreams,
         image_format: str = "png",
     ) -> None:
         self.path = Path(path)
         self.partial = partial_path(self.path)
         if image_format not in ("png", "jpeg"):
             raise WolfcalError(f"{self.path}: unknown image format {image_format!r}; use 'png' or 'jpeg'")
-        if len(binning) != 2 or any(int(b) != b or b < 1 for b in binning):
-            raise WolfcalError(f"{self.path}: binning must be two positive integers, found {binning!r}")
+        if not cameras:
+            raise WolfcalError(f"{self.path}: no camera to record; a capture needs at least one")
+        for name, (_, binning) in cameras.items():
+            if len(binning) != 2 or any(int(b) != b or b < 1 for b in binning):
+                raise WolfcalError(
+                    f"{self.path}: binning of camera {name!r} must be two positive integers, found {binning!r}"
+                )
+        self.topics = {name: robot_config.camera_topics(name) for name in cameras}  # checks the names
         if self.partial.exists():
             raise WolfcalError(
                 f"{self.partial} exists: an earlier capture did not finish; rescue its samples with "
                 f"`wolfcal recover {self.partial}` or delete it, then capture again"
             )
         self.config = robot_config
-        self.camera = camera
-        self.binning = (int(binning[0]), int(binning[1]))
-        self.image_size = (camera.width // self.binning[0], camera.height // self.binning[1])
+        self.cameras = {name: (camera, (int(b[0]), int(b[1]))) for name, (camera, b) in cameras.items()}
+        self.image_sizes = {
+            name: (camera.width // b[0], camera.height // b[1]) for name, (camera, b) in self.cameras.items()
+        }
+        self.frame_ids = {name: self._frame_id(name) for name in cameras}
         self.image_format = image_format
         self.count = 0
         self._closed = False
@@ -95,19 +110,24 @@ class CaptureWriter:
             self.partial.unlink()
             raise
 
+    def _frame_id(self, name: str) -> str:
+        """header.frame_id of a camera's messages: the head camera's optical frame, `<name>_optical_frame` else."""
+        return self.config.head_camera().frame if name == HEAD_CAMERA else f"{name}_optical_frame"
+
     def _start(self, config: RobotConfig) -> tuple[McapWriter, dict[str, int], dict[str, Callable]]:
-        """Header, schemas, channels and attachments; durable on return."""
+        """Header, schemas, channels (by topic), camera metadata and attachments; durable on return."""
         mcap = McapWriter(self._file, chunk_size=_NEVER, compression=CompressionType.NONE)
         mcap.start(profile="ros2", library=LIBRARY)
-        channels, encoders = {}, {}
-        for topic, datatype in (
-            (config.joint_states_topic, JOINT_STATE),
-            (config.camera.topic, COMPRESSED_IMAGE),
-            (config.camera.info_topic, CAMERA_INFO),
-        ):
-            schema_id = mcap.register_schema(datatype, "ros2msg", MSGDEFS[datatype].encode())
-            channels[datatype] = mcap.register_channel(topic, "cdr", schema_id)
-            encoders[datatype] = serialize_dynamic(datatype, MSGDEFS[datatype])[datatype]
+        topics = [(config.joint_states_topic, JOINT_STATE)]
+        for image_topic, info_topic in self.topics.values():
+            topics += [(image_topic, COMPRESSED_IMAGE), (info_topic, CAMERA_INFO)]
+        schema_ids, channels, encoders = {}, {}, {}
+        for topic, datatype in topics:
+            if datatype not in schema_ids:
+                schema_ids[datatype] = mcap.register_schema(datatype, "ros2msg", MSGDEFS[datatype].encode())
+                encoders[datatype] = serialize_dynamic(datatype, MSGDEFS[datatype])[datatype]
+            channels[topic] = mcap.register_channel(topic, "cdr", schema_ids[datatype])
+        mcap.add_metadata(CAMERAS_METADATA, {name: image for name, (image, _) in self.topics.items()})
         now = time.time_ns()
         for name, media_type, source in (
             (URDF_ATTACHMENT, "application/xml", config.urdf),
@@ -124,9 +144,10 @@ class CaptureWriter:
         joint_names: list[str],
         positions: np.ndarray,
         velocities: np.ndarray | None,
-        image: np.ndarray,
+        images: dict[str, np.ndarray],
     ) -> None:
-        """Append one still sample (positions [rad], velocities [rad/s] or None); durable on return."""
+        """Append one still sample (positions [rad], velocities [rad/s] or None, one image per camera that took
+        part: a subset of the writer's cameras, at least one); durable on return."""
         if self._closed:
             raise WolfcalError(f"{self.path}: the capture is closed; open a new CaptureWriter")
         positions = np.asarray(positions, dtype=float).ravel()
@@ -135,32 +156,40 @@ class CaptureWriter:
             velocities is not None and len(velocities) != len(joint_names)
         ):
             raise WolfcalError(f"{self.path}: {len(joint_names)} joint names but positions/velocities differ")
-        height, width = image.shape[:2]
-        if (width, height) != self.image_size:
+        unknown = sorted(set(images) - set(self.cameras))
+        if unknown or not images:
             raise WolfcalError(
-                f"{self.path}: image of {width}x{height} px, but camera "
-                f"{self.camera.width}x{self.camera.height} with binning {self.binning[0]}x{self.binning[1]} "
-                f"gives {self.image_size[0]}x{self.image_size[1]}"
+                f"{self.path}: a sample needs images of the writer's cameras ({', '.join(self.cameras)}), "
+                f"got {', '.join(unknown) if unknown else 'none'}"
             )
-        data, image_format = encode_image(image, self.image_format)
-        header = {"stamp": stamp_dict(stamp_ns), "frame_id": self.config.camera.frame}
-        messages = (
+        for name, image in images.items():
+            self._check_size(name, image)
+        stamp = stamp_dict(stamp_ns)
+        messages = [
             (
+                self.config.joint_states_topic,
                 JOINT_STATE,
                 {
-                    "header": {"stamp": header["stamp"], "frame_id": ""},
+                    "header": {"stamp": stamp, "frame_id": ""},
                     "name": list(joint_names),
                     "position": positions.tolist(),
                     "velocity": [] if velocities is None else velocities.tolist(),
                     "effort": [],
                 },
-            ),
-            (COMPRESSED_IMAGE, {"header": header, "format": image_format, "data": data}),
-            (CAMERA_INFO, camera_info_message(self.camera, self.binning, stamp_ns, self.config.camera.frame)),
-        )
-        for datatype, message in messages:
+            )
+        ]
+        for name, image in images.items():  # encode every image before anything is written
+            data, image_format = encode_image(image, self.image_format)
+            image_topic, info_topic = self.topics[name]
+            camera, binning = self.cameras[name]
+            header = {"stamp": stamp, "frame_id": self.frame_ids[name]}
+            messages.append((image_topic, COMPRESSED_IMAGE, {"header": header, "format": image_format, "data": data}))
+            messages.append(
+                (info_topic, CAMERA_INFO, camera_info_message(camera, binning, stamp_ns, self.frame_ids[name]))
+            )
+        for topic, datatype, message in messages:
             self._mcap.add_message(
-                self._channels[datatype],
+                self._channels[topic],
                 log_time=int(stamp_ns),
                 data=self._encoders[datatype](message),
                 publish_time=int(stamp_ns),
@@ -168,6 +197,16 @@ class CaptureWriter:
             )
         self._sync()
         self.count += 1
+
+    def _check_size(self, name: str, image: np.ndarray) -> None:
+        height, width = image.shape[:2]
+        if (width, height) != self.image_sizes[name]:
+            camera, binning = self.cameras[name]
+            size = self.image_sizes[name]
+            raise WolfcalError(
+                f"{self.path}: image of camera {name!r} is {width}x{height} px, but camera "
+                f"{camera.width}x{camera.height} with binning {binning[0]}x{binning[1]} gives {size[0]}x{size[1]}"
+            )
 
     def close(self) -> Path | None:
         """Finish the file and rename it to `path`; returns `path`, or None if no sample was added."""

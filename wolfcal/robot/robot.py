@@ -26,7 +26,7 @@ class Robot:
     @property
     def camera_joint(self) -> str:
         """The joint whose origin places the camera frame: its frame correction is the camera extrinsic."""
-        return self.model.parent_joint(self.config.camera.frame).name
+        return self.model.parent_joint(self.config.head_camera().frame).name
 
     def actuated_joints_to(self, links: list[str]) -> tuple[str, ...]:
         """The actuated joints between the base and each of `links`, in chain order, each once."""
@@ -42,11 +42,10 @@ class Robot:
         return not self.actuated_joints_to([link])
 
     def camera_and_leg_joints(self, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
-        """The actuated joints between base and camera, then those between base and each tag of the given sides:
-        the joints whose encoder offsets a camera-to-foot calibration can see."""
-        return self.actuated_joints_to(
-            [self.config.camera.frame] + [t.link for t in self.config.tags if t.side in sides]
-        )
+        """The actuated joints between base and camera (none without a head camera), then those between base and
+        each tag of the given sides: the joints whose encoder offsets a camera-to-foot calibration can see."""
+        camera = [self.config.camera.frame] if self.config.camera is not None else []
+        return self.actuated_joints_to(camera + [t.link for t in self.config.tags if t.side in sides])
 
     def T_link_tag(self, tag_id: int, corrections: Corrections | None = None) -> np.ndarray:
         """(4, 4) mount of a tag in its link, with its correction applied."""
@@ -60,9 +59,10 @@ class Robot:
         self, q: np.ndarray, tag_ids: list[int], corrections: Corrections | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """T_base_camera (N, 4, 4) and T_camera_tag (N, len(tag_ids), 4, 4) from measured q (N, J)."""
-        links = [self.config.camera.frame] + [self.config.tag(t).link for t in tag_ids]
+        frame = self.config.head_camera().frame
+        links = [frame] + [self.config.tag(t).link for t in tag_ids]
         poses = self.model.link_poses(q, links, corrections, base=self.config.base_link)
-        T_base_camera = poses[self.config.camera.frame]
+        T_base_camera = poses[frame]
         T_camera_base = invert_transform(T_base_camera)
         T_camera_tag = np.stack(
             [T_camera_base @ poses[self.config.tag(t).link] @ self.T_link_tag(t, corrections) for t in tag_ids],
@@ -78,10 +78,13 @@ def load_robot(config_path: str | Path) -> Robot:
     where = str(config.path)
     if config.base_link not in model.links:
         raise WolfcalError(f"{where}: 'base_link' {config.base_link!r} is not a link of {config.urdf}")
-    if config.camera.frame not in model.links:
-        raise WolfcalError(f"{where}: 'camera.frame' {config.camera.frame!r} is not a link/frame of {config.urdf}")
-    if config.camera.frame == model.root:
-        raise WolfcalError(f"{where}: 'camera.frame' must not be the URDF's root link")
+    if config.camera is not None:
+        if config.camera.frame not in model.links:
+            raise WolfcalError(
+                f"{where}: 'camera.frame' {config.camera.frame!r} is not a link/frame of {config.urdf}"
+            )
+        if config.camera.frame == model.root:
+            raise WolfcalError(f"{where}: 'camera.frame' must not be the URDF's root link")
     for i, tag in enumerate(config.tags):
         if tag.link not in model.links:
             raise WolfcalError(

@@ -29,13 +29,14 @@ def camera_pose_errors(
     robot: Robot, estimate: Corrections, truth: Corrections, grid: int = 15
 ) -> tuple[np.ndarray, np.ndarray]:
     """Camera pose error (rad, m) over a grid spanning the whole range of every joint between base and camera."""
-    joints = [j for j in robot.model.joints_between(robot.config.base_link, robot.config.camera.frame) if j.actuated]
+    frame = robot.config.head_camera().frame
+    joints = [j for j in robot.model.joints_between(robot.config.base_link, frame) if j.actuated]
     axes = [np.linspace(max(j.lower, -np.pi), min(j.upper, np.pi), grid) for j in joints]
     mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(joints))
     q = np.zeros((len(mesh), len(robot.joint_names)))
     for k, joint in enumerate(joints):
         q[:, robot.model.column(joint.name)] = mesh[:, k]
-    return _pose_errors(robot, q, robot.config.camera.frame, estimate, truth)
+    return _pose_errors(robot, q, frame, estimate, truth)
 
 
 def link_position_errors(

@@ -9,7 +9,6 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
-from wolfcal.geometry import invert_transform
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
@@ -61,10 +60,3 @@ def synthetic_observations(
     _, T_camera_tag = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, frames)
     return observations_from_poses(robot, camera, truth, q_true, T_camera_tag, visible, noise_px, rng)
 
-
-def external_tag_poses(
-    robot: Robot, truth: Corrections, q_true: np.ndarray, T_base_camera: np.ndarray
-) -> np.ndarray:
-    """T_camera_tag (N, T, 4, 4) of every configured tag seen by an external camera at T_base_camera (4, 4)."""
-    T_base_tag = true_base_tag_poses(robot, truth, q_true, robot.config.tag_ids)
-    return invert_transform(T_base_camera) @ T_base_tag

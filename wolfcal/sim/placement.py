@@ -1,55 +1,67 @@
-"""Where a simulated external camera stands, and what it sees of the robot's tags.
+"""Where a simulated external camera stands: a pose T_base_camera of its optical frame (z forward, x right, y down)
+in the robot's base frame [m, rad].
 
-A tripod camera in front of the robot (base frame: x forward, z up), 1-2 m away, raised so it looks down on the
-feet at 30-50 deg: the foot tags lie face up on their plates and the torso tag faces forward, so both face it.
+Random placements (`random_placement`): a tripod in front of the robot on its stand, at a horizontal distance of
+`DISTANCE_M` from base_link's origin, within `AZIMUTH_RAD` of straight ahead (+x of base_link), at a height of
+`HEIGHT_M` relative to base_link, looking at `TARGET_BASE` (between the torso tag and the feet, so both are in view)
+give or take `TARGET_JITTER_M` per axis, rolled about its viewing axis by up to `ROLL_RAD`.
+
+Given placements (`placement_from_text`, `--placement x,y,z,roll,pitch,yaw`): the position [m] and the URDF
+roll-pitch-yaw [rad] of the camera's body frame (x along the viewing direction, y left, z up) in base_link, e.g.
+`1.5,0,0,0,0,3.1416`: 1.5 m in front at base height, looking back at the robot.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from wolfcal.camera.model import CameraModel
-from wolfcal.geometry import make_transform
-from wolfcal.vision.tags import tag_corners
+from wolfcal.errors import WolfcalError
+from wolfcal.geometry import axis_angle_matrix, transform_from_xyz_rpy
+
+DISTANCE_M = (1.0, 2.0)
+AZIMUTH_RAD = (-0.5, 0.5)  # about +-29 deg
+HEIGHT_M = (-0.3, 0.4)
+TARGET_BASE = np.array([0.1, 0.0, -0.15])  # [m] in base_link
+TARGET_JITTER_M = 0.05
+ROLL_RAD = 0.05
+# optical frame (z forward, x right, y down) in the body frame (x forward, y left, z up)
+T_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
-def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """T_base_camera (4, 4) of an optical frame (z forward, x right, y down) at `eye` looking at `target`,
-    image rows parallel to the base's horizontal plane [m]."""
-    z = target - eye
-    z = z / np.linalg.norm(z)
+def look_at(position_base: np.ndarray, target_base: np.ndarray, roll: float = 0.0) -> np.ndarray:
+    """(4, 4) T_base_camera of an optical frame at `position_base` whose z axis points at `target_base`, its x axis
+    level (horizontal) before `roll` [rad] about the viewing axis."""
+    z = np.asarray(target_base, float) - np.asarray(position_base, float)
+    z /= np.linalg.norm(z)
     x = np.cross(z, [0.0, 0.0, 1.0])
-    x = x / np.linalg.norm(x)
-    y = np.cross(z, x)
-    return make_transform(np.stack([x, y, z], axis=1), eye)
+    if np.linalg.norm(x) < 1e-9:
+        raise WolfcalError("an external camera looking straight up or down has no level direction; move it")
+    x /= np.linalg.norm(x)
+    R = np.column_stack([x, np.cross(z, x), z]) @ axis_angle_matrix(np.array([0.0, 0.0, 1.0]), np.array(roll))
+    T_base_camera = np.eye(4)
+    T_base_camera[:3, :3] = R
+    T_base_camera[:3, 3] = position_base
+    return T_base_camera
 
 
-def random_tripod_placement(rng: np.random.Generator, target: np.ndarray | None = None) -> np.ndarray:
-    """T_base_camera of a tripod 1-2 m in front of the robot (bearing within +-30 deg), looking down at 30-50 deg
-    onto `target` (default: between torso and feet, (0.1, 0, -0.2) m in the base frame)."""
-    target = np.array([0.1, 0.0, -0.2]) if target is None else np.asarray(target, dtype=float)
-    distance = rng.uniform(1.0, 2.0)
-    bearing = np.deg2rad(rng.uniform(-30.0, 30.0))
-    elevation = np.deg2rad(rng.uniform(30.0, 50.0))
-    eye = target + distance * np.array(
-        [np.cos(elevation) * np.cos(bearing), np.cos(elevation) * np.sin(bearing), np.sin(elevation)]
-    )
-    return look_at(eye, target)
+def random_placement(rng: np.random.Generator) -> np.ndarray:
+    """(4, 4) T_base_camera of a tripod drawn from the ranges of the module docstring."""
+    distance, azimuth = rng.uniform(*DISTANCE_M), rng.uniform(*AZIMUTH_RAD)
+    position_base = np.array([distance * np.cos(azimuth), distance * np.sin(azimuth), rng.uniform(*HEIGHT_M)])
+    target_base = TARGET_BASE + rng.uniform(-TARGET_JITTER_M, TARGET_JITTER_M, 3)
+    return look_at(position_base, target_base, rng.uniform(-ROLL_RAD, ROLL_RAD))
 
 
-def visible_tags(
-    camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray, margin_px: float, min_size_px: float,
-    max_angle_rad: float = np.deg2rad(60.0),
-) -> np.ndarray:
-    """(N, T) bool: tag t (edge sizes[t] [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
-    margin, appears at least `min_size_px` large and faces the camera (normal within `max_angle_rad` of the ray)."""
-    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
-    uv = camera.project(p)  # (N, T, 4, 2)
-    inside = np.all(camera.in_image(uv, margin_px), axis=-1)
-    edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
-    big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px
-    normal = T_camera_tag[..., :3, 2]
-    to_camera = -T_camera_tag[..., :3, 3]
-    cos = np.sum(normal * to_camera, axis=-1) / np.linalg.norm(to_camera, axis=-1)
-    return inside & big & (cos > np.cos(max_angle_rad))
+def placement_from_text(text: str) -> np.ndarray:
+    """(4, 4) T_base_camera from 'x,y,z,roll,pitch,yaw' (body frame of the camera, see the module docstring)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not np.all(np.isfinite(values)):
+        raise WolfcalError(
+            f"--placement {text!r}: give x,y,z,roll,pitch,yaw (metres, radians) of the camera in base_link, "
+            "e.g. 1.5,0,0,0,0,3.1416 for a camera 1.5 m in front looking back at the robot"
+        )
+    return transform_from_xyz_rpy(values[:3], values[3:]) @ T_BODY_OPTICAL
+

@@ -49,14 +49,12 @@ def sampling_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
-def tag_visibility(
-    robot: Robot, camera: CameraModel, q_true: np.ndarray, truth: Corrections, tag_ids: list[int],
-    margin_px: float, min_size_px: float, max_angle_rad: float = np.deg2rad(60.0),
+def visible_in_view(
+    camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray, margin_px: float, min_size_px: float,
+    max_angle_rad: float = np.deg2rad(60.0),
 ) -> np.ndarray:
-    """(N, T) bool: tag t is well visible in pose n (q_true are true angles: no offsets applied)."""
-    true_frames = Corrections(frames=truth.frames, tags=truth.tags)
-    _, T_camera_tag = robot.camera_and_tag_poses(q_true, tag_ids, true_frames)
-    sizes = np.array([robot.config.tag(t).size for t in tag_ids])
+    """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
+    margin, appears at least `min_size_px` per edge and faces the camera (less than `max_angle_rad` off the ray)."""
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
     p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
     uv = camera.project(p)  # (N, T, 4, 2)
@@ -67,6 +65,17 @@ def tag_visibility(
     to_camera = -T_camera_tag[..., :3, 3]
     cos = np.sum(normal * to_camera, axis=-1) / np.linalg.norm(to_camera, axis=-1)
     return inside & big & (cos > np.cos(max_angle_rad))
+
+
+def tag_visibility(
+    robot: Robot, camera: CameraModel, q_true: np.ndarray, truth: Corrections, tag_ids: list[int],
+    margin_px: float, min_size_px: float, max_angle_rad: float = np.deg2rad(60.0),
+) -> np.ndarray:
+    """(N, T) bool: tag t is well visible to the head camera in pose n (q_true are true angles: no offsets)."""
+    true_frames = Corrections(frames=truth.frames, tags=truth.tags)
+    _, T_camera_tag = robot.camera_and_tag_poses(q_true, tag_ids, true_frames)
+    sizes = np.array([robot.config.tag(t).size for t in tag_ids])
+    return visible_in_view(camera, T_camera_tag, sizes, margin_px, min_size_px, max_angle_rad)
 
 
 def random_visible_poses(
@@ -94,3 +103,19 @@ def random_visible_poses(
             f"{robot.config.path}"
         )
     return q, vis
+
+
+def draw_accepted(
+    lo: np.ndarray, hi: np.ndarray, n: int, rng: np.random.Generator, accept, what: str
+) -> np.ndarray:
+    """n configurations (n, J) drawn uniformly in [lo, hi] for which `accept` ((N, J) -> (N,) bool) holds."""
+    kept: list[np.ndarray] = []
+    for _ in range(200):
+        q = rng.uniform(lo, hi, size=(4000, len(lo)))
+        kept.append(q[accept(q)])
+        if sum(len(k) for k in kept) >= n:
+            break
+    q = np.concatenate(kept)[:n]
+    if len(q) < n:
+        raise WolfcalError(f"the simulator found only {len(q)} of {n} poses in which {what}")
+    return q

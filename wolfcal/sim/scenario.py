@@ -11,9 +11,10 @@ from wolfcal.errors import WolfcalError
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.observations import external_tag_poses, observations_from_poses, synthetic_observations
-from wolfcal.sim.placement import random_tripod_placement, visible_tags
-from wolfcal.sim.poses import random_visible_poses, sampling_bounds
+from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_tag_poses, external_visibility
+from wolfcal.sim.observations import observations_from_poses, synthetic_observations
+from wolfcal.sim.placement import random_placement
+from wolfcal.sim.poses import random_visible_poses
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
 
@@ -61,32 +62,29 @@ def synthetic_external_scenario(
     camera sees a tag fixed to the base and at least one other tag; legs move, the base stays fixed."""
     rng = np.random.default_rng(seed)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
-    fixed = np.array([robot.fixed_to_base(t.link) for t in robot.config.tags])
-    sizes = np.array([t.size for t in robot.config.tags])
-    lo, hi = sampling_bounds(robot)
+    lo, hi = external_bounds(robot)
     qs, poses, visibility, sources, cameras = [], [], [], [], []
     for k in range(placements):
         count = n // placements + (1 if k < n % placements else 0)
         for _ in range(50):
-            T_base_camera = random_tripod_placement(rng)
-            kept_q, kept_v, kept_T = [], [], []
+            T_base_camera = random_placement(rng)
+            kept_q, kept_v = [], []
             for _ in range(20):
                 q = rng.uniform(lo, hi, size=(2000, len(lo)))
-                T_camera_tag = external_tag_poses(robot, truth, q, T_base_camera)
-                vis = visible_tags(camera, T_camera_tag, sizes, 0.03 * camera.width, 0.015 * camera.width)
-                good = np.any(vis & fixed, axis=1) & np.any(vis & ~fixed, axis=1)
+                vis = external_visibility(robot, camera, T_base_camera, q, truth)
+                good = external_pose_ok(robot, vis)
                 kept_q.append(q[good])
                 kept_v.append(vis[good])
-                kept_T.append(T_camera_tag[good])
                 if sum(len(x) for x in kept_q) >= count:
                     break
             if sum(len(x) for x in kept_q) >= count:
                 break
         else:
             raise WolfcalError(f"no tripod placement sees the torso tag and a foot tag of {robot.config.path}")
-        qs.append(np.concatenate(kept_q)[:count])
+        q_k = np.concatenate(kept_q)[:count]
+        qs.append(q_k)
         visibility.append(np.concatenate(kept_v)[:count])
-        poses.append(np.concatenate(kept_T)[:count])
+        poses.append(external_tag_poses(robot, T_base_camera, q_k, truth, robot.config.tag_ids))
         sources += [f"placement{k + 1}.mcap"] * count
         cameras.append(T_base_camera)
     q_true = np.concatenate(qs)

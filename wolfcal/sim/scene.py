@@ -1,5 +1,6 @@
-"""Render what the head camera of a simulated robot sees: the robot's tags at the true kinematics.
+"""Render what a camera sees of a simulated robot: the robot's tags at the true kinematics.
 
+The head camera by default, or an external camera fixed in the base frame at `T_base_camera` (its optical frame).
 `true angle = measured + true offset`; tag and camera frames include the true corrections.
 """
 
@@ -10,6 +11,7 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
+from wolfcal.sim.external_poses import external_tag_poses
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_texture, tag_texture_width
 
@@ -18,9 +20,11 @@ class SimScene:
     """The simulated robot's view; `render` takes measured joint angles like the real capture does."""
 
     def __init__(
-        self, robot: Robot, truth: Corrections, camera: CameraModel, seed: int = 0, noise_sigma: float = 2.0
+        self, robot: Robot, truth: Corrections, camera: CameraModel, seed: int = 0, noise_sigma: float = 2.0,
+        T_base_camera: np.ndarray | None = None,
     ):
         self.robot, self.truth, self.camera = robot, truth, camera
+        self.T_base_camera = T_base_camera  # (4, 4) external camera; None: the head camera
         self.noise_sigma = noise_sigma
         self.rng = np.random.default_rng(seed)
         self.textures = {t.id: tag_texture(t.family, t.id) for t in robot.config.tags}
@@ -33,7 +37,10 @@ class SimScene:
         """Gray uint8 image at true joint angles (J,) [rad]."""
         frames = Corrections(frames=self.truth.frames, tags=self.truth.tags)
         tag_ids = self.robot.config.tag_ids
-        _, T_camera_tag = self.robot.camera_and_tag_poses(np.atleast_2d(q_true), tag_ids, frames)
+        if self.T_base_camera is None:
+            _, T_camera_tag = self.robot.camera_and_tag_poses(np.atleast_2d(q_true), tag_ids, frames)
+        else:
+            T_camera_tag = external_tag_poses(self.robot, self.T_base_camera, q_true, frames, tag_ids)
         targets = []
         for k, tag_id in enumerate(tag_ids):
             tag = self.robot.config.tag(tag_id)

@@ -1,8 +1,11 @@
 """`wolfcal simulate`: a capture file of a simulated robot with known ground truth.
 
-Writes FILE.mcap (the capture format of DESIGN.md), FILE.truth.yaml (true corrections, camera, settings) and
-FILE.truth.urdf (the robot as it really is: frame corrections folded into the origins, encoder offsets as
-`<calibration rising>`).
+Systems: `head` (the head camera sees the foot tags in random reachable poses), `external` (an external camera of the
+robot config, on a tripod in front of the robot on its stand, sees the torso tag and the foot tags while the legs
+move: `external_poses`, placement `placement`), `all` (both cameras in every sample). Writes FILE.mcap (the capture
+format of DESIGN.md), FILE.truth.yaml (true corrections, cameras, settings, and the true pose of each external camera
+under `external_cameras`) and FILE.truth.urdf (the robot as it really is: frame corrections folded into the origins,
+encoder offsets as `<calibration rising>`).
 """
 
 from __future__ import annotations
@@ -20,15 +23,20 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.poses import random_visible_poses
+from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
+from wolfcal.sim.external_truth import external_truth_entry
+from wolfcal.sim.placement import placement_from_text, random_placement
+from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
 
 OFFSET_SETS = ("none", "head", "legs", "all")
+SYSTEMS = ("head", "external", "all")
 START_NS = 1_700_000_000_000_000_000
 
 
@@ -36,12 +44,22 @@ START_NS = 1_700_000_000_000_000_000
 class SimOptions:
     samples: int = 24
     seed: int = 0
-    binning: int = 1
+    binning: int = 1  # of every camera's images
     noise_sigma: float = 2.0  # image noise [gray levels]
     outlier_fraction: float = 0.0  # share of samples made outliers (motion blur or stale joint reading)
     offsets: str = "none"  # which joints get a true encoder offset: none | head | legs | all (head and legs)
     truth: TruthSpec = field(default_factory=TruthSpec)
     truth_file: Path | None = None  # reuse the truth of an earlier simulation (e.g. for a held-out capture)
+    system: str = "head"  # head | external | all
+    external: str | None = None  # which external camera of the config (default: the first)
+    placement: str | None = None  # 'x,y,z,roll,pitch,yaw' of the external camera (default: random)
+
+
+@dataclass
+class _SimCamera:
+    model: CameraModel  # full resolution
+    image: CameraModel  # binned
+    T_base_camera: np.ndarray | None = None  # external cameras only
 
 
 def truth_paths(out: Path) -> tuple[Path, Path]:
@@ -59,6 +77,59 @@ def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
     return {"none": (), "head": head, "legs": legs, "all": everything}[which]
 
 
+def _binned(camera: CameraModel, b: int) -> CameraModel:
+    if camera.width % b or camera.height % b:
+        raise WolfcalError(f"--binning {b}: must divide the camera size {camera.width}x{camera.height}")
+    return camera if b == 1 else camera.scaled(1 / b, 1 / b, camera.width // b, camera.height // b)
+
+
+def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dict[str, _SimCamera]:
+    """The simulated cameras by name, without placements yet."""
+    cameras: dict[str, _SimCamera] = {}
+    if options.system in ("head", "all"):
+        if head is None:
+            intrinsics = robot.config.head_camera().intrinsics
+            if intrinsics is None:
+                raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
+            head = load_camera_info(intrinsics)
+        cameras[HEAD_CAMERA] = _SimCamera(head, _binned(head, options.binning))
+    if options.system in ("external", "all"):
+        if not robot.config.external_cameras:
+            raise WolfcalError(
+                f"{robot.config.path}: --system {options.system} needs an external camera; add one under "
+                "'external_cameras:' (name, image_topic, info_topic, intrinsics)"
+            )
+        name = options.external or robot.config.external_cameras[0].name
+        intrinsics, key = robot.config.camera_intrinsics(name)
+        if intrinsics is None:
+            raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML) to simulate camera '{name}'")
+        model = load_camera_info(intrinsics)
+        cameras[name] = _SimCamera(model, _binned(model, options.binning))
+    return cameras
+
+
+def _poses(robot: Robot, options: SimOptions, cameras: dict[str, _SimCamera], truth: Corrections,
+           rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+    """(S, J) true joint angles in which every simulated camera sees tags well."""
+    if options.system == "head":
+        return random_visible_poses(robot, cameras[HEAD_CAMERA].image, truth, options.samples, rng)[0]
+    name = next(n for n in cameras if n != HEAD_CAMERA)
+    external = cameras[name]
+    lo, hi = external_bounds(robot)
+    checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, external.T_base_camera,
+                                                                    q, truth))]  # fmt: skip
+    what = f"camera '{name}' sees the torso tag and a foot tag"
+    if HEAD_CAMERA in cameras:
+        for k, joint in enumerate(robot.joint_names):
+            if joint in robot.camera_and_leg_joints(sides=()) and joint in WOLFGANG_RANGES:
+                lo[k], hi[k] = WOLFGANG_RANGES[joint]
+        head = cameras[HEAD_CAMERA].image
+        margin, size = 0.03 * head.width, 0.02 * head.width
+        checks.append(lambda q: np.any(tag_visibility(robot, head, q, truth, robot.config.tag_ids, margin, size), 1))
+        what += " and the head camera sees a tag"
+    return draw_accepted(lo, hi, options.samples, rng, lambda q: np.logical_and.reduce([c(q) for c in checks]), what)
+
+
 def simulate_capture(
     robot_path: Path,
     out: Path,
@@ -66,62 +137,92 @@ def simulate_capture(
     camera: CameraModel | None = None,
     say: Callable[[str], None] = print,
 ) -> Corrections:
-    """Simulate a capture; returns the true corrections (also written to FILE.truth.yaml)."""
+    """Simulate a capture; returns the true corrections (also written to FILE.truth.yaml). `camera` replaces the
+    head camera's intrinsics (`--intrinsics`)."""
     if out.suffix != ".mcap":
         raise WolfcalError(f"{out}: the capture file name must end in .mcap")
     if options.samples < 1:
         raise WolfcalError("--samples must be at least 1")
+    if options.system not in SYSTEMS:
+        raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
-    if camera is None:
-        if robot.config.camera.intrinsics is None:
-            raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
-        camera = load_camera_info(robot.config.camera.intrinsics)
-    b = options.binning
-    image_camera = camera if b == 1 else camera.scaled(1 / b, 1 / b, camera.width // b, camera.height // b)
+    cameras = _cameras(robot, options, camera)
     rng = np.random.default_rng(options.seed)
     spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
     truth = random_truth(robot, spec, rng)
     if options.truth_file is not None:
         truth = load_corrections(options.truth_file, key="truth")
-    q_true, visible = random_visible_poses(robot, image_camera, truth, options.samples, rng)
+    for name, sim_camera in cameras.items():
+        if name != HEAD_CAMERA:
+            placement = options.placement
+            sim_camera.T_base_camera = placement_from_text(placement) if placement else random_placement(rng)
+    q_true = _poses(robot, options, cameras, truth, rng)
     offsets = truth.offset_vector(robot.joint_names)
     q_measured = encoder_readings(q_true, offsets)
     n_out = int(round(options.outlier_fraction * options.samples))
     outlier_index = rng.choice(options.samples, size=n_out, replace=False) if n_out else np.array([], int)
     kinds = {int(i): ("motion_blur" if k % 2 == 0 else "stale_joints") for k, i in enumerate(outlier_index)}
     moving = [robot.model.column(j) for j in robot.camera_and_leg_joints()]
-    scene = SimScene(robot, truth, image_camera, seed=options.seed + 1, noise_sigma=options.noise_sigma)
-    with CaptureWriter(out, robot.config, camera, binning=(b, b)) as writer:
+    scenes = {
+        name: SimScene(robot, truth, c.image, seed=options.seed + 1 + k, noise_sigma=options.noise_sigma,
+                       T_base_camera=c.T_base_camera)
+        for k, (name, c) in enumerate(cameras.items())
+    }  # fmt: skip
+    b = options.binning
+    with CaptureWriter(out, robot.config, {name: (c.model, (b, b)) for name, c in cameras.items()}) as writer:
         for i in range(options.samples):
-            image = scene.render_true(q_true[i])
+            images = {name: scene.render_true(q_true[i]) for name, scene in scenes.items()}
             reading = q_measured[i].copy()
             if kinds.get(i) == "motion_blur":
-                image = motion_blur(image, length_px=rng.uniform(0.008, 0.015) * image_camera.width,
-                                    angle_rad=rng.uniform(0, np.pi))
+                length, angle = rng.uniform(0.008, 0.015), rng.uniform(0, np.pi)
+                images = {n: motion_blur(im, length * im.shape[1], angle) for n, im in images.items()}
             elif kinds.get(i) == "stale_joints":
                 reading[moving] += rng.normal(0.0, 0.04, len(moving))
             stamp = START_NS + i * 2_000_000_000
-            writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), image)
-            seen = ", ".join(str(t) for t, v in zip(robot.config.tag_ids, visible[i]) if v)
-            say(f"sample {i + 1}/{options.samples}: tags {seen}" + (f" ({kinds[i]})" if i in kinds else ""))
-    truth_yaml, truth_urdf = truth_paths(out)
-    write_text_atomic(
-        truth_yaml,
-        yaml.safe_dump(
-            {
-                "truth": truth.to_dict(),
-                "camera": camera_info_dict(camera),
-                "binning": b,
-                "samples": options.samples,
-                "seed": options.seed,
-                "noise_sigma": options.noise_sigma,
-                "outliers": {int(k): v for k, v in sorted(kinds.items())},
-                "meaning": "offsets: q_true = q_measured + offset [rad]; frames/tags: origin_new = origin * "
-                "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]",
-            },
-            sort_keys=False,
-        ),
-    )
-    write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
-    say(f"wrote {out}, {truth_yaml}, {truth_urdf}")
+            writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), images)
+            say(f"sample {i + 1}/{options.samples}: " + "; ".join(_seen(robot, scenes, q_true[i]))
+                + (f" ({kinds[i]})" if i in kinds else ""))  # fmt: skip
+    _write_truth(robot, out, options, truth, cameras, kinds)
+    say(f"wrote {out}, {truth_paths(out)[0]}, {truth_paths(out)[1]}")
     return truth
+
+
+def _seen(robot: Robot, scenes: dict[str, SimScene], q_true: np.ndarray) -> list[str]:
+    """'<camera>: tags a, b' per camera, the tags well in view at true angles q_true (J,)."""
+    lines = []
+    for name, scene in scenes.items():
+        if scene.T_base_camera is None:
+            visible = tag_visibility(robot, scene.camera, q_true[None], scene.truth, robot.config.tag_ids,
+                                     0.03 * scene.camera.width, 0.02 * scene.camera.width)[0]  # fmt: skip
+        else:
+            visible = external_visibility(robot, scene.camera, scene.T_base_camera, q_true[None], scene.truth)[0]
+        lines.append(f"{name}: tags " + (", ".join(str(t) for t, v in zip(robot.config.tag_ids, visible) if v)
+                                         or "none"))  # fmt: skip
+    return lines
+
+
+def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Corrections, cameras: dict[str, _SimCamera],
+                 kinds: dict[int, str]) -> None:  # fmt: skip
+    """FILE.truth.yaml and FILE.truth.urdf beside the capture."""
+    truth_yaml, truth_urdf = truth_paths(out)
+    data = {"truth": truth.to_dict()}
+    if HEAD_CAMERA in cameras:
+        data["camera"] = camera_info_dict(cameras[HEAD_CAMERA].model)
+    data |= {
+        "binning": options.binning,
+        "samples": options.samples,
+        "seed": options.seed,
+        "noise_sigma": options.noise_sigma,
+        "outliers": {int(k): v for k, v in sorted(kinds.items())},
+        "meaning": "offsets: q_true = q_measured + offset [rad]; frames/tags: origin_new = origin * "
+        "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]",
+        "system": options.system,
+    }
+    external = {n: c for n, c in cameras.items() if c.T_base_camera is not None}
+    if external:
+        data["external_cameras"] = {
+            n: {**external_truth_entry(c.T_base_camera), "camera": camera_info_dict(c.model)}
+            for n, c in external.items()
+        }
+    write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
+    write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)

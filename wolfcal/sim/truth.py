@@ -30,7 +30,7 @@ def random_truth(robot: Robot, spec: TruthSpec, rng: np.random.Generator) -> Cor
     camera[3] += spec.camera_tilt
     return Corrections(
         offsets={j: float(rng.normal(0.0, spec.offset_rms)) for j in spec.offset_joints},
-        frames={robot.camera_joint: camera},
+        frames={robot.camera_joint: camera} if robot.config.camera is not None else {},
         tags={
             t.id: np.concatenate([rng.normal(0.0, spec.tag_translation, 3), rng.normal(0.0, spec.tag_rotation, 3)])
             for t in robot.config.tags

@@ -1,25 +1,73 @@
-"""Samples -> Observations: detect the configured tags in every image (both cores) and stack the corners."""
+"""Samples -> Observations per camera: detect the configured tags in every image (both cores) and stack the corners.
+
+One `Observations` per camera name ('head' or an external camera's name), holding the samples in which that camera
+saw at least one configured tag, with those samples' joint readings, stamps and sources. All images of one camera
+must share one set of intrinsics (one camera, one resolution).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.io.samples import Sample
+from wolfcal.io.samples import Sample, SampleImage
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import detect_tags
 
+Families = dict[str, set[int]]  # tag family -> configured ids
 
-def _detect(sample: Sample, families: dict[str, set[int]]) -> dict[int, np.ndarray]:
-    image = sample.image()
+
+def detect_in_image(image: SampleImage, families: Families) -> dict[int, np.ndarray]:
+    """Corners (4, 2) [px] of the configured tags found in one image, per tag id (the one per-image call)."""
+    pixels = image.decode()
     found: dict[int, np.ndarray] = {}
     for family, ids in families.items():
-        found.update(detect_tags(image, family, ids))
+        found.update(detect_tags(pixels, family, ids))
     return found
+
+
+def _check_one_camera(name: str, images: list[SampleImage]) -> CameraModel:
+    """The intrinsics all images of one camera share; a clear error when they differ."""
+    keys = {(c.width, c.height, tuple(c.K.ravel()), tuple(c.D)) for c in (i.camera for i in images)}
+    if len(keys) > 1:
+        sizes = sorted({f"{w}x{h}" for w, h, _, _ in keys})
+        raise WolfcalError(
+            f"the images of camera '{name}' use different intrinsics or resolutions ({', '.join(sizes)}) in "
+            f"{', '.join(sorted({i.source for i in images}))}; fit captures of one camera setting together "
+            "(for the head camera, --intrinsics FILE uses one camera_info for all)"
+        )
+    return images[0].camera
+
+
+def _stack(
+    name: str, robot: Robot, samples: list[Sample], detections: list[dict[int, np.ndarray]], camera: CameraModel
+) -> Observations:
+    """Observations of the samples (all with detections) of one camera."""
+    sample_index, tag_ids, corner_index, uv = [], [], [], []
+    for k, found in enumerate(detections):
+        for tag_id, corners in sorted(found.items()):
+            sample_index.append(np.full(4, k))
+            tag_ids.append(np.full(4, tag_id))
+            corner_index.append(np.arange(4))
+            uv.append(corners)
+    names = robot.joint_names
+    return Observations(
+        joint_names=list(names),
+        q_measured=np.stack([s.joint_positions(names) for s in samples]),
+        stamps_ns=np.array([s.stamp_ns for s in samples], dtype=np.int64),
+        sources=[s.source for s in samples],
+        camera=camera,
+        sample_index=np.concatenate(sample_index),
+        tag_ids=np.concatenate(tag_ids),
+        corner_index=np.concatenate(corner_index),
+        uv=np.concatenate(uv).astype(float),
+        camera_name=name,
+    )
 
 
 def detect_observations(
@@ -27,55 +75,58 @@ def detect_observations(
     robot: Robot,
     workers: int = 2,
     progress: Callable[[int, int], None] | None = None,
-) -> tuple[Observations, list[str]]:
-    """Detect tags in all samples; samples without any configured tag are left out (and said so)."""
+    cameras: Iterable[str] | None = None,
+) -> tuple[dict[str, Observations], list[str]]:
+    """Detect tags in every image of every sample (of the given `cameras` only, default all) -> Observations per
+    camera name, and warnings (images without any configured tag are left out and said so). WolfcalError when no
+    camera saw any configured tag."""
     if not samples:
         raise WolfcalError("no samples to detect tags in")
-    cameras = {(s.camera.width, s.camera.height, tuple(s.camera.K.ravel()), tuple(s.camera.D)) for s in samples}
-    if len(cameras) > 1:
-        raise WolfcalError(
-            "the captures use different camera intrinsics or resolutions; fit captures of one camera together "
-            "(or pass --intrinsics FILE to use one camera_info for all)"
-        )
-    names = robot.joint_names
-    q = np.stack([s.joint_positions(names) for s in samples])
-    families: dict[str, set[int]] = {}
+    wanted = None if cameras is None else set(cameras)
+    for sample in samples:  # every joint of the robot read in every sample, before any image is decoded
+        sample.joint_positions(robot.joint_names)
+    families: Families = {}
     for tag in robot.config.tags:
         families.setdefault(tag.family, set()).add(tag.id)
-    detections: list[dict[int, np.ndarray]] = []
+    jobs = [(s, n) for s in samples for n in s.images if wanted is None or n in wanted]  # one per image
+    if not jobs:
+        raise WolfcalError(f"no images of camera(s) {', '.join(sorted(wanted or []))} in the samples")
+    models = {name: _check_one_camera(name, [s.images[name] for s, n in jobs if n == name])
+              for name in dict.fromkeys(n for _, n in jobs)}  # fmt: skip
+    found: list[dict[int, np.ndarray]] = []
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:  # OpenCV releases the GIL while detecting
-        for i, found in enumerate(pool.map(lambda s: _detect(s, families), samples)):
-            detections.append(found)
+        for i, detections in enumerate(pool.map(lambda job: detect_in_image(job[0].images[job[1]], families), jobs)):
+            found.append(detections)
             if progress:
-                progress(i + 1, len(samples))
+                progress(i + 1, len(jobs))
+    observations: dict[str, Observations] = {}
     warnings = []
-    empty = [i for i, d in enumerate(detections) if not d]
-    if empty:
-        warnings.append(f"{len(empty)} of {len(samples)} sample(s) show no configured tag and are not used")
-    keep = [i for i, d in enumerate(detections) if d]
-    if not keep:
+    for name, camera in models.items():
+        rows = [k for k, (_, n) in enumerate(jobs) if n == name]
+        seen = [k for k in rows if found[k]]
+        if len(seen) < len(rows):
+            warnings.append(
+                f"{len(rows) - len(seen)} of {len(rows)} image(s) of camera '{name}' show no configured tag and are "
+                "not used"
+            )
+        if seen:
+            observations[name] = _stack(name, robot, [jobs[k][0] for k in seen], [found[k] for k in seen], camera)
+    if not observations:
         ids = ", ".join(f"{t.family} id {t.id}" for t in robot.config.tags)
         sources = ", ".join(sorted({s.source for s in samples}))
         raise WolfcalError(
-            f"{sources}: no configured tag ({ids}) was detected in any of the {len(samples)} image(s); check the "
+            f"{sources}: no configured tag ({ids}) was detected in any of the {len(jobs)} image(s); check the "
             f"tags of {robot.config.path} and that the images are sharp and show the tags"
         )
-    sample_index, tag_ids, corner_index, uv = [], [], [], []
-    for new_index, i in enumerate(keep):
-        for tag_id, corners in sorted(detections[i].items()):
-            sample_index.append(np.full(4, new_index))
-            tag_ids.append(np.full(4, tag_id))
-            corner_index.append(np.arange(4))
-            uv.append(corners)
-    obs = Observations(
-        joint_names=list(names),
-        q_measured=q[keep],
-        stamps_ns=np.array([samples[i].stamp_ns for i in keep], dtype=np.int64),
-        sources=[samples[i].source for i in keep],
-        camera=samples[keep[0]].camera,
-        sample_index=np.concatenate(sample_index),
-        tag_ids=np.concatenate(tag_ids),
-        corner_index=np.concatenate(corner_index),
-        uv=np.concatenate(uv).astype(float),
-    )
-    return obs, warnings
+    return observations, warnings
+
+
+def observations_of(observations: dict[str, Observations], camera: str, sources: Iterable[object]) -> Observations:
+    """The Observations of one camera; a clear error naming the captures when that camera saw no tag in them."""
+    if camera not in observations:
+        seen = ", ".join(f"'{n}'" for n in observations) or "no camera"
+        raise WolfcalError(
+            f"{', '.join(map(str, sources))}: camera '{camera}' saw no configured tag in these captures (tags were "
+            f"seen by {seen}); give captures in which it sees the tags"
+        )
+    return observations[camera]

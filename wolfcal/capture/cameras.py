@@ -1,0 +1,92 @@
+"""The cameras of one `wolfcal capture`: the head camera (`--camera SOURCE`) and external cameras
+(`--external NAME=SOURCE`, repeatable), each with its intrinsics, binning and open image source.
+
+Sources: a V4L index or /dev/video path, a video file, an image folder, or `sim` (renders the robot served by
+`wolfcal emulate`; an external camera from its placement, see `sim_camera`). Intrinsics: the head camera's from
+`--intrinsics` or the config's `camera.intrinsics`; an external camera's from its `intrinsics` in the config.
+Binning: `--binning` for every camera; by default 4 for the simulated head camera, 2 for a simulated external
+camera (its tags are smaller in the image), 1 for real cameras.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.camera.model import CameraModel
+from wolfcal.capture.options import CaptureOptions, parse_external
+from wolfcal.capture.sim_camera import SimCamera
+from wolfcal.errors import WolfcalError
+from wolfcal.hardware.camera import CameraSource, open_camera
+from wolfcal.observations import HEAD_CAMERA
+from wolfcal.robot.robot import Robot
+
+
+@dataclass
+class CaptureCamera:
+    model: CameraModel  # full-resolution intrinsics (written to CameraInfo)
+    image_model: CameraModel  # intrinsics of the binned images
+    binning: int
+    source_text: str
+    source: CameraSource | None = None  # opened by `open_sources`
+
+
+def _binned(name: str, camera: CameraModel, binning: int) -> CameraModel:
+    if binning < 1 or camera.width % binning or camera.height % binning:
+        raise WolfcalError(
+            f"--binning {binning}: must divide the size {camera.width}x{camera.height} of camera '{name}'"
+        )
+    if binning == 1:
+        return camera
+    return camera.scaled(1 / binning, 1 / binning, camera.width // binning, camera.height // binning)
+
+
+def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCamera]:
+    """The cameras to record by name ('head' first), checked against the config; nothing opened yet."""
+    sources: dict[str, str] = {}
+    if options.camera is not None:
+        robot.config.head_camera("--camera records the head camera, which needs one")
+        sources[HEAD_CAMERA] = options.camera
+    for text in options.external:
+        name, source = parse_external(text)
+        robot.config.external_camera(name)  # a clear error for a name the config does not have
+        sources[name] = source
+    cameras = {}
+    for name, source in sources.items():
+        if name == HEAD_CAMERA:
+            path = options.intrinsics or robot.config.head_camera().intrinsics
+            if path is None:
+                raise WolfcalError(f"{robot.config.path}: no 'camera.intrinsics'; pass --intrinsics camera_info.yaml")
+        else:
+            path, key = robot.config.camera_intrinsics(name)
+            if path is None:
+                raise WolfcalError(
+                    f"{robot.config.path}: no '{key}' for external camera '{name}'; set it to the camera's "
+                    "camera_info YAML (`wolfcal intrinsics` makes one)"
+                )
+        model = load_camera_info(Path(path))
+        binning = options.binning or ((4 if name == HEAD_CAMERA else 2) if source == "sim" else 1)
+        cameras[name] = CaptureCamera(model, _binned(name, model, binning), binning, source)
+    return cameras
+
+
+def open_sources(cameras: dict[str, CaptureCamera], robot: Robot, port: str) -> None:
+    """Open every camera's source; on failure the ones already open are closed again."""
+    try:
+        for name, camera in cameras.items():
+            if camera.source_text == "sim":
+                external = None if name == HEAD_CAMERA else name
+                camera.source = SimCamera(robot, port, camera.image_model, external=external)
+            else:
+                camera.source = open_camera(camera.source_text, camera.image_model)
+    except BaseException:
+        close_sources(cameras)
+        raise
+
+
+def close_sources(cameras: dict[str, CaptureCamera]) -> None:
+    for camera in cameras.values():
+        if camera.source is not None:
+            camera.source.close()
+            camera.source = None

@@ -1,0 +1,111 @@
+"""Random leg poses of a robot on a stand (base fixed) seen by an external camera at T_base_camera.
+
+Joint values are true angles [rad]. The Wolfgang's foot tags lie face up on plates ahead of the feet, so a camera
+in front sees them well only when the feet are lifted forward and tilted towards it: the legs are drawn from
+`EXTERNAL_RANGES` (hips swung forward up to about 90 deg, knees bent, ankles pitched both ways, small yaw and roll;
+head and arms at 0), and a pose is kept when the external camera sees the torso tag (every tag on a link rigidly
+fixed to the base) and at least one foot tag fully inside the image (margin 2 % of the width), at least 1.5 % of the
+width per edge, facing it (less than `MAX_ANGLE_RAD` off the viewing ray), and apart from every other tag in the
+image (bounding boxes grown by `SEPARATION` of their size must not overlap: a foot tag lifted in front of the torso
+tag would hide it or break its white border). Occlusion by the robot's body is not modelled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.geometry import invert_transform
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+from wolfcal.sim.poses import visible_in_view
+from wolfcal.vision.tags import tag_corners
+
+EXTERNAL_RANGES = {
+    "RHipYaw": (-0.3, 0.3),
+    "LHipYaw": (-0.3, 0.3),
+    "RHipRoll": (-0.3, 0.3),
+    "LHipRoll": (-0.3, 0.3),
+    "RHipPitch": (-1.6, 0.2),
+    "LHipPitch": (-0.2, 1.6),
+    "RKnee": (-1.6, -0.26),
+    "LKnee": (0.26, 1.6),
+    "RAnklePitch": (-0.37, 1.42),
+    "LAnklePitch": (-1.42, 0.37),
+    "RAnkleRoll": (-0.3, 0.3),
+    "LAnkleRoll": (-0.3, 0.3),
+}
+MAX_ANGLE_RAD = np.deg2rad(55.0)
+SEPARATION = 0.3  # share of a tag's image size kept free around it
+
+
+def external_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) per actuated joint: EXTERNAL_RANGES intersected with the URDF limits (others at 0)."""
+    lo, hi = [], []
+    for name in robot.joint_names:
+        joint = robot.model.joints[name]
+        a, b = EXTERNAL_RANGES.get(name, (0.0, 0.0))
+        a, b = max(a, joint.lower), min(b, joint.upper)
+        if a > b:
+            a = b = float(np.clip(0.0, joint.lower, joint.upper))
+        lo.append(a)
+        hi.append(b)
+    return np.array(lo), np.array(hi)
+
+
+def base_tag_ids(robot: Robot) -> list[int]:
+    """The tags on links rigidly fixed to the base (no actuated joint between): the torso tag on the Wolfgang."""
+    return [t.id for t in robot.config.tags if not robot.actuated_joints_to([t.link])]
+
+
+def external_tag_poses(
+    robot: Robot, T_base_camera: np.ndarray, q_true: np.ndarray, truth: Corrections, tag_ids: list[int]
+) -> np.ndarray:
+    """(N, T, 4, 4) T_camera_tag of the external camera for true angles q_true (N, J), true frames and tag mounts."""
+    frames = Corrections(frames=truth.frames, tags=truth.tags)
+    links = sorted({robot.config.tag(t).link for t in tag_ids})
+    poses = robot.model.link_poses(np.atleast_2d(q_true), links, frames, base=robot.config.base_link)
+    T_camera_base = invert_transform(T_base_camera)
+    if not tag_ids:
+        return np.zeros((len(np.atleast_2d(q_true)), 0, 4, 4))
+    return np.stack(
+        [T_camera_base @ poses[robot.config.tag(t).link] @ robot.T_link_tag(t, frames) for t in tag_ids], axis=1
+    )
+
+
+def external_visibility(
+    robot: Robot, camera: CameraModel, T_base_camera: np.ndarray, q_true: np.ndarray, truth: Corrections
+) -> np.ndarray:
+    """(N, T) bool over robot.config.tag_ids: tag well visible to the external camera (see the module docstring)."""
+    tag_ids = robot.config.tag_ids
+    T_camera_tag = external_tag_poses(robot, T_base_camera, q_true, truth, tag_ids)
+    sizes = np.array([robot.config.tag(t).size for t in tag_ids])
+    visible = visible_in_view(camera, T_camera_tag, sizes, 0.02 * camera.width, 0.015 * camera.width, MAX_ANGLE_RAD)
+    return visible & _apart(camera, T_camera_tag, sizes)
+
+
+def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """(N, T) bool: the tag's grown image box overlaps no other tag's in front of the camera."""
+    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
+    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
+    in_front = np.all(p[..., 2] > 0, axis=-1)  # (N, T)
+    uv = camera.project(np.where(p[..., 2:] > 0, p, np.nan))
+    lo, hi = np.nanmin(uv, axis=2), np.nanmax(uv, axis=2)  # (N, T, 2)
+    grow = SEPARATION * (hi - lo).max(axis=-1, keepdims=True)
+    lo, hi = lo - grow, hi + grow
+    overlap = np.all((lo[:, :, None] < hi[:, None, :]) & (lo[:, None, :] < hi[:, :, None]), axis=-1)  # (N, T, T)
+    overlap &= in_front[:, :, None] & in_front[:, None, :]
+    overlap[:, np.arange(len(sizes)), np.arange(len(sizes))] = False
+    return ~np.any(overlap, axis=2)
+
+
+def external_pose_ok(robot: Robot, visible: np.ndarray) -> np.ndarray:
+    """(N,) bool: every base-fixed tag and at least one other tag visible (visible: (N, T) over config.tag_ids)."""
+    fixed = np.isin(robot.config.tag_ids, base_tag_ids(robot))
+    if not fixed.any():
+        raise WolfcalError(
+            f"{robot.config.path}: no tag on a link fixed to '{robot.config.base_link}' (e.g. a torso tag); an "
+            "external camera needs one to tell the robot's pose"
+        )
+    return np.all(visible[:, fixed], axis=1) & np.any(visible[:, ~fixed], axis=1)

@@ -1,0 +1,43 @@
+"""The true poses of simulated external cameras, kept in FILE.truth.yaml under `external_cameras`.
+
+`external_cameras: {<name>: {T_base_camera: 4x4 list, meaning: ...}}`: the pose of the camera's optical frame
+(z forward, x right, y down) in the robot's base frame, p_base = T_base_camera @ p_camera [m]. One placement per
+capture file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.errors import WolfcalError
+from wolfcal.yamlfile import read_yaml
+
+MEANING = (
+    "pose of the external camera's optical frame (z forward, x right, y down) in the robot's base frame: "
+    "p_base = T_base_camera @ p_camera [m]; one placement per capture file"
+)
+
+
+def external_truth_entry(T_base_camera: np.ndarray) -> dict:
+    """The YAML entry of one external camera's true pose."""
+    return {"T_base_camera": [[float(v) for v in row] for row in np.asarray(T_base_camera)], "meaning": MEANING}
+
+
+def load_external_truth(path: str | Path) -> dict[str, np.ndarray]:
+    """camera name -> (4, 4) true T_base_camera from a simulation's FILE.truth.yaml (empty for a head-only one)."""
+    path = Path(path)
+    data = read_yaml(path, "simulation truth", "give the .truth.yaml written beside a simulated capture")
+    cameras = data.get("external_cameras") if isinstance(data, dict) else None
+    if cameras is None:
+        return {}
+    if not isinstance(cameras, dict):
+        raise WolfcalError(f"{path}: 'external_cameras' must map camera names to {{T_base_camera, meaning}}")
+    poses = {}
+    for name, entry in cameras.items():
+        T = np.asarray(entry.get("T_base_camera") if isinstance(entry, dict) else None, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)) or not np.allclose(T[3], [0, 0, 0, 1]):
+            raise WolfcalError(f"{path}: 'external_cameras.{name}.T_base_camera' must be a 4x4 rigid transform")
+        poses[str(name)] = T
+    return poses
