@@ -53,5 +53,9 @@ class Block:
         _, group_of_sample = np.unique(self.q_measured, axis=0, return_inverse=True)
         return group_of_sample.ravel()[self.sample_of_unit]
 
+    def shared_labels(self) -> np.ndarray:
+        """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""
+        return np.full(self.n_units, -1)
+
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         raise NotImplementedError

@@ -78,6 +78,22 @@ class CameraBlock(Block):
             self.placement_of_sample = None
             self.nuisance = ParameterSet([])
 
+    def shared_labels(self) -> np.ndarray:
+        """(U,) shared detection error of each corner: a tag seen again and again from the same place gives the
+        detector the same picture, so its corner errors repeat instead of averaging out. For an external camera,
+        corners of tags fixed to the base share one error per (placement, tag, corner); for any camera, the frames
+        taken at one still pose (identical joint readings) share one per (pose, tag, corner)."""
+        _, reading = np.unique(self.q_measured, axis=0, return_inverse=True)
+        key = reading.ravel()[self.sample_of_unit]  # the still pose of each corner
+        fixed = np.zeros(self.n_units, dtype=bool)
+        if self.external:
+            tag_fixed = np.array([self.robot.fixed_to_base(self.robot.config.tag(t).link) for t in self.tag_ids])
+            fixed = tag_fixed[self.tag_col]
+            key = np.where(fixed, self.placement_of_sample[self.sample_of_unit], key)
+        _, labels = np.unique(np.stack([fixed, key, self.tag_col, self.obs.corner_index], axis=1), axis=0,
+                              return_inverse=True)
+        return labels.ravel()
+
     # --- the external camera's pose ----------------------------------------------------------------------------
     def _pose_parameters(self, names: list[str]) -> ParameterSet:
         init = initial_camera_poses(self.robot, self.obs, self.placement_of_sample, len(names))

@@ -1,14 +1,17 @@
-"""The noise model of one measurement block: independent noise per measured number plus the joint-reading noise
-that a group of measurements shares.
+"""The noise model of one measurement block: independent noise per measured number plus the errors that groups of
+measurements share.
 
 Residual rows of one group (e.g. every corner seen at one still pose: they share its encoder quantisation) have
-covariance C_g = sigma^2 I + sigma_q^2 A_g A_g^T, A_g = d(rows)/d(joint readings). With A_g A_g^T = U diag(l) U^T,
-W_g = diag(1 / sqrt(sigma^2 + sigma_q^2 l)) U^T whitens them (W_g^T W_g = C_g^-1). The eigen-decomposition is
+covariance C_g = sigma^2 I + S_g, S_g = sigma_q^2 A_g A_g^T (A_g = d(rows)/d(joint readings)) plus any repeating
+detection error (`SharedErrors`). With S_g = U diag(l) U^T, W_g = diag(1 / sqrt(sigma^2 + l)) U^T whitens them
+(W_g^T W_g = C_g^-1). The eigen-decomposition is
 done once per linearisation, so trying another sigma (the noise-level search) costs one division. Groups of equal
 size are decomposed in one batched call.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
@@ -24,20 +27,45 @@ def split_rows(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> 
     return np.split(rows, bounds * dim) if len(order) else []
 
 
-class GroupedWhitening:
-    """Whitening of residual rows split into groups (list of row-index arrays), at joint sensitivities A (R, J)."""
+@dataclass
+class SharedErrors:
+    """Errors that rows share besides their own noise: the joint readings of a still pose (rows with the same
+    `reading` share sigma_q^2 A A^T) and a detection error that repeats (rows with the same `label` >= 0 and the same
+    `axis` share tau^2: a tag that a fixed camera sees in the same place in every frame)."""
 
-    def __init__(self, groups: list[np.ndarray], A: np.ndarray, sigma_q: float) -> None:
-        self.sigma_q = sigma_q
-        self.n_rows = len(A)
+    A: np.ndarray  # (R, J) d(row)/d(joint readings)
+    sigma_q: float  # joint reading noise [rad]
+    reading: np.ndarray  # (R,) reading group of each row
+    label: np.ndarray  # (R,) shared detection error of each row, -1 for none
+    axis: np.ndarray  # (R,) measured axis of each row (u, v, ...)
+    tau: float = 0.0  # shared detection error per axis [the block's unit]
+
+    def covariance(self, rows: np.ndarray) -> np.ndarray:
+        """(G, n, n) shared part of the covariance of groups of rows (G, n)."""
+        A = self.A[rows]
+        same_reading = self.reading[rows][:, :, None] == self.reading[rows][:, None, :]
+        C = self.sigma_q**2 * (A @ np.swapaxes(A, 1, 2)) * same_reading
+        if self.tau > 0:
+            label, axis = self.label[rows], self.axis[rows]
+            shared = (label[:, :, None] == label[:, None, :]) & (label[:, :, None] >= 0)
+            shared &= axis[:, :, None] == axis[:, None, :]
+            C = C + self.tau**2 * shared
+        return C
+
+
+class GroupedWhitening:
+    """Whitening of residual rows split into groups (list of row-index arrays) with covariance
+    sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are independent."""
+
+    def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
+        self.n_rows = len(shared.A)
         sizes = np.array([len(g) for g in groups], dtype=int)
         self._classes = []  # (rows (G, n), eigenvalues (G, n), eigenvectors (G, n, n))
         for n in np.unique(sizes):
             if n == 0:
                 continue
             rows = np.stack([groups[i] for i in np.flatnonzero(sizes == n)])
-            A_g = A[rows]  # (G, n, J)
-            lam, U = np.linalg.eigh(A_g @ np.swapaxes(A_g, 1, 2))
+            lam, U = np.linalg.eigh(shared.covariance(rows))
             self._classes.append((rows, np.clip(lam, 0.0, None), U))
         self.group_of_row = np.full(self.n_rows, -1)
         for k, g in enumerate(groups):
@@ -53,14 +81,14 @@ class GroupedWhitening:
         y, lam = self.rotate(r)
         if not y:
             return np.zeros(0)
-        return np.concatenate([(yc / np.sqrt(sigma**2 + self.sigma_q**2 * lc)).ravel() for yc, lc in zip(y, lam)])
+        return np.concatenate([(yc / np.sqrt(sigma**2 + lc)).ravel() for yc, lc in zip(y, lam)])
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """(n_groups,) squared whitened norm of each group's residuals, in the order of `groups`."""
         out = np.zeros(self.n_groups)
         y, lam = self.rotate(r)
         for (rows, _, _), yc, lc in zip(self._classes, y, lam):
-            out[self.group_of_row[rows[:, 0]]] = np.sum(yc**2 / (sigma**2 + self.sigma_q**2 * lc), axis=1)
+            out[self.group_of_row[rows[:, 0]]] = np.sum(yc**2 / (sigma**2 + lc), axis=1)
         return out
 
     def matrix(self, sigma: float) -> scipy.sparse.csr_matrix:
@@ -68,7 +96,7 @@ class GroupedWhitening:
         data, rr, cc = [], [], []
         for rows, lam, U in self._classes:
             n = rows.shape[1]
-            W = np.swapaxes(U, 1, 2) / np.sqrt(sigma**2 + self.sigma_q**2 * lam)[:, :, None]  # (G, n, n)
+            W = np.swapaxes(U, 1, 2) / np.sqrt(sigma**2 + lam)[:, :, None]  # (G, n, n)
             data.append(W.ravel())
             rr.append(np.repeat(rows, n, axis=1).ravel())
             cc.append(np.tile(rows, (1, n)).ravel())

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse
+from scipy.sparse.csgraph import connected_components
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.noise import GroupedWhitening, split_rows
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
@@ -35,6 +36,10 @@ class BlockState:
 
     def __init__(self, block: Block, start: int, sigma: float, sigma_q: float) -> None:
         self.block, self.start, self.sigma, self.sigma_q = block, start, sigma, sigma_q
+        # A detection error that repeats (the same tag seen from the same place) cannot show in the residuals: the
+        # tag mount and the camera pose absorb it. Its size is the configured detection noise (priors.pixel_noise),
+        # or the estimated noise level when that is larger.
+        self.shared_floor = sigma
         self.excluded = np.zeros(block.n_views, dtype=bool)
         self.groups = block.noise_groups()
         self.whitening: GroupedWhitening | None = None
@@ -44,11 +49,37 @@ class BlockState:
     def inlier_units(self) -> np.ndarray:
         return ~self.excluded[self.block.view_of_unit]
 
+    def shared_errors(self, lin: Linearization) -> SharedErrors:
+        """The errors the block's rows share at this linearisation (see `SharedErrors`); a repeating detection
+        error counts only where at least two inlier units share it (size: see `shared_floor`)."""
+        block, d = self.block, self.block.dim
+        label = np.where(self.inlier_units, block.shared_labels(), -1)
+        counts = np.bincount(label[label >= 0]) if np.any(label >= 0) else np.zeros(0, int)
+        label = np.where((label >= 0) & (counts[np.maximum(label, 0)] >= 2) if len(counts) else False, label, -1)
+        return SharedErrors(
+            A=lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1]),
+            sigma_q=self.sigma_q,
+            reading=np.repeat(self.groups, d),
+            label=np.repeat(label, d),
+            axis=np.tile(np.arange(d), block.n_units),
+            tau=max(self.sigma, self.shared_floor),
+        )
+
     def rebuild(self, lin: Linearization) -> None:
-        """Noise groups over the inlier units at this linearisation (left-out views are in no group)."""
-        A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
-        groups = split_rows(self.groups, self.block.dim, self.inlier_units)
-        self.whitening = GroupedWhitening(groups, A, self.sigma_q)
+        """Noise groups over the inlier units at this linearisation (left-out views are in no group): units that
+        share a joint reading or a repeating detection error are in one group."""
+        shared = self.shared_errors(lin)
+        group_of_unit = self.groups
+        label = shared.label[:: self.block.dim]
+        if np.any(label >= 0):  # join reading groups linked by a shared detection error
+            n_read = int(self.groups.max()) + 1
+            linked = label >= 0
+            graph = scipy.sparse.coo_matrix(
+                (np.ones(int(linked.sum())), (self.groups[linked], n_read + label[linked])),
+                shape=(n_read + int(label.max()) + 1,) * 2,
+            )
+            group_of_unit = connected_components(graph, directed=False)[1][self.groups]
+        self.whitening = GroupedWhitening(split_rows(group_of_unit, self.block.dim, self.inlier_units), shared)
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:

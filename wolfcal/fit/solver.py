@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening, split_rows
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
@@ -61,18 +62,18 @@ class Solution:
         return self.uncertainty.std
 
 
-def view_rms(state: BlockState, residual: np.ndarray, A: np.ndarray) -> np.ndarray:
+def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
-    block = state.block
+    block, residual = state.block, lin.residual
     views = split_rows(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
-    w = GroupedWhitening(views, A.reshape(-1, A.shape[-1]), state.sigma_q)
+    w = GroupedWhitening(views, state.shared_errors(lin))
     return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / np.maximum([len(v) for v in views], 1))
 
 
-def flag_outliers(state: BlockState, residual: np.ndarray, A: np.ndarray) -> np.ndarray:
+def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) views the noise model explains far worse than the others and that are off by more than the floor."""
-    block = state.block
-    t = view_rms(state, residual, A)
+    block, residual = state.block, lin.residual
+    t = view_rms(state, lin)
     size = rms_by(block.view_of_unit, residual, block.n_views) if block.dim == 2 else np.sqrt(
         np.bincount(block.view_of_unit, np.sum(residual**2, axis=1), block.n_views)
         / np.maximum(np.bincount(block.view_of_unit, minlength=block.n_views) * block.dim, 1)
@@ -142,7 +143,7 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
         changed, settled = False, True
         lins = problem.evaluate(z)
         for state, lin in zip(problem.states, lins):
-            outliers = flag_outliers(state, lin.residual, lin.joint_sensitivity)
+            outliers = flag_outliers(state, lin)
             changed |= not np.array_equal(outliers, state.excluded)
             state.excluded = outliers
         problem.linearize(z)
