@@ -19,6 +19,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import camera_correction, write_or_withhold_deploy_files
+from wolfcal.evaluate.external import external_metrics
 from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
@@ -81,6 +82,63 @@ def _observe(
             f"{', '.join(str(s) for s in sources)}"
         )
     return samples, obs.only_tags(tags), tags, warnings
+
+
+def _holds_head_images(robot: Robot, result: dict, captures: list[Path]) -> bool:
+    """Whether the held-out captures hold head-camera images (else they are judged as external-camera views)."""
+    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
+    samples, _ = load_samples(robot, captures, intrinsics, cameras=())
+    return any(HEAD_CAMERA in s.images for s in samples)
+
+
+def _run_external_evaluate(
+    robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, captures: list[Path], out_dir: Path,
+    force: bool, say: Callable[[str], None],
+) -> dict:
+    """Held-out external-camera captures: `external_metrics` before/after, metrics.json, report.md, deploy files
+    unless the reprojection error of any camera got worse."""
+    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
+    samples, warnings = load_samples(robot, captures, intrinsics, cameras=())
+    names = [c.name for c in robot.config.external_cameras]
+    observations, detect_warnings = detect_observations(samples, robot, cameras=names)
+    tags = set(result["tags_used"])
+    observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
+                    if tags & set(o.observed_tag_ids)}  # fmt: skip
+    truth = _truth_reference(captures)
+    figures = external_metrics(robot, observations, fitted, truth, say)
+    worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, force)
+    lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
+             f"fit: {fit_dir.resolve()}; captures: {', '.join(str(c) for c in captures)}", "",
+             figures["meaning"], "", "| camera | model | RMS [px] | max [px] | tag grid [mm] mean +- std |",
+             "|---|---|---|---|---|"]  # fmt: skip
+    for name, c in figures["cameras"].items():
+        for label in ("before", "after"):
+            r = c[label]
+            mean, std = r["tag_grid_mm_mean"], r["tag_grid_mm_std"]
+            grid = "-" if mean is None else f"{mean:.2f} +- {std:.2f}"
+            lines.append(f"| {name} | {label} | {r['rms_px']:.3f} | {r['max_px']:.2f} | {grid} |")
+    if "sole_error_mm" in figures:
+        lines += ["", "Sole position error relative to the torso against the simulator's truth, max over 300 random "
+                  "leg configurations [mm]: " + "; ".join(
+                      f"{label}: " + ", ".join(f"{s} {v:.2f}" for s, v in e.items())
+                      for label, e in figures["sole_error_mm"].items())]  # fmt: skip
+    verdict = ("the calibration makes the held-out reprojection error worse: deploy files withheld" if worse else
+               "the calibration improves the held-out external-camera views")  # fmt: skip
+    lines += ["", f"**{verdict}**"]
+    metrics = {
+        "wolfcal_version": wolfcal.__version__, "fit_dir": str(fit_dir.resolve()), "robot": str(robot.config.path),
+        "robot_name": robot.config.name, "free": result["free"], "mode": "held-out",
+        "captures": [str(Path(c).resolve()) for c in captures], "external": figures,
+        "verdict": {"worse": worse, "message": verdict}, "deploy": deploy, "warnings": warnings + detect_warnings,
+    }  # fmt: skip
+    write_text_atomic(out_dir / "report.md", "\n".join(lines) + "\n")
+    write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
+    for line in lines[6:]:
+        say(line)
+    say(f"report: {out_dir / 'report.md'}")
+    return metrics
 
 
 def _fit_options(result: dict) -> FitOptions:
@@ -147,6 +205,8 @@ def run_evaluate(
     result, robot, fitted = _load_fit(fit_dir)
     held_out = bool(captures)
     _refuse_fitted_captures(captures, result["captures"])
+    if held_out and not _holds_head_images(robot, result, captures):
+        return _run_external_evaluate(robot, result, fitted, fit_dir, captures, out_dir, force, say)
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
     samples, obs, tags, warnings = _observe(robot, result, sources, say)
     views = measure_tag_views(robot, obs)

@@ -55,8 +55,10 @@ class CameraBlock(Block):
     outlier_floor = OUTLIER_FLOOR_PX
 
     def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
-                 placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None) -> None:
+                 placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None,
+                 fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.tag_ids, self.external = robot, obs, list(tag_ids), external
+        self.fixed = fixed or Corrections()  # corrections held fixed under the free ones (e.g. a model under test)
         self.camera_name = obs.camera_name
         self.system = "external" if external else "head"
         self.name = f"external camera {self.camera_name}" if external else "head camera"
@@ -96,7 +98,7 @@ class CameraBlock(Block):
 
     # --- the external camera's pose ----------------------------------------------------------------------------
     def _pose_parameters(self, names: list[str]) -> ParameterSet:
-        init = initial_camera_poses(self.robot, self.obs, self.placement_of_sample, len(names))
+        init = initial_camera_poses(self.robot, self.obs, self.placement_of_sample, len(names), self.fixed)
         params = []
         for k, name in enumerate(names):
             values = np.concatenate([init[k][:3, 3], log_so3(init[k][:3, :3])])
@@ -109,7 +111,7 @@ class CameraBlock(Block):
 
     # --- predictions and derivatives ---------------------------------------------------------------------------
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
-        corrections: Corrections = chain.corrections(chain_values)
+        corrections: Corrections = chain.corrections(chain_values).plus(self.fixed)
         d = ChainDerivatives(self.robot, self.q_measured, corrections, chain, [self.viewer], self.tag_ids)
         s, t = self.sample_of_unit, self.tag_col
         keys = [tag_key(tag) for tag in self.tag_ids]
@@ -163,25 +165,31 @@ def _pnp(camera, uv: np.ndarray, size: float) -> np.ndarray | None:
     return T
 
 
+def tag_pose_from_corners(robot: Robot, obs: Observations, sample: int, tag_id: int) -> np.ndarray | None:
+    """T_camera_tag (4, 4) of one tag in one sample from its four detected corners, or None."""
+    rows = np.flatnonzero((obs.sample_index == sample) & (obs.tag_ids == tag_id))
+    if len(rows) != 4:
+        return None
+    rows = rows[np.argsort(obs.corner_index[rows])]
+    return _pnp(obs.camera, obs.uv[rows], robot.config.tag(tag_id).size)
+
+
 def initial_camera_poses(
-    robot: Robot, obs: Observations, placement_of_sample: np.ndarray, n_placements: int
+    robot: Robot, obs: Observations, placement_of_sample: np.ndarray, n_placements: int,
+    model: Corrections | None = None,
 ) -> list[np.ndarray]:
     """T_base_camera (4, 4) per placement from PnP of the tags on links fixed to the base (e.g. the torso tag),
     median over the placement's views; a clear error for a placement in which no such tag was seen."""
     fixed = [t for t in obs.observed_tag_ids if robot.fixed_to_base(robot.config.tag(t).link)]
-    base_tag = {t: robot.model.link_poses(np.zeros((1, len(robot.joint_names))), [robot.config.tag(t).link],
-                                          base=robot.config.base_link)[robot.config.tag(t).link][0]
-                @ robot.T_link_tag(t) for t in fixed}
+    q0 = np.zeros((1, len(robot.joint_names)))
+    base_tag = {t: robot.model.link_poses(q0, [robot.config.tag(t).link], model, base=robot.config.base_link)[
+        robot.config.tag(t).link][0] @ robot.T_link_tag(t, model) for t in fixed}
     poses = []
     for k in range(n_placements):
         candidates = []
         for s in np.flatnonzero(placement_of_sample == k):
             for t in fixed:
-                rows = np.flatnonzero((obs.sample_index == s) & (obs.tag_ids == t))
-                if len(rows) != 4:
-                    continue
-                rows = rows[np.argsort(obs.corner_index[rows])]
-                T_camera_tag = _pnp(obs.camera, obs.uv[rows], robot.config.tag(t).size)
+                T_camera_tag = tag_pose_from_corners(robot, obs, int(s), t)
                 if T_camera_tag is not None:
                     candidates.append(base_tag[t] @ invert_transform(T_camera_tag))
         if not candidates:

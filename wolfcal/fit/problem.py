@@ -152,7 +152,7 @@ class Problem:
         parts = []
         for state, lin, w in zip(self.states, self.evaluate(z), self._whitened(z)):
             rows = lin.residual.size
-            J_chain = lin.jac_chain.reshape(rows, -1)
+            J_chain = lin.jac_chain.reshape(rows, self.n_chain)
             if sparse:
                 empty = scipy.sparse.csr_matrix((rows, n - self.n_chain))
                 J = scipy.sparse.hstack([scipy.sparse.csr_matrix(J_chain), empty]).tocsr()

@@ -28,6 +28,19 @@ class Corrections:
         """(J,) offsets [rad] in the order of `joint_names` (0 for joints without one)."""
         return np.array([self.offsets.get(n, 0.0) for n in joint_names], dtype=float)
 
+    def plus(self, other: Corrections) -> Corrections:
+        """Offsets and correction vectors added (exact when one side is empty; first order otherwise)."""
+        offsets = dict(self.offsets)
+        for k, v in other.offsets.items():
+            offsets[k] = offsets.get(k, 0.0) + v
+        frames = {k: np.asarray(v, float).copy() for k, v in self.frames.items()}
+        for k, v in other.frames.items():
+            frames[k] = frames.get(k, np.zeros(6)) + v
+        tags = {k: np.asarray(v, float).copy() for k, v in self.tags.items()}
+        for k, v in other.tags.items():
+            tags[k] = tags.get(k, np.zeros(6)) + v
+        return Corrections(offsets, frames, tags)
+
     def to_dict(self) -> dict:
         return {
             "offsets": {k: float(v) for k, v in self.offsets.items()},
