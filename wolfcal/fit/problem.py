@@ -53,13 +53,18 @@ class BlockState:
         """The errors the block's rows share at this linearisation (see `SharedErrors`); a repeating detection
         error counts only where at least two inlier units share it (size: see `shared_floor`)."""
         block, d = self.block, self.block.dim
+        A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
+        # Units the joint readings do not move (a tag fixed to the base seen by an external camera) share no
+        # reading error: each is its own reading group, so only a shared detection error links them.
+        moved = np.any(lin.joint_sensitivity != 0, axis=(1, 2))
+        self.reading_of_unit = np.where(moved, self.groups, self.groups.max() + 1 + np.arange(block.n_units))
         label = np.where(self.inlier_units, block.shared_labels(), -1)
         counts = np.bincount(label[label >= 0]) if np.any(label >= 0) else np.zeros(0, int)
         label = np.where((label >= 0) & (counts[np.maximum(label, 0)] >= 2) if len(counts) else False, label, -1)
         return SharedErrors(
-            A=lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1]),
+            A=A,
             sigma_q=self.sigma_q,
-            reading=np.repeat(self.groups, d),
+            reading=np.repeat(self.reading_of_unit, d),
             label=np.repeat(label, d),
             axis=np.tile(np.arange(d), block.n_units),
             tau=max(self.sigma, self.shared_floor),
@@ -69,16 +74,17 @@ class BlockState:
         """Noise groups over the inlier units at this linearisation (left-out views are in no group): units that
         share a joint reading or a repeating detection error are in one group."""
         shared = self.shared_errors(lin)
-        group_of_unit = self.groups
+        reading = self.reading_of_unit
+        group_of_unit = reading
         label = shared.label[:: self.block.dim]
         if np.any(label >= 0):  # join reading groups linked by a shared detection error
-            n_read = int(self.groups.max()) + 1
+            n_read = int(reading.max()) + 1
             linked = label >= 0
             graph = scipy.sparse.coo_matrix(
-                (np.ones(int(linked.sum())), (self.groups[linked], n_read + label[linked])),
+                (np.ones(int(linked.sum())), (reading[linked], n_read + label[linked])),
                 shape=(n_read + int(label.max()) + 1,) * 2,
             )
-            group_of_unit = connected_components(graph, directed=False)[1][self.groups]
+            group_of_unit = connected_components(graph, directed=False)[1][reading]
         self.whitening = GroupedWhitening(split_rows(group_of_unit, self.block.dim, self.inlier_units), shared)
         self.set_sigma(self.sigma)
 
