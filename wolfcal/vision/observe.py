@@ -1,31 +1,22 @@
-"""Samples -> Observations: detect the configured tags in every image (both cores) and stack the corners."""
+"""Samples -> Observations: detect the configured tags in every image (all cores, cached) and stack the corners."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.io.samples import Sample
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import detect_tags
-
-
-def _detect(sample: Sample, families: dict[str, set[int]]) -> dict[int, np.ndarray]:
-    image = sample.image()
-    found: dict[int, np.ndarray] = {}
-    for family, ids in families.items():
-        found.update(detect_tags(image, family, ids))
-    return found
+from wolfcal.vision.cache import DetectorSettings, detect_by_source
 
 
 def detect_observations(
     samples: list[Sample],
     robot: Robot,
-    workers: int = 2,
+    workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[Observations, list[str]]:
     """Detect tags in all samples; samples without any configured tag are left out (and said so)."""
@@ -42,12 +33,11 @@ def detect_observations(
     families: dict[str, set[int]] = {}
     for tag in robot.config.tags:
         families.setdefault(tag.family, set()).add(tag.id)
-    detections: list[dict[int, np.ndarray]] = []
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:  # OpenCV releases the GIL while detecting
-        for i, found in enumerate(pool.map(lambda s: _detect(s, families), samples)):
-            detections.append(found)
-            if progress:
-                progress(i + 1, len(samples))
+    detections = detect_by_source(
+        [s.source for s in samples], [s.stamp_ns for s in samples], lambda i: samples[i].image_data,
+        f"{HEAD_CAMERA} {robot.config.camera.topic}", DetectorSettings.of(families), progress,
+        labels=lambda i: f"{samples[i].source}: the sample at t={samples[i].stamp_ns} ns", workers=workers,
+    )  # fmt: skip
     warnings = []
     empty = [i for i, d in enumerate(detections) if not d]
     if empty:
