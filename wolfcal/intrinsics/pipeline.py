@@ -16,6 +16,7 @@ from wolfcal.intrinsics.calibrate import DISTORTION_NAMES, Calibration, calibrat
 from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
 from wolfcal.intrinsics.live import LiveView, collect_views
+from wolfcal.intrinsics.refine_choice import choose_window
 from wolfcal.intrinsics.report import write_detections, write_report
 from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
 from wolfcal.vision.board import Board
@@ -148,11 +149,16 @@ def run_intrinsics(
             f"(inner corners, COLSxROWS) and --charuco, and that the whole board is in view; see {report}"
         )
     _check_sizes(views)
+    choice = None
+    if len(views) >= options.min_views:
+        views, choice = choose_window(views, board, options.model)
+        if choice:
+            say(choice.describe())
     calibration = calibrate_views(views, board, options.model, options.min_views, options.reject_outliers)
     calibration.camera = dataclasses.replace(calibration.camera, name=options.camera_name)
     warnings = coverage_warnings(calibration, board)
     save_camera_info(calibration.camera, out)
-    write_report(report, calibration, failures, warnings, options.method)
+    write_report(report, calibration, failures, warnings, options.method + (f"; {choice.describe()}" if choice else ""))
     _say_result(calibration, failures, warnings, say)
     say(f"wrote {out} and the report {report}/summary.md")
     return calibration

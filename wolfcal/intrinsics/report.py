@@ -11,13 +11,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from wolfcal.atomic import write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.intrinsics.calibrate import Calibration
 from wolfcal.intrinsics.coverage import GRID, REGION_NAMES, region_counts
 from wolfcal.intrinsics.detect import Detection, Failure
+from wolfcal.yamlfile import dump_yaml
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _W, _H, _M = 800, 420, 50  # chart size and margin [px]
@@ -161,7 +161,7 @@ def write_detections(folder: Path, detections: list[Detection], failures: list[F
         ],
         "failures": [{"name": f.name, "reason": f.reason} for f in failures],
     }
-    write_text_atomic(folder / "detections.yaml", yaml.safe_dump(data, sort_keys=False, width=200))
+    write_text_atomic(folder / "detections.yaml", dump_yaml(data, sort_keys=False, width=200))
 
 
 def write_report(
@@ -185,7 +185,7 @@ def write_report(
     values.update(zip(list(calibration.std)[4:], map(float, cam.D), strict=True))
     write_text_atomic(
         folder / "intrinsics.yaml",
-        yaml.safe_dump(
+        dump_yaml(
             {
                 "distortion_model": cam.distortion_model,
                 "image_size": [cam.width, cam.height],
