@@ -68,11 +68,13 @@ def test_workers_give_exactly_the_detections_of_detect_tags(images):
     reference = fresh(images)
     assert sum(len(d) for d in reference) == 8
     assert_same(detect_encoded(images, FAMILIES, workers=2), reference)
+    assert_same(detect_encoded(images, FAMILIES, workers=2, processes=True), reference)
     assert_same(detect_encoded(images, FAMILIES, workers=1), reference)
-    assert_same(detect_encoded(images[:2], FAMILIES, workers=2), reference[:2])  # in-process path
+    assert_same(detect_encoded(images[:2], FAMILIES, workers=2), reference[:2])  # in this thread
 
 
-def test_read_ahead_is_bounded(images):
+@pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
+def test_read_ahead_is_bounded(images, processes):
     """A long lazy input is read at most 2 batches per worker ahead of the results."""
     pulled = []
 
@@ -81,7 +83,7 @@ def test_read_ahead_is_bounded(images):
             pulled.append(k)
             yield images[k % len(images)]
 
-    results = iter_detect_encoded(source(), FAMILIES, workers=2)
+    results = iter_detect_encoded(source(), FAMILIES, workers=2, processes=processes)
     next(results)
     assert len(pulled) <= 2 * 2 * BATCH
     assert sum(1 for _ in results) == 59

@@ -1,16 +1,19 @@
 """Tag detection in many encoded images on all cores: decode once, detect, refine; bounded memory.
 
-The corner refinement runs numpy code that holds the interpreter lock, so threads gain little (1.13x on 2
-cores); this uses worker processes. Images go to the workers in batches, and at most two batches per worker
-are under way at once, so memory stays bounded however many images the input yields (it may be a lazy
-iterator over a long recording). Results come back in input order, each exactly what
-`wolfcal.vision.tags.detect_tags` returns for the decoded image.
+Images go to the workers in batches, and at most two batches per worker are under way at once, so memory
+stays bounded however many images the input yields (it may be a lazy iterator over a long recording).
+Results come back in input order, each exactly what `wolfcal.vision.tags.detect_tags` returns for the decoded
+image.
 
-The worker pool is started on first use and kept for the life of the process (a fit's cross-validation
-detects several times); workers start from a fork server (spawn where there is none), never by forking a
-process whose OpenCV threads are running. Few images are detected in this process (no pool start-up).
-As with any use of multiprocessing, a script that calls this must guard its top level with
-`if __name__ == "__main__":` (workers import the main script; the `wolfcal` command does this).
+Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
+held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
+and in numpy's large-array loops, which release the lock, and threads now reach the floor (decoding plus
+OpenCV's bare detector on all cores: 1.02x at 2048x1536, 1.11x at 512x384, whole process), while worker
+processes were 1.25x slower than threads (start-up, and every image pickled to a worker; bench/bench_detection.py).
+`processes=True` is kept for callers whose own Python work would compete for the lock: the pool is
+started on first use, kept for the life of the process, and its workers start from a fork server (spawn
+where there is none), never by forking a process whose OpenCV threads are running; as with any use of
+multiprocessing, a script that uses it must guard its top level with `if __name__ == "__main__":`.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import multiprocessing
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
 
@@ -30,7 +33,7 @@ from wolfcal.errors import WolfcalError
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
-BATCH = 4  # images per task: a 2048x1536 png is ~3 MB, so a worker holds ~12 MB of encoded images per task
+BATCH = 4  # images per task: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
 _pool: ProcessPoolExecutor | None = None
@@ -102,11 +105,12 @@ def iter_detect_encoded(
     refine: str = "edges",
     workers: int | None = None,
     batch: int = BATCH,
+    processes: bool = False,
 ) -> Iterator[Detections | None]:
     """Detections of each encoded image in input order (None for an image that cannot be decoded).
 
-    At most 2 * `workers` batches of `batch` images are read ahead of the results. `workers`: processes
-    (default: one per core); 1 detects in this process.
+    At most 2 * `workers` batches of `batch` images are read ahead of the results. `workers`: threads, or
+    processes if `processes` (default: one per core); 1 detects in this thread.
     """
     workers = max(1, workers or cpu_count())
     names = _family_list(families)
@@ -116,7 +120,7 @@ def iter_detect_encoded(
         for data in [*head, *source]:
             yield detect_encoded_one(data, names, refine)
         return
-    pool = _get_pool(workers)
+    pool = _get_pool(workers) if processes else ThreadPoolExecutor(workers, thread_name_prefix="wolfcal-detect")
     stream = chain(head, source)
     pending: deque[Future] = deque()
     try:
@@ -135,6 +139,8 @@ def iter_detect_encoded(
     finally:
         for future in pending:
             future.cancel()
+        if not processes:
+            pool.shutdown()
 
 
 def detect_encoded(
@@ -145,9 +151,10 @@ def detect_encoded(
     progress: Callable[[int, int | None], None] | None = None,
     total: int | None = None,
     labels: Callable[[int], str] | None = None,
+    processes: bool = False,
 ) -> list[Detections]:
     """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
-    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them.
+    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them (`processes`: see the module docstring).
 
     `progress(done, total)` after each image (`total` as given, e.g. len(images)); an image that cannot be
     decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
@@ -155,7 +162,7 @@ def detect_encoded(
     if total is None and hasattr(images, "__len__"):
         total = len(images)  # type: ignore[arg-type]
     found: list[Detections] = []
-    for index, detections in enumerate(iter_detect_encoded(images, families, refine, workers)):
+    for index, detections in enumerate(iter_detect_encoded(images, families, refine, workers, processes=processes)):
         if detections is None:
             name = labels(index) if labels else f"image {index}"
             raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
