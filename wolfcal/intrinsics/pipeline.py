@@ -15,7 +15,6 @@ from wolfcal.errors import WolfcalError
 from wolfcal.intrinsics.calibrate import DISTORTION_NAMES, Calibration, calibrate_views
 from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
-from wolfcal.intrinsics.live import LiveView, collect_views
 from wolfcal.intrinsics.refine_choice import choose_window
 from wolfcal.intrinsics.report import write_detections, write_report
 from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
@@ -126,6 +125,8 @@ def run_intrinsics(
         say(f"board found in {len(views)} of {len(found.images)} images")
     streams = [(str(p), p.name) for p in found.videos] + ([(camera_source(camera), None)] if camera else [])
     if streams:
+        from wolfcal.intrinsics.live import LiveView, collect_views  # rich's live display: only for streams
+
         selector = ViewSelector(board, Coverage([view_params(v, board) for v in views]), list(views))
         for source, name in streams:
             say(f"collecting still, distinct views from {name or f'camera {source}'} (Ctrl-C stops)")
