@@ -56,6 +56,17 @@ def median_time(function, repeat: int = 3) -> float:
     return float(np.median(times))
 
 
+def interleaved(functions: dict, repeat: int = 5) -> dict[str, float]:
+    """Median seconds of each function, run in turn (A B C A B C ...) so a shared machine's drift hits all."""
+    times: dict[str, list[float]] = {name: [] for name in functions}
+    for _ in range(repeat):
+        for name, function in functions.items():
+            start = time.perf_counter()
+            function()
+            times[name].append(time.perf_counter() - start)
+    return {name: float(np.median(t)) for name, t in times.items()}
+
+
 def detect_before(image: np.ndarray) -> dict[int, np.ndarray]:
     """detect_tags as it was: aruco + the per-edge refinement loop."""
     gray = _to_gray(image)
@@ -75,9 +86,12 @@ def per_image(views_by_camera: dict) -> None:
 
 def _per_image_row(label: str, views: list) -> None:
     images = [image for _, image, _ in views]
-    bare = median_time(lambda: [detect_tags(im, FAMILY, refine="none") for im in images]) / len(images)
-    before = median_time(lambda: [detect_before(im) for im in images]) / len(images)
-    after = median_time(lambda: [detect_tags(im, FAMILY) for im in images]) / len(images)
+    t = interleaved({
+        "bare": lambda: [detect_tags(im, FAMILY, refine="none") for im in images],
+        "before": lambda: [detect_before(im) for im in images],
+        "after": lambda: [detect_tags(im, FAMILY) for im in images],
+    })  # fmt: skip
+    bare, before, after = (t[k] / len(images) for k in ("bare", "before", "after"))
     errors = {}
     for name, detect in (("before", detect_before), ("after", lambda im: detect_tags(im, FAMILY))):
         e = [np.linalg.norm(detect(im)[tag] - truth, axis=1) for tag, im, truth in views if tag in detect(im)]
@@ -107,21 +121,24 @@ def all_cores(views_by_camera: dict, copies: int) -> dict[str, list[bytes]]:
 
 def _all_cores_row(label: str, data: list[bytes], cores: int) -> None:
     n = len(data)
-    with ThreadPoolExecutor(cores) as pool:
-        floor_threads = median_time(lambda: list(pool.map(_floor_one, data))) / n
-    floor_serial = median_time(lambda: [_floor_one(d) for d in data]) / n  # OpenCV's own threads
-    floor = min(floor_threads, floor_serial)
-    serial = median_time(lambda: detect_encoded(data, {FAMILY: None}, workers=1)) / n
-    threads = median_time(lambda: detect_encoded(data, {FAMILY: None})) / n
     start = time.perf_counter()
     detect_encoded(data, {FAMILY: None}, processes=True)
     first = (time.perf_counter() - start) / n
-    procs = median_time(lambda: detect_encoded(data, {FAMILY: None}, processes=True)) / n
-    print(f"  {label:10s} {n} images: floor (decode + bare detector, all cores) {1e3 * floor:5.1f} | wolfcal: "
-          f"one thread {1e3 * serial:5.1f}, threads (default) {1e3 * threads:5.1f}, processes {1e3 * procs:5.1f} "
-          f"(first call, with pool start-up, {1e3 * first:5.1f})")  # fmt: skip
-    print(f"  {'':10s} threads / floor {threads / floor:.2f}x, processes / floor {procs / floor:.2f}x, "
-          f"one thread / floor in one thread {serial / floor_serial:.2f}x")  # fmt: skip
+    with ThreadPoolExecutor(cores) as pool:
+        t = interleaved({
+            "floor threads": lambda: list(pool.map(_floor_one, data)),
+            "floor serial": lambda: [_floor_one(d) for d in data],  # OpenCV's own threads
+            "one thread": lambda: detect_encoded(data, {FAMILY: None}, workers=1),
+            "threads": lambda: detect_encoded(data, {FAMILY: None}),
+            "processes": lambda: detect_encoded(data, {FAMILY: None}, processes=True),
+        }, repeat=3)  # fmt: skip
+    t = {k: v / n for k, v in t.items()}
+    floor = min(t["floor threads"], t["floor serial"])
+    print(f"  {label:10s} {n} images: floor (decode + bare detector, all cores) {1e3 * floor:5.1f} | wolfcal: one "
+          f"thread {1e3 * t['one thread']:5.1f}, threads (default) {1e3 * t['threads']:5.1f}, processes "
+          f"{1e3 * t['processes']:5.1f} (first call, with pool start-up, {1e3 * first:5.1f})")  # fmt: skip
+    print(f"  {'':10s} threads / floor {t['threads'] / floor:.2f}x, processes / floor {t['processes'] / floor:.2f}x, "
+          f"one thread / floor in one thread {t['one thread'] / t['floor serial']:.2f}x")  # fmt: skip
 
 
 def cached(encoded: dict[str, list[bytes]]) -> None:

@@ -18,7 +18,6 @@ multiprocessing, a script that uses it must guard its top level with `if __name_
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -80,6 +79,8 @@ def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list
 def _get_pool(workers: int) -> ProcessPoolExecutor:
     global _pool, _pool_workers
     if _pool is None or _pool_workers != workers:
+        import multiprocessing  # only when processes are asked for
+
         if _pool is not None:
             _pool.shutdown(cancel_futures=True)
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
