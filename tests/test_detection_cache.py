@@ -189,6 +189,20 @@ def test_unwritable_cache_still_detects(capture, images, tmp_path, monkeypatch):
     assert_same(cached_detect(path, "head", stamps, iter(images), DetectorSettings.of(FAMILIES)), fresh(images))
 
 
+def test_detect_by_source_keeps_input_order_across_files_and_cameras(capture, images, tmp_path, monkeypatch):
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
+    path, stamps = capture
+    other = tmp_path / "other.mcap"
+    other.write_bytes(b"another capture")
+    sources = [str(path), str(other), "", str(path)] * 3  # "" : samples made in memory, never cached
+    names = ["head", "head", "head", "tripod"] * 3
+    picks = [k % len(images) for k in range(len(sources))]
+    found = cache.detect_by_source(sources, list(range(len(sources))), lambda k: images[picks[k]], names,
+                                   DetectorSettings.of(FAMILIES))  # fmt: skip
+    assert_same(found, fresh([images[k] for k in picks]))
+    assert len(entries(tmp_path / "cache")) == 3  # (capture, head), (other, head), (capture, tripod)
+
+
 def test_default_location_follows_xdg(monkeypatch, tmp_path):
     monkeypatch.delenv("WOLFCAL_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
