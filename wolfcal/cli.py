@@ -132,12 +132,15 @@ def fit(
                                       "(default: every system the captures contain)."),
     external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
                                          "one pose per sample instead of one per capture file."),
+    no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
 ) -> None:
     """Estimate the chosen free parameters from one or more captures."""
     from wolfcal.fit.pipeline import FitOptions, run_fit
+    from wolfcal.vision.cache import cache_enabled
 
     options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving)
-    run_fit(captures, robot, out, options, intrinsics, say=typer.echo)
+    with cache_enabled(not no_cache):
+        run_fit(captures, robot, out, options, intrinsics, say=typer.echo)
 
 
 @app.command()
@@ -149,11 +152,14 @@ def evaluate(
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
     folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
     force: bool = typer.Option(False, "--force", help="Write the deploy files even if held-out error got worse."),
+    no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
     from wolfcal.evaluate.pipeline import run_evaluate
+    from wolfcal.vision.cache import cache_enabled
 
-    metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
+    with cache_enabled(not no_cache):
+        metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
     if not metrics["deploy"]["written"]:
         raise WolfcalError(metrics["deploy"]["reason"])
 

@@ -5,12 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.atomic import write_text_atomic
 from wolfcal.camera.model import MODELS, CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.yamlfile import read_yaml
+from wolfcal.yamlfile import dump_yaml, read_yaml
 
 
 def _matrix(data: dict, key: str, rows: int, cols: int, path: Path) -> np.ndarray:
@@ -64,4 +63,4 @@ def camera_info_dict(camera: CameraModel) -> dict:
 
 def save_camera_info(camera: CameraModel, path: str | Path) -> None:
     """Write a ROS camera_info YAML atomically."""
-    write_text_atomic(path, yaml.safe_dump(camera_info_dict(camera), sort_keys=False))
+    write_text_atomic(path, dump_yaml(camera_info_dict(camera), sort_keys=False))

@@ -15,7 +15,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import yaml
 from scipy.spatial.transform import Rotation
 
 from wolfcal.atomic import write_text_atomic
@@ -24,6 +23,7 @@ from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
+from wolfcal.yamlfile import dump_yaml
 
 DEPLOY_FILES = ("calibrated.urdf", "calibrated_folded.urdf", "joint_offsets.yaml", "camera_correction.yaml")
 
@@ -75,7 +75,7 @@ def write_deploy_files(robot: Robot, corrections: Corrections, out_dir: Path) ->
     write_calibrated_urdf(urdf, model, corrections, paths[1], fold_offsets=True)
     write_text_atomic(paths[2], joint_offsets_text(robot, corrections))
     write_text_atomic(
-        paths[3], yaml.safe_dump(camera_correction(robot, corrections), sort_keys=False, width=200)
+        paths[3], dump_yaml(camera_correction(robot, corrections), sort_keys=False, width=200)
     )
     return paths
 

@@ -116,8 +116,14 @@ def _intrinsics_std(
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0] = 1.0
     Js = J / scale
-    cov = sigma2 * np.linalg.pinv(Js.T @ Js) / np.outer(scale, scale)
-    return np.sqrt(np.clip(np.diag(cov)[:n_in], 0, None))
+    H = Js.T @ Js
+    # Marginalise the poses by the Schur complement: each view's 6x6 pose block is independent of the others,
+    # so the intrinsics block of H^-1 is (A - sum_v B_v C_v^-1 B_v^T)^-1 (no SVD of the whole of H).
+    A, B = H[:n_in, :n_in], H[:n_in, n_in:].reshape(n_in, n_views, 6)
+    C = H[n_in:, n_in:].reshape(n_views, 6, n_views, 6)[np.arange(n_views), :, np.arange(n_views), :]
+    S = A - np.einsum("ivk,vkl,jvl->ij", B, np.linalg.pinv(C), B)
+    cov = sigma2 * np.linalg.pinv(S) / np.outer(scale[:n_in], scale[:n_in])
+    return np.sqrt(np.clip(np.diag(cov), 0, None))
 
 
 def _solve(

@@ -1,12 +1,14 @@
 """Board corner detection in one image, and in many images on both cores.
 
 Pixels follow OpenCV (centre of the top-left pixel is (0, 0)). Checkerboards: by default ("classic") the
-`findChessboardCorners` search (`findChessboardCornersSB` where it fails) on a copy reduced to at most
-1000 px, then `cornerSubPix` at full size with a window sized from the corner spacing. On rendered boards
+`findChessboardCorners` search (`findChessboardCornersSB` where it fails) on a copy halved (pyrDown) to at
+most 1000 px, then `cornerSubPix` at full size with a window sized from the corner spacing. On rendered boards
 with blur and noise this was about 2x more accurate than the corners of `findChessboardCornersSB` (method
-"sb") and 10-100x faster (bench/bench_intrinsics.py). ChArUco boards: `cv2.aruco.CharucoDetector`, then
-`cornerSubPix` with a half-window of 0.1 corner spacing (measured: 0.11 px RMS against 0.13 px for the
-detector's own corners; wider windows reach into the markers and bias the corners).
+"sb") and 10-100x faster (bench/bench_intrinsics.py). Sharp real photographs want smaller windows, so every
+view also carries its corners refined with the half-windows of `WINDOWS` (capped at the spacing-sized one),
+and `wolfcal.intrinsics.refine_choice` keeps the window the data fit best. ChArUco boards:
+`cv2.aruco.CharucoDetector`, then `cornerSubPix` with a half-window of 0.1 corner spacing (measured: 0.11 px
+RMS against 0.13 px for the detector's own corners; wider windows reach into the markers and bias them).
 """
 
 from __future__ import annotations
@@ -21,9 +23,11 @@ import numpy as np
 from wolfcal.vision.board import Board
 
 METHODS = ("classic", "sb")
-_CLASSIC_MAX_SIDE = 1000  # the classic detector searches a copy reduced to this size (speed), refines at full size
+_CLASSIC_MAX_SIDE = 1000  # the classic detector searches a copy halved to this size (speed), refines at full size
 _MIN_CHARUCO_CORNERS = 6
 _CHARUCO_WINDOW = 0.1  # ChArUco cornerSubPix half-window / corner spacing: larger windows reach the markers
+WINDOWS = (3, 5, 7, 11)  # checkerboard cornerSubPix half-windows [px] tried besides the spacing-sized one
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
 
 
 @dataclass(frozen=True)
@@ -34,6 +38,7 @@ class Detection:
     corners: np.ndarray
     ids: np.ndarray
     image_size: tuple[int, int]  # (width, height)
+    alternatives: tuple[tuple[int, np.ndarray], ...] = ()  # (cornerSubPix half-window [px], corners (N, 2))
 
 
 @dataclass(frozen=True)
@@ -65,8 +70,12 @@ def subpix_window(corners: np.ndarray, cols: int, rows: int) -> int:
 
 
 def _find_coarse(small: np.ndarray, size: tuple[int, int], fallback: bool) -> np.ndarray | None:
-    """Pixel-level corners: the classic search (two threshold settings), else the sector-based one."""
-    base = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_FAST_CHECK
+    """Pixel-level corners: the classic search (two threshold settings), else the sector-based one.
+
+    FAST_CHECK only for live frames (`fallback` False), where most frames may show no board: on images with a
+    board it made the search 2-3x slower (OpenCV 5) and missed 1 in 20 boards (bench/bench_detection.py).
+    """
+    base = cv2.CALIB_CB_ADAPTIVE_THRESH | (0 if fallback else cv2.CALIB_CB_FAST_CHECK)
     for flags in (base | cv2.CALIB_CB_NORMALIZE_IMAGE, base):
         found, corners = cv2.findChessboardCorners(small, size, flags=flags)
         if found:
@@ -77,17 +86,26 @@ def _find_coarse(small: np.ndarray, size: tuple[int, int], fallback: bool) -> np
     return corners.reshape(-1, 2) if found else None
 
 
-def _checkerboard_classic(gray: np.ndarray, board: Board, fallback: bool) -> np.ndarray | None:
-    scale = min(1.0, _CLASSIC_MAX_SIDE / max(gray.shape))
-    small = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale < 1 else gray
+def _subpix(gray: np.ndarray, corners: np.ndarray, win: int) -> np.ndarray:
+    start = corners.astype(np.float32).reshape(-1, 1, 2)
+    return cv2.cornerSubPix(gray, start, (win, win), (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2).astype(float)
+
+
+def _checkerboard_classic(
+    gray: np.ndarray, board: Board, fallback: bool
+) -> tuple[np.ndarray, tuple[tuple[int, np.ndarray], ...]] | None:
+    """Corners refined with the spacing-sized window, and with each of `WINDOWS` capped at it (files only)."""
+    small, factor = gray, 1
+    while max(small.shape) > _CLASSIC_MAX_SIDE:  # Gaussian pyramid: 10x faster than an INTER_AREA resize
+        small, factor = cv2.pyrDown(small), factor * 2
     corners = _find_coarse(small, (board.cols, board.rows), fallback)
     if corners is None:
         return None
-    corners = (corners + 0.5) / scale - 0.5  # pixel centres at integers in both images
+    corners = corners * factor  # pyrDown's pixel i is centred on pixel factor * i of the full image
     win = subpix_window(corners, board.cols, board.rows)
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-    refined = cv2.cornerSubPix(gray, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria)
-    return refined.reshape(-1, 2)
+    spaced = _subpix(gray, corners, win)
+    others = WINDOWS if fallback else ()
+    return spaced, tuple((w, spaced if w >= win else _subpix(gray, corners, w)) for w in others)
 
 
 def _checkerboard_sb(gray: np.ndarray, board: Board) -> np.ndarray | None:
@@ -125,13 +143,15 @@ def detect_board(
         if found is None:
             return Failure(name, f"fewer than {_MIN_CHARUCO_CORNERS} ChArUco corners found ({board.describe()})")
         return Detection(name, found[0].astype(float), found[1], size)
+    alternatives: tuple[tuple[int, np.ndarray], ...] = ()
     if method == "sb":
         corners = _checkerboard_sb(gray, board)
     else:
-        corners = _checkerboard_classic(gray, board, fallback)
+        found = _checkerboard_classic(gray, board, fallback)
+        corners, alternatives = found if found is not None else (None, ())
     if corners is None:
         return Failure(name, f"no {board.cols}x{board.rows} checkerboard found")
-    return Detection(name, corners.astype(float), np.arange(board.n_corners), size)
+    return Detection(name, corners.astype(float), np.arange(board.n_corners), size, alternatives)
 
 
 def probe_board_size(image: np.ndarray) -> tuple[int, int] | None:

@@ -15,7 +15,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.intrinsics.calibrate import DISTORTION_NAMES, Calibration, calibrate_views
 from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
-from wolfcal.intrinsics.live import LiveView, collect_views
+from wolfcal.intrinsics.refine_choice import choose_window
 from wolfcal.intrinsics.report import write_detections, write_report
 from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
 from wolfcal.vision.board import Board
@@ -125,6 +125,8 @@ def run_intrinsics(
         say(f"board found in {len(views)} of {len(found.images)} images")
     streams = [(str(p), p.name) for p in found.videos] + ([(camera_source(camera), None)] if camera else [])
     if streams:
+        from wolfcal.intrinsics.live import LiveView, collect_views  # rich's live display: only for streams
+
         selector = ViewSelector(board, Coverage([view_params(v, board) for v in views]), list(views))
         for source, name in streams:
             say(f"collecting still, distinct views from {name or f'camera {source}'} (Ctrl-C stops)")
@@ -148,11 +150,16 @@ def run_intrinsics(
             f"(inner corners, COLSxROWS) and --charuco, and that the whole board is in view; see {report}"
         )
     _check_sizes(views)
+    choice = None
+    if len(views) >= options.min_views:
+        views, choice = choose_window(views, board, options.model)
+        if choice:
+            say(choice.describe())
     calibration = calibrate_views(views, board, options.model, options.min_views, options.reject_outliers)
     calibration.camera = dataclasses.replace(calibration.camera, name=options.camera_name)
     warnings = coverage_warnings(calibration, board)
     save_camera_info(calibration.camera, out)
-    write_report(report, calibration, failures, warnings, options.method)
+    write_report(report, calibration, failures, warnings, options.method + (f"; {choice.describe()}" if choice else ""))
     _say_result(calibration, failures, warnings, say)
     say(f"wrote {out} and the report {report}/summary.md")
     return calibration

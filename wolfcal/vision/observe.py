@@ -1,4 +1,5 @@
-"""Samples -> Observations per camera: detect the configured tags in every image (both cores) and stack the corners.
+"""Samples -> Observations per camera: detect the configured tags in every image (all cores, cached) and stack the
+corners.
 
 One `Observations` per camera name ('head' or an external camera's name), holding the samples in which that camera
 saw at least one configured tag, with those samples' joint readings, stamps and sources. All images of one camera
@@ -8,7 +9,6 @@ must share one set of intrinsics (one camera, one resolution).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -17,18 +17,9 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.samples import Sample, SampleImage
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import detect_tags
+from wolfcal.vision.cache import DetectorSettings, detect_by_source
 
 Families = dict[str, set[int]]  # tag family -> configured ids
-
-
-def detect_in_image(image: SampleImage, families: Families) -> dict[int, np.ndarray]:
-    """Corners (4, 2) [px] of the configured tags found in one image, per tag id (the one per-image call)."""
-    pixels = image.decode()
-    found: dict[int, np.ndarray] = {}
-    for family, ids in families.items():
-        found.update(detect_tags(pixels, family, ids))
-    return found
 
 
 def _check_one_camera(name: str, images: list[SampleImage]) -> CameraModel:
@@ -73,7 +64,7 @@ def _stack(
 def detect_observations(
     samples: list[Sample],
     robot: Robot,
-    workers: int = 2,
+    workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     cameras: Iterable[str] | None = None,
 ) -> tuple[dict[str, Observations], list[str]]:
@@ -93,12 +84,12 @@ def detect_observations(
         raise WolfcalError(f"no images of camera(s) {', '.join(sorted(wanted or []))} in the samples")
     models = {name: _check_one_camera(name, [s.images[name] for s, n in jobs if n == name])
               for name in dict.fromkeys(n for _, n in jobs)}  # fmt: skip
-    found: list[dict[int, np.ndarray]] = []
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:  # OpenCV releases the GIL while detecting
-        for i, detections in enumerate(pool.map(lambda job: detect_in_image(job[0].images[job[1]], families), jobs)):
-            found.append(detections)
-            if progress:
-                progress(i + 1, len(jobs))
+    found = detect_by_source(
+        [s.source for s, _ in jobs], [s.stamp_ns for s, _ in jobs], lambda k: jobs[k][0].images[jobs[k][1]].data,
+        [n for _, n in jobs], DetectorSettings.of(families), progress,
+        labels=lambda k: f"{jobs[k][0].source}: the {jobs[k][1]} image at t={jobs[k][0].stamp_ns} ns",
+        workers=workers,
+    )  # fmt: skip
     observations: dict[str, Observations] = {}
     warnings = []
     for name, camera in models.items():

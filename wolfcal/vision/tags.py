@@ -6,10 +6,10 @@ printed face. Corners in aruco order: top-left (-s/2, s/2, 0), top-right (s/2, s
 the top-left pixel is (0, 0).
 
 Detection is OpenCV's aruco detector (minDistanceToBorder = 0: the default loses strongly distorted tags near
-the image border); its corners are then refined by `_refine_edges` ("edges"): for each corner, sub-pixel
-points of the two black-square edges next to it (area method on intensity profiles across the edge, unbiased
-for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the corner (lens
-distortion bends whole edges, so only a local fit is exact), and the tangents intersected.
+the image border); its corners are then refined by `wolfcal.vision.edges.refine_edges` ("edges"): for each
+corner, sub-pixel points of the two black-square edges next to it (area method on intensity profiles across
+the edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the
+corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected.
 
 Why (bench/bench_vision.py: tag36h11 of 0.08 m at 0.3-1.2 m, tilted up to 50 deg, anywhere in the image,
 noise sigma 2; a 2048x1536 camera with strong barrel distortion, k1 = -0.286, and the same lens binned to
@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.vision.edges import refine_edges
 
 FAMILIES = {
     "tag36h11": cv2.aruco.DICT_APRILTAG_36h11,
@@ -111,124 +112,6 @@ def _detector(family: str, refine: str) -> cv2.aruco.ArucoDetector:
     return cv2.aruco.ArucoDetector(_dictionary(family), params)
 
 
-def _edge_offsets(profiles: np.ndarray, t: np.ndarray, dark: float, light: float, window: float) -> np.ndarray:
-    """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
-
-    Area method: within `window` px (less near the profile's ends, at least 0.75 px) of the mid-grey crossing
-    nearest the profile centre, the edge lies where the dark area ends: edge = t_start + sum((light - I) /
-    (light - dark)) * dt. Unlike the crossing of interpolated samples it is unbiased for a box-filtered
-    (pixel-integrated) or symmetrically blurred step.
-    """
-    step = t[1] - t[0]
-    above = profiles >= 0.5 * (dark + light)
-    change = above[:, 1:] & ~above[:, :-1]  # dark -> light between samples k and k + 1
-    centre = (len(t) - 1) / 2
-    dist = np.where(change, np.abs(np.arange(len(t) - 1) + 0.5 - centre), np.inf)
-    k = np.argmin(dist, axis=1)
-    ok = np.isfinite(dist[np.arange(len(k)), k])
-    cross = t[k] + step / 2
-    reach = np.minimum(window, np.minimum(cross - t[0], t[-1] - cross) - step)  # stay inside the profile
-    ok &= reach >= 0.75
-    inside = np.abs(t[None, :] - cross[:, None]) <= reach[:, None]
-    start = np.where(inside, t[None, :], np.inf).min(axis=1) - step / 2
-    dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
-    edge = start + (dark_part * inside).sum(axis=1) * step
-    return np.where(ok, edge, np.nan)
-
-
-def _edge_tangent(d: np.ndarray, off: np.ndarray) -> tuple[float, float]:
-    """Fit the edge offset off(d) across an edge vs distance d from the corner -> (offset, slope) at d = 0.
-
-    A parabola when the points span more than 8 px (it absorbs the bend of the edge under lens distortion,
-    which a line would extrapolate into a bias of ~curvature * span^2 / 12), a line otherwise. Points off the
-    first fit by more than max(0.3 px, 4 median deviations) (dirt, glare, a wrong crossing) are dropped.
-    """
-    degree = 2 if d.max() - d.min() > 8.0 else 1
-    coeffs = np.polynomial.polynomial.polyfit(d, off, degree)
-    residual = np.abs(off - np.polynomial.polynomial.polyval(d, coeffs))
-    inlier = residual <= max(0.3, 4.0 * float(np.median(residual)))
-    if inlier.sum() > degree + 2 and not inlier.all():
-        coeffs = np.polynomial.polynomial.polyfit(d[inlier], off[inlier], degree)
-    return float(coeffs[0]), float(coeffs[1])
-
-
-def _intersect(p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.ndarray) -> np.ndarray | None:
-    """Intersection of the lines p1 + s d1 and p2 + s d2 (None if nearly parallel)."""
-    A = np.column_stack([d1, -d2])
-    if abs(np.linalg.det(A)) < 1e-6:
-        return None
-    s = np.linalg.solve(A, p2 - p1)
-    return p1 + s[0] * d1
-
-
-def _edge_line(
-    img: np.ndarray,
-    corner: np.ndarray,
-    other: np.ndarray,
-    outward: np.ndarray,
-    t: np.ndarray,
-    d: np.ndarray,
-    window: float,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Tangent (point, direction) at `corner` of the tag edge towards the corner `other`, from sub-pixel
-    edge points at distances `d` [px] along it (profiles sampled at offsets `t` [px] across it, edge found
-    within `window` px of the mid-grey crossing); None if there are too few."""
-    e = other - corner
-    length = np.linalg.norm(e)
-    e /= length
-    n = np.array([-e[1], e[0]])
-    n = n if np.dot(n, outward) >= 0 else -n  # positive offsets point out of the tag (dark -> light)
-    d = d[d < 0.45 * length]
-    pts = corner + d[:, None, None] * e + t[None, :, None] * n  # (M, S, 2)
-    h, w = img.shape
-    inside = (pts[..., 0] >= 0) & (pts[..., 0] <= w - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= h - 1)
-    keep = inside.all(axis=1)
-    if keep.sum() < 4:
-        return None
-    pts = pts[keep].astype(np.float32)
-    profiles = cv2.remap(img, pts[..., 0], pts[..., 1], cv2.INTER_LINEAR)
-    dark, light = np.percentile(profiles, [10, 90])
-    if light - dark < 10:
-        return None
-    off = _edge_offsets(profiles, t, dark, light, window)
-    good = np.isfinite(off)
-    if good.sum() < 4:
-        return None
-    offset, slope = _edge_tangent(d[keep][good], off[good])
-    return corner + offset * n, e + slope * n
-
-
-def _refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
-    """Refine (4, 2) corners [px] in a float32 image by fitting the two black-square edges next to each
-    corner, near that corner.
-
-    Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off),
-    reach along the edge for 2.5 cells and across it for one cell (2-6 px) each way; the edge is measured
-    within half a cell (1-2.5 px) of it, so it sees the black border and the white quiet zone only. The fit
-    is local (a parabola per edge), which keeps the corner exact under lens distortion that bends whole
-    edges. A corner whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
-    """
-    corners = corners.astype(float).copy()
-    for _ in range(iterations):
-        cell = np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)) / cells
-        half = float(np.clip(cell, 2.0, 6.0))
-        t = np.arange(-half, half + 1e-9, 0.25)
-        d = np.arange(max(2.0, 0.3 * cell), max(2.5 * cell, 4.0) + 1e-9, 0.5)
-        window = float(np.clip(0.5 * cell, 1.0, 2.5))  # small tags: keep clear of data bits and background
-        centre = corners.mean(axis=0)
-        new = corners.copy()
-        for k in range(4):
-            c = corners[k]
-            lines = [_edge_line(img, c, corners[(k + j) % 4], c - centre, t, d, window) for j in (1, -1)]
-            if lines[0] is None or lines[1] is None:
-                continue
-            p = _intersect(*lines[0], *lines[1])
-            if p is not None and np.linalg.norm(p - c) < 0.5 * cell + 1.0:
-                new[k] = p
-        corners = new
-    return corners
-
-
 def detect_tags(
     image: np.ndarray, family: str = "tag36h11", ids: set[int] | None = None, refine: str = "edges"
 ) -> dict[int, np.ndarray]:
@@ -256,5 +139,5 @@ def detect_tags(
         c = np.asarray(c, dtype=np.float64).reshape(4, 2)
         if (c < 1.0).any() or (c[:, 0] > w - 2).any() or (c[:, 1] > h - 2).any():
             continue  # cut by the image border
-        result[tag_id] = _refine_edges(img, c, cells) if refine == "edges" else c
+        result[tag_id] = refine_edges(img, c, cells) if refine == "edges" else c
     return result

@@ -1,0 +1,227 @@
+"""Detection on all cores (wolfcal.vision.batch) and the detection cache (wolfcal.vision.cache)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from test_vision import CAMERA, random_view, tag_target
+from typer.testing import CliRunner
+
+from wolfcal.cli import app
+from wolfcal.errors import WolfcalError
+from wolfcal.vision import cache
+from wolfcal.vision.batch import BATCH, detect_encoded, iter_detect_encoded
+from wolfcal.vision.cache import DetectorSettings, cache_enabled, cached_detect
+from wolfcal.vision.render import render_targets
+from wolfcal.vision.tags import detect_tags
+
+ROOT = Path(__file__).resolve().parents[1]
+BINNED = CAMERA.scaled(0.25, 0.25, 512, 384)
+FAMILIES = {"tag36h11": {3, 4}}
+
+
+@pytest.fixture(scope="module")
+def images() -> list[bytes]:
+    """8 encoded 512x384 views of tags 3 and 4 (png and jpeg), and 2 without any tag."""
+    rng = np.random.default_rng(3)
+    out = []
+    for k in range(8):
+        tags = [tag_target("tag36h11", 3 + k % 2, random_view(BINNED, rng))]
+        image = render_targets(BINNED, tags, noise_sigma=2.0, rng=rng)
+        out.append(cv2.imencode(".png" if k % 3 else ".jpg", image)[1].tobytes())
+    blank = render_targets(BINNED, [], noise_sigma=2.0, rng=rng)
+    return out + [cv2.imencode(".png", blank)[1].tobytes()] * 2
+
+
+def fresh(images: list[bytes], families=FAMILIES) -> list[dict]:
+    """What detect_tags gives for each decoded image (the reference)."""
+    out = []
+    for data in images:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        found = {}
+        for family, ids in families.items():
+            found.update(detect_tags(image, family, ids))
+        out.append(found)
+    return out
+
+
+def assert_same(a: list[dict], b: list[dict]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert x.keys() == y.keys()
+        for k in x:
+            np.testing.assert_array_equal(x[k], y[k])
+
+
+def never(n: int):
+    """An image source that must not be read (the cache must answer)."""
+    raise AssertionError("the images were read although the cache holds the detections")
+    yield  # pragma: no cover
+
+
+def test_workers_give_exactly_the_detections_of_detect_tags(images):
+    reference = fresh(images)
+    assert sum(len(d) for d in reference) == 8
+    assert_same(detect_encoded(images, FAMILIES, workers=2), reference)
+    assert_same(detect_encoded(images, FAMILIES, workers=2, processes=True), reference)
+    assert_same(detect_encoded(images, FAMILIES, workers=1), reference)
+    assert_same(detect_encoded(images[:2], FAMILIES, workers=2), reference[:2])  # in this thread
+
+
+@pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
+def test_read_ahead_is_bounded(images, processes):
+    """A long lazy input is read at most 2 batches per worker ahead of the results."""
+    pulled = []
+
+    def source():
+        for k in range(60):
+            pulled.append(k)
+            yield images[k % len(images)]
+
+    results = iter_detect_encoded(source(), FAMILIES, workers=2, processes=processes)
+    next(results)
+    assert len(pulled) <= 2 * 2 * BATCH
+    assert sum(1 for _ in results) == 59
+
+
+def test_undecodable_image_is_named(images):
+    with pytest.raises(WolfcalError, match="sample 5: the image cannot be decoded"):
+        detect_encoded([*images[:5], b"\x89PNG broken", *images[:3]], FAMILIES, labels=lambda i: f"sample {i}")
+
+
+@pytest.fixture
+def capture(tmp_path, images) -> tuple[Path, list[int]]:
+    """A file standing in for a capture (the cache keys on its bytes) and one stamp per image."""
+    path = tmp_path / "capture.mcap"
+    path.write_bytes(b"".join(images))
+    return path, [1_000_000 * (k + 1) for k in range(len(images))]
+
+
+def entries(folder: Path) -> list[Path]:
+    return sorted(folder.glob("*.npz"))
+
+
+def test_second_run_reads_the_cache_and_equals_a_fresh_detection(capture, images, tmp_path, monkeypatch):
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
+    path, stamps = capture
+    settings = DetectorSettings.of(FAMILIES)
+    first = cached_detect(path, "head", stamps, iter(images), settings)
+    assert len(entries(tmp_path / "cache")) == 1
+    second = cached_detect(path, "head", stamps, never(0), settings)
+    assert_same(second, fresh(images))
+    assert_same(first, second)
+    other_camera = cached_detect(path, "tripod", stamps, iter(images[::-1]), settings)  # its own entry
+    assert_same(other_camera, fresh(images[::-1]))
+    assert len(entries(tmp_path / "cache")) == 2
+
+
+def test_stale_entry_after_the_capture_changes_is_not_used(capture, images, tmp_path, monkeypatch):
+    """Same size, same mtime, one byte changed: detected again (content hash, not size + mtime)."""
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
+    path, stamps = capture
+    settings = DetectorSettings.of(FAMILIES)
+    cached_detect(path, "head", stamps, iter(images), settings)
+    info = path.stat()
+    data = bytearray(path.read_bytes())
+    data[-1] ^= 0xFF
+    path.write_bytes(bytes(data))
+    os.utime(path, ns=(info.st_atime_ns, info.st_mtime_ns))
+    changed = images[::-1]  # what the "new" capture holds: a wrong answer would show
+    assert_same(cached_detect(path, "head", stamps, iter(changed), settings), fresh(changed))
+
+
+def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
+    path, stamps = capture
+    cached_detect(path, "head", stamps, iter(images), DetectorSettings.of(FAMILIES))
+    only_3 = {"tag36h11": {3}}
+    assert_same(cached_detect(path, "head", stamps, iter(images), DetectorSettings.of(only_3)), fresh(images, only_3))
+    subpix = cached_detect(path, "head", stamps, iter(images), DetectorSettings.of(FAMILIES, "subpix"))
+    assert_same(subpix, [{k: detect_tags(cv2.imdecode(np.frombuffer(d, np.uint8), -1), "tag36h11", {3, 4}, "subpix")[k]
+                          for k in f} for d, f in zip(images, fresh(images), strict=True)])  # fmt: skip
+    shifted = [s + 1 for s in stamps]  # another reader kept other frames
+    reversed_images = images[::-1]
+    got = cached_detect(path, "head", shifted, iter(reversed_images), DetectorSettings.of(FAMILIES))
+    assert_same(got, fresh(reversed_images))
+
+
+def test_foreign_or_damaged_entries_are_not_used(capture, images, tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
+    path, stamps = capture
+    settings = DetectorSettings.of(FAMILIES)
+    cached_detect(path, "head", stamps, iter(images), settings)
+    (entry,) = entries(folder)
+    other = tmp_path / "other.mcap"
+    other.write_bytes(path.read_bytes() + b"x")
+    cached_detect(other, "head", stamps, iter(images), settings)
+    (foreign,) = [e for e in entries(folder) if e != entry]
+    foreign.write_bytes(entry.read_bytes())  # the first file's entry under the second file's name
+    assert_same(cached_detect(other, "head", stamps, iter(images[::-1]), settings), fresh(images[::-1]))
+    entry.write_bytes(entry.read_bytes()[:100])  # torn
+    assert_same(cached_detect(path, "head", stamps, iter(images[::-1]), settings), fresh(images[::-1]))
+    assert_same(cached_detect(path, "head", stamps, never(0), settings), fresh(images[::-1]))  # rewritten whole
+
+
+def test_no_cache_neither_reads_nor_writes(capture, images, tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
+    path, stamps = capture
+    settings = DetectorSettings.of(FAMILIES)
+    with cache_enabled(False):
+        cached_detect(path, "head", stamps, iter(images), settings)
+    assert entries(folder) == []
+    cached_detect(path, "head", stamps, iter(images), settings)
+    with cache_enabled(False):
+        assert_same(cached_detect(path, "head", stamps, iter(images[::-1]), settings), fresh(images[::-1]))
+
+
+def test_unwritable_cache_still_detects(capture, images, tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(blocker / "cache"))
+    path, stamps = capture
+    assert_same(cached_detect(path, "head", stamps, iter(images), DetectorSettings.of(FAMILIES)), fresh(images))
+
+
+def test_detect_by_source_keeps_input_order_across_files_and_cameras(capture, images, tmp_path, monkeypatch):
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
+    path, stamps = capture
+    other = tmp_path / "other.mcap"
+    other.write_bytes(b"another capture")
+    sources = [str(path), str(other), "", str(path)] * 3  # "" : samples made in memory, never cached
+    names = ["head", "head", "head", "tripod"] * 3
+    picks = [k % len(images) for k in range(len(sources))]
+    found = cache.detect_by_source(sources, list(range(len(sources))), lambda k: images[picks[k]], names,
+                                   DetectorSettings.of(FAMILIES))  # fmt: skip
+    assert_same(found, fresh([images[k] for k in picks]))
+    assert len(entries(tmp_path / "cache")) == 3  # (capture, head), (other, head), (capture, tripod)
+
+
+def test_default_location_follows_xdg(monkeypatch, tmp_path):
+    monkeypatch.delenv("WOLFCAL_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cache.cache_dir() == tmp_path / "wolfcal" / "detections"
+
+
+def test_fit_twice_uses_the_cache_and_no_cache_skips_it(tmp_path, monkeypatch):
+    """The demo capture: the second fit gives the same result from the cache; --no-cache writes no entry."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
+    capture = ROOT / "captures" / "demo.mcap"
+    robot = ROOT / "configs" / "wolfgang"
+    runner = CliRunner()
+    plain = runner.invoke(app, ["fit", str(capture), "--robot", str(robot), "--out", str(tmp_path / "a"), "--no-cache"])
+    assert plain.exit_code == 0, plain.output
+    assert entries(folder) == []
+    for out in ("b", "c"):
+        result = runner.invoke(app, ["fit", str(capture), "--robot", str(robot), "--out", str(tmp_path / out)])
+        assert result.exit_code == 0, result.output
+        assert len(entries(folder)) == 1
+    values = [yaml.safe_load((tmp_path / out / "result.yaml").read_text())["corrections"] for out in "abc"]
+    assert values[0] == values[1] == values[2]

@@ -1,0 +1,51 @@
+"""The vectorised edge refinement gives the corners of the per-edge reference loop it replaced."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from edge_reference import _refine_edges as reference_refine
+from test_vision import CAMERA, random_view, tag_target, truth
+
+from wolfcal.vision.edges import edge_offsets, refine_edges
+from wolfcal.vision.render import render_targets
+from wolfcal.vision.tags import _detector, _to_gray, tag_cells
+
+
+@pytest.mark.parametrize("camera", [CAMERA, CAMERA.scaled(0.25, 0.25, 512, 384)], ids=["full", "binned"])
+def test_vectorised_refinement_equals_the_reference(camera):
+    """Same starting corners (aruco's), same image: the corners agree to 1e-6 px, for large and small tags."""
+    rng = np.random.default_rng(7)
+    compared = 0
+    for _ in range(6):
+        T = random_view(camera, rng)
+        image = render_targets(camera, [tag_target("tag36h11", 3, T)], noise_sigma=2.0, rng=rng)
+        corners, ids, _ = _detector("tag36h11", "edges").detectMarkers(_to_gray(image))
+        img = image.astype(np.float32)
+        for c in corners:
+            start = np.asarray(c, float).reshape(4, 2)
+            expected = reference_refine(img, start, tag_cells("tag36h11"))
+            np.testing.assert_allclose(refine_edges(img, start, tag_cells("tag36h11")), expected, atol=1e-6)
+            assert np.linalg.norm(expected - truth(camera, T), axis=1).max() < 1.0  # a real refinement
+            compared += 1
+    assert compared >= 5
+
+
+def test_corner_by_the_image_border_keeps_its_estimate():
+    """A tag whose corners sit on the border: unmeasurable edges leave those corners where they were."""
+    image = np.full((60, 60), 255.0, np.float32)
+    image[:30, :30] = 0.0  # a black square in the top-left corner, its outer edges on the image border
+    start = np.array([[0.0, 0.0], [29.7, 0.0], [29.7, 29.7], [0.0, 29.7]])
+    refined = refine_edges(image, start, 8)
+    np.testing.assert_allclose(refined[0], start[0])  # both edges of corner 0 lie on the border
+    assert abs(refined[2, 0] - 29.5) < 0.05 and abs(refined[2, 1] - 29.5) < 0.05  # the free corner is found
+
+
+def test_edge_offsets_of_a_box_filtered_step():
+    """A pixel-integrated step at +0.3 px is found at +0.3 px (area method), per profile dark/light levels."""
+    t = np.arange(-3.0, 3.01, 0.25)
+    edge = 0.3
+    profile = np.clip(t - edge + 0.5, 0.0, 1.0)  # box filter of width 1 px
+    profiles = np.stack([20 + 200 * profile, 50 + 100 * profile])
+    found = edge_offsets(profiles, t, np.array([20.0, 50.0]), np.array([220.0, 150.0]), 2.0)
+    np.testing.assert_allclose(found, edge, atol=0.01)

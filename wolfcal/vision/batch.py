@@ -1,0 +1,173 @@
+"""Tag detection in many encoded images on all cores: decode once, detect, refine; bounded memory.
+
+Images go to the workers in batches, and at most two batches per worker are under way at once, so memory
+stays bounded however many images the input yields (it may be a lazy iterator over a long recording).
+Results come back in input order, each exactly what `wolfcal.vision.tags.detect_tags` returns for the decoded
+image.
+
+Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
+held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
+and in numpy's large-array loops, which release the lock, and threads now reach the floor (decoding plus
+OpenCV's bare detector on all cores: 1.02x at 2048x1536, 1.11x at 512x384, whole process), while worker
+processes were 1.25x slower than threads (start-up, and every image pickled to a worker; bench/bench_detection.py).
+`processes=True` is kept for callers whose own Python work would compete for the lock: the pool is
+started on first use, kept for the life of the process, and its workers start from a fork server (spawn
+where there is none), never by forking a process whose OpenCV threads are running; as with any use of
+multiprocessing, a script that uses it must guard its top level with `if __name__ == "__main__":`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from itertools import chain, islice
+
+import numpy as np
+
+from wolfcal.errors import WolfcalError
+
+Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
+FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
+Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
+BATCH = 4  # images per task: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
+IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
+
+_pool: ProcessPoolExecutor | None = None
+_pool_workers = 0
+
+
+def cpu_count() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _family_list(families: Families) -> FamilyList:
+    return [(family, None if ids is None else frozenset(ids)) for family, ids in families.items()]
+
+
+def detect_encoded_one(data: bytes, families: FamilyList, refine: str) -> Detections | None:
+    """Decode one encoded image (png, jpeg, ...) and detect the tags of every family; None if undecodable."""
+    import cv2
+
+    from wolfcal.vision.tags import detect_tags
+
+    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if len(data) else None
+    if image is None:
+        return None
+    found: Detections = {}
+    for family, ids in families:
+        found.update(detect_tags(image, family, None if ids is None else set(ids), refine))
+    return found
+
+
+def _worker_start() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)  # one process per core: OpenCV's own threads would only compete
+
+
+def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
+    return [detect_encoded_one(data, families, refine) for data in batch]
+
+
+def _get_pool(workers: int) -> ProcessPoolExecutor:
+    global _pool, _pool_workers
+    if _pool is None or _pool_workers != workers:
+        import multiprocessing  # only when processes are asked for
+
+        if _pool is not None:
+            _pool.shutdown(cancel_futures=True)
+        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        context = multiprocessing.get_context(method)
+        if method == "forkserver":
+            context.set_forkserver_preload(["wolfcal.vision.tags"])  # workers fork with cv2 already imported
+        _pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start)
+        _pool_workers = workers
+    return _pool
+
+
+def shutdown_pool() -> None:
+    """Stop the worker processes (they are also stopped when the interpreter exits)."""
+    global _pool
+    if _pool is not None:
+        _pool.shutdown()
+        _pool = None
+
+
+def iter_detect_encoded(
+    images: Iterable[bytes],
+    families: Families,
+    refine: str = "edges",
+    workers: int | None = None,
+    batch: int = BATCH,
+    processes: bool = False,
+) -> Iterator[Detections | None]:
+    """Detections of each encoded image in input order (None for an image that cannot be decoded).
+
+    At most 2 * `workers` batches of `batch` images are read ahead of the results. `workers`: threads, or
+    processes if `processes` (default: one per core); 1 detects in this thread.
+    """
+    workers = max(1, workers or cpu_count())
+    names = _family_list(families)
+    source = iter(images)
+    head = list(islice(source, IN_PROCESS + 1))
+    if workers == 1 or len(head) <= IN_PROCESS:
+        for data in [*head, *source]:
+            yield detect_encoded_one(data, names, refine)
+        return
+    pool = _get_pool(workers) if processes else ThreadPoolExecutor(workers, thread_name_prefix="wolfcal-detect")
+    stream = chain(head, source)
+    pending: deque[Future] = deque()
+    try:
+        while chunk := list(islice(stream, batch)):
+            pending.append(pool.submit(_detect_batch, chunk, names, refine))
+            if len(pending) >= 2 * workers:
+                yield from pending.popleft().result()
+        while pending:
+            yield from pending.popleft().result()
+    except BrokenProcessPool:
+        shutdown_pool()
+        raise WolfcalError(
+            "a tag detection worker process died (out of memory, or a script that starts wolfcal without an "
+            "`if __name__ == '__main__':` guard); close other programs and retry"
+        ) from None
+    finally:
+        for future in pending:
+            future.cancel()
+        if not processes:
+            pool.shutdown()
+
+
+def detect_encoded(
+    images: Iterable[bytes],
+    families: Families,
+    refine: str = "edges",
+    workers: int | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
+    total: int | None = None,
+    labels: Callable[[int], str] | None = None,
+    processes: bool = False,
+) -> list[Detections]:
+    """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
+    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them (`processes`: see the module docstring).
+
+    `progress(done, total)` after each image (`total` as given, e.g. len(images)); an image that cannot be
+    decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
+    """
+    if total is None and hasattr(images, "__len__"):
+        total = len(images)  # type: ignore[arg-type]
+    found: list[Detections] = []
+    for index, detections in enumerate(iter_detect_encoded(images, families, refine, workers, processes=processes)):
+        if detections is None:
+            name = labels(index) if labels else f"image {index}"
+            raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
+        found.append(detections)
+        if progress:
+            progress(index + 1, total)
+    return found

@@ -1,0 +1,176 @@
+"""Sub-pixel tag corners from the two black-square edges next to each corner, vectorised over the 8 edges.
+
+For each corner, sub-pixel points of the two edges next to it (area method on intensity profiles across the
+edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the
+corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected. All
+8 edges of a tag are sampled with one `cv2.remap` and fitted with batched normal equations (no per-edge
+Python loop): about 1 ms per tag instead of 7-15 ms for the per-edge loop it replaces, same corners to
+~1e-6 px (tests/test_vision.py compares the two).
+
+Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points along an edge at distances
+`d` [px] from the corner, S samples across it at offsets `t` [px] (positive out of the tag).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+MIN_POINTS = 4  # edge points needed for a tangent
+MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
+
+
+def edge_offsets(profiles: np.ndarray, t: np.ndarray, dark: np.ndarray, light: np.ndarray, window: float) -> np.ndarray:
+    """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
+
+    `dark`, `light`: (N,) or scalar grey levels. Area method: within `window` px (less near the profile's ends,
+    at least 0.75 px) of the mid-grey crossing nearest the profile centre, the edge lies where the dark area
+    ends: edge = t_start + sum((light - I) / (light - dark)) * dt.
+    """
+    dark = np.reshape(dark, (-1, 1))
+    light = np.reshape(light, (-1, 1))
+    step = t[1] - t[0]
+    above = profiles >= 0.5 * (dark + light)
+    change = above[:, 1:] & ~above[:, :-1]  # dark -> light between samples k and k + 1
+    centre = (len(t) - 1) / 2
+    dist = np.where(change, np.abs(np.arange(len(t) - 1) + 0.5 - centre), np.inf)
+    k = np.argmin(dist, axis=1)
+    ok = np.isfinite(dist[np.arange(len(k)), k])
+    cross = t[k] + step / 2
+    reach = np.minimum(window, np.minimum(cross - t[0], t[-1] - cross) - step)  # stay inside the profile
+    ok &= reach >= 0.75
+    inside = np.abs(t[None, :] - cross[:, None]) <= reach[:, None]
+    start = np.where(inside, t[None, :], np.inf).min(axis=1) - step / 2
+    dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
+    edge = start + (dark_part * inside).sum(axis=1) * step
+    return np.where(ok, edge, np.nan)
+
+
+def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(E,) 10th and 90th percentile grey level of each edge's kept profiles (E, M, S) [rows `keep` (E, M)],
+    as np.percentile (linear interpolation) gives them; NaN for an edge without kept rows. One sort for both."""
+    E, M, S = profiles.shape
+    ordered = np.sort(np.where(keep[..., None], profiles, np.inf).reshape(E, M * S), axis=1)
+    last = np.maximum(keep.sum(axis=1) * S - 1, 0)
+    rows = np.arange(E)
+    out = []
+    for q in (0.10, 0.90):
+        pos = q * last
+        lo = np.floor(pos).astype(int)
+        a, b = ordered[rows, lo], ordered[rows, np.minimum(lo + 1, last)]
+        with np.errstate(invalid="ignore"):
+            out.append(np.where(keep.any(axis=1), a + (b - a) * (pos - lo), np.nan))
+    return out[0], out[1]
+
+
+def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per row of (E, M) `values`, the median of values[mask] (NaN for empty rows)."""
+    ordered = np.sort(np.where(mask, values, np.inf), axis=1)
+    n = mask.sum(axis=1)
+    rows = np.arange(len(values))
+    lo = ordered[rows, np.maximum(n - 1, 0) // 2]
+    hi = ordered[rows, np.minimum(n // 2, values.shape[1] - 1)]
+    with np.errstate(invalid="ignore"):
+        return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+
+
+def _fit(d: np.ndarray, off: np.ndarray, weight: np.ndarray, degree: np.ndarray) -> np.ndarray:
+    """Least-squares polynomials off(d) of `degree` (E,) (1 or 2) over the points with `weight` 1 -> (E, 3)
+    coefficients (constant, linear, quadratic; quadratic 0 for lines). d is scaled per edge for conditioning."""
+    scale = np.maximum(np.abs(np.where(weight > 0, d, 0.0)).max(axis=1), 1e-9)[:, None]  # (E, 1)
+    x = d / scale
+    quadratic = (degree == 2)[:, None]
+    A = np.stack([np.ones_like(x), x, x * x * quadratic], axis=2) * weight[..., None]  # (E, M, 3)
+    AtA = np.einsum("emi,emj->eij", A, A)
+    Atb = np.einsum("emi,em->ei", A, np.where(weight > 0, off, 0.0))
+    AtA[~quadratic[:, 0], 2, 2] = 1.0  # lines: no quadratic column, so its coefficient solves to 0
+    ok = np.abs(np.linalg.det(AtA)) > 1e-12
+    AtA[~ok] = np.eye(3)
+    coeffs = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    coeffs[~ok] = np.nan
+    return coeffs / np.concatenate([np.ones_like(scale), scale, scale * scale], axis=1)
+
+
+def _tangents(d: np.ndarray, off: np.ndarray, good: np.ndarray) -> np.ndarray:
+    """Offset and slope at d = 0 of each edge (E, 2) from its points (E, M) where `good`.
+
+    A parabola when the points span more than 8 px (it absorbs the bend of the edge under lens distortion,
+    which a line would extrapolate into a bias of ~curvature * span^2 / 12), a line otherwise. Points off the
+    first fit by more than max(0.3 px, 4 median deviations) (dirt, glare, a wrong crossing) are dropped.
+    """
+    span = np.where(good, d, -np.inf).max(axis=1) - np.where(good, d, np.inf).min(axis=1)
+    degree = np.where(span > 8.0, 2, 1)
+    coeffs = _fit(d, off, good.astype(float), degree)
+    fitted = coeffs[:, :1] + coeffs[:, 1:2] * d + coeffs[:, 2:3] * d * d
+    residual = np.abs(np.where(good, off, 0.0) - fitted)
+    limit = np.maximum(0.3, 4.0 * _masked_median(residual, good))
+    inlier = good & (residual <= limit[:, None])
+    count = inlier.sum(axis=1)
+    again = (count > degree + 2) & (count < good.sum(axis=1))
+    if again.any():
+        coeffs[again] = _fit(d[again], off[again], inlier[again].astype(float), degree[again])
+    return coeffs[:, :2]
+
+
+def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
+    """Refine (4, 2) corners [px] of one tag in a float32 image by fitting the two black-square edges next to
+    each corner, near that corner.
+
+    Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off),
+    reach along the edge for 2.5 cells and across it for one cell (2-6 px) each way; the edge is measured
+    within half a cell (1-2.5 px) of it, so it sees the black border and the white quiet zone only. A corner
+    whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
+    """
+    corners = corners.astype(float).copy()
+    h, w = img.shape
+    start = np.repeat(np.arange(4), 2)  # edge 2k + j starts at corner k ...
+    end = (start + np.tile([1, -1], 4)) % 4  # ... and runs towards corner k + 1 (j = 0) or k - 1 (j = 1)
+    for _ in range(iterations):
+        cell = np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)) / cells
+        half = float(np.clip(cell, 2.0, 6.0))
+        t = np.arange(-half, half + 1e-9, 0.25)
+        d = np.arange(max(2.0, 0.3 * cell), max(2.5 * cell, 4.0) + 1e-9, 0.5)
+        window = float(np.clip(0.5 * cell, 1.0, 2.5))  # small tags: keep clear of data bits and background
+        c = corners[start]  # (E, 2)
+        e = corners[end] - c
+        length = np.linalg.norm(e, axis=1)
+        e /= length[:, None]
+        n = np.stack([-e[:, 1], e[:, 0]], axis=1)
+        n *= np.where(np.einsum("ei,ei->e", n, c - corners.mean(axis=0)) >= 0, 1.0, -1.0)[:, None]  # outwards
+        base = c[:, None] + d[None, :, None] * e[:, None]  # (E, M, 2) on the edge
+        ends = base[:, :, None] + t[[0, -1]][None, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
+        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= [w - 1, h - 1]).all(axis=(2, 3))  # the box is convex
+        keep = inside & (d[None, :] < 0.45 * length[:, None])  # (E, M): whole profile in the image, near corner
+        E, M, S = len(c), len(d), len(t)
+        pts = (base[:, :, None] + t[None, None, :, None] * n[:, None, None]).astype(np.float32).reshape(E * M, S, 2)
+        profiles = cv2.remap(img, pts[..., 0], pts[..., 1], cv2.INTER_LINEAR).reshape(E, M, S)
+        dark, light = _dark_light(profiles, keep)
+        profiles = profiles.astype(float)
+        usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
+        dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
+        off = edge_offsets(profiles.reshape(E * M, S), t, np.repeat(dark, M), np.repeat(light, M), window)
+        off = off.reshape(E, M)
+        good = keep & np.isfinite(off) & usable[:, None]
+        usable &= good.sum(axis=1) >= MIN_POINTS
+        dd = np.broadcast_to(d, (E, M))
+        tangent = np.full((E, 2), np.nan)
+        if usable.any():
+            tangent[usable] = _tangents(dd[usable], off[usable], good[usable])
+        point = c + tangent[:, :1] * n  # (E, 2) on the edge at the corner
+        direction = e + tangent[:, 1:] * n
+        corners = _intersect_pairs(corners, point, direction, 0.5 * cell + 1.0)
+    return corners
+
+
+def _intersect_pairs(corners: np.ndarray, point: np.ndarray, direction: np.ndarray, reach: float) -> np.ndarray:
+    """New corners: intersection of edges 2k and 2k + 1 where both are measured, not nearly parallel and
+    within `reach` px of the old corner; the old corner otherwise."""
+    p1, d1, p2, d2 = point[0::2], direction[0::2], point[1::2], direction[1::2]
+    det = -d1[:, 0] * d2[:, 1] + d2[:, 0] * d1[:, 1]  # det [d1, -d2]
+    rhs = p2 - p1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (-rhs[:, 0] * d2[:, 1] + d2[:, 0] * rhs[:, 1]) / det  # Cramer's rule for the first unknown
+        new = p1 + s[:, None] * d1
+        ok = np.isfinite(new).all(axis=1) & (np.abs(det) >= 1e-6)
+        ok &= np.linalg.norm(np.where(ok[:, None], new, corners) - corners, axis=1) < reach
+    return np.where(ok[:, None], new, corners)
