@@ -7,6 +7,7 @@ from pathlib import Path
 
 from wolfcal.capture.gating import GateSettings
 from wolfcal.errors import WolfcalError
+from wolfcal.outputs import check_outputs
 
 EXIT_TORQUE = ("restore", "on", "off")
 
@@ -29,6 +30,7 @@ class CaptureOptions:
     pose_timeout_s: float = 5.0  # scripted: give up a pose that gives no sample within this time after arrival
     image_format: str = "png"
     gates: GateSettings = field(default_factory=GateSettings)
+    force: bool = False  # replace an existing capture file at --out
 
 
 def check_options(options: CaptureOptions) -> None:
@@ -37,8 +39,8 @@ def check_options(options: CaptureOptions) -> None:
         raise WolfcalError("give exactly one of --poses POSES.yaml (scripted) or --manual")
     if options.out.suffix != ".mcap":
         raise WolfcalError(f"{options.out}: the capture file name must end in .mcap")
-    if options.out.exists():
-        raise WolfcalError(f"{options.out}: exists; give another --out or delete it first")
+    inputs = [p for p in (options.poses, options.intrinsics) if p is not None]
+    check_outputs([options.out], options.force, inputs)
     if options.samples is not None and options.samples < 1:
         raise WolfcalError("--samples must be at least 1")
     if options.exit_torque not in EXIT_TORQUE:

@@ -8,14 +8,18 @@ from pathlib import Path
 
 import yaml
 
+from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
-from wolfcal.io.reader import read_captures
+from wolfcal.io.reader import read_capture
 from wolfcal.io.samples import Sample
+from wolfcal.leftout import check_left_out
 from wolfcal.observations import Observations
+from wolfcal.outputs import check_output_folder
+from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
@@ -81,12 +85,13 @@ def fit_observations(
 
 
 def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None
+    robot: Robot, captures: list[Path], intrinsics: Path | None, say: Callable[[str], None] | None = None
 ) -> tuple[list[Sample], list[str]]:
     """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
-    config names another robot is refused."""
+    config names another robot is refused. `say` gets progress lines while long files are read."""
     camera = load_camera_info(intrinsics) if intrinsics else None
-    loaded = read_captures(captures, robot.config, camera)
+    progress = (lambda path: Progress(say, f"reading {Path(path).name}", "messages")) if say else (lambda path: None)
+    loaded = [read_capture(path, robot.config, camera, progress(path)) for path in captures]
     for capture in loaded:
         name = attached_robot_name(capture.robot_config_text)
         if name is not None and name != robot.config.name:
@@ -108,6 +113,24 @@ def attached_robot_name(config_text: str | None) -> str | None:
     return data.get("name") if isinstance(data, dict) else None
 
 
+FIT_OUTPUTS = ("result.yaml", "calibrated.urdf")
+
+
+def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
+    """The outlier rule must not absorb unusable data: WolfcalError when more than MAX_LEFT_OUT of the samples
+    or tag views were left out as outliers."""
+    n_views = len({(int(s), int(t)) for s, t in zip(fit.obs.sample_index, fit.obs.tag_ids)})
+    check_left_out(
+        {
+            "samples": (int(fit.solution.outlier_samples.sum()), fit.obs.n_samples),
+            "tag views": (len(fit.solution.outlier_views), n_views),
+        },
+        ", ".join(map(str, captures)),
+        "the data do not fit the model: check the joint readings, the tags' ids, sizes and links in the robot "
+        "config, and the camera intrinsics (--intrinsics)",
+    )
+
+
 def run_fit(
     captures: list[Path],
     robot_path: Path,
@@ -115,15 +138,20 @@ def run_fit(
     options: FitOptions,
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
+    force: bool = False,
 ) -> dict:
-    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml."""
+    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
     robot = load_robot(robot_path)
-    samples, warnings = load_samples(robot, captures, intrinsics)
+    inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
+    samples, warnings = load_samples(robot, captures, intrinsics, say)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    obs, detect_warnings = detect_observations(samples, robot)
+    obs, detect_warnings = detect_observations(samples, robot, progress=Progress(say, "detecting tags", "samples"))
     warnings += detect_warnings
     say(f"{obs.n_samples} sample(s) with tags, {len(obs.uv)} corners; fitting --free {options.free} ...")
     fit = fit_observations(robot, obs, options, say)
+    check_solution_left_out(fit, captures)
     data = result_dict(
         robot_path=robot.config.path,
         urdf_path=robot.config.urdf,
@@ -140,9 +168,9 @@ def run_fit(
         huber_k=options.huber_k,
         warnings=warnings,
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_result(out_dir / "result.yaml", data)
-    write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+    with output_set():
+        write_result(out_dir / "result.yaml", data)
+        write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
     for line in summary_lines(data):
         say(line)
     for line in explain(fit.params, fit.solution) + warnings:

@@ -13,7 +13,7 @@ Any of them at another resolution than the image is scaled to it (same aspect ra
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO
 
@@ -23,14 +23,16 @@ from mcap.reader import McapReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.camera.model import MODELS, CameraModel
+from wolfcal.camera.model import CameraModel
+from wolfcal.camera.validate import MESSAGE_FIELDS, YAML_FIELDS, check_image_size, checked_camera
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.images import image_kind, image_size
-from wolfcal.io.mcapfile import check_mcap, is_finished, recover_hint, torn_error
+from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns
 from wolfcal.io.recording import JointStates, Paired, pair_frame
 from wolfcal.io.samples import Capture, Sample
+from wolfcal.io.validate import drop_damaged_images, finite_joint_states
 from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
 
@@ -42,16 +44,20 @@ def read_captures(
 
 
 def read_capture(
-    path: str | Path, robot_config: RobotConfig, intrinsics: CameraModel | None = None
+    path: str | Path,
+    robot_config: RobotConfig,
+    intrinsics: CameraModel | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Capture:
-    """Read one capture file or ROS 2 recording; WolfcalError naming the file when it gives no samples."""
+    """Read one capture file or ROS 2 recording; WolfcalError naming the file when it gives no samples.
+    `progress(messages read, messages in the file)` is called now and then while reading."""
     path = Path(path)
     check_mcap(path)
     if not is_finished(path):
         raise torn_error(path)
     try:
         with path.open("rb") as handle:
-            return _read(path, handle, robot_config, intrinsics)
+            return _read(path, handle, robot_config, intrinsics, progress)
     except McapError as exc:
         raise WolfcalError(f"{path}: damaged MCAP file ({exc}); {recover_hint(path)}") from None
 
@@ -90,18 +96,12 @@ def _check_topics(path: Path, reader: McapReader, config: RobotConfig) -> bool:
     return config.camera.info_topic in present
 
 
-def _camera_info_model(path: Path, message) -> tuple[CameraModel, tuple[int, int]] | None:
+def _camera_info_model(where: str, message) -> tuple[CameraModel, tuple[int, int]] | None:
     """(full-resolution model, binning) of a CameraInfo; None for an uncalibrated one (K all zero)."""
-    K = np.asarray(message.k, dtype=float).reshape(3, 3)
-    if not np.any(K) or message.width == 0 or message.height == 0:
+    if not np.any(np.asarray(message.k, dtype=float)) or message.width == 0 or message.height == 0:
         return None
     model = message.distortion_model or "plumb_bob"
-    if model not in MODELS:
-        raise WolfcalError(
-            f"{path}: CameraInfo uses distortion model {model!r}, wolfcal knows {', '.join(MODELS)}; "
-            "pass --intrinsics FILE with a supported model"
-        )
-    camera = CameraModel(int(message.width), int(message.height), K, np.asarray(message.d, float), model)
+    camera = checked_camera(where, message.width, message.height, message.k, message.d, model, MESSAGE_FIELDS)
     return camera, (max(int(message.binning_x), 1), max(int(message.binning_y), 1))
 
 
@@ -118,11 +118,13 @@ class _Intrinsics:
     ) -> CameraModel:
         """Intrinsics for an image of `size` (width, height) given the CameraInfo nearest to it (or None)."""
         if self.override is not None:
-            base, binning, what = self.override, (1, 1), "the --intrinsics"
+            base, binning, what = self.override, (1, 1), (f"{self.path}: the --intrinsics", YAML_FIELDS)
         elif info is not None:
-            base, binning, what = info[0], info[1], "the CameraInfo"
+            where = f"{self.path}: CameraInfo on {self.config.camera.info_topic}"
+            base, binning, what = info[0], info[1], (where, MESSAGE_FIELDS)
         else:
-            base, binning, what = self._config_intrinsics(), (1, 1), f"{self.config.camera.intrinsics}"
+            where = f"{self.config.camera.intrinsics} (intrinsics for {self.path})"
+            base, binning, what = self._config_intrinsics(), (1, 1), (where, YAML_FIELDS)
         key = (id(base), binning, size)
         if key not in self.cache:
             self.cache[key] = self._at_size(base, binning, size, what)
@@ -139,7 +141,7 @@ class _Intrinsics:
         return self.fallback
 
     def _at_size(
-        self, base: CameraModel, binning: tuple[int, int], size: tuple[int, int], what: str
+        self, base: CameraModel, binning: tuple[int, int], size: tuple[int, int], what: tuple[str, dict]
     ) -> CameraModel:
         if binning != (1, 1):
             bx, by = binning
@@ -147,17 +149,17 @@ class _Intrinsics:
         width, height = size
         if (base.width, base.height) == (width, height):
             return base
-        sx, sy = width / base.width, height / base.height
-        if abs(sx / sy - 1) > 0.01:
-            raise WolfcalError(
-                f"{self.path}: {what} intrinsics are for {base.width}x{base.height} px images, the "
-                f"images are {width}x{height} px (another aspect ratio); pass --intrinsics FILE "
-                "calibrated for these images"
-            )
-        return base.scaled(sx, sy, width, height)
+        check_image_size(*what, base, size)
+        return base.scaled(width / base.width, height / base.height, width, height)
 
 
-def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: CameraModel | None) -> Capture:
+def _read(
+    path: Path,
+    handle: IO[bytes],
+    config: RobotConfig,
+    intrinsics: CameraModel | None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Capture:
     """Both passes over an open file: pair and select frames, then fetch the kept frames' bytes."""
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     use_info = _check_topics(path, reader, config) and intrinsics is None
@@ -166,7 +168,10 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
     topics = [config.joint_states_topic, config.camera.topic] + (
         [config.camera.info_topic] if use_info else []
     )
-    for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
+    total = message_count(reader, topics)
+    for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
+        if progress is not None and count % 200 == 0:
+            progress(count, total)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
             joint_messages.append((stamp, decoded.name, decoded.position, decoded.velocity))
@@ -182,23 +187,27 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
             )
             key += (decoded.binning_x, decoded.binning_y)
             if key not in info_models:  # one model per distinct CameraInfo
-                info_models[key] = _camera_info_model(path, decoded)
+                info_models[key] = _camera_info_model(f"{path}: CameraInfo on {channel.topic}", decoded)
             infos.append((stamp, info_models[key]))
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
 
-    states = JointStates.from_messages(joint_messages)
+    if progress is not None:
+        progress(total, total)
     # a capture file: one joint state per image, with the image's stamp
     exact = len(joint_messages) == len(images) and {i[0] for i in images} <= {m[0] for m in joint_messages}
+    joint_messages, bad_stamps, skipped = finite_joint_states(path, config.joint_states_topic, joint_messages)
+    states = JointStates.from_messages(joint_messages)
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
     chooser = _Intrinsics(path, config, intrinsics)
     images.sort(key=lambda item: item[0])
     start = images[0][0] if images else 0
     kept: dict[int, Sample] = {}
-    skipped = []
     for stamp, kind, size in images:
         where = f"image {(stamp - start) / 1e9:.3f} s after the first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
+            continue
+        if stamp in bad_stamps:  # its joint reading is not a number: said in `skipped` already
             continue
         paired = pair_frame(states, stamp, exact)
         if not isinstance(paired, Paired):
@@ -230,6 +239,7 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
         sample = kept.get(header_stamp_ns(decoded.header, message.log_time))
         if sample is not None and not sample.image_data:
             sample.image_data = bytes(decoded.data)
+    skipped += drop_damaged_images(path, kept, [stamp for stamp, _, _ in images])
     return Capture(
         path=path,
         samples=list(kept.values()),
@@ -237,3 +247,4 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
         robot_config_text=attachments.get(CONFIG_ATTACHMENT),
         skipped=skipped,
     )
+

@@ -14,12 +14,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from wolfcal.atomic import write_text_atomic
+from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
@@ -65,13 +66,24 @@ def simulate_capture(
     options: SimOptions,
     camera: CameraModel | None = None,
     say: Callable[[str], None] = print,
+    force: bool = False,
 ) -> Corrections:
-    """Simulate a capture; returns the true corrections (also written to FILE.truth.yaml)."""
+    """Simulate a capture; returns the true corrections (also written to FILE.truth.yaml). The three files are
+    written as one set; existing ones are replaced only with `force`."""
     if out.suffix != ".mcap":
         raise WolfcalError(f"{out}: the capture file name must end in .mcap")
     if options.samples < 1:
         raise WolfcalError("--samples must be at least 1")
     robot = load_robot(robot_path)
+    inputs = [robot.config.path, robot.config.urdf] + ([options.truth_file] if options.truth_file else [])
+    check_outputs([out, *truth_paths(out)], force, inputs)
+    with output_set():
+        return _simulate(robot, out, options, camera, say)
+
+
+def _simulate(
+    robot: Robot, out: Path, options: SimOptions, camera: CameraModel | None, say: Callable[[str], None]
+) -> Corrections:
     if camera is None:
         if robot.config.camera.intrinsics is None:
             raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
