@@ -189,7 +189,7 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
     out = tmp_path / "report"
     out.mkdir()
     (out / "calibrated.urdf").write_text("stale deploy file of an earlier run")
-    m = run_evaluate(tmp_path / "bad_fit", [tmp_path / "held.mcap"], out, say=quiet)
+    m = run_evaluate(tmp_path / "bad_fit", [tmp_path / "held.mcap"], out, say=quiet, force=True)
     assert m["verdict"]["worse"] and not m["deploy"]["written"]
     assert m["after"]["rms_px"] > m["before"]["rms_px"]
     assert not any((out / name).exists() for name in DEPLOY_FILES)
@@ -203,9 +203,11 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
         "--out",
         str(out),
     ]
-    refused = runner.invoke(app, args)
-    assert refused.exit_code != 0 and "--force" in refused.output and "Traceback" not in refused.output
-    forced = runner.invoke(app, args + ["--force"])
+    exists = runner.invoke(app, args)  # the report of the run above is not replaced without --force
+    assert exists.exit_code == 2 and "report.html" in exists.output and "pass --force" in exists.output
+    refused = runner.invoke(app, args + ["--force"])
+    assert refused.exit_code != 0 and "--deploy-worse" in refused.output and "Traceback" not in refused.output
+    forced = runner.invoke(app, args + ["--force", "--deploy-worse"])
     assert forced.exit_code == 0, forced.output
     assert all((out / name).exists() for name in DEPLOY_FILES)
 

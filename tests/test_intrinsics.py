@@ -24,7 +24,7 @@ from wolfcal.intrinsics.detect import Detection, detect_board
 from wolfcal.intrinsics.live import collect_views
 from wolfcal.intrinsics.synthetic import example_camera, random_board_poses, render_view, true_corners
 from wolfcal.vision.board import Board, make_board
-from wolfcal.vision.printing import PT_PER_M, board_sheet, parse_ids, sheet_pdf, sheet_png, tag_sheet
+from wolfcal.vision.printing import PT_PER_M, board_sheet, parse_ids, sheet_pdf, sheet_png, tag_sheets
 
 CAMERA = example_camera(640, 480)
 BOARD = Board(9, 6, 0.025)
@@ -260,12 +260,13 @@ def test_board_png_has_its_density_and_a_readable_board(tmp_path):
 
 def test_tag_sheet_ids_read_back():
     assert parse_ids("0-3,7") == [0, 1, 2, 3, 7]
-    image = cv2.imdecode(np.frombuffer(sheet_png(tag_sheet("36h11", [0, 5, 9], 0.05), 100), np.uint8), 0)
+    (sheet,) = tag_sheets("36h11", [0, 5, 9], 0.05)
+    image = cv2.imdecode(np.frombuffer(sheet_png(sheet, 100), np.uint8), 0)
     detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11))
     _, ids, _ = detector.detectMarkers(image)
     assert sorted(ids.ravel().tolist()) == [0, 5, 9]
     with pytest.raises(WolfcalError, match="do not exist"):
-        tag_sheet("36h11", [600], 0.05)
+        tag_sheets("36h11", [600], 0.05)
 
 
 def test_cli_board_and_tags_write_pdf_and_png(tmp_path):
