@@ -173,7 +173,9 @@ def run_fit(
         write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
     for line in summary_lines(data):
         say(line)
-    for line in explain(fit.params, fit.solution) + warnings:
+    for line in explain(fit.params, fit.solution):
         say(f"note: {line}")
+    for line in warnings:
+        say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'} and {out_dir / 'calibrated.urdf'}")
     return data
