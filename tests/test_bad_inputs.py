@@ -98,6 +98,7 @@ def test_a_few_nan_readings_leave_out_those_samples_with_a_warning(good, tmp_pat
     assert any(line.startswith("warning: ") and "HeadTilt 1x" in line for line in lines)
 
 
+@pytest.mark.slow
 def test_more_than_a_fifth_left_out_as_outliers_fails_the_fit_and_is_refused_by_evaluate(good, good_fit, tmp_path):
     many = tmp_path / "outliers.mcap"  # half the samples blurred or with stale joint readings
     simulate_capture(ROBOT, many, SimOptions(samples=N, seed=4, binning=4, outlier_fraction=0.5), say=quiet)
@@ -344,3 +345,12 @@ def test_reading_reports_progress_over_the_messages_of_the_file(good, robot):
     calls: list[tuple[int, int]] = []
     read_capture(good, robot.config, progress=lambda done, total: calls.append((done, total)))
     assert calls[0] == (0, 3 * N) and calls[-1] == (3 * N, 3 * N)
+
+
+@pytest.mark.slow
+def test_the_bad_inputs_script_passes_every_case():
+    """bench/bad_inputs.py: every bad input above through the real command line, one line per case."""
+    result = subprocess.run([sys.executable, str(ROOT / "bench" / "bad_inputs.py")], cwd=ROOT, capture_output=True,
+                            text=True, timeout=1800)  # fmt: skip
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert re.search(r"(\d+) of \1 cases pass", result.stdout)

@@ -143,6 +143,7 @@ def scripted(robot, truth_file, tmp_path_factory):
     return out, summary, before
 
 
+@pytest.mark.slow
 def test_scripted_capture_is_exact_to_the_tick_and_from_one_still_moment(robot, scripted):
     out, summary, before = scripted
     capture = read_capture(out, robot.config)
@@ -160,6 +161,7 @@ def test_scripted_capture_is_exact_to_the_tick_and_from_one_still_moment(robot, 
     assert len(summary.rest_to_sample_s) == summary.samples  # how long each took: bench/bench_capture.py
 
 
+@pytest.mark.slow
 def test_scripted_capture_then_fit_recovers_the_offsets(scripted, tmp_path):
     assert_recovers_truth(fit(scripted[0], tmp_path / "fit"))
 
@@ -185,6 +187,7 @@ def test_targets_outside_the_urdf_limits_are_refused_before_anything_moves(robot
 
 
 # --- manual -------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_manual_capture_with_an_emulated_operator_then_fit(robot, truth_file, tmp_path):
     operator = [p.joints for p in load_poses(POSES, {j: (-9, 9) for j in robot.joint_names}).poses]
     out = tmp_path / "manual.mcap"
@@ -273,6 +276,7 @@ def test_bus_faults_are_reported_and_lose_no_sample(robot, truth_file, tmp_path,
         assert "torque could not be left as chosen (--exit-torque restore) on RKnee:" in str(error)
 
 
+@pytest.mark.slow
 def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scripted, tmp_path):
     folder = tmp_path / "frames"
     folder.mkdir()

@@ -170,6 +170,7 @@ def test_camera_correction_is_the_fitted_frame_change(robot, sim, held_out):
     )
 
 
+@pytest.mark.slow
 def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
     """A robot whose URDF is nearly right, fitted on a capture of outliers only (blurred images, stale joint
     readings): the calibration makes clean held-out poses worse, so nothing deployable is written."""

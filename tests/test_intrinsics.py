@@ -127,6 +127,7 @@ def test_cli_calibrates_a_folder_lists_failures_and_writes_the_report(image_fold
     assert set(stds) == {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
 
 
+@pytest.mark.slow
 def test_cli_wrong_board_size_names_the_size_found_and_keeps_detections(image_folder, tmp_path):
     out = tmp_path / "camera_info.yaml"
     args = ["intrinsics", str(image_folder / "view_0*.png"), "--board", "8x6", "--square", "0.025", "--out", str(out)]
@@ -162,6 +163,7 @@ def _stream(poses: list[np.ndarray], images: list[np.ndarray]):
             yield f"f{i}s{k}", image
 
 
+@pytest.mark.slow
 def test_live_selection_keeps_still_distinct_views_and_stops_when_covered(tmp_path):
     rng = np.random.default_rng(3)
     poses = random_board_poses(CAMERA, BOARD, 30, rng, max_tilt_deg=50, fill=(0.3, 0.95))
@@ -192,6 +194,7 @@ def test_cli_video_input(views, tmp_path):
     assert len(list((tmp_path / "kept").glob("*.png"))) >= 10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("legacy", [False, True])
 def test_charuco_views_calibrate(legacy):
     board = make_board("6x5", 0.03, "5X5_100", 0.022, legacy)  # 7x6 squares: even rows, the layouts differ
@@ -209,6 +212,7 @@ def test_charuco_views_calibrate(legacy):
     assert abs(result.camera.fx - CAMERA.fx) / CAMERA.fx < 0.004
 
 
+@pytest.mark.slow
 def test_equidistant_model():
     fisheye = CameraModel(640, 480, [[300.0, 0, 322.0], [0, 300.5, 236.0], [0, 0, 1]], [0.05, -0.02, 0.01, 0.0],
                           "equidistant")  # fmt: skip
