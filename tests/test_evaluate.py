@@ -172,6 +172,7 @@ def test_camera_correction_is_the_fitted_frame_change(robot, sim, held_out):
     )
 
 
+@pytest.mark.slow
 def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
     """A robot whose URDF is nearly right, fitted on a capture of outliers only (blurred images, stale joint
     readings): the calibration makes clean held-out poses worse, so nothing deployable is written."""
@@ -191,7 +192,7 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
     out = tmp_path / "report"
     out.mkdir()
     (out / "calibrated.urdf").write_text("stale deploy file of an earlier run")
-    m = run_evaluate(tmp_path / "bad_fit", [tmp_path / "held.mcap"], out, say=quiet)
+    m = run_evaluate(tmp_path / "bad_fit", [tmp_path / "held.mcap"], out, say=quiet, force=True)
     assert m["verdict"]["worse"] and not m["deploy"]["written"]
     assert m["after"]["rms_px"] > m["before"]["rms_px"]
     assert not any((out / name).exists() for name in DEPLOY_FILES)
@@ -205,9 +206,11 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
         "--out",
         str(out),
     ]
-    refused = runner.invoke(app, args)
-    assert refused.exit_code != 0 and "--force" in refused.output and "Traceback" not in refused.output
-    forced = runner.invoke(app, args + ["--force"])
+    exists = runner.invoke(app, args)  # the report of the run above is not replaced without --force
+    assert exists.exit_code == 2 and "report.html" in exists.output and "pass --force" in exists.output
+    refused = runner.invoke(app, args + ["--force"])
+    assert refused.exit_code != 0 and "--deploy-worse" in refused.output and "Traceback" not in refused.output
+    forced = runner.invoke(app, args + ["--force", "--deploy-worse"])
     assert forced.exit_code == 0, forced.output
     assert all((out / name).exists() for name in DEPLOY_FILES)
 

@@ -147,6 +147,12 @@ def distortion_field(camera: CameraModel) -> np.ndarray:
     return img
 
 
+REPORT_FILES = (
+    "detections.yaml", "residual_histogram.png", "per_view_errors.png", "corner_map.png", "distortion_field.png",
+    "per_view.csv", "intrinsics.yaml", "summary.md",
+)  # fmt: skip
+
+
 def write_detections(folder: Path, detections: list[Detection], failures: list[Failure]) -> None:
     """Corners of every view and the reason of every failure, as YAML (kept even if calibration fails)."""
     data = {
