@@ -263,7 +263,8 @@ def test_a_damaged_image_is_skipped_and_named_by_index_and_time(good, tmp_path, 
     bad = faulty(good, tmp_path, with_damaged_image(IMAGE_TOPIC, 5))
     capture = read_capture(bad, robot.config)
     assert len(capture.samples) == N - 1
-    assert any(n.startswith("image 6 of 16 (10.000 s after the first): png checksum error") for n in capture.skipped)
+    damaged = "'head' image 6 of 16 (10.000 s after the first): png checksum error"
+    assert any(n.startswith(damaged) for n in capture.skipped)
     result = subprocess.run([sys.executable, "-m", "wolfcal.cli", "fit", str(bad), "--robot", str(ROBOT), "--out",
                              str(tmp_path / "fit")], capture_output=True, text=True, timeout=300)  # fmt: skip
     assert result.returncode == 0 and "libpng" not in result.stderr + result.stdout
@@ -292,7 +293,7 @@ def test_evaluate_refuses_a_fit_folder_without_its_calibrated_urdf(good, good_fi
     partial.mkdir()
     shutil.copy(good_fit / "result.yaml", partial / "result.yaml")
     code, output = cli("evaluate", partial, "--out", tmp_path / "report")
-    assert code == 2 and "not a complete fit folder (calibrated.urdf missing)" in output
+    assert code == 2 and "not a complete fit folder (calibrated.urdf, calibrated_robot.yaml missing)" in output
 
 
 # --- 8.-11. what a new user reads ------------------------------------------------------------------------------------

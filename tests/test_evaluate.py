@@ -17,6 +17,7 @@ from wolfcal.evaluate.ground import ground_errors
 from wolfcal.evaluate.metrics import measure_tag_views, model_errors
 from wolfcal.evaluate.pipeline import run_evaluate
 from wolfcal.evaluate.report import before_after_table
+from wolfcal.fit import pipeline as fit_pipeline
 from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
@@ -173,7 +174,7 @@ def test_camera_correction_is_the_fitted_frame_change(robot, sim, held_out):
 
 
 @pytest.mark.slow
-def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
+def test_fit_on_outliers_is_refused(tmp_path, robot, camera, monkeypatch):
     """A robot whose URDF is nearly right, fitted on a capture of outliers only (blurred images, stale joint
     readings): the calibration makes clean held-out poses worse, so nothing deployable is written."""
     good = TruthSpec(
@@ -188,6 +189,10 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera):
         simulate_capture(CONFIG, tmp_path / f"{name}.mcap", options, say=quiet)
     split_capture(tmp_path / "outliers.mcap", {tmp_path / "fit.mcap": range(14)}, robot, camera)
     split_capture(tmp_path / "clean.mcap", {tmp_path / "held.mcap": range(14, 22)}, robot, camera)
+    with pytest.raises(WolfcalError, match="left out as outliers, more than the 20%"):  # issue 12: fit refuses
+        run_fit([tmp_path / "fit.mcap"], CONFIG, tmp_path / "bad_fit", FitOptions(free="camera"), say=quiet)
+    # what evaluate makes of such a fit: made here without the fit's 20 % rule
+    monkeypatch.setattr(fit_pipeline, "check_solution_left_out", lambda fit, captures: None)
     run_fit([tmp_path / "fit.mcap"], CONFIG, tmp_path / "bad_fit", FitOptions(free="camera"), say=quiet)
     out = tmp_path / "report"
     out.mkdir()

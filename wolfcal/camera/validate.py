@@ -87,14 +87,20 @@ def checked_camera(
     return CameraModel(width, height, k.reshape(3, 3), d[:expected], model, name)
 
 
-def check_image_size(where: str, fields: dict[str, str], camera: CameraModel, size: tuple[int, int]) -> None:
+def check_image_size(
+    where: str,
+    fields: dict[str, str],
+    camera: CameraModel,
+    size: tuple[int, int],
+    advice: str = "pass --intrinsics FILE calibrated for these images",
+) -> None:
     """The images (`size` = width, height) must be the intrinsics' size, or that size binned (or enlarged) by one
-    whole factor in both axes; anything else is an error naming the size fields."""
+    whole factor in both axes; anything else is an error naming the size fields and saying `advice`."""
     (cw, ch), (w, h) = (camera.width, camera.height), size
     if any(a % b == 0 and c % d == 0 and a // b == c // d for a, b, c, d in ((cw, w, ch, h), (w, cw, h, ch))):
         return
     why = "another aspect ratio" if abs(w * ch - h * cw) > 0.01 * w * ch else "not a whole binning factor"
     raise WolfcalError(
         f"{where}: '{fields['width']}'/'{fields['height']}' say {cw}x{ch} px, the images are {w}x{h} px ({why}); "
-        "pass --intrinsics FILE calibrated for these images"
+        f"{advice}"
     )

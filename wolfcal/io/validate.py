@@ -11,7 +11,7 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.io.images import image_damage
-from wolfcal.io.samples import Sample
+from wolfcal.io.samples import SampleImage
 from wolfcal.leftout import MAX_LEFT_OUT, check_left_out, too_many
 
 JointMessage = tuple[int, Sequence[str], Sequence[float], Sequence[float]]  # stamp [ns], names, positions, velocities
@@ -47,16 +47,18 @@ def finite_joint_states(
     return kept, dropped, [f"{what}: the sample(s) at these readings are left out"]
 
 
-def drop_damaged_images(path: Path, kept: dict[int, Sample], stamps: list[int]) -> list[str]:
-    """Remove the samples whose image is damaged (bad checksum, cut short) from `kept`; returns why, naming each
-    by its index among the file's images and its time."""
+def drop_damaged_images(path: Path, camera: str, kept: dict[int, SampleImage], stamps: list[int]) -> list[str]:
+    """Remove the images of `camera` that are damaged (bad checksum, cut short) from `kept` (stamp -> image with
+    its bytes); returns why, naming each by its index among the camera's images in the file (`stamps`, sorted)
+    and its time."""
     notes = []
-    for stamp, sample in list(kept.items()):
-        problem = image_damage(sample.image_data)
+    for stamp, image in list(kept.items()):
+        problem = image_damage(image.data)
         if problem:
             index = stamps.index(stamp)
             notes.append(
-                f"image {index + 1} of {len(stamps)} ({(stamp - stamps[0]) / 1e9:.3f} s after the first): {problem}"
+                f"'{camera}' image {index + 1} of {len(stamps)} ({(stamp - stamps[0]) / 1e9:.3f} s after the "
+                f"first): {problem}"
             )
             del kept[stamp]
     if notes:
