@@ -27,6 +27,7 @@ from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.external_poses import external_tag_poses
 from wolfcal.sim.external_truth import load_external_truth
+from wolfcal.sim.faulty import rewrite_capture, with_camera_info, with_damaged_image
 from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations
 from wolfcal.vision.tags import tag_corners
@@ -168,6 +169,36 @@ def test_recover_rescues_two_camera_samples(tmp_path):
     assert count == len(samples) >= 2 and all(set(s.images) == {"head", "tripod"} for s in samples)
 
 
+def test_a_damaged_external_image_is_left_out_and_named_by_camera_index_and_time(tmp_path):
+    config = load_robot_config(WOLFGANG)
+    good, bad = tmp_path / "good.mcap", tmp_path / "bad.mcap"
+    write_two_camera_capture(good, config, 6)
+    rewrite_capture(good, bad, with_damaged_image("/tripod/image/compressed", 2))
+    calls: list[tuple[int, int]] = []
+    capture = read_capture(bad, config, progress=lambda done, total: calls.append((done, total)))
+    assert calls[0] == (0, 30) and calls[-1] == (30, 30)  # joint states, and images and infos of both cameras
+    assert capture.skipped == ["'tripod' image 3 of 6 (2.000 s after the first): png checksum error in its IDAT chunk"]
+    assert [set(s.images) for s in capture.samples] == [{"head", "tripod"}] * 2 + [{"head"}] + [{"head", "tripod"}] * 3
+    rewrite_capture(good, bad, lambda topic, i, m: with_damaged_image("/tripod/image/compressed", i)(topic, i, m))
+    with pytest.raises(WolfcalError, match=r"bad\.mcap: 'tripod' image 1 of 6 .* \(and 5 more damaged\): 6 of 6 im"):
+        read_capture(bad, config)
+
+
+def test_external_camera_info_is_validated_naming_file_topic_and_field(tmp_path):
+    config = load_robot_config(WOLFGANG)
+    good, bad = tmp_path / "good.mcap", tmp_path / "bad.mcap"
+    write_two_camera_capture(good, config, 2)
+    nan_fy = [1400.0, 0, 960, 0, float("nan"), 540, 0, 0, 1]
+    rewrite_capture(good, bad, with_camera_info("/tripod/camera_info", k=nan_fy))
+    with pytest.raises(WolfcalError, match=r"bad\.mcap: CameraInfo on /tripod/camera_info: 'k\[4\]' is nan"):
+        read_capture(bad, config)
+    rewrite_capture(good, bad, with_camera_info("/tripod/camera_info", width=1000, height=1000))
+    with pytest.raises(WolfcalError, match=r"bad\.mcap: CameraInfo on /tripod/camera_info: 'width'/'height' say "
+                       r"125x125 px, the images are 240x135 px \(another aspect ratio\); record the camera_info of "
+                       r"the images of camera 'tripod'"):  # fmt: skip
+        read_capture(bad, config)
+
+
 # --- a plain ROS 2 recording with two image streams, written by mcap_ros2 directly ----------------------------
 RATE_HZ = 100
 HEAD_TIMES = 0.105 + 0.25 * np.arange(16)  # [s] 4 Hz
@@ -175,7 +206,7 @@ TRIPOD_TIMES = HEAD_TIMES + np.where(np.arange(16) % 4 == 3, 0.06, 0.008)  # 8 m
 MOVE = (1.65, 2.2)  # [s] the joints move; still before and after
 
 
-def write_recording(path: Path, config, nan_at: float | None = None) -> None:
+def write_recording(path: Path, config, nan_at: float | None = None, nan_span: float = 0.03) -> None:
     t = np.arange(int(4.2 * RATE_HZ)) / RATE_HZ
     q = np.outer(np.clip((t - MOVE[0]) / (MOVE[1] - MOVE[0]), 0, 1), [0.3, -0.2, 0.5, 0.4])
     head_info = camera_info_message(load_camera_info(WOLFGANG / "basler_acA2040.yaml"), (8, 8), 0, "cam")
@@ -191,7 +222,7 @@ def write_recording(path: Path, config, nan_at: float | None = None) -> None:
             header = {"stamp": stamp_dict(stamp), "frame_id": ""}
             if kind == "joints":
                 position = q[i].tolist()
-                if nan_at is not None and abs(s - nan_at) < 0.03:
+                if nan_at is not None and abs(s - nan_at) < nan_span:
                     position[2] = float("nan")
                 message = {"header": header, "name": JOINTS, "position": position, "velocity": [], "effort": []}
                 writer.write_message(config.joint_states_topic, schemas[JOINT_STATE], message, log_time=stamp)
@@ -233,12 +264,26 @@ def test_recording_pairs_each_stream_and_groups_frames_within_20_ms(tmp_path):
     assert any("'tripod' image" in reason and "not still" in reason for reason in capture.skipped)
 
 
-def test_recording_with_nan_joint_readings_is_refused(tmp_path):
+def test_recording_with_a_few_nan_joint_readings_leaves_them_out_with_a_warning(tmp_path):
+    config = load_robot_config(WOLFGANG)
+    clean, path = tmp_path / "clean.mcap", tmp_path / "rosbag.mcap"
+    write_recording(clean, config)
+    write_recording(path, config, nan_at=1.0)
+    capture = read_capture(path, config)
+    assert capture.skipped[0].startswith(
+        f"{path}: 5 of 420 joint state(s) on /joint_states hold NaN or infinite positions (RKnee 5x)"
+    )
+    assert "left out" in capture.skipped[0]
+    assert all(np.all(np.isfinite(s.positions)) for s in capture.samples)
+    assert [s.stamp_ns for s in capture.samples] == [s.stamp_ns for s in read_capture(clean, config).samples]
+
+
+def test_recording_with_many_nan_joint_readings_is_refused(tmp_path):
     config = load_robot_config(WOLFGANG)
     path = tmp_path / "rosbag.mcap"
-    write_recording(path, config, nan_at=1.0)
-    with pytest.raises(WolfcalError, match=r"rosbag\.mcap: topic /joint_states holds NaN or infinite joint "
-                       r"positions: RKnee \(5 of 420\)"):  # fmt: skip
+    write_recording(path, config, nan_at=1.0, nan_span=0.6)  # 120 of 420 joint states
+    with pytest.raises(WolfcalError, match=r"rosbag\.mcap: 1\d\d of 420 joint state\(s\) on /joint_states hold NaN "
+                       r"or infinite positions \(RKnee 1\d\dx\): more than 20%"):  # fmt: skip
         read_capture(path, config)
 
 

@@ -24,7 +24,7 @@ from wolfcal.intrinsics.detect import Detection, detect_board
 from wolfcal.intrinsics.live import collect_views
 from wolfcal.intrinsics.synthetic import example_camera, random_board_poses, render_view, true_corners
 from wolfcal.vision.board import Board, make_board
-from wolfcal.vision.printing import PT_PER_M, board_sheet, parse_ids, sheet_pdf, sheet_png, tag_sheet
+from wolfcal.vision.printing import PT_PER_M, board_sheet, parse_ids, sheet_pdf, sheet_png, tag_sheets
 
 CAMERA = example_camera(640, 480)
 BOARD = Board(9, 6, 0.025)
@@ -127,6 +127,7 @@ def test_cli_calibrates_a_folder_lists_failures_and_writes_the_report(image_fold
     assert set(stds) == {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
 
 
+@pytest.mark.slow
 def test_cli_wrong_board_size_names_the_size_found_and_keeps_detections(image_folder, tmp_path):
     out = tmp_path / "camera_info.yaml"
     args = ["intrinsics", str(image_folder / "view_0*.png"), "--board", "8x6", "--square", "0.025", "--out", str(out)]
@@ -162,6 +163,7 @@ def _stream(poses: list[np.ndarray], images: list[np.ndarray]):
             yield f"f{i}s{k}", image
 
 
+@pytest.mark.slow
 def test_live_selection_keeps_still_distinct_views_and_stops_when_covered(tmp_path):
     rng = np.random.default_rng(3)
     poses = random_board_poses(CAMERA, BOARD, 30, rng, max_tilt_deg=50, fill=(0.3, 0.95))
@@ -192,6 +194,7 @@ def test_cli_video_input(views, tmp_path):
     assert len(list((tmp_path / "kept").glob("*.png"))) >= 10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("legacy", [False, True])
 def test_charuco_views_calibrate(legacy):
     board = make_board("6x5", 0.03, "5X5_100", 0.022, legacy)  # 7x6 squares: even rows, the layouts differ
@@ -209,6 +212,7 @@ def test_charuco_views_calibrate(legacy):
     assert abs(result.camera.fx - CAMERA.fx) / CAMERA.fx < 0.004
 
 
+@pytest.mark.slow
 def test_equidistant_model():
     fisheye = CameraModel(640, 480, [[300.0, 0, 322.0], [0, 300.5, 236.0], [0, 0, 1]], [0.05, -0.02, 0.01, 0.0],
                           "equidistant")  # fmt: skip
@@ -260,12 +264,13 @@ def test_board_png_has_its_density_and_a_readable_board(tmp_path):
 
 def test_tag_sheet_ids_read_back():
     assert parse_ids("0-3,7") == [0, 1, 2, 3, 7]
-    image = cv2.imdecode(np.frombuffer(sheet_png(tag_sheet("36h11", [0, 5, 9], 0.05), 100), np.uint8), 0)
+    (sheet,) = tag_sheets("36h11", [0, 5, 9], 0.05)
+    image = cv2.imdecode(np.frombuffer(sheet_png(sheet, 100), np.uint8), 0)
     detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11))
     _, ids, _ = detector.detectMarkers(image)
     assert sorted(ids.ravel().tolist()) == [0, 5, 9]
     with pytest.raises(WolfcalError, match="do not exist"):
-        tag_sheet("36h11", [600], 0.05)
+        tag_sheets("36h11", [600], 0.05)
 
 
 def test_cli_board_and_tags_write_pdf_and_png(tmp_path):

@@ -1,13 +1,26 @@
-"""Atomic file output: write to a temporary file in the target folder, fsync, rename over the target."""
+"""Atomic file output: write to a temporary file in the target folder, fsync, rename over the target.
+
+`output_set()` makes the outputs of one command a set: inside it, every atomic write (and `replace_file`,
+`remove_output`) is staged as a temporary file beside its target, and nothing replaces or removes a target
+until the block ends without an exception; then all staged files are renamed into place together. A command
+that fails halfway (bad URDF, Ctrl-C, a full disk) leaves the outputs of an earlier run as they were and no new
+ones: never a lone result.yaml without its calibrated.urdf.
+"""
 
 from __future__ import annotations
 
+import contextvars
 import os
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import BinaryIO
+
+# (staged temporary file or None for a removal, target) of the output set being written, if any
+_STAGED: contextvars.ContextVar[list[tuple[Path | None, Path]] | None] = contextvars.ContextVar(
+    "wolfcal_output_set", default=None
+)
 
 
 def _umask() -> int:
@@ -16,23 +29,87 @@ def _umask() -> int:
     return mask
 
 
+def _fsync_directory(folder: Path) -> None:
+    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def output_set() -> Iterator[None]:
+    """Stage every atomic write inside the block; rename all into place only when the block succeeds."""
+    outer = _STAGED.get()
+    if outer is not None:  # nested: part of the enclosing set
+        yield
+        return
+    staged: list[tuple[Path | None, Path]] = []
+    token = _STAGED.set(staged)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in staged:
+            if tmp is not None:
+                tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        _STAGED.reset(token)
+    for tmp, target in staged:
+        if tmp is None:
+            target.unlink(missing_ok=True)
+        else:
+            os.replace(tmp, target)
+    for folder in {target.parent for _, target in staged}:
+        _fsync_directory(folder)
+
+
+def replace_file(src: Path, target: Path) -> None:
+    """Rename the finished file `src` to `target` now, or when the enclosing output set succeeds (and remove
+    `src` if it fails)."""
+    staged = _STAGED.get()
+    if staged is None:
+        os.replace(src, target)
+        _fsync_directory(target.parent)
+    else:
+        staged.append((Path(src), Path(target)))
+
+
+def remove_output(path: Path) -> bool:
+    """Remove an output of an earlier run (now, or when the enclosing output set succeeds); whether it existed."""
+    if not path.exists():
+        return False
+    staged = _STAGED.get()
+    if staged is None:
+        path.unlink()
+    else:
+        staged.append((None, Path(path)))
+    return True
+
+
 @contextmanager
 def atomic_output(path: str | Path) -> Iterator[BinaryIO]:
-    """A binary file that replaces `path` only when the block ends without an exception, so readers see either
-    the old file or the whole new one. Mode 0666 & ~umask, like a plain open()."""
+    """A binary file that replaces `path` only when the block ends without an exception (and, inside
+    `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one.
+    Mode 0666 & ~umask, like a plain open()."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = Path(name)
     try:
         with os.fdopen(fd, "wb") as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        replace_file(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:

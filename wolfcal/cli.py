@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from wolfcal.config import default_robot
 from wolfcal.errors import WolfcalError
 
 # The fit's matrices are tall and thin (thousands of rows, tens of columns): BLAS threads only contend, and with
@@ -23,11 +24,13 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts are plain: units like "[m]" must not be read as rich markup
 )
 
 
 def friendly_errors(command: Callable) -> Callable:
-    """Turn WolfcalError (bad input) into a one-line message on stderr and a non-zero exit; Ctrl-C into exit 130."""
+    """Turn WolfcalError (bad input) into a one-line message on stderr and a non-zero exit; Ctrl-C into exit 130,
+    SIGTERM / SIGHUP during a capture into 143 / 129 (128 + the signal number)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -36,14 +39,24 @@ def friendly_errors(command: Callable) -> Callable:
         except WolfcalError as exc:
             typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
             raise typer.Exit(exc.exit_code) from None
-        except KeyboardInterrupt:
-            typer.secho("interrupted", err=True)
-            raise typer.Exit(130) from None
+        except KeyboardInterrupt as exc:
+            signum = getattr(exc, "signum", None)  # wolfcal.capture.signals.Stopped
+            typer.secho(str(exc) if signum else "interrupted", err=True)
+            raise typer.Exit(128 + signum if signum else 130) from None
 
     return wrapper
 
 
-DEFAULT_ROBOT = Path("configs/wolfgang")
+ROBOT_HELP = "Robot config (robot.yaml or its folder); default: configs/wolfgang here, else the packaged Wolfgang."
+FORCE_HELP = "Replace outputs that exist (never an input)."
+
+
+def robot_option() -> Path | None:
+    return typer.Option(None, "--robot", help=ROBOT_HELP, show_default=False)
+
+
+def force_option() -> bool:
+    return typer.Option(False, "--force", help=FORCE_HELP)
 
 
 @app.command()
@@ -65,6 +78,7 @@ def intrinsics(
     no_reject: bool = typer.Option(False, "--no-reject", help="Keep outlier views."),
     workers: int = typer.Option(2, "--workers", help="Detection threads."),
     name: str = typer.Option("camera", "--name", help="camera_name in the YAML."),
+    force: bool = force_option(),
 ) -> None:
     """Calibrate camera intrinsics from checkerboard or ChArUco views -> camera_info YAML and a report."""
     from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics
@@ -72,7 +86,7 @@ def intrinsics(
 
     options = IntrinsicsOptions(
         model=model, method=detector, min_views=min_views, reject_outliers=not no_reject, workers=workers,
-        camera_name=name, report=report, save_frames=save_frames, live_view=True,
+        camera_name=name, report=report, save_frames=save_frames, live_view=True, force=force,
     )  # fmt: skip
     target = make_board(board, square, charuco, marker, legacy)
     run_intrinsics(inputs or [], target, out, options, camera, say=typer.echo)
@@ -81,7 +95,7 @@ def intrinsics(
 @app.command()
 @friendly_errors
 def capture(
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    robot: Path | None = robot_option(),
     port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
     camera: str | None = typer.Option(None, "--camera", help="Head camera: V4L index or /dev/video path, video file, "
                                       "image folder, or 'sim' (renders the robot served by `wolfcal emulate`)."),
@@ -103,15 +117,16 @@ def capture(
                                            "config's; external cameras use their config 'intrinsics')."),
     settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
     min_sharpness: float = typer.Option(100.0, "--min-sharpness", help="Minimum variance of the Laplacian."),
+    force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
     from wolfcal.capture.gating import GateSettings
     from wolfcal.capture.pipeline import CaptureOptions, run_capture
 
     options = CaptureOptions(
-        robot=robot, out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples, limp=limp,
-        yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
-        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external,
+        robot=default_robot(robot), out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples,
+        limp=limp, yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
+        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external, force=force,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -121,7 +136,7 @@ def capture(
 @friendly_errors
 def fit(
     captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on."),
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    robot: Path | None = robot_option(),
     free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
@@ -133,6 +148,7 @@ def fit(
     external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
                                          "one pose per sample instead of one per capture file."),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
+    force: bool = force_option(),
 ) -> None:
     """Estimate the chosen free parameters from one or more captures."""
     from wolfcal.fit.pipeline import FitOptions, run_fit
@@ -140,7 +156,7 @@ def fit(
 
     options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving)
     with cache_enabled(not no_cache):
-        run_fit(captures, robot, out, options, intrinsics, say=typer.echo)
+        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force)
 
 
 @app.command()
@@ -151,7 +167,10 @@ def evaluate(
                                        "Repeatable. Without it: k-fold cross-validation over the fit's samples."),
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
     folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
-    force: bool = typer.Option(False, "--force", help="Write the deploy files even if held-out error got worse."),
+    deploy_worse: bool = typer.Option(
+        False, "--deploy-worse", help="Write the deploy files even if held-out error got worse."
+    ),
+    force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
@@ -159,7 +178,7 @@ def evaluate(
     from wolfcal.vision.cache import cache_enabled
 
     with cache_enabled(not no_cache):
-        metrics = run_evaluate(fit_dir, capture, out, force=force, folds=folds, say=typer.echo)
+        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force)
     if not metrics["deploy"]["written"]:
         raise WolfcalError(metrics["deploy"]["reason"])
 
@@ -169,18 +188,19 @@ def evaluate(
 def demo(
     out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
     root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
+    force: bool = force_option(),
 ) -> None:
     """Fit and evaluate the shipped demo capture; prints the before/after table."""
     from wolfcal.demo import run_demo
 
-    run_demo(root, out, say=typer.echo)
+    run_demo(root, out, say=typer.echo, force=force)
 
 
 @app.command()
 @friendly_errors
 def simulate(
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap); truth goes beside it."),
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    robot: Path | None = robot_option(),
     samples: int = typer.Option(24, "--samples", help="Number of still poses."),
     seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same capture)."),
     offsets: str = typer.Option("none", "--offsets", help="Joints with true encoder offsets: none|head|legs|all."),
@@ -197,6 +217,7 @@ def simulate(
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
+    force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
     from wolfcal.camera.camera_info import load_camera_info
@@ -207,16 +228,16 @@ def simulate(
         truth_file=truth, system=system, external=external, placement=placement,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
-    simulate_capture(robot, out, options, camera, say=typer.echo)
+    simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)
 
 
 @app.command()
 @friendly_errors
 def emulate(
-    robot: Path = typer.Option(DEFAULT_ROBOT, "--robot", help="Robot config (robot.yaml or its folder)."),
+    robot: Path | None = robot_option(),
     truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
     fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
-                                    "KIND: no-answer, crc, hw-error, missing, model. Repeatable."),
+                                    "KIND: no-answer, crc, hw-error, missing, model, late. Repeatable."),
     operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
                                          "limp joints through (manual capture)."),
     hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
@@ -224,7 +245,7 @@ def emulate(
     """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
     from wolfcal.capture.emulate import emulate as run
 
-    run(robot, truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
+    run(default_robot(robot), truth, fault, operator, hold, say=lambda text: typer.echo(text, nl=True))
 
 
 @app.command()
@@ -234,12 +255,13 @@ def recover(
     out: Path | None = typer.Option(  # noqa: B008
         None, "--out", help="Where to write the rescued capture (default: FILE.recovered.mcap)."
     ),
+    force: bool = force_option(),
 ) -> None:
     """Rescue every complete sample of a capture whose recording stopped before it finished."""
     from wolfcal.io.recover import recover_capture, recovered_path
 
     target = out or recovered_path(file)
-    count = recover_capture(file, target)
+    count = recover_capture(file, target, force)
     typer.echo(f"rescued {count} sample(s) from {file} into {target}")
 
 
@@ -254,12 +276,13 @@ def board_command(
     legacy: bool = typer.Option(False, "--legacy", help="ChArUco layout of OpenCV < 4.6."),
     paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit."),
     dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
+    force: bool = force_option(),
 ) -> None:
     """Write a printable checkerboard or ChArUco board: PDF and PNG at exact size, with a scale line."""
     from wolfcal.vision.board import make_board
     from wolfcal.vision.printing import board_sheet, write_sheet
 
-    paths = write_sheet(board_sheet(make_board(board, square, charuco, marker, legacy), paper), out, dpi)
+    paths = write_sheet(board_sheet(make_board(board, square, charuco, marker, legacy), paper), out, dpi, force)
     typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
 
 
@@ -270,13 +293,15 @@ def tags(
     size: float = typer.Option(..., "--size", help="Edge of the black square [m]."),
     out: Path = typer.Option(..., "--out", help="Output file; OUT.pdf and OUT.png are written."),
     family: str = typer.Option("36h11", "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11."),
-    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit."),
+    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit (one page of the tags' size)."),
     dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
+    force: bool = force_option(),
 ) -> None:
-    """Write a sheet of AprilTags with their ids (PDF and PNG at exact size, with a scale check line)."""
-    from wolfcal.vision.printing import parse_ids, tag_sheet, write_sheet
+    """Write sheets of AprilTags with their ids (a PDF page and a PNG per sheet at exact size, with a scale line);
+    as many pages of --paper as the tags need."""
+    from wolfcal.vision.printing import parse_ids, tag_sheets, write_sheet
 
-    paths = write_sheet(tag_sheet(family, parse_ids(ids), size, paper), out, dpi)
+    paths = write_sheet(tag_sheets(family, parse_ids(ids), size, paper), out, dpi, force)
     typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
 
 

@@ -294,6 +294,24 @@ def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
             )
         )
     return tuple(cameras)
+REPOSITORY_ROBOT = Path("configs/wolfgang")  # the default robot when run from the repository root
+
+
+def packaged_robot() -> Path:
+    """The default robot (Wolfgang) shipped in the package as wolfcal/data/robots/wolfgang (a copy of the
+    repository's configs/wolfgang made when the package is built), or configs/wolfgang itself in a source tree."""
+    here = Path(__file__).resolve().parent
+    for folder in (here / "data" / "robots" / "wolfgang", here.parent / "configs" / "wolfgang"):
+        if (folder / "robot.yaml").is_file():
+            return folder
+    raise WolfcalError("this wolfcal install lacks its default robot (wolfcal/data/robots/wolfgang); pass --robot")
+
+
+def default_robot(robot: str | Path | None = None) -> Path:
+    """`robot` if given; else configs/wolfgang in the current folder if there is one, else the packaged robot."""
+    if robot is not None:
+        return Path(robot)
+    return REPOSITORY_ROBOT if (REPOSITORY_ROBOT / "robot.yaml").is_file() else packaged_robot()
 
 
 def load_robot_config(path: str | Path) -> RobotConfig:

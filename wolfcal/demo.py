@@ -19,8 +19,9 @@ DEMO_HELDOUT = Path("captures/demo_heldout.mcap")
 DEMO_ROBOT = Path("configs/wolfgang/robot.yaml")
 
 
-def run_demo(root: Path, out: Path, say: Callable[[str], None] = print) -> dict:
-    """Fit and evaluate the demo capture found under `root`; outputs go to `out`. Returns the metrics."""
+def run_demo(root: Path, out: Path, say: Callable[[str], None] = print, force: bool = False) -> dict:
+    """Fit and evaluate the demo capture found under `root`; outputs go to `out` (an earlier run's only replaced
+    with `force`). Returns the metrics."""
     capture, heldout, robot = root / DEMO_CAPTURE, root / DEMO_HELDOUT, root / DEMO_ROBOT
     missing = [str(p) for p in (capture, heldout, robot) if not p.exists()]
     if missing:
@@ -30,6 +31,6 @@ def run_demo(root: Path, out: Path, say: Callable[[str], None] = print) -> dict:
         )
     fit_dir, report_dir = out / "fit", out / "report"
     say(f"== wolfcal fit {capture} --free camera --out {fit_dir}")
-    run_fit([capture], robot, fit_dir, FitOptions(free="camera"), say=say)
+    run_fit([capture], robot, fit_dir, FitOptions(free="camera"), say=say, force=force)
     say(f"\n== wolfcal evaluate {fit_dir} --capture {heldout} --out {report_dir}")
-    return run_evaluate(fit_dir, [heldout], report_dir, say=say)
+    return run_evaluate(fit_dir, [heldout], report_dir, say=say, force=force)

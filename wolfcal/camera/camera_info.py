@@ -7,23 +7,30 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.atomic import write_text_atomic
-from wolfcal.camera.model import MODELS, CameraModel
+from wolfcal.camera.model import CameraModel
+from wolfcal.camera.validate import YAML_FIELDS, checked_camera, numbers
 from wolfcal.errors import WolfcalError
 from wolfcal.yamlfile import dump_yaml, read_yaml
 
 
-def _matrix(data: dict, key: str, rows: int, cols: int, path: Path) -> np.ndarray:
+def _matrix(data: dict, key: str, rows: int, cols: int, path: Path) -> list:
+    """The 'data' list of a {rows, cols, data} block; declared rows/cols must be the matrix's."""
     entry = data.get(key)
     if not isinstance(entry, dict) or "data" not in entry:
         raise WolfcalError(f"{path}: '{key}' must be a mapping with 'rows', 'cols' and 'data'")
-    values = np.asarray(entry["data"], dtype=float).ravel()
-    if rows and cols and values.size != rows * cols:
-        raise WolfcalError(f"{path}: '{key}.data' must have {rows * cols} numbers, found {values.size}")
-    return values.reshape(rows, cols) if rows and cols else values
+    for name, expected in (("rows", rows), ("cols", cols)):
+        if expected and name in entry and entry[name] != expected:
+            raise WolfcalError(f"{path}: '{key}.{name}' is {entry[name]!r}, a {rows}x{cols} matrix has {expected}")
+    values = entry["data"]
+    if not isinstance(values, list):
+        raise WolfcalError(f"{path}: '{key}.data' must be a list of numbers, found {values!r}")
+    if rows and cols and len(values) != rows * cols:
+        raise WolfcalError(f"{path}: '{key}.data' must have {rows * cols} numbers ({rows}x{cols}), found {len(values)}")
+    return values
 
 
 def load_camera_info(path: str | Path) -> CameraModel:
-    """Read a ROS camera_info YAML file; errors name the file and the key."""
+    """Read a ROS camera_info YAML file; errors name the file and the key (see `checked_camera`)."""
     path = Path(path)
     data = read_yaml(path, "camera_info file")
     if not isinstance(data, dict):
@@ -31,13 +38,15 @@ def load_camera_info(path: str | Path) -> CameraModel:
     for key in ("image_width", "image_height", "camera_matrix", "distortion_coefficients"):
         if key not in data:
             raise WolfcalError(f"{path}: missing key '{key}'")
-    model = data.get("distortion_model", "plumb_bob")
-    if model not in MODELS:
-        raise WolfcalError(f"{path}: 'distortion_model' {model!r} is not one of {', '.join(MODELS)}")
     K = _matrix(data, "camera_matrix", 3, 3, path)
     D = _matrix(data, "distortion_coefficients", 0, 0, path)
-    return CameraModel(
-        int(data["image_width"]), int(data["image_height"]), K, D, model, str(data.get("camera_name", "camera"))
+    for key, rows, cols in (("rectification_matrix", 3, 3), ("projection_matrix", 3, 4)):
+        if key in data:
+            numbers(str(path), f"{key}.data", _matrix(data, key, rows, cols, path))
+    model = data.get("distortion_model", "plumb_bob")
+    name = str(data.get("camera_name", "camera"))
+    return checked_camera(
+        str(path), data["image_width"], data["image_height"], K, D, model, YAML_FIELDS, name
     )
 
 

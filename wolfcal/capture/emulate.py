@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from wolfcal.capture.poses import joint_limits, load_poses
+from wolfcal.errors import WolfcalError
 from wolfcal.hardware.emulator.faults import parse_fault
 from wolfcal.hardware.emulator.serve import serve
 from wolfcal.hardware.emulator.spec import load_truth, spec_from_config
@@ -28,10 +29,19 @@ def emulate(
     poses = []
     if operator is not None:
         poses = [p.joints for p in load_poses(operator, joint_limits(robot, robot.joint_names)).poses]
+    parsed = [parse_fault(f) for f in faults]
+    ids = robot.config.servos.ids if robot.config.servos is not None else {}
+    unknown = [text for text, fault in zip(faults, parsed) if fault.servo_id not in ids.values()]
+    if unknown:
+        listed = ", ".join(f"{joint} {sid}" for joint, sid in sorted(ids.items(), key=lambda item: item[1]))
+        raise WolfcalError(
+            f"--fault {', '.join(unknown)}: no servo with this id in {robot.config.path} (ids: {listed or 'none'}); "
+            "give the id of a configured servo"
+        )
     spec = spec_from_config(
         robot.config,
         corrections,
-        [parse_fault(f) for f in faults],
+        parsed,
         poses,
         hold_s,
         str(truth.resolve()) if truth is not None else None,

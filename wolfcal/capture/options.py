@@ -7,6 +7,7 @@ from pathlib import Path
 
 from wolfcal.capture.gating import GateSettings
 from wolfcal.errors import WolfcalError
+from wolfcal.outputs import check_outputs
 
 EXIT_TORQUE = ("restore", "on", "off")
 
@@ -30,6 +31,7 @@ class CaptureOptions:
     image_format: str = "png"
     gates: GateSettings = field(default_factory=GateSettings)
     external: list[str] = field(default_factory=list)  # --external NAME=SOURCE, one per external camera
+    force: bool = False  # replace an existing capture file at --out
 
 
 def parse_external(text: str) -> tuple[str, str]:
@@ -54,8 +56,8 @@ def check_options(options: CaptureOptions) -> None:
         raise WolfcalError(f"--external names a camera twice ({', '.join(names)}); give each camera once")
     if options.out.suffix != ".mcap":
         raise WolfcalError(f"{options.out}: the capture file name must end in .mcap")
-    if options.out.exists():
-        raise WolfcalError(f"{options.out}: exists; give another --out or delete it first")
+    inputs = [p for p in (options.poses, options.intrinsics) if p is not None]
+    check_outputs([options.out], options.force, inputs)
     if options.samples is not None and options.samples < 1:
         raise WolfcalError("--samples must be at least 1")
     if options.exit_torque not in EXIT_TORQUE:

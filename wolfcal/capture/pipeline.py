@@ -20,6 +20,7 @@ from wolfcal.capture.options import CaptureOptions, check_options
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
+from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
@@ -50,7 +51,7 @@ def run_capture(
         "scripted" if script else "manual", options.samples or (len(script.poses) if script else None)
     )
     coverage = Coverage({j: limits[j] for j in touched})
-    with DynamixelBus(robot.config.servos, options.port) as bus:
+    with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
         initial = bus.torque_enabled()
@@ -73,13 +74,18 @@ def run_capture(
                     run_scripted(session, script)
                 else:
                     run_manual(session, limp)
-        except (BusError, CameraError, KeyboardInterrupt) as exc:
+        except (BusError, CameraError, KeyboardInterrupt) as exc:  # KeyboardInterrupt: also SIGTERM, SIGHUP
             failure = exc
-        finally:
-            session.summary.path = writer.close()
-            close_sources(cameras)
-        bus.recover_port()
-        failed = leave_torque(bus, initial, touched, options.exit_torque)
+        except Exception as exc:  # a bug: leave the torque as chosen first, then let it surface
+            failure = exc
+        with signals_held() as noted:  # nothing cuts restoring the torque short
+            try:
+                session.summary.path = writer.close()
+                close_sources(cameras)
+            finally:
+                bus.recover_port()
+                failed = leave_torque(bus, initial, touched, options.exit_torque)
+        failure = failure or interruption(noted)
     summary = session.summary
     saved = f"{summary.samples} sample(s) saved in {summary.path}" if summary.path else "no sample taken, no file"
     if failed:
@@ -89,6 +95,6 @@ def run_capture(
     if isinstance(failure, WolfcalError):
         raise type(failure)(f"{failure}\n{saved}") from None
     console.print(saved)
-    if isinstance(failure, KeyboardInterrupt):
+    if failure is not None:  # Ctrl-C, SIGTERM, SIGHUP, or an unexpected error (its traceback is wanted)
         raise failure
     return summary

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from wolfcal.atomic import write_text_atomic
+from wolfcal.atomic import remove_output, write_text_atomic
 from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.robot.corrections import Corrections
@@ -82,23 +82,17 @@ def write_deploy_files(robot: Robot, corrections: Corrections, out_dir: Path) ->
 
 def remove_deploy_files(out_dir: Path) -> list[Path]:
     """Delete deploy files a previous run left in out_dir (a refused calibration must not look deployable)."""
-    removed = []
-    for name in DEPLOY_FILES:
-        path = out_dir / name
-        if path.exists():
-            path.unlink()
-            removed.append(path)
-    return removed
+    return [out_dir / name for name in DEPLOY_FILES if remove_output(out_dir / name)]
 
 
 def write_or_withhold_deploy_files(
-    robot: Robot, corrections: Corrections, out_dir: Path, worse: bool, force: bool
+    robot: Robot, corrections: Corrections, out_dir: Path, worse: bool, deploy_worse: bool
 ) -> dict:
-    """Write the deploy files, or (worse held-out error without force) remove any an earlier run left.
+    """Write the deploy files, or (worse held-out error without deploy_worse) remove any an earlier run left.
 
     Returns metrics.json's 'deploy' record: written, forced, files (names in out_dir), reason.
     """
-    if worse and not force:
+    if worse and not deploy_worse:
         removed = remove_deploy_files(out_dir)
         earlier = f" ({len(removed)} file(s) of an earlier run removed)" if removed else ""
         return {
@@ -106,12 +100,12 @@ def write_or_withhold_deploy_files(
             "forced": False,
             "files": [],
             "reason": "The calibration makes held-out error worse, so the deploy files were not written"
-            f"{earlier}. Pass --force to write them anyway.",
+            f"{earlier}. Pass --deploy-worse to write them anyway.",
         }
     paths = write_deploy_files(robot, corrections, out_dir)
     return {
         "written": True,
         "forced": worse,
         "files": [p.name for p in paths],
-        "reason": "written despite worse held-out error (--force)" if worse else None,
+        "reason": "written despite worse held-out error (--deploy-worse)" if worse else None,
     }

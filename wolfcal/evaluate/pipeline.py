@@ -2,7 +2,7 @@
 
 Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
 judged model was not fitted on. The deploy files are written only when the held-out reprojection RMS did not get
-worse (or with force=True). This module only runs the steps; errors are `metrics` / `ground` / `crossval`, the
+worse (or with deploy_worse=True). This module only runs the steps; errors are `metrics` / `ground` / `crossval`, the
 report's words `report_content`, its pictures `report_figures`, the files to deploy `deploy`.
 """
 
@@ -14,11 +14,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import wolfcal
-from wolfcal.atomic import write_bytes_atomic, write_text_atomic
+from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
-from wolfcal.evaluate.deploy import camera_correction, write_or_withhold_deploy_files
+from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.external import external_metrics
 from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
@@ -32,10 +32,13 @@ from wolfcal.evaluate.report_content import (
     verdict_message,
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
-from wolfcal.fit.pipeline import FitOptions, load_samples
+from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_samples
 from wolfcal.fit.result import load_result
 from wolfcal.io.samples import Sample
+from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.outputs import check_output_folder
+from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.sim.simulate import truth_paths
@@ -46,6 +49,13 @@ def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
+    folder = Path(fit_dir) if Path(fit_dir).is_dir() else Path(fit_dir).parent
+    missing = [name for name in FIT_OUTPUTS if not (folder / name).is_file()]
+    if missing:
+        raise WolfcalError(
+            f"{folder}: not a complete fit folder ({', '.join(missing)} missing); give the --out folder of a "
+            f"`wolfcal fit` run, or run the fit again"
+        )
     result = load_result(fit_dir)
     robot_path = Path(result["robot"])
     if not robot_path.exists():
@@ -71,9 +81,11 @@ def _observe(
 ) -> tuple[list[Sample], Observations, list[int], list[str]]:
     """Samples of the sources, their corners of the fit's tags, those tags, and detection warnings."""
     intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
-    samples, _ = load_samples(robot, sources, intrinsics)
+    samples, _ = load_samples(robot, sources, intrinsics, say=say)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
-    observations, warnings = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
+    observations, warnings = detect_observations(
+        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
+    )
     obs = observations_of(observations, HEAD_CAMERA, sources)
     tags = [t for t in result["tags_used"] if t in obs.observed_tag_ids]
     if not tags:
@@ -93,7 +105,7 @@ def _holds_head_images(robot: Robot, result: dict, captures: list[Path]) -> bool
 
 def _run_external_evaluate(
     robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, captures: list[Path], out_dir: Path,
-    force: bool, say: Callable[[str], None],
+    deploy_worse: bool, say: Callable[[str], None],
 ) -> dict:
     """Held-out external-camera captures: `external_metrics` before/after, metrics.json, report.md, deploy files
     unless the reprojection error of any camera got worse."""
@@ -108,7 +120,7 @@ def _run_external_evaluate(
     figures = external_metrics(robot, observations, fitted, truth, say)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, force)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
              f"fit: {fit_dir.resolve()}; captures: {', '.join(str(c) for c in captures)}", "",
              figures["meaning"], "", "| camera | model | RMS [px] | max [px] | tag grid [mm] mean +- std |",
@@ -174,6 +186,9 @@ def _ground_rows(
     return ground_errors(robot, camera, reference, models, DISTANCES_M), None
 
 
+REPORT_FILES = ("report.html", "report.md", "metrics.json")
+
+
 def _write_report(out_dir: Path, metrics: dict, figures: Figures) -> None:
     """figures/*.png, report.html, report.md and metrics.json in out_dir."""
     pngs, captions = figures
@@ -191,23 +206,43 @@ def run_evaluate(
     fit_dir: Path,
     captures: list[Path],
     out_dir: Path,
-    force: bool = False,
+    deploy_worse: bool = False,
     folds: int = 5,
     say: Callable[[str], None] = print,
+    force: bool = False,
+) -> dict:
+    """`_evaluate` with all its outputs written as one set: nothing of a failed run replaces an earlier one."""
+    with output_set():
+        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force)
+
+
+def _evaluate(
+    fit_dir: Path,
+    captures: list[Path],
+    out_dir: Path,
+    deploy_worse: bool = False,
+    folds: int = 5,
+    say: Callable[[str], None] = print,
+    force: bool = False,
 ) -> dict:
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
     With `captures` empty, k-fold cross-validation over the fit's own captures. The deploy files are written only
-    when the calibration does not make held-out reprojection RMS worse, or with `force`; check
-    `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table.
+    when the calibration does not make held-out reprojection RMS worse, or with `deploy_worse`; check
+    `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table. Outputs of an
+    earlier run in out_dir are replaced only with `force`; all are written as one set. More than MAX_LEFT_OUT
+    of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot, fitted = _load_fit(fit_dir)
     held_out = bool(captures)
     _refuse_fitted_captures(captures, result["captures"])
-    if held_out and not _holds_head_images(robot, result, captures):
-        return _run_external_evaluate(robot, result, fitted, fit_dir, captures, out_dir, force, say)
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
+    fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
+    inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
+    check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
+    if held_out and not _holds_head_images(robot, result, captures):
+        return _run_external_evaluate(robot, result, fitted, fit_dir, captures, out_dir, deploy_worse, say)
     samples, obs, tags, warnings = _observe(robot, result, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
@@ -222,6 +257,12 @@ def run_evaluate(
         after_of_sample = [models[k] for k in fold_of]
         mode_note = cross_validation_note(len(models), obs.n_samples)
     outliers = outlier_samples(before, after)
+    check_left_out(
+        {"samples": (int(outliers.sum()), obs.n_samples)},
+        ", ".join(map(str, sources)),
+        "the evaluation refuses to judge on what is left: check these captures' joint readings and images, and "
+        "that they are of this robot and camera",
+    )
     s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
     worse = bool(s_after["rms_px"] > s_before["rms_px"])
     verdict = verdict_message(s_before, s_after, worse)
@@ -235,7 +276,7 @@ def run_evaluate(
         robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.get("covariance")
     )
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, force)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
     metrics = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),

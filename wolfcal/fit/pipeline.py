@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
@@ -16,9 +17,12 @@ from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
-from wolfcal.io.reader import read_captures, require_cameras
+from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Sample
+from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.outputs import check_output_folder
+from wolfcal.progress import Progress
 from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
@@ -152,12 +156,15 @@ def fit_observations(
 
 
 def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,)
+    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,),
+    say: Callable[[str], None] | None = None,
 ) -> tuple[list[Sample], list[str]]:
     """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
-    config names another robot is refused, and so is one without images of each of `cameras`."""
+    config names another robot is refused, and so is one without images of each of `cameras`. `say` gets
+    progress lines while long files are read."""
     camera = load_camera_info(intrinsics) if intrinsics else None
-    loaded = read_captures(captures, robot.config, camera)
+    progress = (lambda path: Progress(say, f"reading {Path(path).name}", "messages")) if say else (lambda path: None)
+    loaded = [read_capture(path, robot.config, camera, progress(path)) for path in captures]
     for capture in loaded:
         name = attached_robot_name(capture.robot_config_text)
         if name is not None and name != robot.config.name:
@@ -180,6 +187,24 @@ def attached_robot_name(config_text: str | None) -> str | None:
     return data.get("name") if isinstance(data, dict) else None
 
 
+FIT_OUTPUTS = ("result.yaml", "calibrated.urdf", "calibrated_robot.yaml")
+
+
+def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
+    """The outlier rule must not absorb unusable data: WolfcalError when more than MAX_LEFT_OUT of a measurement
+    system's samples or tag views were left out as outliers."""
+    counts = {}
+    for block, result in zip(fit.blocks, fit.solution.blocks):
+        counts[f"{block.name} samples"] = (int(result.outlier_samples.sum()), len(block.q_measured))
+        counts[f"{block.name} tag views"] = (len(result.outlier_views), block.n_views)
+    check_left_out(
+        counts,
+        ", ".join(map(str, captures)),
+        "the data do not fit the model: check the joint readings, the tags' ids, sizes and links in the robot "
+        "config, and the camera intrinsics (--intrinsics)",
+    )
+
+
 def run_fit(
     captures: list[Path],
     robot_path: Path,
@@ -187,28 +212,37 @@ def run_fit(
     options: FitOptions,
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
+    force: bool = False,
 ) -> dict:
-    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml."""
+    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
     robot = load_robot(robot_path)
+    inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
     required = (HEAD_CAMERA,) if options.system == "head" else ()
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required)
+    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
     wanted = None if options.system in (None, "all") else [HEAD_CAMERA] if options.system == "head" else [
         c.name for c in robot.config.external_cameras]
-    observations, detect_warnings = detect_observations(samples, robot, cameras=wanted)
+    observations, detect_warnings = detect_observations(
+        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+    )
     warnings += detect_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
     fit = fit_observations(robot, observations, options, say)
+    check_solution_left_out(fit, captures)
     data = result_dict(fit, options, captures, intrinsics, warnings)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_result(out_dir / "result.yaml", data)
-    write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
-    write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
+    with output_set():
+        write_result(out_dir / "result.yaml", data)
+        write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+        write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
     for line in summary_lines(data):
         say(line)
-    for line in explain(fit.params, fit.solution) + warnings:
+    for line in explain(fit.params, fit.solution):
         say(f"note: {line}")
+    for line in warnings:
+        say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
     return data

@@ -7,6 +7,7 @@ joint and id and what to check.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import partial
@@ -22,7 +23,11 @@ from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware import protocol as P
 
-RETRIES = 3  # attempts per transaction before a communication error is reported
+# A transaction that got no (or a corrupted) answer is tried again after a pause that doubles each time, until
+# the time budget is spent: a busy host (or emulator) may answer late, a silent servo must still be named soon.
+RETRY_BUDGET_S = 1.0  # longest a transaction may take, all attempts included
+FIRST_PAUSE_S = 0.005  # pause before the second attempt; doubled before each further one ...
+MAX_PAUSE_S = 0.2  # ... up to this
 READ_BLOCK_S = 0.002  # longest a serial read blocks before the SDK checks its packet timeout again
 
 
@@ -49,14 +54,40 @@ def _signed32(value: int) -> int:
 Outcome = TypeVar("Outcome")
 
 
-def _with_retries(transaction: Callable[[], Outcome], comm_result: Callable[[Outcome], int]) -> Outcome:
-    """The outcome of the first of RETRIES attempts of an SDK transaction that communicated, else of the last;
-    `comm_result` picks the communication result (`sdk.COMM_*`) out of an outcome."""
-    for _ in range(RETRIES):
+@dataclass(frozen=True)
+class Tried:
+    """How a transaction was tried: attempts made, seconds spent, the longest pause between two attempts."""
+
+    attempts: int
+    seconds: float
+    longest_pause_s: float
+
+    def __str__(self) -> str:
+        pauses = (
+            f", pausing {FIRST_PAUSE_S * 1000:.0f}-{self.longest_pause_s * 1000:.0f} ms between them"
+            if self.attempts > 1
+            else ""
+        )
+        return f"{self.attempts} attempt(s) in {self.seconds:.2f} s{pauses}"
+
+
+def _with_retries(
+    transaction: Callable[[], Outcome], comm_result: Callable[[Outcome], int], budget_s: float | None = None
+) -> tuple[Outcome, Tried]:
+    """The outcome of the first attempt of an SDK transaction that communicated, else of the last one the time
+    budget allowed (pauses doubling from FIRST_PAUSE_S to MAX_PAUSE_S), and how it was tried; `comm_result`
+    picks the communication result (`sdk.COMM_*`) out of an outcome."""
+    budget = RETRY_BUDGET_S if budget_s is None else budget_s
+    start = time.monotonic()
+    pause, longest, attempts = FIRST_PAUSE_S, 0.0, 0
+    while True:
         outcome = transaction()
-        if comm_result(outcome) == sdk.COMM_SUCCESS:
+        attempts += 1
+        if comm_result(outcome) == sdk.COMM_SUCCESS or time.monotonic() - start + pause > budget:
             break
-    return outcome
+        time.sleep(pause)  # a back-off between attempts, not a wait for an event
+        longest, pause = pause, min(2 * pause, MAX_PAUSE_S)
+    return outcome, Tried(attempts, time.monotonic() - start, longest)
 
 
 @dataclass
@@ -141,17 +172,20 @@ class DynamixelBus:
         joint = self.joints[self.ids.index(sid)] if sid in self.ids else "?"
         return f"{joint} (id {sid})"
 
-    def _comm_text(self, result: int) -> str:
-        return self.ph.getTxRxResult(result).replace("[TxRxResult] ", "")
+    def _comm_text(self, result: int, tried: Tried | None = None) -> str:
+        """The SDK's words for a communication result, with 'timeout' and how it was tried."""
+        text = self.ph.getTxRxResult(result).replace("[TxRxResult] ", "")
+        kind = "timeout: no answer in time" if result == sdk.COMM_RX_TIMEOUT else "no valid answer"
+        return f"{text} ({kind}; {tried})" if tried is not None else text
 
     # --- checks ---------------------------------------------------------------------------------------------
     def ping_all(self) -> dict[str, int]:
         """Ping every configured servo; one BusError lists every missing id and unexpected model number."""
         problems, models = [], {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
-            model, result, _ = _with_retries(partial(self.ph.ping, self.port, sid), itemgetter(1))
+            (model, result, _), tried = _with_retries(partial(self.ph.ping, self.port, sid), itemgetter(1))
             if result != sdk.COMM_SUCCESS:
-                problems.append(f"{joint} (id {sid}): no answer ({self._comm_text(result)})")
+                problems.append(f"{joint} (id {sid}): no answer ({self._comm_text(result, tried)})")
                 continue
             models[joint] = model
             expected = self.servos.models.get(joint)
@@ -189,15 +223,15 @@ class DynamixelBus:
 
     # --- reading --------------------------------------------------------------------------------------------
     def _sync_read(self, group: sdk.GroupSyncRead, what: str) -> None:
-        result = _with_retries(group.txRxPacket, lambda result: result)
+        result, tried = _with_retries(group.txRxPacket, lambda result: result)
         if result == sdk.COMM_SUCCESS:
             return
         # the SDK stops at the first servo that failed; its data is left empty
         culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
         who = self._name(culprit) if culprit is not None else "a servo"
         raise BusError(
-            f"{self.port_name}: sync read of {what} failed at {who}: {self._comm_text(result)} "
-            f"({RETRIES} attempts); check that servo's cable and power"
+            f"{self.port_name}: sync read of {what} failed at {who}: {self._comm_text(result, tried)}; "
+            "check that servo's cable and power"
         )
 
     def read_state(self) -> JointState:
@@ -214,11 +248,11 @@ class DynamixelBus:
         addr, size = item
         write = {1: self.ph.write1ByteTxRx, 2: self.ph.write2ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
         unsigned = value & ((1 << (8 * size)) - 1)
-        result, error = _with_retries(partial(write, self.port, sid, addr, unsigned), itemgetter(0))
+        (result, error), tried = _with_retries(partial(write, self.port, sid, addr, unsigned), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
             raise BusError(
                 f"{self.port_name}: writing address {addr} of {self._name(sid)} failed: "
-                f"{self._comm_text(result)}; check that servo's cable and power"
+                f"{self._comm_text(result, tried)}; check that servo's cable and power"
             )
         if error & 0x7F:
             raise BusError(
@@ -237,11 +271,11 @@ class DynamixelBus:
         result = {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
             read = partial(self.ph.read1ByteTxRx, self.port, sid, P.TORQUE_ENABLE[0])
-            value, comm, _ = _with_retries(read, itemgetter(1))
+            (value, comm, _), tried = _with_retries(read, itemgetter(1))
             if comm != sdk.COMM_SUCCESS:
                 raise BusError(
                     f"{self.port_name}: reading the torque state of {self._name(sid)} failed: "
-                    f"{self._comm_text(comm)}"
+                    f"{self._comm_text(comm, tried)}"
                 )
             result[joint] = bool(value)
         return result
@@ -265,6 +299,8 @@ class DynamixelBus:
     def reboot(self, joint: str) -> None:
         """Reboot a servo: clears its hardware error; its torque comes back off."""
         sid = self.servos.ids[joint]
-        result, _ = self.ph.reboot(self.port, sid)
+        (result, _), tried = _with_retries(partial(self.ph.reboot, self.port, sid), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
-            raise BusError(f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result)}")
+            raise BusError(
+                f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result, tried)}"
+            )

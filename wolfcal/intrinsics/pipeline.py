@@ -10,14 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
+from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import save_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.intrinsics.calibrate import DISTORTION_NAMES, Calibration, calibrate_views
 from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, empty_regions, view_params
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
 from wolfcal.intrinsics.refine_choice import choose_window
-from wolfcal.intrinsics.report import write_detections, write_report
+from wolfcal.intrinsics.report import REPORT_FILES, write_detections, write_report
 from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
+from wolfcal.outputs import check_output_folder, check_outputs
 from wolfcal.vision.board import Board
 
 
@@ -34,6 +36,7 @@ class IntrinsicsOptions:
     report: Path | None = None  # default: <out stem>_report beside the output
     save_frames: Path | None = None  # folder for frames kept from videos / the live camera
     live_view: bool = False  # show the coverage bars in the terminal while collecting from streams
+    force: bool = False  # replace outputs of an earlier run
 
 
 def _wrong_board_hint(failures: list[Failure], board: Board) -> str:
@@ -105,9 +108,16 @@ def run_intrinsics(
     if not inputs and camera is None:
         raise WolfcalError("give images, folders or videos to calibrate from, or --camera for the live camera")
     found = expand_inputs(inputs)
-    if out.resolve() in {p.resolve() for p in found.images + found.videos}:
-        raise WolfcalError(f"{out}: --out names one of the inputs; choose another output file")
     report = options.report or out.with_name(f"{out.stem}_report")
+    check_outputs([out], options.force, found.images + found.videos)
+    check_output_folder(report, REPORT_FILES, options.force, found.images + found.videos, "--report")
+    if options.save_frames is not None:
+        check_output_folder(options.save_frames, [], options.force, option="--save-frames")
+        if not options.force and options.save_frames.is_dir() and any(options.save_frames.glob("view_*.png")):
+            raise WolfcalError(
+                f"--save-frames {options.save_frames}: holds frames of an earlier run (view_*.png); pass --force "
+                "to replace them, or choose another folder"
+            )
     failures = list(found.missing)
     for failure in failures:
         say(f"{failure.name}: {failure.reason}")
@@ -158,8 +168,10 @@ def run_intrinsics(
     calibration = calibrate_views(views, board, options.model, options.min_views, options.reject_outliers)
     calibration.camera = dataclasses.replace(calibration.camera, name=options.camera_name)
     warnings = coverage_warnings(calibration, board)
-    save_camera_info(calibration.camera, out)
-    write_report(report, calibration, failures, warnings, options.method + (f"; {choice.describe()}" if choice else ""))
+    with output_set():  # the camera_info and its report together, or neither
+        save_camera_info(calibration.camera, out)
+        write_report(report, calibration, failures, warnings,
+                     options.method + (f"; {choice.describe()}" if choice else ""))  # fmt: skip
     _say_result(calibration, failures, warnings, say)
     say(f"wrote {out} and the report {report}/summary.md")
     return calibration

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+import zlib
 
 import cv2
 import numpy as np
@@ -77,3 +78,30 @@ def image_size(data: bytes) -> tuple[int, int] | None:
                 return int(width), int(height)
             pos += 2 + length
     return None
+
+
+def image_damage(data: bytes) -> str | None:
+    """Why an encoded png or jpeg is damaged (bad chunk checksum, cut short), or None when it looks whole.
+    Cheap: checks the structure and checksums, does not decode."""
+    if image_kind(data) == "png":
+        pos = len(PNG_SIGNATURE)
+        while pos + 12 <= len(data):
+            (length,) = struct.unpack(">I", data[pos : pos + 4])
+            kind = data[pos + 4 : pos + 8]
+            end = pos + 12 + length
+            if end > len(data):
+                return f"png cut short in its {kind.decode('latin-1')} chunk"
+            (crc,) = struct.unpack(">I", data[end - 4 : end])
+            if zlib.crc32(data[pos + 4 : end - 4]) & 0xFFFFFFFF != crc:
+                return f"png checksum error in its {kind.decode('latin-1')} chunk"
+            if kind == b"IEND":
+                return None
+            pos = end
+        return "png cut short (no IEND chunk)"
+    if image_kind(data) == "jpeg":
+        if image_size(data) is None:
+            return "jpeg without a readable frame header"
+        if b"\xff\xd9" not in data[-64:]:
+            return "jpeg cut short (no end-of-image marker)"
+        return None
+    return "not a png or jpeg image"

@@ -2,7 +2,8 @@
 
 First that applies: the `--intrinsics` override (head camera only), the camera's CameraInfo stamped nearest to the
 image (binning applied, ROS convention; an uncalibrated one, K all zero, counts as none), the camera's `intrinsics`
-in the robot config. Any of them at another resolution than the image is scaled to it (same aspect ratio only).
+in the robot config. Any of them at another resolution than the image is scaled to it (by a whole binning factor
+only). Every source is validated by `wolfcal.camera.validate` (errors name the file, topic and field).
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.camera.model import MODELS, CameraModel
+from wolfcal.camera.model import CameraModel
+from wolfcal.camera.validate import MESSAGE_FIELDS, YAML_FIELDS, check_image_size, checked_camera
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.observations import HEAD_CAMERA
@@ -21,17 +23,13 @@ InfoModel = tuple[CameraModel, tuple[int, int]]  # (full-resolution model, binni
 
 
 def camera_info_model(path: Path, topic: str, message) -> InfoModel | None:
-    """(full-resolution model, binning) of a decoded CameraInfo; None for an uncalibrated one (K all zero)."""
-    K = np.asarray(message.k, dtype=float).reshape(3, 3)
-    if not np.any(K) or message.width == 0 or message.height == 0:
+    """(full-resolution model, binning) of a decoded CameraInfo; None for an uncalibrated one (K all zero).
+    WolfcalError naming file, topic and field when it is not valid (`checked_camera`)."""
+    if not np.any(np.asarray(message.k, dtype=float)) or message.width == 0 or message.height == 0:
         return None
     model = message.distortion_model or "plumb_bob"
-    if model not in MODELS:
-        raise WolfcalError(
-            f"{path}: CameraInfo on {topic} uses distortion model {model!r}, wolfcal knows {', '.join(MODELS)}; "
-            "calibrate the camera with a supported model (`wolfcal intrinsics`) and give its YAML"
-        )
-    camera = CameraModel(int(message.width), int(message.height), K, np.asarray(message.d, float), model)
+    where = f"{path}: CameraInfo on {topic}"
+    camera = checked_camera(where, message.width, message.height, message.k, message.d, model, MESSAGE_FIELDS)
     return camera, (max(int(message.binning_x), 1), max(int(message.binning_y), 1))
 
 
@@ -46,12 +44,25 @@ class IntrinsicsChooser:
 
     def for_image(self, size: tuple[int, int], info: InfoModel | None) -> CameraModel:
         """Intrinsics for an image of `size` (width, height) given the CameraInfo nearest to it (or None)."""
+        image_topic, info_topic = self.config.camera_topics(self.camera)
+        images = f"the images of camera '{self.camera}' ({image_topic})"
+        override = f"pass --intrinsics FILE calibrated for {images}"
         if self.override is not None:
-            base, binning, what = self.override, (1, 1), "the --intrinsics"
+            base, binning = self.override, (1, 1)
+            what = (f"{self.path}: the --intrinsics", YAML_FIELDS, override)
         elif info is not None:
-            base, binning, what = info[0], info[1], f"the CameraInfo of camera '{self.camera}'"
+            base, binning = info[0], info[1]
+            fix = override if self.camera == HEAD_CAMERA else (
+                f"record the camera_info of {images} at their resolution, or record none and set "
+                f"'{self.config.camera_intrinsics(self.camera)[1]}' in {self.config.path}"
+            )  # fmt: skip
+            what = (f"{self.path}: CameraInfo on {info_topic}", MESSAGE_FIELDS, fix)
         else:
-            base, binning, what = self._config_intrinsics(), (1, 1), "the robot config's"
+            base, binning = self._config_intrinsics(), (1, 1)
+            file, key = self.config.camera_intrinsics(self.camera)
+            fix = f"set '{key}' in {self.config.path} to a file calibrated for {images}"
+            fix = f"{override}, or {fix}" if self.camera == HEAD_CAMERA else fix
+            what = (f"{file} (intrinsics of camera '{self.camera}' for {self.path})", YAML_FIELDS, fix)
         key = (id(base), binning, size)
         if key not in self.cache:
             self.cache[key] = self._at_size(base, binning, size, what)
@@ -70,19 +81,16 @@ class IntrinsicsChooser:
             self.fallback = load_camera_info(intrinsics)
         return self.fallback
 
-    def _at_size(self, base: CameraModel, binning: tuple[int, int], size: tuple[int, int], what: str) -> CameraModel:
+    def _at_size(
+        self, base: CameraModel, binning: tuple[int, int], size: tuple[int, int], what: tuple[str, dict[str, str], str]
+    ) -> CameraModel:
+        """`base` binned, then scaled to `size`; `what` = (where, field names, advice) for the error."""
         if binning != (1, 1):
             bx, by = binning
             base = base.scaled(1 / bx, 1 / by, base.width // bx, base.height // by)
         width, height = size
         if (base.width, base.height) == (width, height):
             return base
-        sx, sy = width / base.width, height / base.height
-        if abs(sx / sy - 1) > 0.01:
-            fix = "pass --intrinsics FILE" if self.camera == HEAD_CAMERA else "set the camera's 'intrinsics' to a file"
-            raise WolfcalError(
-                f"{self.path}: {what} intrinsics are for {base.width}x{base.height} px images, the images of "
-                f"camera '{self.camera}' are {width}x{height} px (another aspect ratio); {fix} calibrated for "
-                "these images"
-            )
-        return base.scaled(sx, sy, width, height)
+        where, fields, advice = what
+        check_image_size(where, fields, base, size, advice)
+        return base.scaled(width / base.width, height / base.height, width, height)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mcap.reader import McapReader
+
 from wolfcal.errors import WolfcalError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -20,7 +22,11 @@ def recover_hint(path: Path) -> str:
 
 
 def check_mcap(path: Path) -> None:
-    """WolfcalError naming `path` when it is missing or not an MCAP file."""
+    """WolfcalError naming `path` when it is missing, a folder or not an MCAP file."""
+    if path.is_dir():
+        inside = sorted(p.name for p in path.glob("*.mcap"))
+        hint = f"give the .mcap file(s) in it, e.g. {path / inside[0]}" if inside else "it holds no .mcap file"
+        raise WolfcalError(f"{path}: is a folder, not a capture file; {hint}")
     if not path.is_file():
         partial = partial_path(path)
         if partial.is_file():
@@ -53,3 +59,13 @@ def torn_error(path: Path) -> WolfcalError:
     return WolfcalError(
         f"{path}: was not closed properly (the recording stopped before it finished); {recover_hint(path)}"
     )
+
+
+def message_count(reader: McapReader, topics: list[str]) -> int:
+    """Messages on `topics` according to the file's statistics (0 when it has none)."""
+    summary = reader.get_summary()
+    if summary is None or summary.statistics is None:
+        return 0
+    counts = summary.statistics.channel_message_counts
+    return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic in topics)
+

@@ -9,11 +9,16 @@ kept only when the robot was still, and kept frames of different cameras within 
 camera only). Two passes: the first decides which frames to keep from stamps and image headers, the second fetches
 the encoded bytes of the kept frames only (a long recording's images need not fit in memory); `SampleImage.decode()`
 decodes on demand.
+
+Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
+(errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
+file, topic, joint and count (an error when more than 20 % of them are); damaged images of any camera are left out
+with a note naming camera, index and time (an error when more than 20 % of a camera's images are).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -29,17 +34,11 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.images import image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import check_mcap, is_finished, recover_hint, torn_error
+from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
 from wolfcal.io.msgdefs import header_stamp_ns
-from wolfcal.io.recording import (
-    SAMPLE_TOLERANCE_NS,
-    JointStates,
-    Paired,
-    check_finite_positions,
-    group_by_stamp,
-    pair_frame,
-)
+from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, JointStates, Paired, group_by_stamp, pair_frame
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
+from wolfcal.io.validate import drop_damaged_images, finite_joint_states
 from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
 
@@ -50,12 +49,19 @@ def read_captures(
     return [read_capture(p, robot_config, intrinsics) for p in paths]
 
 
+ProgressCallback = Callable[[int, int], None]  # (messages read, messages in the file)
+
+
 def read_capture(
-    path: str | Path, robot_config: RobotConfig, intrinsics: CameraModel | None = None
+    path: str | Path,
+    robot_config: RobotConfig,
+    intrinsics: CameraModel | None = None,
+    progress: ProgressCallback | None = None,
 ) -> Capture:
     """Read one capture file or ROS 2 recording; WolfcalError naming the file when it gives no samples.
 
     `intrinsics` (`--intrinsics`) replaces the head camera's; external cameras use their own CameraInfo or config.
+    `progress(messages read, messages in the file)` is called now and then while reading.
     """
     path = Path(path)
     check_mcap(path)
@@ -63,7 +69,7 @@ def read_capture(
         raise torn_error(path)
     try:
         with path.open("rb") as handle:
-            return _read(path, handle, robot_config, intrinsics)
+            return _read(path, handle, robot_config, intrinsics, progress)
     except McapError as exc:
         raise WolfcalError(f"{path}: damaged MCAP file ({exc}); {recover_hint(path)}") from None
 
@@ -91,7 +97,14 @@ class _Frame:
     paired: Paired
 
 
-def _pass_one(path: Path, reader, config: RobotConfig, cameras: list[str], info_cameras: set[str]):
+def _pass_one(
+    path: Path,
+    reader,
+    config: RobotConfig,
+    cameras: list[str],
+    info_cameras: set[str],
+    progress: ProgressCallback | None,
+):
     """Joint-state messages, per-camera image headers (stamp, kind, size) and per-camera CameraInfo models."""
     image_topics = {config.camera_topics(n)[0]: n for n in cameras}
     info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
@@ -100,7 +113,10 @@ def _pass_one(path: Path, reader, config: RobotConfig, cameras: list[str], info_
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
     topics = [config.joint_states_topic, *image_topics, *info_topics]
-    for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
+    total = message_count(reader, topics)
+    for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
+        if progress is not None and count % 200 == 0:
+            progress(count, total)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
             joint_messages.append((stamp, decoded.name, decoded.position, decoded.velocity))
@@ -112,25 +128,35 @@ def _pass_one(path: Path, reader, config: RobotConfig, cameras: list[str], info_
             if key not in models:  # one model per distinct CameraInfo
                 models[key] = camera_info_model(path, channel.topic, decoded)
             infos[info_topics[channel.topic]].append((stamp, models[key]))
+    if progress is not None:
+        progress(total, total)
     return joint_messages, images, infos
 
 
-def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: CameraModel | None) -> Capture:
-    """Both passes over an open file: pair and select frames per camera, group them, fetch the kept bytes."""
+def _read(
+    path: Path,
+    handle: IO[bytes],
+    config: RobotConfig,
+    intrinsics: CameraModel | None,
+    progress: ProgressCallback | None,
+) -> Capture:
+    """Both passes over an open file: pair and select frames per camera, fetch the kept bytes, leave out damaged
+    images, group the frames into samples."""
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
-    joint_messages, images, infos = _pass_one(path, reader, config, found.cameras, info_cameras)
+    joint_messages, images, infos = _pass_one(path, reader, config, found.cameras, info_cameras, progress)
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
-    states = JointStates.from_messages(joint_messages)
-    check_finite_positions(path, config.joint_states_topic, states)
     image_stamps = {s for frames in images.values() for s, _, _ in frames}
     # a capture file: one joint state per sample, with the stamp of the sample's images
     exact = len(joint_messages) == len(image_stamps) and image_stamps <= {m[0] for m in joint_messages}
+    finite, bad_stamps, skipped = finite_joint_states(path, config.joint_states_topic, joint_messages)
+    states = JointStates.from_messages(finite)
     frames: list[_Frame] = []
-    skipped: list[str] = []
     for name in found.cameras:
-        frames += _keep_frames(path, config, name, images[name], infos[name], states, exact, intrinsics, skipped)
+        frames += _keep_frames(
+            path, config, name, images[name], infos[name], states, exact, intrinsics, bad_stamps, skipped
+        )
     if not frames:
         counts = ", ".join(f"{len(images[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}" for n in images)
         why = f"; e.g. {skipped[0]}" if skipped else ""
@@ -138,8 +164,9 @@ def _read(path: Path, handle: IO[bytes], config: RobotConfig, intrinsics: Camera
             f"{path}: no usable samples ({counts}, {len(joint_messages)} joint state(s) on "
             f"{config.joint_states_topic}{why}); record the robot holding still poses with the camera running"
         )
-    samples = _group(path, states, frames, 0 if exact else SAMPLE_TOLERANCE_NS)
     _fetch_bytes(reader, config, frames)
+    frames = _drop_damaged(path, images, frames, skipped)
+    samples = _group(path, states, frames, 0 if exact else SAMPLE_TOLERANCE_NS)
     return Capture(
         path=path,
         samples=samples,
@@ -159,9 +186,11 @@ def _keep_frames(
     states: JointStates,
     exact: bool,
     intrinsics: CameraModel | None,
+    bad_stamps: set[int],
     skipped: list[str],
 ) -> list[_Frame]:
-    """The still (or, in a capture file, stamped) frames of one camera; reasons for the others go to `skipped`."""
+    """The still (or, in a capture file, stamped) frames of one camera; reasons for the others go to `skipped`.
+    Frames stamped like a joint state that was left out (`bad_stamps`) are left out: `skipped` says so already."""
     chooser = IntrinsicsChooser(path, config, name, intrinsics)
     topic = config.camera_topics(name)[0]
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
@@ -172,6 +201,8 @@ def _keep_frames(
         where = f"'{name}' image {(stamp - start) / 1e9:.3f} s after its first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
+            continue
+        if stamp in bad_stamps:
             continue
         paired = pair_frame(states, stamp, exact)
         if not isinstance(paired, Paired):
@@ -184,6 +215,21 @@ def _keep_frames(
         image = SampleImage(b"", kind, chooser.for_image(size, info), f"{path}: {topic}", stamp)
         kept[stamp] = _Frame(name, stamp, image, paired)
     return list(kept.values())
+
+
+def _drop_damaged(
+    path: Path,
+    images: dict[str, list[tuple[int, str | None, tuple[int, int] | None]]],
+    frames: list[_Frame],
+    skipped: list[str],
+) -> list[_Frame]:
+    """The frames whose image is whole; the others are named (camera, index, time) in `skipped`."""
+    whole: set[tuple[str, int]] = set()
+    for name, headers in images.items():
+        kept = {f.stamp: f.image for f in frames if f.camera == name}
+        skipped += drop_damaged_images(path, name, kept, sorted(stamp for stamp, _, _ in headers))
+        whole |= {(name, stamp) for stamp in kept}
+    return [f for f in frames if (f.camera, f.stamp) in whole]
 
 
 def _group(path: Path, states: JointStates, frames: list[_Frame], tolerance_ns: int) -> list[Sample]:

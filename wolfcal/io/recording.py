@@ -19,12 +19,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from wolfcal.encoders import RAD_PER_TICK
-from wolfcal.errors import WolfcalError
 
 PAIR_TOLERANCE_NS = 20_000_000  # 20 ms: a joint moving at STILL_VELOCITY turns by < 1/2 tick in this time
 STILL_WINDOW_NS = 250_000_000  # +-0.25 s around the image
@@ -124,18 +122,6 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
         )
     v = np.asarray(velocities)
     return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
-
-
-def check_finite_positions(path: Path | str, topic: str, states: JointStates) -> None:
-    """WolfcalError naming file, topic, joint and count when a joint reading is NaN or infinite."""
-    bad = {name: int(np.count_nonzero(~np.isfinite(s.positions))) for name, s in states.series.items()}
-    bad = {name: count for name, count in bad.items() if count}
-    if bad:
-        listing = ", ".join(f"{name} ({count} of {len(states.series[name].positions)})" for name, count in bad.items())
-        raise WolfcalError(
-            f"{path}: topic {topic} holds NaN or infinite joint positions: {listing}; a joint reading that is "
-            "not a number cannot be calibrated against. Check the driver that published them"
-        )
 
 
 def group_by_stamp(stamps: Sequence[int], cameras: Sequence[str], tolerance_ns: int) -> list[list[int]]:

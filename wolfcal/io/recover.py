@@ -21,6 +21,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns
 from wolfcal.io.writer import LIBRARY
+from wolfcal.outputs import check_outputs
 
 
 def recovered_path(path: Path) -> Path:
@@ -29,8 +30,9 @@ def recovered_path(path: Path) -> Path:
     return path.with_name(name + ".recovered.mcap")
 
 
-def recover_capture(src: str | Path, dst: str | Path) -> int:
-    """Copy every readable record of `src` into a finished MCAP file `dst` (never `src` itself).
+def recover_capture(src: str | Path, dst: str | Path, force: bool = False) -> int:
+    """Copy every readable record of `src` into a finished MCAP file `dst` (never `src` itself; an existing
+    `dst` only with `force`).
 
     Returns the number of complete samples rescued: images with a joint state of the same stamp.
     """
@@ -38,6 +40,7 @@ def recover_capture(src: str | Path, dst: str | Path) -> int:
     check_mcap(src)
     if dst.resolve() == src.resolve():
         raise WolfcalError(f"{src}: recovery never overwrites the torn file; give another --out FILE")
+    check_outputs([dst], force, [src])
     with atomic_output(dst) as out, src.open("rb") as handle:
         count = _copy_records(handle, out)
     return count

@@ -24,6 +24,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic
 
+from wolfcal.atomic import replace_file
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
@@ -220,8 +221,7 @@ class CaptureWriter:
         if not self.count:  # an empty capture must not replace an earlier one
             self.partial.unlink()
             return None
-        os.replace(self.partial, self.path)
-        _fsync_directory(self.path.parent)
+        replace_file(self.partial, self.path)  # inside an output set: when the whole set is written
         return self.path
 
     def _sync(self) -> None:
@@ -236,14 +236,3 @@ class CaptureWriter:
     ) -> None:
         self.close()
 
-
-def _fsync_directory(folder: Path) -> None:
-    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

@@ -29,16 +29,32 @@ def _fmt(values) -> str:
     return " ".join(f"{float(v):.17g}" for v in values)
 
 
+def read_urdf_xml(urdf_path: str | Path) -> etree._ElementTree:
+    """Parse a URDF strictly (well-formed XML, root <robot>; entities are never expanded): the one parser of
+    every reader and writer, so a file that loads also writes back."""
+    urdf_path = Path(urdf_path)
+    parser = etree.XMLParser(
+        remove_blank_text=False, remove_comments=False, resolve_entities=False, no_network=True, load_dtd=False
+    )
+    try:
+        tree = etree.parse(str(urdf_path), parser)
+    except OSError as exc:
+        raise WolfcalError(f"{urdf_path}: cannot read the URDF ({exc})") from None
+    except etree.XMLSyntaxError as exc:
+        raise WolfcalError(
+            f"{urdf_path}: not a well-formed URDF: {exc.msg} (line {exc.lineno}); fix the XML of this file"
+        ) from None
+    if tree.getroot().tag != "robot":
+        raise WolfcalError(f"{urdf_path}: the root element is <{tree.getroot().tag}>, a URDF's is <robot>")
+    return tree
+
+
 def calibrated_urdf_bytes(
     urdf_path: str | Path, model: KinematicModel, corrections: Corrections, fold_offsets: bool = False
 ) -> bytes:
     """The input URDF with `corrections` applied, as bytes."""
     urdf_path = Path(urdf_path)
-    parser = etree.XMLParser(remove_blank_text=False, remove_comments=False)
-    try:
-        tree = etree.parse(str(urdf_path), parser)
-    except (OSError, etree.XMLSyntaxError) as exc:
-        raise WolfcalError(f"{urdf_path}: cannot read the URDF ({exc})") from None
+    tree = read_urdf_xml(urdf_path)
     joints = {j.get("name"): j for j in tree.getroot().iter("joint")}
     touched = set(corrections.frames) | {j for j, v in corrections.offsets.items() if fold_offsets and v != 0.0}
     for name in touched:
@@ -82,7 +98,7 @@ def write_calibrated_urdf(
 
 def read_calibration_offsets(urdf_path: str | Path) -> dict[str, float]:
     """Encoder offsets stored as `<calibration rising>` in a URDF (joint -> rad)."""
-    tree = etree.parse(str(urdf_path))
+    tree = read_urdf_xml(urdf_path)
     out = {}
     for joint in tree.getroot().iter("joint"):
         element = joint.find("calibration")

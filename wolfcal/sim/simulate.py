@@ -17,13 +17,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from wolfcal.atomic import write_text_atomic
+from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
+from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
@@ -136,9 +137,11 @@ def simulate_capture(
     options: SimOptions,
     camera: CameraModel | None = None,
     say: Callable[[str], None] = print,
+    force: bool = False,
 ) -> Corrections:
     """Simulate a capture; returns the true corrections (also written to FILE.truth.yaml). `camera` replaces the
-    head camera's intrinsics (`--intrinsics`)."""
+    head camera's intrinsics (`--intrinsics`). The three files are written as one set; existing ones are replaced
+    only with `force`."""
     if out.suffix != ".mcap":
         raise WolfcalError(f"{out}: the capture file name must end in .mcap")
     if options.samples < 1:
@@ -147,6 +150,15 @@ def simulate_capture(
         raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
     cameras = _cameras(robot, options, camera)
+    inputs = [robot.config.path, robot.config.urdf] + ([options.truth_file] if options.truth_file else [])
+    check_outputs([out, *truth_paths(out)], force, inputs)
+    with output_set():
+        return _simulate(robot, out, options, cameras, say)
+
+
+def _simulate(
+    robot: Robot, out: Path, options: SimOptions, cameras: dict[str, _SimCamera], say: Callable[[str], None]
+) -> Corrections:
     rng = np.random.default_rng(options.seed)
     spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
     truth = random_truth(robot, spec, rng)

@@ -1,6 +1,6 @@
 """Printable calibration boards and AprilTag sheets at exact physical size: PDF and PNG.
 
-The PDF is written by hand (one page: gray images placed at their exact size in points with interpolation
+The PDF is written by hand (a page per sheet: gray images placed at their exact size in points with interpolation
 off, vector lines, Helvetica text); the little of the format needed fits in `sheet_pdf`, so no PDF library is
 a dependency. Each sheet carries a scale check line: print at 100 % ("actual size", no fit-to-page) and
 measure it. The PNG is the same page rasterised at `dpi` with the density in its pHYs chunk; its edges are
@@ -18,8 +18,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from wolfcal.atomic import write_bytes_atomic
+from wolfcal.atomic import output_set, write_bytes_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.outputs import check_outputs
 from wolfcal.vision.board import Board, aruco_dictionary
 
 PAPER = {
@@ -60,8 +61,8 @@ def _pdf_string(text: str) -> str:
     )
 
 
-def sheet_pdf(sheet: Sheet) -> bytes:
-    """A one-page PDF of the sheet at exact physical size."""
+def _page_objects(sheet: Sheet, page: int, content_number: int, images: list[int]) -> dict[int, bytes]:
+    """The PDF objects of one page: the page, its content stream and its images, at the given numbers."""
     H = sheet.height * PT_PER_M
     ops = []
     for i, (_, x, y, w, h) in enumerate(sheet.images):
@@ -80,18 +81,17 @@ def sheet_pdf(sheet: Sheet) -> bytes:
             f"{_pdf_string(text)} Tj ET"
         )
     content = zlib.compress("\n".join(ops).encode("latin-1"))
-    xobjects = " ".join(f"/Im{i} {6 + i} 0 R" for i in range(len(sheet.images)))
-    objects = [
-        b"<< /Type /Catalog /Pages 2 0 R >>",
-        b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>",
-        f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {sheet.width * PT_PER_M:.4f} {H:.4f}] /Contents 4 0 R "
-        f"/Resources << /Font << /F1 5 0 R >> /XObject << {xobjects} >> >> >>".encode(),
-        f"<< /Length {len(content)} /Filter /FlateDecode >>\nstream\n".encode() + content + b"\nendstream",
-        b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica /Encoding /WinAnsiEncoding >>",
-    ]
-    for image, *_ in sheet.images:
+    xobjects = " ".join(f"/Im{i} {number} 0 R" for i, number in enumerate(images))
+    objects = {
+        page: f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {sheet.width * PT_PER_M:.4f} {H:.4f}] "
+        f"/Contents {content_number} 0 R /Resources << /Font << /F1 5 0 R >> /XObject << {xobjects} >> >> >>".encode(),
+        content_number: f"<< /Length {len(content)} /Filter /FlateDecode >>\nstream\n".encode()
+        + content
+        + b"\nendstream",
+    }
+    for number, (image, *_) in zip(images, sheet.images):
         data = zlib.compress(np.ascontiguousarray(image, np.uint8).tobytes())
-        objects.append(
+        objects[number] = (
             f"<< /Type /XObject /Subtype /Image /Width {image.shape[1]} /Height {image.shape[0]} "
             "/ColorSpace /DeviceGray /BitsPerComponent 8 /Interpolate false /Filter /FlateDecode "
             f"/Length {len(data)} >>\n"
@@ -99,11 +99,31 @@ def sheet_pdf(sheet: Sheet) -> bytes:
             + data
             + b"\nendstream"
         )
+    return objects
+
+
+def sheet_pdf(sheets: Sheet | list[Sheet]) -> bytes:
+    """A PDF of the sheet(s), one page each, at exact physical size. Objects: 1 catalog, 2 page tree, 3 and 4 the
+    first page and its content, 5 the font, then the first page's images and the further pages."""
+    sheets = [sheets] if isinstance(sheets, Sheet) else sheets
+    objects: dict[int, bytes] = {
+        1: b"<< /Type /Catalog /Pages 2 0 R >>",
+        5: b"<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica /Encoding /WinAnsiEncoding >>",
+    }
+    pages, free = [], 6
+    for k, sheet in enumerate(sheets):
+        page, content = (3, 4) if k == 0 else (free + len(sheet.images), free + len(sheet.images) + 1)
+        images = list(range(free, free + len(sheet.images)))
+        free += len(sheet.images) + (0 if k == 0 else 2)
+        objects.update(_page_objects(sheet, page, content, images))
+        pages.append(page)
+    kids = " ".join(f"{page} 0 R" for page in pages)
+    objects[2] = f"<< /Type /Pages /Kids [{kids}] /Count {len(pages)} >>".encode()
     out = bytearray(b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n")
     offsets = []
-    for number, body in enumerate(objects, start=1):
+    for number in range(1, len(objects) + 1):
         offsets.append(len(out))
-        out += f"{number} 0 obj\n".encode() + body + b"\nendobj\n"
+        out += f"{number} 0 obj\n".encode() + objects[number] + b"\nendobj\n"
     xref = len(out)
     out += f"xref\n0 {len(objects) + 1}\n0000000000 65535 f \n".encode()
     out += b"".join(f"{o:010d} 00000 n \n".encode() for o in offsets)
@@ -147,12 +167,24 @@ def sheet_png(sheet: Sheet, dpi: float) -> bytes:
     return data[:end_of_ihdr] + chunk + data[end_of_ihdr:]
 
 
-def write_sheet(sheet: Sheet, out: Path, dpi: float = 300) -> list[Path]:
-    """Write OUT.pdf and OUT.png (atomically); returns both paths."""
-    pdf, png = out.with_suffix(".pdf"), out.with_suffix(".png")
-    write_bytes_atomic(pdf, sheet_pdf(sheet))
-    write_bytes_atomic(png, sheet_png(sheet, dpi))
-    return [pdf, png]
+def sheet_paths(out: Path, pages: int) -> list[Path]:
+    """OUT.pdf, then OUT.png for one page or OUT-p1.png ... OUT-pN.png for several."""
+    if pages == 1:
+        return [out.with_suffix(".pdf"), out.with_suffix(".png")]
+    pngs = [out.with_name(f"{out.stem}-p{k}.png") for k in range(1, pages + 1)]
+    return [out.with_suffix(".pdf"), *pngs]
+
+
+def write_sheet(sheets: Sheet | list[Sheet], out: Path, dpi: float = 300, force: bool = False) -> list[Path]:
+    """Write OUT.pdf (every page) and a PNG per page, as one set; existing files only with `force`."""
+    sheets = [sheets] if isinstance(sheets, Sheet) else sheets
+    paths = sheet_paths(out, len(sheets))
+    check_outputs(paths, force)
+    with output_set():
+        write_bytes_atomic(paths[0], sheet_pdf(sheets))
+        for path, sheet in zip(paths[1:], sheets):
+            write_bytes_atomic(path, sheet_png(sheet, dpi))
+    return paths
 
 
 def _page(paper: str, content: tuple[float, float]) -> tuple[float, float]:
@@ -198,22 +230,29 @@ def board_sheet(board: Board, paper: str = "a4", px_per_square: int = 100) -> Sh
     return sheet
 
 
-def _tag_page(paper: str, n: int, pitch_x: float, pitch_y: float) -> tuple[float, float, int]:
-    """(page width, page height, columns) for `n` tags: upright paper first, then turned; 'fit': 4 columns."""
+def _tag_pages(paper: str, n: int, pitch_x: float, pitch_y: float) -> tuple[float, float, int, int]:
+    """(page width, page height, columns, tags per page) for `n` tags: all on one page if they fit (upright paper
+    first, then turned), else as many pages as needed of the orientation that holds the most; 'fit': one page,
+    4 columns."""
     if paper == "fit":
         columns = min(n, 4)
-        return *_page(paper, (max(columns * pitch_x, 0.1), -(-n // columns) * pitch_y + FOOTER)), columns
+        return *_page(paper, (max(columns * pitch_x, 0.1), -(-n // columns) * pitch_y + FOOTER)), columns, n
     if paper not in PAPER:
         raise WolfcalError(f"unknown --paper {paper!r}; use one of {', '.join(PAPER)}, fit")
     w, h = PAPER[paper]
+    layouts = []
     for page_w, page_h in ((w, h), (h, w)):
-        columns = int((page_w - 2 * MARGIN) // pitch_x)
-        if columns and -(-n // columns) * pitch_y + FOOTER <= page_h - 2 * MARGIN:
-            return page_w, page_h, columns
-    raise WolfcalError(
-        f"{n} tags of this size do not fit on one {paper} sheet; print fewer --ids per sheet, "
-        "or use a larger --paper (a3, fit)"
-    )
+        columns = int((page_w - 2 * MARGIN) / pitch_x + 1e-9)
+        rows = int((page_h - 2 * MARGIN - FOOTER) / pitch_y + 1e-9)
+        layouts.append((page_w, page_h, columns, columns * rows))
+    fitting = [layout for layout in layouts if layout[3] >= n]
+    best = fitting[0] if fitting else max(layouts, key=lambda layout: layout[3])
+    if best[3] == 0:
+        raise WolfcalError(
+            f"a tag of this size (with its white border and label) does not fit on {paper} with "
+            f"{MARGIN * 1000:.0f} mm margins; use a larger --paper (a3, fit) or a smaller --size"
+        )
+    return best
 
 
 def parse_ids(text: str) -> list[int]:
@@ -224,12 +263,15 @@ def parse_ids(text: str) -> list[int]:
         if not match:
             raise WolfcalError(f"--ids {text!r}: give ids and ranges like 0-7,10")
         first, last = int(match[1]), int(match[2] or match[1])
+        if last < first:
+            raise WolfcalError(f"--ids {text!r}: the range {first}-{last} runs backwards; write {last}-{first}")
         ids += range(first, last + 1)
     return ids
 
 
-def tag_sheet(family: str, ids: list[int], size: float, paper: str = "a4", cell_px: int = 20) -> Sheet:
-    """AprilTags (black square edge `size` [m]) in a grid, labelled with their ids, and the scale line."""
+def tag_sheets(family: str, ids: list[int], size: float, paper: str = "a4", cell_px: int = 20) -> list[Sheet]:
+    """AprilTags (black square edge `size` [m]) in a grid, labelled with their ids, and the scale line; as many
+    pages as the paper needs."""
     dictionary = aruco_dictionary(family)
     count = len(dictionary.bytesList)
     bad = [i for i in ids if i >= count]
@@ -240,13 +282,18 @@ def tag_sheet(family: str, ids: list[int], size: float, paper: str = "a4", cell_
     cells = dictionary.markerSize + 2  # data bits and the black border
     quiet = 2 * size / cells  # white border of two cells around each tag
     pitch_x, pitch_y = size + quiet, size + quiet + TEXT + 0.002
-    width, height, columns = _tag_page(paper, len(ids), pitch_x, pitch_y)
-    sheet = Sheet(width, height)
-    for k, tag_id in enumerate(ids):
-        x = (width - columns * pitch_x) / 2 + (k % columns) * pitch_x + quiet / 2  # grid centred across
-        y = MARGIN + (k // columns) * pitch_y + quiet / 2
-        image = cv2.aruco.generateImageMarker(dictionary, tag_id, cells * cell_px, borderBits=1)
-        sheet.images.append((image, x, y, size, size))
-        sheet.texts.append((x, y + size + 0.0015 + TEXT, TEXT, f"id {tag_id}"))
-    _add_scale_line(sheet, f"wolfcal AprilTag {family}, black square {size * 1000:g} mm")
-    return sheet
+    width, height, columns, per_page = _tag_pages(paper, len(ids), pitch_x, pitch_y)
+    chunks = [ids[k : k + per_page] for k in range(0, len(ids), per_page)]
+    sheets = []
+    for page, chunk in enumerate(chunks, start=1):
+        sheet = Sheet(width, height)
+        for k, tag_id in enumerate(chunk):
+            x = (width - columns * pitch_x) / 2 + (k % columns) * pitch_x + quiet / 2  # grid centred across
+            y = MARGIN + (k // columns) * pitch_y + quiet / 2
+            image = cv2.aruco.generateImageMarker(dictionary, tag_id, cells * cell_px, borderBits=1)
+            sheet.images.append((image, x, y, size, size))
+            sheet.texts.append((x, y + size + 0.0015 + TEXT, TEXT, f"id {tag_id}"))
+        of = f", page {page} of {len(chunks)}" if len(chunks) > 1 else ""
+        _add_scale_line(sheet, f"wolfcal AprilTag {family}, black square {size * 1000:g} mm{of}")
+        sheets.append(sheet)
+    return sheets

@@ -51,6 +51,9 @@ def _address_and_length(params: bytes) -> tuple[int, int]:
 def _status(servo: EmulatedServo, error: int, params: bytes = b"") -> bytes:
     if not servo.answers:
         return b""
+    if servo.late_replies:  # this reply would come after the master gave up waiting
+        servo.late_replies -= 1
+        return b""
     packet = bytearray(P.build_status(servo.sid, error | servo.error_byte(), params))
     if servo.corrupt:
         packet[-1] ^= 0x5A

@@ -36,8 +36,10 @@ class EmulatorProcess:
         self.port = self.conn.recv()
 
     def inject(self, fault: Fault) -> None:
-        """Inject a fault now."""
+        """Inject a fault now; returns once the emulator has (every reply after this shows the fault)."""
         self.conn.send(fault)
+        if not self.conn.poll(START_TIMEOUT_S) or self.conn.recv() != "injected":
+            raise WolfcalError(f"the bus emulator did not confirm fault {fault} within {START_TIMEOUT_S:.0f} s")
 
     def stop(self) -> None:
         """Ask the emulator to stop; terminate it if it has not within 5 s."""

@@ -20,7 +20,8 @@ STEP_S = 0.002  # longest wait for bus bytes or a control message between two st
 def serve(spec: EmulatorSpec, on_ready: Callable[[str], None], control: Connection | None = None) -> None:
     """Serve the bus on a new pty until the control connection closes or says 'stop' (or KeyboardInterrupt).
 
-    `on_ready(port)` gets the slave path. Control messages: `Fault` objects (injected now), 'stop'.
+    `on_ready(port)` gets the slave path. Control messages: `Fault` objects (injected now, then confirmed with
+    an 'injected' reply, so that the sender can wait for it instead of sleeping), 'stop'.
     """
     master, slave = pty.openpty()
     tty.setraw(slave)
@@ -46,6 +47,7 @@ def serve(spec: EmulatorSpec, on_ready: Callable[[str], None], control: Connecti
                 if message == "stop":
                     break
                 bus.inject(message)
+                control.send("injected")
             publisher.publish(bus.true_angles())
     finally:
         publisher.close()

@@ -34,6 +34,7 @@ class EmulatedServo:
         self.angle = 0.0
         self.speed = 0.0
         self.silent = self.corrupt = self.missing = False
+        self.late_replies = 0  # fault: replies still to come too late for the master (dropped)
         self.write(P.MODEL_NUMBER, spec.model)
         self.write(P.FIRMWARE_VERSION, FIRMWARE)
         self.write(P.ID, sid)
