@@ -1,35 +1,13 @@
 """The per-edge corner refinement that `wolfcal.vision.edges.refine_edges` replaced (one remap and one
-polynomial fit per edge, in a Python loop), kept verbatim as the reference the vectorised version must equal."""
+polynomial fit per edge, in a Python loop), kept as the reference the vectorised version must equal. The edge
+position along each profile is the shared `edge_offsets` (the old copy here was the same code)."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-
-def _edge_offsets(profiles: np.ndarray, t: np.ndarray, dark: float, light: float, window: float) -> np.ndarray:
-    """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
-
-    Area method: within `window` px (less near the profile's ends, at least 0.75 px) of the mid-grey crossing
-    nearest the profile centre, the edge lies where the dark area ends: edge = t_start + sum((light - I) /
-    (light - dark)) * dt. Unlike the crossing of interpolated samples it is unbiased for a box-filtered
-    (pixel-integrated) or symmetrically blurred step.
-    """
-    step = t[1] - t[0]
-    above = profiles >= 0.5 * (dark + light)
-    change = above[:, 1:] & ~above[:, :-1]  # dark -> light between samples k and k + 1
-    centre = (len(t) - 1) / 2
-    dist = np.where(change, np.abs(np.arange(len(t) - 1) + 0.5 - centre), np.inf)
-    k = np.argmin(dist, axis=1)
-    ok = np.isfinite(dist[np.arange(len(k)), k])
-    cross = t[k] + step / 2
-    reach = np.minimum(window, np.minimum(cross - t[0], t[-1] - cross) - step)  # stay inside the profile
-    ok &= reach >= 0.75
-    inside = np.abs(t[None, :] - cross[:, None]) <= reach[:, None]
-    start = np.where(inside, t[None, :], np.inf).min(axis=1) - step / 2
-    dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
-    edge = start + (dark_part * inside).sum(axis=1) * step
-    return np.where(ok, edge, np.nan)
+from wolfcal.vision.edges import edge_offsets
 
 
 def _edge_tangent(d: np.ndarray, off: np.ndarray) -> tuple[float, float]:
@@ -86,7 +64,7 @@ def _edge_line(
     dark, light = np.percentile(profiles, [10, 90])
     if light - dark < 10:
         return None
-    off = _edge_offsets(profiles, t, dark, light, window)
+    off = edge_offsets(profiles, t, dark, light, window)
     good = np.isfinite(off)
     if good.sum() < 4:
         return None

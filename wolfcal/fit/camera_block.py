@@ -22,9 +22,8 @@ from wolfcal.geometry import (
     log_so3,
     right_jacobian_so3,
     skew,
-    transform_from_twist_params,
 )
-from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.observations import Observations
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, point_motion, tag_key
@@ -207,11 +206,3 @@ def initial_camera_poses(
         T[:3, 3] = t_med
         poses.append(T)
     return poses
-
-
-def camera_pose(values: np.ndarray) -> np.ndarray:
-    """T_base_camera (4, 4) from the six pose values (x, y, z, rx, ry, rz) [m, rad]."""
-    return transform_from_twist_params(np.asarray(values, dtype=float))
-
-
-__all__ = ["CameraBlock", "HEAD_CAMERA", "camera_pose", "initial_camera_poses", "pixel_jacobian"]

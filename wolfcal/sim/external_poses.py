@@ -19,7 +19,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.poses import visible_in_view
+from wolfcal.sim.poses import sampling_bounds, visible_in_view
 from wolfcal.vision.tags import tag_corners
 
 EXTERNAL_RANGES = {
@@ -42,16 +42,7 @@ SEPARATION = 0.3  # share of a tag's image size kept free around it
 
 def external_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) per actuated joint: EXTERNAL_RANGES intersected with the URDF limits (others at 0)."""
-    lo, hi = [], []
-    for name in robot.joint_names:
-        joint = robot.model.joints[name]
-        a, b = EXTERNAL_RANGES.get(name, (0.0, 0.0))
-        a, b = max(a, joint.lower), min(b, joint.upper)
-        if a > b:
-            a = b = float(np.clip(0.0, joint.lower, joint.upper))
-        lo.append(a)
-        hi.append(b)
-    return np.array(lo), np.array(hi)
+    return sampling_bounds(robot, EXTERNAL_RANGES)
 
 
 def base_tag_ids(robot: Robot) -> list[int]:

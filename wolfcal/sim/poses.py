@@ -35,12 +35,14 @@ WOLFGANG_RANGES = {
 }
 
 
-def sampling_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) per actuated joint: the calibration range intersected with the URDF limits."""
+def sampling_bounds(
+    robot: Robot, ranges: dict[str, tuple[float, float]] = WOLFGANG_RANGES
+) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) per actuated joint: `ranges` [rad] intersected with the URDF limits (others at 0)."""
     lo, hi = [], []
     for name in robot.joint_names:
         joint = robot.model.joints[name]
-        a, b = WOLFGANG_RANGES.get(name, (0.0, 0.0))
+        a, b = ranges.get(name, (0.0, 0.0))
         a, b = max(a, joint.lower), min(b, joint.upper)
         if a > b:  # range and limits disjoint: sit at the limit nearest to 0
             a = b = float(np.clip(0.0, joint.lower, joint.upper))
