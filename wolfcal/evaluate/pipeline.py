@@ -32,9 +32,9 @@ from wolfcal.evaluate.report_content import (
     verdict_message,
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
-from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_samples
+from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_captures, samples_of
 from wolfcal.fit.result import load_result
-from wolfcal.io.samples import Sample
+from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
@@ -77,11 +77,10 @@ def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> No
 
 
 def _observe(
-    robot: Robot, result: dict, sources: list[Path], say: Callable[[str], None]
+    robot: Robot, result: dict, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
 ) -> tuple[list[Sample], Observations, list[int], list[str]]:
-    """Samples of the sources, their corners of the fit's tags, those tags, and detection warnings."""
-    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
-    samples, _ = load_samples(robot, sources, intrinsics, say=say)
+    """Samples of the read sources, their corners of the fit's tags, those tags, and detection warnings."""
+    samples, _ = samples_of(loaded, robot)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
     observations, warnings = detect_observations(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
@@ -96,21 +95,13 @@ def _observe(
     return samples, obs.only_tags(tags), tags, warnings
 
 
-def _holds_head_images(robot: Robot, result: dict, captures: list[Path]) -> bool:
-    """Whether the held-out captures hold head-camera images (else they are judged as external-camera views)."""
-    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
-    samples, _ = load_samples(robot, captures, intrinsics, cameras=())
-    return any(HEAD_CAMERA in s.images for s in samples)
-
-
 def _run_external_evaluate(
-    robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, captures: list[Path], out_dir: Path,
-    deploy_worse: bool, say: Callable[[str], None],
+    robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
+    out_dir: Path, deploy_worse: bool, say: Callable[[str], None],
 ) -> dict:
-    """Held-out external-camera captures: `external_metrics` before/after, metrics.json, report.md, deploy files
-    unless the reprojection error of any camera got worse."""
-    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=())
+    """Held-out external-camera captures (read: `loaded`): `external_metrics` before/after, metrics.json,
+    report.md, deploy files unless the reprojection error of any camera got worse."""
+    samples, warnings = samples_of(loaded, robot, cameras=())
     names = [c.name for c in robot.config.external_cameras]
     observations, detect_warnings = detect_observations(samples, robot, cameras=names)
     tags = set(result["tags_used"])
@@ -241,9 +232,11 @@ def _evaluate(
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
-    if held_out and not _holds_head_images(robot, result, captures):
-        return _run_external_evaluate(robot, result, fitted, fit_dir, captures, out_dir, deploy_worse, say)
-    samples, obs, tags, warnings = _observe(robot, result, sources, say)
+    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
+    loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
+    if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
+        return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
+    samples, obs, tags, warnings = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
     fold_of = None

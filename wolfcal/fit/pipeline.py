@@ -18,7 +18,7 @@ from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
 from wolfcal.io.reader import read_capture, require_cameras
-from wolfcal.io.samples import Sample
+from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
@@ -155,13 +155,11 @@ def fit_observations(
     return Fit(robot, used, blocks, chain, problem, solution)
 
 
-def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,),
-    say: Callable[[str], None] | None = None,
-) -> tuple[list[Sample], list[str]]:
-    """All samples of the captures, and notes on frames a recording skipped. A capture whose attached robot
-    config names another robot is refused, and so is one without images of each of `cameras`. `say` gets
-    progress lines while long files are read."""
+def load_captures(
+    robot: Robot, captures: list[Path], intrinsics: Path | None, say: Callable[[str], None] | None = None
+) -> list[Capture]:
+    """The captures read; one whose attached robot config names another robot is refused. `say` gets progress
+    lines while long files are read."""
     camera = load_camera_info(intrinsics) if intrinsics else None
     progress = (lambda path: Progress(say, f"reading {Path(path).name}", "messages")) if say else (lambda path: None)
     loaded = [read_capture(path, robot.config, camera, progress(path)) for path in captures]
@@ -172,10 +170,26 @@ def load_samples(
                 f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "
                 f"({robot.config.path}); use the config of the robot that was captured"
             )
+    return loaded
+
+
+def samples_of(
+    loaded: list[Capture], robot: Robot, cameras: tuple[str, ...] = (HEAD_CAMERA,)
+) -> tuple[list[Sample], list[str]]:
+    """All samples of read captures, and notes on frames a recording skipped; a capture without images of each of
+    `cameras` is refused."""
     require_cameras(loaded, cameras, robot.config)
     samples = [s for c in loaded for s in c.samples]
     notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
     return samples, notes
+
+
+def load_samples(
+    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,),
+    say: Callable[[str], None] | None = None,
+) -> tuple[list[Sample], list[str]]:
+    """`samples_of` the captures read by `load_captures`."""
+    return samples_of(load_captures(robot, captures, intrinsics, say), robot, cameras)
 
 
 def attached_robot_name(config_text: str | None) -> str | None:

@@ -15,14 +15,6 @@ from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
 
 
-def true_base_tag_poses(robot: Robot, truth: Corrections, q_true: np.ndarray, tag_ids: list[int]) -> np.ndarray:
-    """T_base_tag (N, T, 4, 4) of the tags at true joint angles (N, J), with the true frame and mount errors."""
-    frames = Corrections(frames=truth.frames, tags=truth.tags)
-    links = [robot.config.tag(t).link for t in tag_ids]
-    poses = robot.model.link_poses(q_true, links, frames, base=robot.config.base_link)
-    return np.stack([poses[link] @ robot.T_link_tag(t, frames) for t, link in zip(tag_ids, links)], axis=1)
-
-
 def observations_from_poses(
     robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, T_camera_tag: np.ndarray,
     visible: np.ndarray, noise_px: float, rng: np.random.Generator, camera_name: str = HEAD_CAMERA,
