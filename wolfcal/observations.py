@@ -17,9 +17,9 @@ HEAD_CAMERA = "head"  # camera name of the robot's own camera (config `camera:`)
 
 
 def rms_by(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
-    """(n_groups,) per-axis RMS of 2-vectors (M, 2) grouped by `group` (M,); NaN for empty groups."""
+    """(n_groups,) per-axis RMS of vectors (M, D) (pixels: D = 2) grouped by `group` (M,); NaN for empty groups."""
     sq = np.bincount(group, weights=np.sum(values**2, axis=1), minlength=n_groups)
-    count = np.bincount(group, minlength=n_groups) * 2
+    count = np.bincount(group, minlength=n_groups) * values.shape[1]
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.sqrt(sq / count)
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.metrics import tag_grid
-from wolfcal.fit.camera_block import CameraBlock, tag_pose_from_corners
+from wolfcal.fit.camera_block import CameraBlock, placements, tag_pose_from_corners
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.solver import solve
 from wolfcal.geometry import invert_transform
@@ -32,9 +32,7 @@ SOLES = ("r_sole", "l_sole")
 
 def _reprojection(robot: Robot, obs: Observations, model: Corrections) -> dict:
     """Per-axis RMS and max corner distance [px] with each placement's pose fitted and the chain held at `model`."""
-    files = list(dict.fromkeys(obs.sources))
-    placement = np.array([files.index(s) for s in obs.sources], dtype=int)
-    names = [f"{obs.camera_name}@{k + 1}" for k in range(len(files))]
+    placement, names = placements(obs, moving=False)
     block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names, fixed=model)
     problem = Problem(ParameterSet([]), [block], [robot.config.priors.pixel_noise], robot.config.priors.encoder_noise)
     b = solve(problem).blocks[0]

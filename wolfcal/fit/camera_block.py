@@ -84,8 +84,7 @@ class CameraBlock(Block):
         detector the same picture, so its corner errors repeat instead of averaging out. For an external camera,
         corners of tags fixed to the base share one error per (placement, tag, corner); for any camera, the frames
         taken at one still pose (identical joint readings) share one per (pose, tag, corner)."""
-        _, reading = np.unique(self.q_measured, axis=0, return_inverse=True)
-        key = reading.ravel()[self.sample_of_unit]  # the still pose of each corner
+        key = self.noise_groups()  # the still pose of each corner
         fixed = np.zeros(self.n_units, dtype=bool)
         if self.external:
             tag_fixed = np.array([self.robot.fixed_to_base(self.robot.config.tag(t).link) for t in self.tag_ids])
@@ -149,6 +148,18 @@ class CameraBlock(Block):
         jac_local = np.concatenate([-R_camera_base, skew(p_camera) @ right_jacobian_so3(pose[:, 3:])], axis=2)
         local_cols = 6 * k[:, None] + np.arange(6)
         return p_camera, R_camera_base @ dp_p, R_camera_base @ dp_q, jac_local, local_cols
+
+
+def placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
+    """Placement of each sample of an external camera and the placements' names: one per capture file (in the
+    order of the files), or one per sample of a moving camera."""
+    if moving:
+        return np.arange(obs.n_samples), [f"{obs.camera_name}@s{i + 1}" for i in range(obs.n_samples)]
+    files = list(dict.fromkeys(obs.sources))
+    index = np.array([files.index(s) for s in obs.sources], dtype=int)
+    if len(files) == 1:
+        return index, [obs.camera_name]
+    return index, [f"{obs.camera_name}@{k + 1}" for k in range(len(files))]
 
 
 def _pnp(camera, uv: np.ndarray, size: float) -> np.ndarray | None:

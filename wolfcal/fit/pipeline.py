@@ -13,7 +13,7 @@ from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
-from wolfcal.fit.camera_block import CameraBlock
+from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
@@ -75,18 +75,6 @@ class Fit:
         return self.observations.get(HEAD_CAMERA)
 
 
-def _placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
-    """Placement of each sample of an external camera and the placements' names: one per capture file (in the
-    order of the files), or one per sample of a moving camera."""
-    if moving:
-        return np.arange(obs.n_samples), [f"{obs.camera_name}@s{i + 1}" for i in range(obs.n_samples)]
-    files = list(dict.fromkeys(obs.sources))
-    index = np.array([files.index(s) for s in obs.sources], dtype=int)
-    if len(files) == 1:
-        return index, [obs.camera_name]
-    return index, [f"{obs.camera_name}@{k + 1}" for k in range(len(files))]
-
-
 def _systems(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
     """The cameras the fit uses, by --system (default: every one the captures contain)."""
     system = options.system or "all"
@@ -134,7 +122,7 @@ def fit_observations(
         if name == HEAD_CAMERA:
             blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids))
         else:
-            placement, names = _placements(obs, options.external_moving)
+            placement, names = placements(obs, options.external_moving)
             blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
     chain = build_parameter_set(
         robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags

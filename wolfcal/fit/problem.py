@@ -41,7 +41,8 @@ class BlockState:
         # or the estimated noise level when that is larger.
         self.shared_floor = sigma
         self.excluded = np.zeros(block.n_views, dtype=bool)
-        self.groups = block.noise_groups()
+        self.groups = block.noise_groups()  # (U,) fixed: derived once
+        self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.whitening: GroupedWhitening | None = None
         self.W: scipy.sparse.csr_matrix | None = None
 
@@ -58,7 +59,7 @@ class BlockState:
         # reading error: each is its own reading group, so only a shared detection error links them.
         moved = np.any(lin.joint_sensitivity != 0, axis=(1, 2))
         self.reading_of_unit = np.where(moved, self.groups, self.groups.max() + 1 + np.arange(block.n_units))
-        label = np.where(self.inlier_units, block.shared_labels(), -1)
+        label = np.where(self.inlier_units, self.labels, -1)
         counts = np.bincount(label[label >= 0]) if np.any(label >= 0) else np.zeros(0, int)
         label = np.where((label >= 0) & (counts[np.maximum(label, 0)] >= 2) if len(counts) else False, label, -1)
         return SharedErrors(

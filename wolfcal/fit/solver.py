@@ -74,10 +74,7 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) views the noise model explains far worse than the others and that are off by more than the floor."""
     block, residual = state.block, lin.residual
     t = view_rms(state, lin)
-    size = rms_by(block.view_of_unit, residual, block.n_views) if block.dim == 2 else np.sqrt(
-        np.bincount(block.view_of_unit, np.sum(residual**2, axis=1), block.n_views)
-        / np.maximum(np.bincount(block.view_of_unit, minlength=block.n_views) * block.dim, 1)
-    )
+    size = rms_by(block.view_of_unit, residual, block.n_views)
     return (t > OUTLIER_FACTOR * np.median(t)) & (size > block.outlier_floor)
 
 
@@ -111,10 +108,7 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
     view_sample = np.array([s for s, _ in block.view_labels], dtype=int)
 
     def per_sample(r: np.ndarray) -> np.ndarray:
-        sq = np.bincount(block.sample_of_unit, np.sum(r**2, axis=1), n_samples)
-        count = np.bincount(block.sample_of_unit, minlength=n_samples) * block.dim
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.sqrt(sq / count)
+        return rms_by(block.sample_of_unit, r, n_samples)
 
     def rms(r: np.ndarray) -> float:
         return float(np.sqrt(np.mean(r[inlier] ** 2))) if inlier.any() else float("nan")

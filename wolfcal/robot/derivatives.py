@@ -70,8 +70,8 @@ class ChainDerivatives:
         self.T_root: dict[str, np.ndarray] = dict(walk.T_root_link)
         n, n_joints, n_params = len(np.atleast_2d(q)), len(robot.joint_names), len(params)
         # Per walked joint: (columns it moves with their multipliers, its unit motion twist).
-        self._joint_q: dict[str, list[tuple[int, np.ndarray]]] = {}
-        self._joint_p: dict[str, list[tuple[int, np.ndarray]]] = {}
+        joint_q: dict[str, list[tuple[int, np.ndarray]]] = {}
+        joint_p: dict[str, list[tuple[int, np.ndarray]]] = {}
         offset_cols = {p.target: i for i, p in enumerate(params.parameters) if p.kind == "offset"}
         frame_cols: dict[str, list[int]] = {}
         for i, p in enumerate(params.parameters):
@@ -90,15 +90,15 @@ class ChainDerivatives:
                 delta = corrections.frames.get(name, np.zeros(6))
                 twists = _frame_twists(walk.T_root_origin[name], T_root_frame, delta)
                 p_terms += [(i, twists[:, params.parameters[i].component]) for i in frame_cols[name]]
-            self._joint_q[name], self._joint_p[name] = q_terms, p_terms
+            joint_q[name], joint_p[name] = q_terms, p_terms
         self._twist_q: dict[str, np.ndarray] = {}
         self._twist_p: dict[str, np.ndarray] = {}
         for link in dict.fromkeys(links + tag_links):
             tq, tp = np.zeros((n, n_joints, 6)), np.zeros((n, n_params, 6))
             for joint in model.path_from_root(link):
-                for col, twist in self._joint_q.get(joint.name, []):
+                for col, twist in joint_q.get(joint.name, []):
                     tq[:, col] += twist
-                for col, twist in self._joint_p.get(joint.name, []):
+                for col, twist in joint_p.get(joint.name, []):
                     tp[:, col] += twist
             self._twist_q[link], self._twist_p[link] = tq, tp
         for tag_id, link in zip(tag_ids, tag_links):
