@@ -70,18 +70,21 @@ class Fit:
     def corrections(self) -> Corrections:
         return self.chain.corrections(self.solution.values[: len(self.chain)])
 
-    @property
-    def head(self) -> Observations | None:
-        return self.observations.get(HEAD_CAMERA)
+
+
+def system_cameras(robot: Robot, system: str | None) -> list[str] | None:
+    """The cameras a --system means: head -> the head camera, external -> the config's external cameras; None (all)
+    for 'all' or no choice."""
+    if system in (None, "all"):
+        return None
+    return [HEAD_CAMERA] if system == "head" else [c.name for c in robot.config.external_cameras]
 
 
 def _systems(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
     """The cameras the fit uses, by --system (default: every one the captures contain)."""
     system = options.system or "all"
-    chosen = {
-        name: obs for name, obs in observations.items()
-        if system == "all" or (system == "head") == (name == HEAD_CAMERA)
-    }  # fmt: skip
+    wanted = system_cameras(robot, system)
+    chosen = {name: obs for name, obs in observations.items() if wanted is None or name in wanted}
     if not chosen:
         found = ", ".join(sorted(observations)) or "none"
         raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
@@ -224,8 +227,7 @@ def run_fit(
     required = (HEAD_CAMERA,) if options.system == "head" else ()
     samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    wanted = None if options.system in (None, "all") else [HEAD_CAMERA] if options.system == "head" else [
-        c.name for c in robot.config.external_cameras]
+    wanted = system_cameras(robot, options.system)
     observations, detect_warnings = detect_observations(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
     )
