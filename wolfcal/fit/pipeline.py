@@ -72,19 +72,16 @@ class Fit:
 
 
 
-def system_cameras(robot: Robot, system: str | None) -> list[str] | None:
-    """The cameras a --system means: head -> the head camera, external -> the config's external cameras; None (all)
-    for 'all' or no choice."""
-    if system in (None, "all"):
-        return None
-    return [HEAD_CAMERA] if system == "head" else [c.name for c in robot.config.external_cameras]
+def in_system(camera: str, system: str | None) -> bool:
+    """Whether a camera belongs to a --system: head -> the head camera, external -> any other; all (or no
+    choice) -> every camera."""
+    return system in (None, "all") or (system == "head") == (camera == HEAD_CAMERA)
 
 
 def _systems(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
     """The cameras the fit uses, by --system (default: every one the captures contain)."""
     system = options.system or "all"
-    wanted = system_cameras(robot, system)
-    chosen = {name: obs for name, obs in observations.items() if wanted is None or name in wanted}
+    chosen = {name: obs for name, obs in observations.items() if in_system(name, system)}
     if not chosen:
         found = ", ".join(sorted(observations)) or "none"
         raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
@@ -227,7 +224,8 @@ def run_fit(
     required = (HEAD_CAMERA,) if options.system == "head" else ()
     samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    wanted = system_cameras(robot, options.system)
+    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
     observations, detect_warnings = detect_observations(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
     )
