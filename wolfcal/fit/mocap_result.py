@@ -62,7 +62,7 @@ def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, resi
         ],  # fmt: skip
         "unknown_marker_names": obs.unknown_names,
         "base_poses": poses,
-        "base_pose_meaning": "T_mocap_base: the robot's base link in the motion-capture frame, p_mocap = T @ p_base [m]",
+        "base_pose_meaning": "T_mocap_base: the base link in the motion-capture frame, p_mocap = T @ p_base [m]",
         "mocap_clock_offset_s": {Path(k).name: round(v, 6) for k, v in obs.clock_offsets_s.items()},
         "samples": samples,
     }
