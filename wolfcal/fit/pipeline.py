@@ -18,6 +18,7 @@ from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
+from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -247,25 +248,38 @@ def run_fit(
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
     force: bool = False,
+    mocap: list[Path] = (),
+    mocap_offsets: list[float] = (),
 ) -> dict:
     """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
-    Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
+    (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
+    (one per capture, clock offsets `mocap_offsets` or estimated)."""
     robot = load_robot(robot_path)
-    inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
-    required = (HEAD_CAMERA,) if options.system == "head" else ()
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-    observations, detect_warnings = detect_observations(
-        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-    )
-    warnings += detect_warnings
+    markers, warnings, observations = None, [], {}
+    if options.system == "mocap" or mocap:
+        markers = load_marker_observations(robot.config, robot.joint_names, captures, mocap, list(mocap_offsets))
+        say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+            + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+        warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
+                     ] if markers.unknown_names else []  # fmt: skip
+    if options.system != "mocap":
+        required = (HEAD_CAMERA,) if options.system == "head" else ()
+        samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        warnings += read_warnings
+        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+        observations, detect_warnings = detect_observations(
+            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+        )
+        warnings += detect_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
-    fit = fit_observations(robot, observations, options, say)
+    fit = fit_observations(robot, observations, options, say, markers)
     check_solution_left_out(fit, captures)
     data = result_dict(fit, options, captures, intrinsics, warnings)
     with output_set():
