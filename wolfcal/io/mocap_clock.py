@@ -3,8 +3,9 @@
 t_recording = t_file + offset [s], t_file: seconds since the file's first frame. Both streams see the same motion:
 the markers' speed (per frame, the mean over markers of the speed of their 50 ms moving median, so noise and
 reflections do not count) and the joints' speed (sum of |dq/dt| over the joints) rise and fall together. Both
-profiles are resampled on a `GRID_S` grid, normalised, and cross-correlated over every lag that keeps at least half
-of the file inside the recording; the peak, refined by a parabola through its neighbours, gives the offset. A peak
+profiles are resampled on a `GRID_S` grid, normalised, and cross-correlated over every lag at which the two overlap
+by at least `MIN_OVERLAP` of the shorter one (a session's moves repeat in rhythm: a half overlap can match a wrong
+move); the peak, refined by a parabola through its neighbours, gives the offset. A peak
 correlation below `MIN_CORRELATION` means the two do not show the same motion: the offset is not found.
 """
 
@@ -20,6 +21,7 @@ from wolfcal.io.recording import JointStates
 GRID_S = 0.002  # resampling step of the speed profiles [s]
 SMOOTH_S = 0.05  # moving-median width for marker positions, and smoothing of both profiles [s]
 MIN_CORRELATION = 0.6
+MIN_OVERLAP = 0.9
 
 
 def _smooth(x: np.ndarray, n: int) -> np.ndarray:
@@ -65,16 +67,7 @@ def estimate_offset(traj: MarkerTrajectories, columns: list[int], states: JointS
     b = _smooth(joint_speed(states, rec_grid), n_smooth)
     if len(a) < 10 or len(b) < 10 or np.std(a) == 0 or np.std(b) == 0:
         raise _not_found(traj, "one of them shows no motion")
-    a, b = (a - a.mean()) / a.std(), (b - b.mean()) / b.std()
-    # correlation of a with b shifted by lag k: c[k] = sum_i a[i] b[i + k] / overlap
-    n = len(a) + len(b)
-    size = 1 << (n - 1).bit_length()
-    c = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
-    lags = np.arange(-len(a) + 1, len(b))
-    c = np.concatenate([c[size - len(a) + 1 :], c[: len(b)]])
-    overlap = np.minimum(len(a), np.minimum(len(b) - lags, len(a) + lags)).clip(min=1)
-    c = c / overlap
-    c[overlap < len(a) // 2] = -np.inf
+    c, lags = pearson_by_lag(a, b)
     k = int(np.argmax(c))
     if not np.isfinite(c[k]) or c[k] < MIN_CORRELATION:
         raise _not_found(traj, f"best correlation {c[k]:.2f} of their speed profiles, below {MIN_CORRELATION}")
@@ -83,6 +76,26 @@ def estimate_offset(traj: MarkerTrajectories, columns: list[int], states: JointS
         denom = c[k - 1] - 2 * c[k] + c[k + 1]
         frac = 0.5 * (c[k - 1] - c[k + 1]) / denom if denom < 0 else 0.0
     return (start + (lags[k] + frac) * GRID_S * 1e9) / 1e9
+
+
+def pearson_by_lag(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pearson correlation of a[i] with b[i + k] over their overlap, for every lag k (-inf where the overlap is
+    shorter than MIN_OVERLAP of the shorter series), and the lags."""
+    n = len(a) + len(b)
+    size = 1 << (n - 1).bit_length()
+    ab = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
+    lags = np.arange(-len(a) + 1, len(b))
+    ab = np.concatenate([ab[size - len(a) + 1 :], ab[: len(b)]])
+    i0, i1 = np.maximum(0, -lags), np.minimum(len(a), len(b) - lags)  # overlap: a[i0:i1], b[i0+k:i1+k]
+    ca, ca2 = np.concatenate([[0], np.cumsum(a)]), np.concatenate([[0], np.cumsum(a * a)])
+    cb, cb2 = np.concatenate([[0], np.cumsum(b)]), np.concatenate([[0], np.cumsum(b * b)])
+    m = (i1 - i0).astype(float)
+    sa, saa = ca[i1] - ca[i0], ca2[i1] - ca2[i0]
+    sb, sbb = cb[i1 + lags] - cb[i0 + lags], cb2[i1 + lags] - cb2[i0 + lags]
+    with np.errstate(all="ignore"):
+        c = (ab - sa * sb / m) / np.sqrt((saa - sa**2 / m) * (sbb - sb**2 / m))
+    c[(m < MIN_OVERLAP * min(len(a), len(b))) | ~np.isfinite(c)] = -np.inf
+    return c, lags
 
 
 def _not_found(traj: MarkerTrajectories, why: str) -> WolfcalError:
