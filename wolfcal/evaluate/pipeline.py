@@ -20,7 +20,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
+from wolfcal.evaluate.ground import DISTANCES_M, ground_errors
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
@@ -169,9 +169,10 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
 def _ground_rows(
     robot: Robot, camera: CameraModel, reference: Corrections, fitted: Corrections, say: Callable[[str], None]
 ) -> tuple[list[dict], str | None]:
-    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no sole frame)."""
-    if GROUND_LINK not in robot.model.links:
-        return [], f"{robot.config.urdf} has no '{GROUND_LINK}' frame: the ground error was not computed"
+    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no `floor:` config)."""
+    if robot.config.floor is None:
+        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
+                    "computed")
     say("computing the ground error ...")
     models = {"before": Corrections(), "after": fitted}
     return ground_errors(robot, camera, reference, models, DISTANCES_M), None
@@ -289,7 +290,8 @@ def _evaluate(
         "after": s_after,
         "ground": {
             "reference": "simulator truth" if truth is not None else "calibrated model",
-            "standing_pose_rad": STANDING,
+            "standing_pose_rad": dict(robot.config.floor.standing) if robot.config.floor else {},
+            "soles": list(robot.config.floor.soles) if robot.config.floor else [],
             "rows": ground_rows,
         },
         "verdict": {"worse": worse, "message": verdict},

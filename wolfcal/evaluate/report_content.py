@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.evaluate.ground import STANDING
 from wolfcal.evaluate.metrics import ModelErrors
 from wolfcal.evaluate.report import Block, headline_rows
 from wolfcal.observations import Observations
@@ -109,15 +108,16 @@ def sample_rows(
     return rows
 
 
-def ground_text(reference_is_truth: bool) -> str:
+def ground_text(reference_is_truth: bool, standing: dict[str, float], soles: list[str]) -> str:
     """What the ground-error table means, and what it is measured against."""
-    pose = ", ".join(f"{k} = {v:+.4f} rad" for k, v in STANDING.items())
+    pose = ", ".join(f"{k} = {v:+.4f} rad" for k, v in standing.items()) or "every joint 0"
     common = (
-        f"A standing robot (straight legs: {pose}, all other joints 0 as read by the encoders) tilts its head to "
-        "look at a ball on the ground straight ahead. The pixel where the ball appears is turned back into a spot "
-        "on the field through each model (the ground is the model's sole plane); the error is the distance on the "
-        "field between that spot and where the ball really is. 'Lands at' is the distance from the robot where "
-        "the model puts the ball."
+        f"A standing robot (the config's standing pose: {pose}, all other joints 0 as read by the encoders) turns "
+        "its head to look at a ball on the ground at -30, 0 and +30 deg; the worst of the three is shown. The "
+        "pixel where the ball appears is turned back into a spot on the field through each model (the ground is "
+        f"the plane of the model's standing soles {', '.join(soles)}); the error is the distance on the field "
+        "between that spot and where the ball really is. 'Lands at' is the distance from the robot where the "
+        "model puts the ball."
     )
     if reference_is_truth:
         return (
@@ -148,7 +148,7 @@ def ground_blocks(ground: dict) -> list[Block]:
     headers = ["ball at", "lands at, before", "error before", "lands at, after", "error after"]
     return [
         ("h2", "Where a ball lands on the field"),
-        ("p", ground_text(ground["reference"] == "simulator truth")),
+        ("p", ground_text(ground["reference"] == "simulator truth", ground["standing_pose_rad"], ground["soles"])),
         ("table", (headers, rows, set())),
     ]
 
