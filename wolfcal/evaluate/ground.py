@@ -21,6 +21,7 @@ from wolfcal.config import FloorConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
 
 DISTANCES_M = (1.0, 2.0, 4.5, 9.0)
@@ -175,3 +176,25 @@ def ground_errors(
             }
         rows.append(row)
     return rows
+
+
+def predicted_ground_std(
+    robot: Robot, camera: CameraModel, chain: ParameterSet, values: np.ndarray, covariance: np.ndarray,
+    distance: float = VERDICT_DISTANCE_M,
+) -> float:
+    """1-sigma ground error at `distance` [m] that the fit's covariance (P, P) of the chain parameter `values` (P,)
+    [SI] implies: sqrt(trace(J C J^T)) of the landing point on the floor, worst bearing (J by central differences)."""
+    model = chain.corrections(values)
+    worst = 0.0
+    for view in ball_views(robot, camera, model, distance):
+        J = np.zeros((2, len(values)))
+        for i in range(len(values)):
+            step = np.zeros(len(values))
+            step[i] = 1e-6
+            plus = ground_point(robot, view["q"], chain.corrections(values + step), view["uv"], camera)
+            minus = ground_point(robot, view["q"], chain.corrections(values - step), view["uv"], camera)
+            J[:, i] = (plus[:2] - minus[:2]) / 2e-6
+        if not np.all(np.isfinite(J)):
+            return float("inf")
+        worst = max(worst, float(np.sqrt(np.trace(J @ covariance @ J.T))))
+    return worst

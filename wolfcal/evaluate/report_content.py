@@ -60,20 +60,6 @@ def cross_validation_note(n_folds: int, n_samples: int) -> str:
     )
 
 
-def verdict_message(before: dict, after: dict, worse: bool) -> str:
-    """The one-line verdict from the two `metrics.summary` dicts (reprojection RMS [px])."""
-    if worse:
-        return (
-            f"The calibration makes held-out error worse: reprojection RMS {after['rms_px']:.3f} px "
-            f"calibrated vs {before['rms_px']:.3f} px with the input URDF. Keep the input URDF; refit "
-            "with more varied poses, fewer free parameters, or without the outlier samples."
-        )
-    return (
-        f"The calibration improves held-out error: reprojection RMS {before['rms_px']:.3f} px -> "
-        f"{after['rms_px']:.3f} px."
-    )
-
-
 def sample_rows(
     obs: Observations,
     before: ModelErrors,
@@ -157,7 +143,8 @@ def report_blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]
     """The whole report, in order, from metrics.json's content and the figures' (file name, caption)."""
     m = metrics
     blocks: list[Block] = [("h1", f"wolfcal evaluation: {m['robot_name']}, --free {m['free']}")]
-    blocks.append(("banner", (not m["verdict"]["worse"], m["verdict"]["message"])))
+    blocks.append(("banner", (m["verdict"]["deploy"], m["verdict"]["message"])))
+    blocks += [("p", line) for line in m["verdict"]["refusals"] + m["verdict"]["notes"]]
     blocks.append(("p", INTRO))
     blocks.append(("p", m["mode_note"]))
     blocks += _headline_blocks(m)
