@@ -102,6 +102,7 @@ def test_held_out_errors_before_and_after(held_out):
     assert m["after"]["rms_px"] < 0.1 * m["before"]["rms_px"]
     assert m["after"]["tag_grid_mean_mm"] < 0.5 * m["before"]["tag_grid_mean_mm"]
     assert not m["verdict"]["worse"] and m["deploy"]["written"]
+    assert m["verdict"]["deploy"] and not m["structure"]["unexplained"] and m["structure"]["scale"] < 1.5
     assert len(m["samples"]) == m["n_samples"] >= 8
     table = before_after_table(m)
     assert "ground error, ball at 4.5 m [cm]" in table and "tag-grid" in table
@@ -202,6 +203,7 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera, monkeypatch):
     assert m["after"]["rms_px"] > m["before"]["rms_px"]
     assert not any((out / name).exists() for name in DEPLOY_FILES)
     assert "makes held-out error worse" in (out / "report.html").read_text()
+    assert m["verdict"]["message"].startswith("Do not deploy")
     runner = CliRunner()
     args = [
         "evaluate",

@@ -177,17 +177,27 @@ def evaluate(
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
     folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
     deploy_worse: bool = typer.Option(
-        False, "--deploy-worse", help="Write the deploy files even if held-out error got worse."
+        False, "--deploy-worse", help="Write the deploy files even when the verdict refuses them."
     ),
     force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
+    ground_limit: float = typer.Option(5.0, "--ground-limit-cm", help="Largest measured ground error at 4.5 m "
+                                       "that may be deployed [cm]."),
+    mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
+                                      "camera by more than this [deg]."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
+    import math
+
     from wolfcal.evaluate.pipeline import run_evaluate
+    from wolfcal.evaluate.verdict import VerdictLimits
     from wolfcal.vision.cache import cache_enabled
 
+    if ground_limit <= 0 or mount_limit <= 0:
+        raise WolfcalError("--ground-limit-cm and --mount-limit-deg must be positive")
     with cache_enabled(not no_cache):
-        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force)
+        limits = VerdictLimits(ground_limit / 100.0, math.radians(mount_limit))
+        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force, limits=limits)
     if not metrics["deploy"]["written"]:
         raise WolfcalError(metrics["deploy"]["reason"])
 

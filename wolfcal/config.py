@@ -87,6 +87,7 @@ class RobotConfig:
     priors: PriorConfig = PriorConfig()
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
     markers: MarkersConfig | None = None  # motion-capture markers on the robot (`markers:`), None when absent
+    floor: FloorConfig | None = None  # the venue ground check (`floor:`), None when not configured
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -329,7 +330,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link"),
-        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers"),
+        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor"),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -358,6 +359,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
         external_cameras=external,
         markers=markers,
+        floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
     )
 
 
@@ -420,3 +422,71 @@ def _markers(path: Path, data) -> MarkersConfig:
         link = m.string("link")
         markers.append(MarkerConfig(name=name, link=link, xyz=m.vector3("xyz"), side=side_of_link(link)))
     return MarkersConfig(topic=r.string("topic", "/mocap/markers"), entries=tuple(markers))
+
+
+@dataclass(frozen=True)
+class FloorTagConfig:
+    """A tag lying flat on the floor, face up, at a place the fit finds (DESIGN.md `floor.tags`)."""
+
+    id: int
+    family: str
+    size: float  # edge of the black square [m]
+    thickness: float = 0.0  # height of the tag's face above the floor [m]
+
+
+@dataclass(frozen=True)
+class FloorConfig:
+    """The venue ground check (DESIGN.md `floor:`): the floor is the plane of the standing soles."""
+
+    soles: tuple[str, ...]  # links whose frames lie on the floor (z up) when the robot stands
+    standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
+    tags: tuple[FloorTagConfig, ...] = ()
+
+    def tag(self, tag_id: int) -> FloorTagConfig:
+        for tag in self.tags:
+            if tag.id == tag_id:
+                return tag
+        raise KeyError(tag_id)
+
+    @property
+    def tag_ids(self) -> list[int]:
+        return [t.id for t in self.tags]
+
+
+def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
+    """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
+    r = _Reader(path, data, "floor")
+    r.check_keys(("soles", "standing"), ("tags",))
+    soles = r.data["soles"]
+    if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
+        r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
+    standing = r.data["standing"] or {}
+    if not isinstance(standing, dict):
+        r.fail("'standing' must map joint names to readings [rad] (joints not named are 0)")
+    for joint, value in standing.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            r.fail(f"'standing.{joint}' must be a number [rad], found {value!r}")
+    tags_data = r.data.get("tags") or []
+    if not isinstance(tags_data, list):
+        r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
+    tags = []
+    on_links = {t.id for t in link_tags}
+    for i, item in enumerate(tags_data):
+        t = _Reader(path, item, f"floor.tags[{i}]")
+        t.check_keys(("id", "size"), ("family", "thickness"))
+        tag_id = t.data["id"]
+        if isinstance(tag_id, bool) or not isinstance(tag_id, int) or tag_id < 0:
+            t.fail(f"'id' must be a non-negative integer, found {tag_id!r}")
+        if tag_id in on_links:
+            t.fail(f"tag {tag_id} is also configured on a link under 'tags:'; a floor tag lies on the floor, "
+                   "so give it an id no tag on the robot uses")
+        if tag_id in {x.id for x in tags}:
+            t.fail(f"tag {tag_id} is listed twice")
+        family = t.string("family", "tag36h11")
+        if family not in TAG_FAMILIES:
+            t.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
+        thickness = t.number("thickness", 0.0)
+        if thickness < 0:
+            t.fail(f"'thickness' must not be negative, found {thickness!r}")
+        tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
+    return FloorConfig(tuple(soles), {str(k): float(v) for k, v in standing.items()}, tuple(tags))

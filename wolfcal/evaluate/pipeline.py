@@ -1,9 +1,10 @@
 """`wolfcal evaluate`: a fit + held-out captures (or k-fold cross-validation) -> report and files to deploy.
 
 Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
-judged model was not fitted on. The deploy files are written only when the held-out reprojection RMS did not get
-worse (or with deploy_worse=True). This module only runs the steps; errors are `metrics` / `ground` / `crossval`, the
-report's words `report_content`, its pictures `report_figures`, the files to deploy `deploy`.
+judged model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
+model explains the data, ground error) allows it, or with deploy_worse=True. This module only runs the steps;
+errors are `metrics` / `ground` / `crossval` / `structure`, the report's words `report_content`, its pictures
+`report_figures`, the files to deploy `deploy`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
+
 import wolfcal
 from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
@@ -20,7 +23,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
+from wolfcal.evaluate.ground import DISTANCES_M, ground_errors, predicted_ground_std
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
@@ -29,9 +32,10 @@ from wolfcal.evaluate.report_content import (
     held_out_note,
     report_blocks,
     sample_rows,
-    verdict_message,
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
+from wolfcal.evaluate.structure import unexplained
+from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_captures, samples_of
 from wolfcal.fit.result import load_result
 from wolfcal.io.samples import Capture, Sample
@@ -40,6 +44,7 @@ from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations, observations_of
@@ -111,7 +116,8 @@ def _run_external_evaluate(
     figures = external_metrics(robot, observations, fitted, truth, say)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
+    refused = "The calibration makes the held-out reprojection error worse." if worse else None
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
              f"fit: {fit_dir.resolve()}; captures: {', '.join(str(c) for c in captures)}", "",
              figures["meaning"], "", "| camera | model | RMS [px] | max [px] | tag grid [mm] mean +- std |",
@@ -169,12 +175,36 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
 def _ground_rows(
     robot: Robot, camera: CameraModel, reference: Corrections, fitted: Corrections, say: Callable[[str], None]
 ) -> tuple[list[dict], str | None]:
-    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no sole frame)."""
-    if GROUND_LINK not in robot.model.links:
-        return [], f"{robot.config.urdf} has no '{GROUND_LINK}' frame: the ground error was not computed"
+    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no `floor:` config)."""
+    if robot.config.floor is None:
+        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
+                    "computed")
     say("computing the ground error ...")
     models = {"before": Corrections(), "after": fitted}
     return ground_errors(robot, camera, reference, models, DISTANCES_M), None
+
+
+def _predicted_ground(
+    robot: Robot, camera: CameraModel, result: dict, tags: list[int], fitted: Corrections
+) -> float | None:
+    """1-sigma ground error at 4.5 m [m] from the fit's covariance of its chain parameters (None without floor)."""
+    covariance = result.get("covariance")
+    if robot.config.floor is None or not covariance:
+        return None
+    chain = build_parameter_set(robot, result["free"], {HEAD_CAMERA: tags}, result["side"], result["fix_tags"])
+    index = {name: i for i, name in enumerate(covariance["names"])}
+    keep = [k for k, name in enumerate(chain.names) if name in index]
+    cols = [index[chain.names[k]] for k in keep]
+    sub = ParameterSet([chain.parameters[k] for k in keep])
+    matrix = np.asarray(covariance["matrix"], dtype=float)[np.ix_(cols, cols)]
+    return predicted_ground_std(robot, camera, sub, sub.values_from(fitted), matrix)
+
+
+def camera_turn(robot: Robot, fitted: Corrections) -> float:
+    """Rotation angle of the fitted camera frame correction [rad] (0 without a head camera)."""
+    if robot.config.camera is None:
+        return 0.0
+    return float(np.linalg.norm(fitted.frames.get(robot.camera_joint, np.zeros(6))[3:]))
 
 
 REPORT_FILES = ("report.html", "report.md", "metrics.json")
@@ -201,10 +231,11 @@ def run_evaluate(
     folds: int = 5,
     say: Callable[[str], None] = print,
     force: bool = False,
+    limits: VerdictLimits = VerdictLimits(),
 ) -> dict:
     """`_evaluate` with all its outputs written as one set: nothing of a failed run replaces an earlier one."""
     with output_set():
-        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force)
+        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force, limits)
 
 
 def _evaluate(
@@ -215,6 +246,7 @@ def _evaluate(
     folds: int = 5,
     say: Callable[[str], None] = print,
     force: bool = False,
+    limits: VerdictLimits = VerdictLimits(),
 ) -> dict:
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
@@ -257,19 +289,22 @@ def _evaluate(
         "that they are of this robot and camera",
     )
     s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
-    worse = bool(s_after["rms_px"] > s_before["rms_px"])
-    verdict = verdict_message(s_before, s_after, worse)
     truth = _truth_reference(sources)
     ground_rows, no_ground = _ground_rows(robot, obs.camera, truth if truth is not None else fitted, fitted, say)
     if no_ground:
         warnings.append(no_ground)
+    structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
+    predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
+    verdict = deploy_verdict(result["free"], s_before["rms_px"], s_after["rms_px"], structure, None, predicted,
+                             camera_turn(robot, fitted), limits)  # fmt: skip
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(
         robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.get("covariance")
     )
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
+                                            deploy_worse)  # fmt: skip
     metrics = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -289,10 +324,12 @@ def _evaluate(
         "after": s_after,
         "ground": {
             "reference": "simulator truth" if truth is not None else "calibrated model",
-            "standing_pose_rad": STANDING,
+            "standing_pose_rad": dict(robot.config.floor.standing) if robot.config.floor else {},
+            "soles": list(robot.config.floor.soles) if robot.config.floor else [],
             "rows": ground_rows,
         },
-        "verdict": {"worse": worse, "message": verdict},
+        "verdict": verdict,
+        "structure": structure,
         "deploy": deploy,
         "camera_correction": camera_correction(robot, fitted),
         "parameters": [
@@ -307,6 +344,7 @@ def _evaluate(
     _write_report(out_dir, metrics, figures)
     for line in before_after_table(metrics).splitlines():
         say(line)
-    say(verdict)
+    for line in [verdict["message"], *verdict["refusals"][1:], *verdict["notes"]]:
+        say(line)
     say(f"report: {out_dir / 'report.html'}")
     return metrics

@@ -15,6 +15,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
@@ -34,6 +35,7 @@ from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
 
 SYSTEMS = ("head", "external", "mocap", "all")
+SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
 
 @dataclass(frozen=True)
@@ -68,7 +70,7 @@ class Fit:
 
     @property
     def tag_ids(self) -> list[int]:
-        return sorted({t for b in self.blocks for t in getattr(b, "tag_ids", ())})
+        return sorted({t for b in self.blocks if b.system != "floor" for t in getattr(b, "tag_ids", ())})
 
     @property
     def corrections(self) -> Corrections:
@@ -115,6 +117,7 @@ def fit_observations(
         observations = {}
     else:
         observations = _systems(robot, observations, options)
+    observations, floor = split_floor(robot, observations)
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
@@ -123,7 +126,7 @@ def fit_observations(
                                              if robot.fixed_to_base(robot.config.tag(t).link)})
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
-    if not used and mocap is None:
+    if not used and mocap is None and floor is None:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
@@ -134,8 +137,15 @@ def fit_observations(
         else:
             placement, names = placements(obs, options.external_moving)
             blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
+    tags_by_camera = {b.camera_name: b.tag_ids for b in blocks}
+    if floor is not None:
+        check_floor_samples(robot, floor)
+        tags_by_camera.setdefault(HEAD_CAMERA, [])
+        blocks.append(FloorBlock(robot, floor))
+        if len(robot.config.floor.soles) == 2:
+            blocks.append(SoleClosure(robot, floor))
     chain = build_parameter_set(
-        robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags,
+        robot, options.free, tags_by_camera, options.side, options.fix_tags,
         tuple(mocap.links) if mocap is not None else (),
     )
     blocks += [mocap] if mocap is not None else []
@@ -150,7 +160,10 @@ def fit_observations(
             "fewer parameters"
         )
     priors = robot.config.priors
-    sigmas = [MOCAP_NOISE_START_M if b.system == "mocap" else priors.pixel_noise for b in blocks]
+    sigmas = [
+        priors.pixel_noise if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M
+        for b in blocks
+    ]
     problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
     solution = solve(problem, progress=say)
     return Fit(robot, used, blocks, chain, problem, solution)
@@ -174,6 +187,21 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
         markers = markers.only_markers([n for n in markers.marker_names
                                         if config.marker(n).side in (options.side, None)])  # fmt: skip
     return MocapBlock(robot, markers, options.mocap_moving)
+def split_floor(
+    robot: Robot, observations: dict[str, Observations]
+) -> tuple[dict[str, Observations], Observations | None]:
+    """The head camera's views of floor tags (config `floor.tags`) apart from its views of tags on links."""
+    head = observations.get(HEAD_CAMERA)
+    if head is None or robot.config.floor is None:
+        return observations, None
+    floor_ids = [t for t in head.observed_tag_ids if t in robot.config.floor.tag_ids]
+    if not floor_ids:
+        return observations, None
+    rest = {k: v for k, v in observations.items() if k != HEAD_CAMERA}
+    link_ids = [t for t in head.observed_tag_ids if t not in floor_ids]
+    if link_ids:
+        rest[HEAD_CAMERA] = head.only_tags(link_ids)
+    return rest, head.only_tags(floor_ids)
 
 
 def load_captures(

@@ -105,4 +105,20 @@ def load_robot(config_path: str | Path) -> Robot:
                 f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of "
                 f"{config.urdf}"
             )
+    _check_floor(config, model)
     return Robot(config=config, model=model)
+
+
+def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
+    """The floor's soles must be links and its standing readings movable joints of the URDF."""
+    if config.floor is None:
+        return
+    for i, sole in enumerate(config.floor.soles):
+        if sole not in model.links:
+            raise WolfcalError(f"{config.path}: 'floor.soles[{i}]' {sole!r} is not a link of {config.urdf}")
+    unknown = [j for j in config.floor.standing if j not in model.actuated_joint_names]
+    if unknown:
+        raise WolfcalError(
+            f"{config.path}: 'floor.standing' names joint(s) {', '.join(unknown)} that are not movable joints of "
+            f"{config.urdf}"
+        )
