@@ -14,8 +14,8 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
-from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
+from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
