@@ -21,11 +21,12 @@ from wolfcal.fit import pipeline as fit_pipeline
 from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
+from wolfcal.io.truth import truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.sim.scenario import synthetic_scenario
-from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
+from wolfcal.sim.simulate import SimOptions, simulate_capture
 from wolfcal.sim.truth import TruthSpec
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"

@@ -17,11 +17,12 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.metrics import tag_grid
-from wolfcal.fit.camera_block import CameraBlock, placements, tag_pose_from_corners
+from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.solver import solve
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
+from wolfcal.projection import tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot

@@ -15,14 +15,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from wolfcal.observations import Observations
-from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, project_corners
+from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, project_corners, tag_pose_from_pixels
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 GRID_SHAPE = (5, 4)  # grid points across x and y of the tag's black square
 OUTLIER_FLOOR_PX = 1.0  # a sample is an outlier above max(this, OUTLIER_FACTOR x median sample RMS) [px]
@@ -55,22 +53,10 @@ def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
             continue
         rows = rows[np.argsort(obs.corner_index[rows])]
         tag_id = int(obs.tag_ids[rows[0]])
-        xy = obs.camera.undistort_normalized(obs.camera.pixels_to_normalized(obs.uv[rows]))
-        ok, rvec, tvec = cv2.solvePnP(
-            tag_corners(robot.config.tag(tag_id).size),
-            xy.reshape(4, 1, 2),
-            np.eye(3),
-            None,
-            flags=cv2.SOLVEPNP_IPPE_SQUARE,
-        )
-        T = np.full((4, 4), np.nan)
-        if ok:
-            T = np.eye(4)
-            T[:3, :3] = cv2.Rodrigues(rvec)[0]
-            T[:3, 3] = tvec.ravel()
+        T = tag_pose_from_pixels(obs.camera, obs.uv[rows], robot.config.tag(tag_id).size)
         samples.append(int(obs.sample_index[rows[0]]))
         tags.append(tag_id)
-        poses.append(T)
+        poses.append(np.full((4, 4), np.nan) if T is None else T)
     return TagViews(
         np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4)
     )

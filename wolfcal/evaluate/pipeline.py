@@ -35,13 +35,13 @@ from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_captures, samples_of
 from wolfcal.fit.result import load_result
 from wolfcal.io.samples import Capture, Sample
+from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
-from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations, observations_of
 
 

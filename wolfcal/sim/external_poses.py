@@ -16,7 +16,8 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import invert_transform
+from wolfcal.geometry import invert_transform, transform_points
+from wolfcal.projection import tag_corner_pixels
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.poses import sampling_bounds, visible_in_view
@@ -79,9 +80,8 @@ def external_visibility(
 def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     """(N, T) bool: the tag's grown image box overlaps no other tag's in front of the camera."""
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
-    in_front = np.all(p[..., 2] > 0, axis=-1)  # (N, T)
-    uv = camera.project(np.where(p[..., 2:] > 0, p, np.nan))
+    in_front = np.all(transform_points(T_camera_tag, corners)[..., 2] > 0, axis=-1)  # (N, T)
+    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # NaN behind the camera
     lo, hi = np.nanmin(uv, axis=2), np.nanmax(uv, axis=2)  # (N, T, 2)
     grow = SEPARATION * (hi - lo).max(axis=-1, keepdims=True)
     lo, hi = lo - grow, hi + grow

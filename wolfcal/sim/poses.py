@@ -11,6 +11,7 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.projection import tag_corner_pixels
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
@@ -58,8 +59,7 @@ def visible_in_view(
     """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
     margin, appears at least `min_size_px` per edge and faces the camera (less than `max_angle_rad` off the ray)."""
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
-    uv = camera.project(p)  # (N, T, 4, 2)
+    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # (N, T, 4, 2)
     inside = np.all(camera.in_image(uv, margin_px), axis=-1)
     edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
     big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px

@@ -22,6 +22,7 @@ from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_outputs
@@ -29,7 +30,6 @@ from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
-from wolfcal.sim.external_truth import external_truth_entry
 from wolfcal.sim.placement import placement_from_text, random_placement
 from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
@@ -61,11 +61,6 @@ class _SimCamera:
     model: CameraModel  # full resolution
     image: CameraModel  # binned
     T_base_camera: np.ndarray | None = None  # external cameras only
-
-
-def truth_paths(out: Path) -> tuple[Path, Path]:
-    stem = out.with_suffix("")
-    return Path(f"{stem}.truth.yaml"), Path(f"{stem}.truth.urdf")
 
 
 def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
