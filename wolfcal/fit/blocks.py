@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
 
 
@@ -33,7 +34,7 @@ class Block:
     system: str  # 'head' | 'external' | ...
     unit: str  # 'px' | 'm'
     dim: int  # measured numbers per unit
-    outlier_floor: float  # a view is left out only if also off by more than this [unit]
+    outlier_rule: OutlierRule  # which views are left out (`wolfcal.outliers`; floor in the block's unit)
     nuisance: ParameterSet  # the block's own unknowns
     sample_of_unit: np.ndarray  # (U,) sample index of each unit
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit

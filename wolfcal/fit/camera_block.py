@@ -23,13 +23,13 @@ from wolfcal.geometry import (
     skew,
 )
 from wolfcal.observations import Observations
+from wolfcal.outliers import FIT_VIEW_PX
 from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, pixel_jacobian, tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, point_motion, tag_key
 from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
 
-OUTLIER_FLOOR_PX = 0.5  # a tag view is left out only if also off by more than this [px]
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
 
@@ -38,7 +38,7 @@ class CameraBlock(Block):
     """Corners of the tags one camera saw; see the module docstring."""
 
     unit, dim = "px", 2
-    outlier_floor = OUTLIER_FLOOR_PX
+    outlier_rule = FIT_VIEW_PX
 
     def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
                  placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None,
@@ -51,8 +51,7 @@ class CameraBlock(Block):
         self.tag_col, self.p_tag = corner_points(robot, obs, self.tag_ids)  # (M,), (M, 3) corner in its tag frame [m]
         self.sample_of_unit = obs.sample_index
         self.q_measured = obs.q_measured
-        views, view_of_unit = np.unique(np.stack([obs.sample_index, obs.tag_ids], axis=1), axis=0, return_inverse=True)
-        self.view_of_unit = view_of_unit.ravel()
+        views, self.view_of_unit = obs.views()
         self.view_labels = [(int(s), int(t)) for s, t in views]
         if external:
             self.viewer = robot.config.base_link
