@@ -42,7 +42,7 @@ def test_leg_preset_puts_soles_within_3mm(robot, camera):
     # Exactly confounded pairs are reported in words, not silently fitted.
     sentences = explain(fit.params, fit.solution)
     together = [s for s in sentences if "move together" in s]
-    assert any("HeadTilt.offset" in s and "camera_optical_frame_uncalibrated_frame.rx" in s for s in together)
+    assert any("HeadTilt.offset" in s and "camera.rx" in s for s in together)
     assert any("RAnkleRoll.offset" in s for s in sentences)
 
 

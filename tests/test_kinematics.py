@@ -103,6 +103,10 @@ tags:
         (BASE.replace("frame: camera_optical_frame", "frame: eye"), ["camera.frame", "eye"]),
         (BASE.replace("size: 0.08", "size: -1"), ["tags[0].size", "positive"]),
         (BASE + "servos: {ids: {Tail: 3}}\n", ["servos.ids", "Tail"]),
+        (BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: tag43"),
+         ["'camera'", "tag43", "tag<id>"]),
+        (BASE + "external_cameras: [{name: camera, image_topic: /t/i, info_topic: /t/c}]\n",
+         ["camera.name", "external camera's name"]),
     ],
 )
 def test_config_errors_name_file_and_key(tmp_path, text, words):
@@ -140,3 +144,17 @@ def test_calibrated_urdf_round_trip(robot, tmp_path, fold_offsets):
         urdf.update_cfg({j: q[i, model.column(j)] + rising.get(j, 0.0) for j in model.actuated_joint_names})
         for link in links:
             np.testing.assert_allclose(urdf.get_transform(link, "base_link"), expected[link][i], atol=1e-9)
+
+
+def test_camera_parameters_take_the_configured_name(tmp_path):
+    """The head camera's pose parameters are named after `camera.name` (default `camera`); they still correct the
+    fixed joint above the optical frame."""
+    from wolfcal.robot.parameters import build_parameter_set
+
+    named = BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: eye")
+    for text, prefix in ((BASE, "camera"), (named, "eye")):
+        robot = load_robot(write_config(tmp_path, text))
+        params = build_parameter_set(robot, "camera", {"head": [43]})
+        frames = [p for p in params.parameters if p.kind == "frame"]
+        assert [p.name for p in frames] == [f"{prefix}.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")]
+        assert {p.target for p in frames} == {"camera_optical_frame_uncalibrated_frame"}

@@ -132,6 +132,7 @@ def test_fit_on_a_plain_recording_of_another_robot(tmp_path):
     assert np.rad2deg(rotation_angle(error[:, :3, :3])[0]) < 0.25
     assert np.linalg.norm(error[0, :3, 3]) < 0.003
     for p in data["parameters"]:
-        if p["name"].startswith("cam_mount."):
+        if p["name"].startswith("camera."):  # the correction of the URDF joint cam_mount
+            assert p["urdf_joint"] == "cam_mount"
             true = TRUTH.frames["cam_mount"]["x y z rx ry rz".split().index(p["name"].split(".")[1])]
             assert abs(p["value"] - true) < 3 * p["std"], p["name"]

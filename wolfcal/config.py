@@ -40,6 +40,7 @@ class CameraConfig:
     topic: str
     info_topic: str
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
+    name: str = "camera"  # in the names of its pose correction's parameters (`camera.x ... camera.rz`)
 
 
 @dataclass(frozen=True)
@@ -259,13 +260,27 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
 
 def _camera(path: Path, data) -> CameraConfig:
     cam = _Reader(path, data, "camera")
-    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
+    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics"))
+    name = _parameter_name(cam, "camera")
     return CameraConfig(
+        name=name,
         frame=cam.string("frame"),
         topic=cam.string("topic", "/camera/image_raw/compressed"),
         info_topic=cam.string("info_topic", "/camera/camera_info"),
         intrinsics=_intrinsics_path(cam, path.parent),
     )
+
+
+def _parameter_name(r: _Reader, default: str | None = None) -> str:
+    """A camera's `name`, used in parameter names (`<name>.x`): a letter, then letters, digits and '_', and not
+    `tag<id>` (the tag mounts' names)."""
+    name = r.string("name", default)
+    if not _NAME.fullmatch(name) or re.fullmatch(r"tag\d+", name):
+        r.fail(
+            f"'name' {name!r} must start with a letter, hold only letters, digits and '_' and not be tag<id> "
+            f"(it is used in parameter names such as {name}.x)"
+        )
+    return name
 
 
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
@@ -275,12 +290,7 @@ def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     for i, item in enumerate(data):
         r = _Reader(path, item, f"external_cameras[{i}]")
         r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))
-        name = r.string("name")
-        if not _NAME.fullmatch(name):
-            r.fail(
-                f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
-                "(it is used in parameter names such as tripod.x)"
-            )
+        name = _parameter_name(r)
         if name == HEAD_CAMERA:
             r.fail(f"'name' must not be {HEAD_CAMERA!r}: that name means the robot's own camera ('camera:')")
         if name in {c.name for c in cameras}:
@@ -333,6 +343,8 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     if camera is None and not external:
         r.fail("needs a head camera ('camera:') or at least one camera under 'external_cameras:'")
     _check_topics_distinct(path, camera, external)
+    if camera is not None and camera.name in {c.name for c in external}:
+        r.fail(f"'camera.name' {camera.name!r} is also an external camera's name; each camera needs its own name")
     tags_data = r.data["tags"]
     if not isinstance(tags_data, list) or not tags_data:
         r.fail("'tags' must be a non-empty list of tags")

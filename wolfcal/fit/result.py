@@ -185,6 +185,7 @@ def result_dict(fit: Fit, options: FitOptions, captures: list[Path], intrinsics:
                 "prior_sigma": p.prior_sigma,
                 "data_share": round(float(share), 4),
                 "measured_by": by,
+                **({"urdf_joint": p.target} if p.kind in ("offset", "frame") else {}),
                 "display": f"{_display(v, p.unit)} +- {_display(s, p.unit)[1:]}",
             }
             for p, v, s, share, by in zip(params.parameters, solution.values, u.std, u.data_share, _measured_by(fit))

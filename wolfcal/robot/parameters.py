@@ -1,8 +1,10 @@
 """Free-parameter sets: names, units, priors, and the presets `camera`, `head_camera`, `leg`.
 
 A parameter is a deviation from the nominal model (nominal value 0). Names follow DESIGN.md and mean the same
-everywhere: `<joint>.offset` (encoder offset, rad), `<joint>.x|y|z|rx|ry|rz` (frame correction of a joint origin
-in its child frame, m / rad), `tag<id>.x|...|rz` (tag mount correction in the tag frame, m / rad).
+everywhere: `<joint>.offset` (encoder offset, rad), `<camera>.x|y|z|rx|ry|rz` (the head camera's pose correction:
+the frame correction of the fixed joint above its optical frame, in that joint's child frame, m / rad; `<camera>` is
+the config's `camera.name`, default `camera`; result.yaml says which URDF joint it is written to),
+`tag<id>.x|...|rz` (tag mount correction in the tag frame, m / rad).
 """
 
 from __future__ import annotations
@@ -127,8 +129,8 @@ def build_parameter_set(
     links: list[str] = []
     if "head" in tags_by_camera:
         camera_joint = robot.camera_joint
-        params += frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation,
-                                   priors.camera_rotation)  # fmt: skip
+        params += frame_parameters(robot.config.head_camera().name, "frame", camera_joint,
+                                   priors.camera_translation, priors.camera_rotation)  # fmt: skip
         if preset in ("head_camera", "leg"):
             links.append(robot.config.camera.frame)
     if preset == "leg":
