@@ -79,3 +79,19 @@ def test_a_misdetected_tag_is_left_out_but_not_its_sample(robot, camera):
     assert not fit.solution.blocks[0].outlier_samples[s]
     rot, _ = camera_pose_errors(robot, fit.corrections, scenario.truth)
     assert np.rad2deg(rot.max()) < 0.05
+
+
+def test_the_outlier_rule_and_noise_floor_are_the_fits_settings(robot, camera):
+    """FitOptions' outlier rule and noise floor decide the fit: a floor above the misdetection keeps the view, a
+    noise floor above the real noise holds the estimated noise there."""
+    from wolfcal.outliers import OutlierRule
+
+    scenario = synthetic_scenario(robot, camera, n=24, seed=16)
+    obs = scenario.obs
+    s = [s for s in range(obs.n_samples) if len(obs.tags_in_sample(s)) == 2][0]
+    obs.uv[(obs.sample_index == s) & (obs.tag_ids == 44)] += [4.0, -3.0]
+    fit = fit_observations(robot, obs, FitOptions(free="camera", outlier=OutlierRule(factor=4.0, floor=50.0)))
+    assert fit.solution.blocks[0].outlier_views == []
+    fit = fit_observations(robot, obs, FitOptions(free="camera", noise_floor_px=3.0))
+    assert fit.solution.blocks[0].sigma >= 3.0
+    assert fit.solution.blocks[0].outlier_views == [(s, 44)]

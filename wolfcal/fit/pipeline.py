@@ -14,9 +14,10 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
+from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
-from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
-from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
+from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -25,27 +26,10 @@ from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
-
-SYSTEMS = ("head", "external", "all")
-
-
-@dataclass(frozen=True)
-class FitOptions:
-    free: str = "camera"
-    side: str = "both"
-    fix_tags: bool = False
-    huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    system: str | None = None  # 'head' | 'external' | 'all'; None: every system the captures contain
-    external_moving: bool = False  # one external-camera pose per sample instead of one per capture file
-
-    def __post_init__(self) -> None:
-        check_preset(self.free, self.side)  # before any file is read
-        if self.system is not None and self.system not in SYSTEMS:
-            raise WolfcalError(f"--system {self.system!r} must be one of {', '.join(SYSTEMS)}")
 
 
 @dataclass
@@ -120,10 +104,12 @@ def fit_observations(
     blocks: list[Block] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids)
         else:
             placement, names = placements(obs, options.external_moving)
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
+        block.outlier_rule = options.outlier
+        blocks.append(block)
     chain = build_parameter_set(
         robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags
     )
@@ -139,7 +125,7 @@ def fit_observations(
         )
     priors = robot.config.priors
     problem = Problem(chain, blocks, [priors.pixel_noise] * len(blocks), priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say)
+    solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
     return Fit(robot, used, blocks, chain, problem, solution)
 
 
@@ -215,8 +201,8 @@ def run_fit(
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
     force: bool = False,
-) -> dict:
-    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
+) -> FitResult:
+    """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
     Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
     robot = load_robot(robot_path)
     inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
@@ -235,16 +221,16 @@ def run_fit(
     say(f"fitting --free {options.free} ...")
     fit = fit_observations(robot, observations, options, say)
     check_solution_left_out(fit, captures)
-    data = result_dict(fit, options, captures, intrinsics, warnings)
+    result = fit_result(fit, options, captures, intrinsics, warnings)
     with output_set():
-        write_result(out_dir / "result.yaml", data)
+        write_result(out_dir / "result.yaml", result)
         write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
         write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
-    for line in summary_lines(data):
+    for line in summary_lines(result):
         say(line)
     for line in explain(fit.params, fit.solution):
         say(f"note: {line}")
     for line in warnings:
         say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
-    return data
+    return result

@@ -18,14 +18,14 @@ import numpy as np
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening, split_rows
+from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import rms_by
 
-# Bounds of a pixel block's estimated noise [px]. The floor is the detector's systematic error: its corner errors
-# of 0.02-0.05 px repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of
-# them, so the residuals alone would understate it (measured: bench/bench_vision.py, tests/test_other_robot.py).
-MIN_SIGMA = {"px": 0.05, "m": 1e-5}
+# Bounds of a block's estimated noise per unit; the pixel floor is the fit's setting (`FitOptions.noise_floor_px`,
+# see there why).
+MIN_SIGMA = {"px": NOISE_FLOOR_PX, "m": 1e-5}
 MAX_SIGMA = {"px": 50.0, "m": 0.1}
 
 
@@ -86,10 +86,10 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
 
 
-def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float) -> float:
-    """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log);
-    returns the residual scale reached."""
-    lo, hi = np.log(MIN_SIGMA[state.block.unit]), np.log(MAX_SIGMA[state.block.unit])
+def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
+    """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
+    not below `floor` [unit]); returns the residual scale reached."""
+    lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     for _ in range(30):
         mid = 0.5 * (lo + hi)
         if residual_scale(state, residual, float(np.exp(mid)), n_params) > 1.0:
@@ -123,7 +123,11 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
     )  # fmt: skip
 
 
-def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
+def solve(
+    problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
+    min_sigma: dict[str, float] = MIN_SIGMA,
+) -> Solution:
+    """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
     say = progress or (lambda _msg: None)
     n_params = len(problem.params)
     z = np.zeros(n_params)
@@ -144,7 +148,7 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
         for state, lin in zip(problem.states, lins):
             previous = state.sigma
             share = n_params * lin.residual.size / rows_total
-            scale = estimate_noise(state, lin.residual, share)
+            scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
             settled &= abs(state.sigma / previous - 1.0) < 0.1
             notes.append(
                 f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
