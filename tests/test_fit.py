@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.fit.result import explain
-from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.sim.scenario import synthetic_scenario
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"

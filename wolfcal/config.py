@@ -31,7 +31,7 @@ class TagConfig:
     link: str
     xyz: tuple[float, float, float]
     rpy: tuple[float, float, float]
-    side: str | None = None  # 'right' / 'left' for the leg preset; None for tags not on a leg
+    side: str | None = None  # 'right' / 'left' (config `side`): the leg it is on, for the leg preset; None: no leg
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,8 @@ class RobotConfig:
     servos: ServoConfig | None = None
     priors: PriorConfig = PriorConfig()
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
+    # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
+    sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -199,10 +201,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
     if family not in TAG_FAMILIES:
         r.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
     side = r.data.get("side")
-    if side is None:
-        link = str(r.data["link"]).lower()
-        side = "right" if link.startswith(("r_", "right")) else "left" if link.startswith(("l_", "left")) else None
-    elif side not in ("right", "left"):
+    if side is not None and side not in ("right", "left"):
         r.fail(f"'side' must be 'right' or 'left', found {side!r}")
     return TagConfig(
         id=tag_id,
@@ -283,6 +282,31 @@ def _parameter_name(r: _Reader, default: str | None = None) -> str:
     return name
 
 
+SAMPLING_SYSTEMS = ("head", "external")
+
+
+def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
+    """`sampling_ranges: {head|external: {<joint>: [lo, hi]}}` [rad, true angles]; joints checked by load_robot."""
+    r = _Reader(path, data, "sampling_ranges")
+    r.check_keys((), SAMPLING_SYSTEMS)
+    out = {}
+    for system, joints in r.data.items():
+        if not isinstance(joints, dict) or not joints:
+            r.fail(f"'{system}' must map joint names to [lower, upper] in rad")
+        ranges = {}
+        for joint, value in joints.items():
+            ok = isinstance(value, (list, tuple)) and len(value) == 2
+            ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+            if not ok or value[0] > value[1]:
+                raise WolfcalError(
+                    f"{path}: 'sampling_ranges.{system}.{joint}' must be [lower, upper] in rad with lower <= upper, "
+                    f"found {value!r}"
+                )
+            ranges[str(joint)] = (float(value[0]), float(value[1]))
+        out[system] = ranges
+    return out
+
+
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     if not isinstance(data, list):
         raise WolfcalError(f"{path}: 'external_cameras' must be a list of cameras ({{name, image_topic, info_topic}})")
@@ -333,7 +357,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link", "tags"),
-        ("camera", "external_cameras", "joint_states_topic", "servos", "priors"),
+        ("camera", "external_cameras", "joint_states_topic", "servos", "priors", "sampling_ranges"),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -362,6 +386,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
         external_cameras=external,
+        sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
     )
 
 

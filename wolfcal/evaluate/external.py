@@ -16,6 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import link_position_errors
 from wolfcal.evaluate.metrics import tag_grid
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.problem import Problem
@@ -26,7 +27,6 @@ from wolfcal.projection import tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.accuracy import link_position_errors
 
 SOLES = ("r_sole", "l_sole")
 

@@ -92,6 +92,13 @@ def load_robot(config_path: str | Path) -> Robot:
             raise WolfcalError(
                 f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}"
             )
+    for system, ranges in config.sampling_ranges.items():
+        unknown = [j for j in ranges if j not in model.actuated_joint_names]
+        if unknown:
+            raise WolfcalError(
+                f"{where}: 'sampling_ranges.{system}' names joint(s) {', '.join(unknown)} that are not movable "
+                f"joints of {config.urdf}"
+            )
     if config.servos is not None:
         unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
         if unknown:

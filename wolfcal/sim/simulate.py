@@ -27,11 +27,12 @@ from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
+from wolfcal.sim.external_poses import external_pose_ok, external_visibility
 from wolfcal.sim.placement import placement_from_text, random_placement
-from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
+from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
@@ -111,14 +112,15 @@ def _poses(robot: Robot, options: SimOptions, cameras: dict[str, _SimCamera], tr
         return random_visible_poses(robot, cameras[HEAD_CAMERA].image, truth, options.samples, rng)[0]
     name = next(n for n in cameras if n != HEAD_CAMERA)
     external = cameras[name]
-    lo, hi = external_bounds(robot)
+    lo, hi = sampling_bounds(robot, "external")
     checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, external.T_base_camera,
                                                                     q, truth))]  # fmt: skip
     what = f"camera '{name}' sees the torso tag and a foot tag"
     if HEAD_CAMERA in cameras:
+        head_lo, head_hi = sampling_bounds(robot, "head")
         for k, joint in enumerate(robot.joint_names):
-            if joint in robot.camera_and_leg_joints(sides=()) and joint in WOLFGANG_RANGES:
-                lo[k], hi[k] = WOLFGANG_RANGES[joint]
+            if joint in robot.camera_and_leg_joints(sides=()):  # the head camera's joints move as for head poses
+                lo[k], hi[k] = head_lo[k], head_hi[k]
         head = cameras[HEAD_CAMERA].image
         margin, size = 0.03 * head.width, 0.02 * head.width
         checks.append(lambda q: np.any(tag_visibility(robot, head, q, truth, robot.config.tag_ids, margin, size), 1))
