@@ -310,7 +310,7 @@ def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     if not isinstance(data, list):
         raise WolfcalError(f"{path}: 'external_cameras' must be a list of cameras ({{name, image_topic, info_topic}})")
-    cameras = []
+    cameras: list[ExternalCameraConfig] = []
     for i, item in enumerate(data):
         r = _Reader(path, item, f"external_cameras[{i}]")
         r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))

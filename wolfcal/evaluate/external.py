@@ -49,12 +49,13 @@ def _tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> list[fl
     out = []
     base = robot.config.base_link
     for s in range(obs.n_samples):
-        measured = {t: tag_pose_from_corners(robot, obs, s, t) for t in fixed + moving}
-        ref = next((t for t in fixed if measured[t] is not None), None)
+        found = {t: tag_pose_from_corners(robot, obs, s, t) for t in fixed + moving}
+        measured = {t: T for t, T in found.items() if T is not None}
+        ref = next((t for t in fixed if t in measured), None)
         if ref is None:
             continue
         for t in moving:
-            if measured[t] is None:
+            if t not in measured:
                 continue
             links = [robot.config.tag(ref).link, robot.config.tag(t).link]
             poses = robot.model.link_poses(obs.q_measured[s : s + 1], links, model, base=base)

@@ -228,7 +228,7 @@ def _evaluate(
     samples, obs, tags, warnings = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
-    fold_of = None
+    fold_of, n_folds = None, None
     if held_out:
         after = model_errors(robot, obs, views, fitted)
         after_of_sample = [fitted] * obs.n_samples
@@ -237,6 +237,7 @@ def _evaluate(
         fold_of, models = cross_validate(robot, obs, result.options, folds, say)
         after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
         after_of_sample = [models[k] for k in fold_of]
+        n_folds = len(models)
         mode_note = cross_validation_note(len(models), obs.n_samples)
     outliers = outlier_samples(before, after)
     check_left_out(
@@ -269,7 +270,7 @@ def _evaluate(
         "mode": "held-out" if held_out else "cross-validation",
         "mode_note": mode_note,
         "captures": [str(p.resolve()) for p in sources],
-        "folds": None if held_out else int(fold_of.max() + 1),
+        "folds": n_folds,
         "tags_used": tags,
         "n_samples": obs.n_samples,
         "n_outliers": int(outliers.sum()),

@@ -32,7 +32,7 @@ def skeleton_px(robot: Robot, q: np.ndarray, corrections: Corrections, camera: C
     """
     joints = list(robot.model.joints.values())
     links = sorted({j.parent for j in joints} | {j.child for j in joints})
-    poses = robot.model.link_poses(q[None], links, corrections, base=robot.config.camera.frame)
+    poses = robot.model.link_poses(q[None], links, corrections, base=robot.config.head_camera().frame)
     t = np.linspace(0.0, 1.0, SKELETON_STEPS)[:, None]
     lines = []
     for joint in joints:

@@ -53,13 +53,14 @@ class CameraBlock(Block):
         self.q_measured = obs.q_measured
         views, self.view_of_unit = obs.views()
         self.view_labels = [(int(s), int(t)) for s, t in views]
+        # (S,) placement of each sample: the external camera's pose it was taken from (the head camera: all 0)
+        self.placement_of_sample = np.zeros(obs.n_samples, dtype=int)
         if external:
             self.viewer = robot.config.base_link
             self.placement_of_sample = np.asarray(placement_of_sample, dtype=int)
             self.nuisance = self._pose_parameters(placement_names or [self.camera_name])
         else:
-            self.viewer = robot.config.camera.frame
-            self.placement_of_sample = None
+            self.viewer = robot.config.head_camera().frame
             self.nuisance = ParameterSet([])
 
     def shared_labels(self) -> np.ndarray:

@@ -12,7 +12,6 @@ import yaml
 from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
@@ -36,7 +35,7 @@ from wolfcal.vision.observe import detect_observations
 class Fit:
     robot: Robot
     observations: dict[str, Observations]  # per camera, only the tags used
-    blocks: list[Block]
+    blocks: list[CameraBlock]  # the measurement blocks (today all camera blocks)
     chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
     problem: Problem
     solution: Solution
@@ -101,7 +100,7 @@ def fit_observations(
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
-    blocks: list[Block] = []
+    blocks: list[CameraBlock] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
             block = CameraBlock(robot, obs, obs.observed_tag_ids)

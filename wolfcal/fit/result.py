@@ -82,8 +82,8 @@ def _measured_by(fit: Fit) -> list[list[str]]:
     start = len(fit.chain)
     for state, lin in zip(fit.problem.states, fit.problem.evaluate(z)):
         chain = np.abs(lin.jac_chain).reshape(-1, len(fit.chain)).max(axis=0) if len(fit.chain) else np.zeros(0)
-        for i in np.flatnonzero(chain > 0):
-            out[i].append(state.block.name)
+        for column in np.flatnonzero(chain > 0):
+            out[int(column)].append(state.block.name)
         for i in range(len(state.block.nuisance)):
             out[start + i].append(state.block.name)
         start += len(state.block.nuisance)

@@ -80,7 +80,7 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
     """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
     freedom the free parameters take."""
-    w = state.whitening.whitened(residual.ravel(), sigma)
+    w = state.noise_model.whitened(residual.ravel(), sigma)
     if w.size <= n_params:
         return 1.0
     return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
@@ -123,6 +123,34 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
     )  # fmt: skip
 
 
+def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
+    """Flag each block's outlier views at these linearisations; whether any outlier set changed."""
+    changed = False
+    for state, lin in zip(problem.states, lins):
+        outliers = flag_outliers(state, lin)
+        changed |= not np.array_equal(outliers, state.excluded)
+        state.excluded = outliers
+    return changed
+
+
+def _update_noise(
+    problem: Problem, lins: list[Linearization], n_params: int, rows_total: int, min_sigma: dict[str, float]
+) -> tuple[bool, list[str]]:
+    """Re-estimate each block's noise level (its share of the free parameters by rows); whether every level
+    settled (changed by less than 10 %), and one progress note per block."""
+    settled, notes = True, []
+    for state, lin in zip(problem.states, lins):
+        previous = state.sigma
+        share = n_params * lin.residual.size / rows_total
+        scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
+        settled &= abs(state.sigma / previous - 1.0) < 0.1
+        notes.append(
+            f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
+            f"{state.block.unit} (scale {scale:.2f})"
+        )
+    return settled, notes
+
+
 def solve(
     problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
     min_sigma: dict[str, float] = MIN_SIGMA,
@@ -137,23 +165,10 @@ def solve(
     for round_index in range(max_rounds):
         result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
         z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
-        changed, settled = False, True
         lins = problem.evaluate(z)
-        for state, lin in zip(problem.states, lins):
-            outliers = flag_outliers(state, lin)
-            changed |= not np.array_equal(outliers, state.excluded)
-            state.excluded = outliers
+        changed = _update_outliers(problem, lins)
         problem.linearize(z)
-        notes = []
-        for state, lin in zip(problem.states, lins):
-            previous = state.sigma
-            share = n_params * lin.residual.size / rows_total
-            scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
-            settled &= abs(state.sigma / previous - 1.0) < 0.1
-            notes.append(
-                f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
-                f"{state.block.unit} (scale {scale:.2f})"
-            )
+        settled, notes = _update_noise(problem, lins, n_params, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break

@@ -112,8 +112,11 @@ def _poses(robot: Robot, options: SimOptions, cameras: dict[str, _SimCamera], tr
         return random_visible_poses(robot, cameras[HEAD_CAMERA].image, truth, options.samples, rng)[0]
     name = next(n for n in cameras if n != HEAD_CAMERA)
     external = cameras[name]
+    T_base_camera = external.T_base_camera
+    if T_base_camera is None:
+        raise WolfcalError(f"simulated external camera '{name}' has no placement")
     lo, hi = sampling_bounds(robot, "external")
-    checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, external.T_base_camera,
+    checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, T_base_camera,
                                                                     q, truth))]  # fmt: skip
     what = f"camera '{name}' sees the torso tag and a foot tag"
     if HEAD_CAMERA in cameras:
@@ -214,7 +217,7 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
                  kinds: dict[int, str]) -> None:  # fmt: skip
     """FILE.truth.yaml and FILE.truth.urdf beside the capture."""
     truth_yaml, truth_urdf = truth_paths(out)
-    data = {"truth": truth.to_dict()}
+    data: dict[str, object] = {"truth": truth.to_dict()}
     if HEAD_CAMERA in cameras:
         data["camera"] = camera_info_dict(cameras[HEAD_CAMERA].model)
     data |= {
@@ -227,11 +230,11 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
         "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]",
         "system": options.system,
     }
-    external = {n: c for n, c in cameras.items() if c.T_base_camera is not None}
+    external = {n: (c.T_base_camera, c.model) for n, c in cameras.items() if c.T_base_camera is not None}
     if external:
         data["external_cameras"] = {
-            n: {**external_truth_entry(c.T_base_camera), "camera": camera_info_dict(c.model)}
-            for n, c in external.items()
+            n: {**external_truth_entry(T_base_camera), "camera": camera_info_dict(model)}
+            for n, (T_base_camera, model) in external.items()
         }
     write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
