@@ -16,8 +16,8 @@ from wolfcal.geometry import transform_from_xyz_rpy
 from wolfcal.markers import MarkerObservations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, offset_parameter
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.external_poses import external_bounds
 from wolfcal.sim.mocap_scene import MocapNoise, measure, true_marker_positions
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -30,7 +30,7 @@ def simulate(robot, n: int, seed: int, noise: MocapNoise = MocapNoise()):
     legs = [j for j in robot.joint_names if j[0] in "RL" and "Shoulder" not in j and "Elbow" not in j]
     truth = Corrections(offsets={j: float(rng.normal(0, 0.025)) for j in legs})
     mounts = rng.normal(0, noise.mount_sigma, (len(robot.config.markers.entries), 3))
-    lo, hi = external_bounds(robot)
+    lo, hi = sampling_bounds(robot, "external")
     q_true = rng.uniform(lo, hi, (n, len(lo)))
     p, reflection = measure(true_marker_positions(robot, q_true, truth, mounts, T_MOCAP_BASE), noise, rng)
     seen = np.all(np.isfinite(p), axis=2)
@@ -108,14 +108,15 @@ def test_leg_fit_recovers_offsets_within_their_std_and_flags_every_reflection(se
 
 
 def test_result_lists_each_left_out_marker_with_its_sample(tmp_path):
-    from wolfcal.fit.result import result_dict, summary_lines, write_result
+    from wolfcal.fit.result import fit_result, summary_lines, write_result
 
     robot = load_robot(WOLFGANG)
     obs, _, _, reflections = simulate(robot, 12, seed=4, noise=MocapNoise(reflections=0.03))
     options = FitOptions(free="leg", system="mocap")
     fit = fit_observations(robot, {}, options, markers=obs)
-    data = result_dict(fit, options, [], None, [])
-    write_result(tmp_path / "result.yaml", data)
+    result = fit_result(fit, options, [], None, [])
+    write_result(tmp_path / "result.yaml", result)
+    data = result.to_dict()
     block = data["blocks"][0]
     left_out = {(e["sample"], e["marker"]) for e in block["left_out_markers"]}
     assert left_out >= {(s, obs.marker_names[k]) for s, k in reflections}
@@ -123,4 +124,4 @@ def test_result_lists_each_left_out_marker_with_its_sample(tmp_path):
     assert 0.2 < block["rms_after_mm"] < 0.45 and block["base_poses"]["mocap"]["xyz"] == pytest.approx(
         T_MOCAP_BASE[:3, 3], abs=0.005)
     assert any(p["name"] == "marker.r_foot_fl.x" for p in data["parameters"])
-    assert summary_lines(data)
+    assert summary_lines(result)

@@ -31,7 +31,7 @@ class TagConfig:
     link: str
     xyz: tuple[float, float, float]
     rpy: tuple[float, float, float]
-    side: str | None = None  # 'right' / 'left' for the leg preset; None for tags not on a leg
+    side: str | None = None  # 'right' / 'left' (config `side`): the leg it is on, for the leg preset; None: no leg
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,7 @@ class CameraConfig:
     topic: str
     info_topic: str
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
+    name: str = "camera"  # in the names of its pose correction's parameters (`camera.x ... camera.rz`)
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,8 @@ class RobotConfig:
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
     markers: MarkersConfig | None = None  # motion-capture markers on the robot (`markers:`), None when absent
     floor: FloorConfig | None = None  # the venue ground check (`floor:`), None when not configured
+    # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
+    sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -190,12 +193,6 @@ def _resolve(base: Path, value: str) -> Path:
     return p if p.is_absolute() else (base / p)
 
 
-def side_of_link(link: str) -> str | None:
-    """'right' / 'left' for a link named r_... / l_... (or right... / left...), else None."""
-    low = link.lower()
-    return "right" if low.startswith(("r_", "right")) else "left" if low.startswith(("l_", "left")) else None
-
-
 def _tag(path: Path, index: int, data) -> TagConfig:
     r = _Reader(path, data, f"tags[{index}]")
     r.check_keys(("id", "size", "link"), ("family", "xyz", "rpy", "side"))
@@ -206,9 +203,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
     if family not in TAG_FAMILIES:
         r.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
     side = r.data.get("side")
-    if side is None:
-        side = side_of_link(str(r.data["link"]))
-    elif side not in ("right", "left"):
+    if side is not None and side not in ("right", "left"):
         r.fail(f"'side' must be 'right' or 'left', found {side!r}")
     return TagConfig(
         id=tag_id,
@@ -266,13 +261,52 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
 
 def _camera(path: Path, data) -> CameraConfig:
     cam = _Reader(path, data, "camera")
-    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
+    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics"))
+    name = _parameter_name(cam, "camera")
     return CameraConfig(
+        name=name,
         frame=cam.string("frame"),
         topic=cam.string("topic", "/camera/image_raw/compressed"),
         info_topic=cam.string("info_topic", "/camera/camera_info"),
         intrinsics=_intrinsics_path(cam, path.parent),
     )
+
+
+def _parameter_name(r: _Reader, default: str | None = None) -> str:
+    """A camera's `name`, used in parameter names (`<name>.x`): a letter, then letters, digits and '_', and not
+    `tag<id>` (the tag mounts' names)."""
+    name = r.string("name", default)
+    if not _NAME.fullmatch(name) or re.fullmatch(r"tag\d+", name):
+        r.fail(
+            f"'name' {name!r} must start with a letter, hold only letters, digits and '_' and not be tag<id> "
+            f"(it is used in parameter names such as {name}.x)"
+        )
+    return name
+
+
+SAMPLING_SYSTEMS = ("head", "external", "mocap")
+
+
+def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
+    """`sampling_ranges: {head|external|mocap: {<joint>: [lo, hi]}}` [rad, true angles]; joints: load_robot."""
+    r = _Reader(path, data, "sampling_ranges")
+    r.check_keys((), SAMPLING_SYSTEMS)
+    out = {}
+    for system, joints in r.data.items():
+        if not isinstance(joints, dict) or not joints:
+            r.fail(f"'{system}' must map joint names to [lower, upper] in rad")
+        ranges = {}
+        for joint, value in joints.items():
+            ok = isinstance(value, (list, tuple)) and len(value) == 2
+            ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+            if not ok or value[0] > value[1]:
+                raise WolfcalError(
+                    f"{path}: 'sampling_ranges.{system}.{joint}' must be [lower, upper] in rad with lower <= upper, "
+                    f"found {value!r}"
+                )
+            ranges[str(joint)] = (float(value[0]), float(value[1]))
+        out[system] = ranges
+    return out
 
 
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
@@ -282,12 +316,7 @@ def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     for i, item in enumerate(data):
         r = _Reader(path, item, f"external_cameras[{i}]")
         r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))
-        name = r.string("name")
-        if not _NAME.fullmatch(name):
-            r.fail(
-                f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
-                "(it is used in parameter names such as tripod.x)"
-            )
+        name = _parameter_name(r)
         if name == HEAD_CAMERA:
             r.fail(f"'name' must not be {HEAD_CAMERA!r}: that name means the robot's own camera ('camera:')")
         if name in {c.name for c in cameras}:
@@ -330,7 +359,8 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link"),
-        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor"),
+        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
+         "sampling_ranges"),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -341,6 +371,8 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     if camera is None and not external and markers is None:
         r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:' or motion-capture 'markers:'")
     _check_topics_distinct(path, camera, external)
+    if camera is not None and camera.name in {c.name for c in external}:
+        r.fail(f"'camera.name' {camera.name!r} is also an external camera's name; each camera needs its own name")
     tags_data = r.data.get("tags", [] if camera is None and not external else None)
     if not isinstance(tags_data, list) or (not tags_data and (camera is not None or external)):
         r.fail("'tags' must be a non-empty list of tags (a config with cameras needs the tags they see)")
@@ -360,6 +392,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         external_cameras=external,
         markers=markers,
         floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
+        sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
     )
 
 
@@ -385,7 +418,7 @@ class MarkerConfig:
     name: str  # as the motion-capture system labels it
     link: str
     xyz: tuple[float, float, float]
-    side: str | None = None  # 'right' / 'left' from the link name (leg preset --side), None otherwise
+    side: str | None = None  # 'right' / 'left': the leg it is on (`side:`, for the leg preset's --side), else None
 
 
 @dataclass(frozen=True)
@@ -412,15 +445,17 @@ def _markers(path: Path, data) -> MarkersConfig:
     markers: list[MarkerConfig] = []
     for i, item in enumerate(items):
         m = _Reader(path, item, f"markers.list[{i}]")
-        m.check_keys(("name", "link", "xyz"))
+        m.check_keys(("name", "link", "xyz"), ("side",))
         name = m.string("name")
         if not _NAME.fullmatch(name):
             m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
                    "(it is used in parameter names such as marker.r_foot_fl.x)")
         if name in {k.name for k in markers}:
             m.fail(f"'name' {name!r} is used by another marker; names must be unique")
-        link = m.string("link")
-        markers.append(MarkerConfig(name=name, link=link, xyz=m.vector3("xyz"), side=side_of_link(link)))
+        side = m.data.get("side")
+        if side is not None and side not in ("right", "left"):
+            m.fail(f"'side' must be 'right' or 'left' (the leg the marker is on), found {side!r}")
+        markers.append(MarkerConfig(name=name, link=m.string("link"), xyz=m.vector3("xyz"), side=side))
     return MarkersConfig(topic=r.string("topic", "/mocap/markers"), entries=tuple(markers))
 
 

@@ -36,9 +36,10 @@ from wolfcal.evaluate.report_content import (
 from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
-from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_captures, samples_of
-from wolfcal.fit.result import load_result
+from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
+from wolfcal.fit.result import FitResult, load_result
 from wolfcal.io.samples import Capture, Sample
+from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
@@ -46,11 +47,10 @@ from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
-from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations, observations_of
 
 
-def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
+def _load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
@@ -62,12 +62,10 @@ def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
             f"`wolfcal fit` run, or run the fit again"
         )
     result = load_result(fit_dir)
-    robot_path = Path(result["robot"])
+    robot_path = Path(result.robot)
     if not robot_path.exists():
         raise WolfcalError(f"{fit_dir}: the fit's robot config {robot_path} no longer exists")
-    robot = load_robot(robot_path)
-    corrections = Corrections.from_dict(result["corrections"], f"{fit_dir}/result.yaml: corrections")
-    return result, robot, corrections
+    return result, load_robot(robot_path)
 
 
 def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> None:
@@ -82,7 +80,7 @@ def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> No
 
 
 def _observe(
-    robot: Robot, result: dict, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
+    robot: Robot, result: FitResult, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
 ) -> tuple[list[Sample], Observations, list[int], list[str]]:
     """Samples of the read sources, their corners of the fit's tags, those tags, and detection warnings."""
     samples, _ = samples_of(loaded, robot)
@@ -91,17 +89,17 @@ def _observe(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
     )
     obs = observations_of(observations, HEAD_CAMERA, sources)
-    tags = [t for t in result["tags_used"] if t in obs.observed_tag_ids]
+    tags = [t for t in result.tags_used if t in obs.observed_tag_ids]
     if not tags:
         raise WolfcalError(
-            f"none of the fit's tags ({', '.join(map(str, result['tags_used']))}) was detected in "
+            f"none of the fit's tags ({', '.join(map(str, result.tags_used))}) was detected in "
             f"{', '.join(str(s) for s in sources)}"
         )
     return samples, obs.only_tags(tags), tags, warnings
 
 
 def _run_external_evaluate(
-    robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
+    robot: Robot, result: FitResult, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
     out_dir: Path, deploy_worse: bool, say: Callable[[str], None],
 ) -> dict:
     """Held-out external-camera captures (read: `loaded`): `external_metrics` before/after, metrics.json,
@@ -109,7 +107,7 @@ def _run_external_evaluate(
     samples, warnings = samples_of(loaded, robot, cameras=())
     names = [c.name for c in robot.config.external_cameras]
     observations, detect_warnings = detect_observations(samples, robot, cameras=names)
-    tags = set(result["tags_used"])
+    tags = set(result.tags_used)
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
     truth = _truth_reference(captures)
@@ -138,7 +136,7 @@ def _run_external_evaluate(
     lines += ["", f"**{verdict}**"]
     metrics = {
         "wolfcal_version": wolfcal.__version__, "fit_dir": str(fit_dir.resolve()), "robot": str(robot.config.path),
-        "robot_name": robot.config.name, "free": result["free"], "mode": "held-out",
+        "robot_name": robot.config.name, "free": result.free, "mode": "held-out",
         "captures": [str(Path(c).resolve()) for c in captures], "external": figures,
         "verdict": {"worse": worse, "message": verdict}, "deploy": deploy, "warnings": warnings + detect_warnings,
     }  # fmt: skip
@@ -148,16 +146,6 @@ def _run_external_evaluate(
         say(line)
     say(f"report: {out_dir / 'report.md'}")
     return metrics
-
-
-def _fit_options(result: dict) -> FitOptions:
-    """The options the fit ran with, so that each cross-validation fold is fitted the same way."""
-    return FitOptions(
-        free=result["free"],
-        side=result["side"],
-        fix_tags=result["fix_tags"],
-        huber_k=(result.get("robust_loss") or {}).get("threshold_sigma", 3.0),
-    )
 
 
 def _truth_reference(captures: list[Path]) -> Corrections | None:
@@ -185,13 +173,13 @@ def _ground_rows(
 
 
 def _predicted_ground(
-    robot: Robot, camera: CameraModel, result: dict, tags: list[int], fitted: Corrections
+    robot: Robot, camera: CameraModel, result: FitResult, tags: list[int], fitted: Corrections
 ) -> float | None:
     """1-sigma ground error at 4.5 m [m] from the fit's covariance of its chain parameters (None without floor)."""
-    covariance = result.get("covariance")
+    covariance = result.covariance
     if robot.config.floor is None or not covariance:
         return None
-    chain = build_parameter_set(robot, result["free"], {HEAD_CAMERA: tags}, result["side"], result["fix_tags"])
+    chain = build_parameter_set(robot, result.free, {HEAD_CAMERA: tags}, result.side, result.fix_tags)
     index = {name: i for i, name in enumerate(covariance["names"])}
     keep = [k for k, name in enumerate(chain.names) if name in index]
     cols = [index[chain.names[k]] for k in keep]
@@ -257,29 +245,31 @@ def _evaluate(
     of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
-    result, robot, fitted = _load_fit(fit_dir)
+    result, robot = _load_fit(fit_dir)
+    fitted = result.corrections
     held_out = bool(captures)
-    _refuse_fitted_captures(captures, result["captures"])
-    sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
+    _refuse_fitted_captures(captures, result.captures)
+    sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result.captures]
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
-    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
+    intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
         return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
     samples, obs, tags, warnings = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
-    fold_of = None
+    fold_of, n_folds = None, None
     if held_out:
         after = model_errors(robot, obs, views, fitted)
         after_of_sample = [fitted] * obs.n_samples
-        mode_note = held_out_note(sources, result["captures"])
+        mode_note = held_out_note(sources, result.captures)
     else:
-        fold_of, models = cross_validate(robot, obs, _fit_options(result), folds, say)
+        fold_of, models = cross_validate(robot, obs, result.options, folds, say)
         after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
         after_of_sample = [models[k] for k in fold_of]
+        n_folds = len(models)
         mode_note = cross_validation_note(len(models), obs.n_samples)
     outliers = outlier_samples(before, after)
     check_left_out(
@@ -295,12 +285,12 @@ def _evaluate(
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
     predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
-    verdict = deploy_verdict(result["free"], s_before["rms_px"], s_after["rms_px"], structure, None, predicted,
+    verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, None, predicted,
                              camera_turn(robot, fitted), limits)  # fmt: skip
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(
-        robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.get("covariance")
+        robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.covariance
     )
     out_dir.mkdir(parents=True, exist_ok=True)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
@@ -311,11 +301,11 @@ def _evaluate(
         "fit_dir": str(fit_dir.resolve()),
         "robot": str(robot.config.path),
         "robot_name": robot.config.name,
-        "free": result["free"],
+        "free": result.free,
         "mode": "held-out" if held_out else "cross-validation",
         "mode_note": mode_note,
         "captures": [str(p.resolve()) for p in sources],
-        "folds": None if held_out else int(fold_of.max() + 1),
+        "folds": n_folds,
         "tags_used": tags,
         "n_samples": obs.n_samples,
         "n_outliers": int(outliers.sum()),
@@ -333,10 +323,11 @@ def _evaluate(
         "deploy": deploy,
         "camera_correction": camera_correction(robot, fitted),
         "parameters": [
-            {k: p[k] for k in ("name", "value", "std", "unit", "data_share", "display")}
-            for p in result["parameters"]
-        ],
-        "correlated_pairs": result.get("correlated_pairs", []),
+            {"name": p.name, "value": p.value, "std": p.std, "unit": p.unit, "data_share": p.data_share,
+             "display": p.display}
+            for p in result.parameters
+        ],  # fmt: skip
+        "correlated_pairs": result.correlated_pairs,
         "samples": sample_rows(obs, before, after, outliers, fold_of),
         "figures": [{"file": f"figures/{name}", "caption": caption} for name, caption in figures[1]],
         "warnings": warnings,

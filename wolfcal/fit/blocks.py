@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
-
-OUTLIER_FACTOR = 4.0  # a view is an outlier when its whitened RMS exceeds this many times the median view's
 
 
 @dataclass
@@ -35,8 +34,7 @@ class Block:
     system: str  # 'head' | 'external' | ...
     unit: str  # 'px' | 'm'
     dim: int  # measured numbers per unit
-    outlier_floor: float  # a view is left out only if also off by more than this [unit]
-    outlier_factor: float = OUTLIER_FACTOR  # ... and its whitened RMS exceeds this many times the median view's
+    outlier_rule: OutlierRule  # which views are left out (`wolfcal.outliers`; floor in the block's unit)
     nuisance: ParameterSet  # the block's own unknowns
     sample_of_unit: np.ndarray  # (U,) sample index of each unit
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit

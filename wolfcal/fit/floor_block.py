@@ -21,10 +21,10 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.camera_block import pixel_jacobian
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
-from wolfcal.projection import BEHIND_CAMERA_PX
+from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
+from wolfcal.projection import BEHIND_CAMERA_PX, pixel_jacobian
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
@@ -32,7 +32,6 @@ from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
 
 REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] below which a floor tag's corners are down-weighted
-OUTLIER_FLOOR_PX = 0.5
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
 SOLE_LEVER_M = 0.1  # a tilt between the soles counts as the displacement it makes at this distance [m]
@@ -72,7 +71,7 @@ class FloorBlock(Block):
     """Corners of the floor tags the head camera saw while the robot stood; see the module docstring."""
 
     system, unit, dim = "floor", "px", 2
-    outlier_floor = OUTLIER_FLOOR_PX
+    outlier_rule = FIT_VIEW_PX
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()
@@ -181,7 +180,7 @@ class SoleClosure(Block):
     """Both standing soles on one plane, once per floor sample; see the module docstring."""
 
     name, system, unit, dim = "sole closure", "floor", "m", 4
-    outlier_floor = 0.005
+    outlier_rule = SOLE_CLOSURE_M
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()

@@ -20,13 +20,13 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, Linearization
 from wolfcal.geometry import exp_so3, log_so3, right_jacobian_so3, rigid_registration, skew
 from wolfcal.markers import MarkerObservations
+from wolfcal.outliers import MOCAP_MARKER_M
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, point_motion
 from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
 
 MOUNT_PRIOR_M = 0.001  # marker mounts: 3D-printed parts differ from CAD by about a millimetre [m]
-OUTLIER_FLOOR_M = 0.001  # a marker is left out only if also off by more than this per axis (RMS) [m]
 POSE_PRIOR_M = 10.0  # weak priors of the base pose in the mocap frame: the data decide it [m]
 POSE_PRIOR_RAD = 3.0  # [rad]
 MIN_TORSO_MARKERS = 3
@@ -37,8 +37,7 @@ class MocapBlock(Block):
     """Markers measured by motion capture; see the module docstring."""
 
     system, unit, dim = "mocap", "m", 3
-    outlier_floor = OUTLIER_FLOOR_M
-    outlier_factor = 3.0  # a reflection 2 mm away is 4-7 noise sigmas at 0.3 mm: a tighter rule than for tag views
+    outlier_rule = MOCAP_MARKER_M
     name = "motion capture"
 
     def __init__(self, robot: Robot, obs: MarkerObservations, moving: bool = False,

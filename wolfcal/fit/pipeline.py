@@ -16,9 +16,10 @@ from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
 from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
-from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
-from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
+from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
 from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
@@ -29,36 +30,19 @@ from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
 
-SYSTEMS = ("head", "external", "mocap", "all")
 SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
-
-
-@dataclass(frozen=True)
-class FitOptions:
-    free: str = "camera"
-    side: str = "both"
-    fix_tags: bool = False
-    huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    system: str | None = None  # 'head' | 'external' | 'mocap' | 'all'; None: every system the captures contain
-    external_moving: bool = False  # one external-camera pose per sample instead of one per capture file
-    mocap_moving: bool = False  # one base pose in the motion-capture frame per sample instead of one per source
-
-    def __post_init__(self) -> None:
-        check_preset(self.free, self.side)  # before any file is read
-        if self.system is not None and self.system not in SYSTEMS:
-            raise WolfcalError(f"--system {self.system!r} must be one of {', '.join(SYSTEMS)}")
 
 
 @dataclass
 class Fit:
     robot: Robot
     observations: dict[str, Observations]  # per camera, only the tags used
-    blocks: list[Block]
+    blocks: list[Block]  # the measurement blocks (camera, floor, sole closure, motion capture)
     chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
     problem: Problem
     solution: Solution
@@ -133,15 +117,19 @@ def fit_observations(
     blocks: list[Block] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids)
         else:
             placement, names = placements(obs, options.external_moving)
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
+        block.outlier_rule = options.outlier
+        blocks.append(block)
     tags_by_camera = {b.camera_name: b.tag_ids for b in blocks}
     if floor is not None:
         check_floor_samples(robot, floor)
         tags_by_camera.setdefault(HEAD_CAMERA, [])
-        blocks.append(FloorBlock(robot, floor))
+        floor_block = FloorBlock(robot, floor)
+        floor_block.outlier_rule = options.outlier
+        blocks.append(floor_block)
         if len(robot.config.floor.soles) == 2:
             blocks.append(SoleClosure(robot, floor))
     chain = build_parameter_set(
@@ -165,7 +153,7 @@ def fit_observations(
         for b in blocks
     ]
     problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say)
+    solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
     return Fit(robot, used, blocks, chain, problem, solution)
 
 
@@ -278,8 +266,8 @@ def run_fit(
     force: bool = False,
     mocap: list[Path] = (),
     mocap_offsets: list[float] = (),
-) -> dict:
-    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
+) -> FitResult:
+    """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
     Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
     (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
     (one per capture, clock offsets `mocap_offsets` or estimated)."""
@@ -309,16 +297,16 @@ def run_fit(
     say(f"fitting --free {options.free} ...")
     fit = fit_observations(robot, observations, options, say, markers)
     check_solution_left_out(fit, captures)
-    data = result_dict(fit, options, captures, intrinsics, warnings)
+    result = fit_result(fit, options, captures, intrinsics, warnings)
     with output_set():
-        write_result(out_dir / "result.yaml", data)
+        write_result(out_dir / "result.yaml", result)
         write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
         write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
-    for line in summary_lines(data):
+    for line in summary_lines(result):
         say(line)
     for line in explain(fit.params, fit.solution):
         say(f"note: {line}")
     for line in warnings:
         say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
-    return data
+    return result

@@ -98,6 +98,13 @@ def load_robot(config_path: str | Path) -> Robot:
                 f"{where}: 'markers.list[{i}].link' {marker.link!r} (marker {marker.name}) is not a link of "
                 f"{config.urdf}"
             )
+    for system, ranges in config.sampling_ranges.items():
+        unknown = [j for j in ranges if j not in model.actuated_joint_names]
+        if unknown:
+            raise WolfcalError(
+                f"{where}: 'sampling_ranges.{system}' names joint(s) {', '.join(unknown)} that are not movable "
+                f"joints of {config.urdf}"
+            )
     if config.servos is not None:
         unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
         if unknown:

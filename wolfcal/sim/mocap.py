@@ -28,9 +28,9 @@ from wolfcal.errors import WolfcalError
 from wolfcal.geometry import transform_from_xyz_rpy
 from wolfcal.io.msgdefs import JOINT_STATE, MARKERS, MSGDEFS, stamp_dict
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.external_poses import EXTERNAL_RANGES
 from wolfcal.sim.mocap_scene import MocapNoise, true_marker_positions
 
 RATE_HZ = 100.0
@@ -39,20 +39,15 @@ START_NS = 1_700_000_000_000_000_000
 
 
 def mocap_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """Sampling range per joint: joints between the base and the markers' links move (the Wolfgang's leg ranges,
-    else the central 60 % of their URDF limits); the others stay at 0 (clipped to their limits)."""
-    moving = robot.actuated_joints_to([m.link for m in robot.config.markers.entries])
-    lo, hi = [], []
-    for name in robot.joint_names:
-        joint = robot.model.joints[name]
-        if name in moving:
-            mid, half = 0.5 * (joint.lower + joint.upper), 0.3 * (joint.upper - joint.lower)
-            a, b = EXTERNAL_RANGES.get(name, (mid - half, mid + half))
-        else:
-            a = b = float(np.clip(0.0, joint.lower, joint.upper))
-        lo.append(a)
-        hi.append(b)
-    return np.array(lo), np.array(hi)
+    """(lower, upper) per joint [rad]: joints between the base and the markers' links within the config's mocap
+    sampling ranges (`wolfcal.robot.ranges`); the others stay at 0 (clipped to their limits)."""
+    moving = set(robot.actuated_joints_to([m.link for m in robot.config.markers.entries]))
+    lo, hi = sampling_bounds(robot, "mocap")
+    for k, name in enumerate(robot.joint_names):
+        if name not in moving:
+            joint = robot.model.joints[name]
+            lo[k] = hi[k] = float(np.clip(0.0, joint.lower, joint.upper))
+    return lo, hi
 
 
 def timeline(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
