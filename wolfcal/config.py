@@ -86,6 +86,7 @@ class RobotConfig:
     servos: ServoConfig | None = None
     priors: PriorConfig = PriorConfig()
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
+    planning: PlanningConfig = field(default_factory=lambda: PlanningConfig())
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -323,7 +324,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link", "tags"),
-        ("camera", "external_cameras", "joint_states_topic", "servos", "priors"),
+        ("camera", "external_cameras", "joint_states_topic", "servos", "priors", *PLANNING_KEYS),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -350,6 +351,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
         external_cameras=external,
+        planning=_planning(path, r.data),
     )
 
 
@@ -366,3 +368,27 @@ def _check_topics_distinct(
         if topic in owners:
             raise WolfcalError(f"{path}: '{key}' {topic} is also '{owners[topic]}'; each camera needs its own topics")
         owners[topic] = key
+
+
+# --- pose planning: `rest_pose:` and `collision_radii:` (both optional) ------------------------------------------
+PLANNING_KEYS = ("rest_pose", "collision_radii")
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """Where joints a planned pose leaves alone stand, and the capsule radii of a URDF without <collision>."""
+
+    rest_pose: dict[str, float] = field(default_factory=dict)  # joint -> reading [rad]; others 0
+    collision_radii: dict[str, float] = field(default_factory=dict)  # link -> capsule radius [m]
+
+
+def _planning(path: Path, data: dict) -> PlanningConfig:
+    """`rest_pose: {joint: rad}` and `collision_radii: {link: m}` (names are checked against the URDF later)."""
+    out = {}
+    for key, positive in (("rest_pose", False), ("collision_radii", True)):
+        value = data.get(key) or {}
+        if not isinstance(value, dict):
+            raise WolfcalError(f"{path}: '{key}' must map names to numbers, e.g. {{RKnee: -0.26}}")
+        r = _Reader(path, value, key)
+        out[key] = {str(k): r.number(k, positive=positive) for k in value}
+    return PlanningConfig(**out)
