@@ -29,6 +29,7 @@ from wolfcal.vision.tags import tag_corners
 
 BATCH = 4000  # configurations drawn at a time
 MAX_BATCHES = 250
+HOPELESS_BATCHES = 25  # give up after this many batches without a single candidate
 CLEARANCE_M = 0.005  # smallest distance kept between two bodies of a candidate pose [m]
 
 
@@ -156,7 +157,8 @@ def draw_candidates(
         rejected["tags hidden by the body"] += int((~ok).sum())
         kept_q.append(q[ok])
         kept_v.append(visible[ok])
-        if sum(len(k) for k in kept_q) >= n:
+        found = sum(len(k) for k in kept_q)
+        if found >= n or (not found and drawn >= HOPELESS_BATCHES * BATCH):
             break
     q, visible = np.concatenate(kept_q)[:n], np.concatenate(kept_v)[:n]
     if not len(q):
