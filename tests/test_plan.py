@@ -79,10 +79,11 @@ def test_written_poses_are_inside_the_limits_and_collision_free(robot, small_pla
     path.write_text(poses_text(robot, plan, options))
     script = load_poses(path, joint_limits(robot, robot.config.servos.ids))  # refuses targets outside the limits
     assert len(script.poses) == 5
-    assert all(set(p.joints) == set(robot.config.servos.ids) for p in script.poses), "every servo joint is named"
+    assert all(list(p.joints) == plan.joints for p in script.poses), "every joint the plan moves is named"
+    assert not {"RElbow", "LShoulderPitch"} & set(plan.joints), "the arms are left alone"
     rest_gaps = _min_gaps(robot, np.zeros(len(robot.joint_names)))
     for pose in script.poses:
-        q = np.array([pose.joints[j] for j in robot.joint_names])
+        q = np.array([pose.joints.get(j, 0.0) for j in robot.joint_names])  # arms at the rest pose (0)
         gaps = _min_gaps(robot, q)
         # pairs that already touch in the rest pose are allowed to (as in the planner); every other pair is apart
         bad = {k: v for k, v in gaps.items() if v < 0 and rest_gaps[k] >= 0.005}
@@ -135,3 +136,18 @@ def test_external_camera_facing_away_finds_no_candidate(robot):
     options = PlanOptions(free="leg", system="external", poses=3, candidates=50, placement="-1.5,0,0,0,0,3.1416")
     with pytest.raises(WolfcalError, match="none of .* random poses within the joint limits shows"):
         make_plan(robot, options, say=lambda _m: None)
+
+
+def test_capture_refuses_a_script_whose_legs_cross(robot, tmp_path):
+    from wolfcal.capture.poses import check_collisions
+
+    path = tmp_path / "poses.yaml"
+    path.write_text("poses:\n- {name: apart, joints: {RHipRoll: -0.3, LHipRoll: 0.3}}\n"
+                    "- {name: crossed, joints: {RHipRoll: 0.6, LHipRoll: -0.6}}\n")
+    script = load_poses(path, joint_limits(robot, robot.config.servos.ids))
+    crossed = np.array([{"RHipRoll": 0.6, "LHipRoll": -0.6}.get(j, 0.0) for j in robot.joint_names])
+    assert min(_min_gaps(robot, crossed).values()) < 0, "the independent check sees the legs overlap"
+    with pytest.raises(WolfcalError, match="crossed: .* would touch"):
+        check_collisions(robot, script, path, start={})
+    first = load_poses(path, joint_limits(robot, robot.config.servos.ids)).poses[:1]
+    assert check_collisions(robot, type(script)(first, script.velocity), path, start={}) is None

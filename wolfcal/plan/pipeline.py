@@ -1,7 +1,8 @@
 """`wolfcal plan`: candidates -> expected information -> chosen poses -> capture order -> poses file + table.
 
 The poses file is the one `wolfcal capture --poses` and `wolfcal simulate --poses` read (`wolfcal.capture.poses`):
-every pose names every servo joint (the joints the plan moves, the others at the rest pose). The table compares the
+every pose names every joint the plan moves; the others stay where they stand (planned and checked at the
+rest pose; `capture --poses` checks again where they really stand). The table compares the
 standard deviations the fit would report (configured pixel and encoder noise) for the planned poses and for as many
 random candidate poses.
 """
@@ -57,7 +58,7 @@ class PlanOptions:
 @dataclass
 class Plan:
     q: np.ndarray  # (n, J) planned joint readings in capture order [rad]
-    joints: list[str]  # joints written per pose
+    joints: list[str]  # joints written per pose: those the plan moves
     move_time_s: float  # moves from the rest pose through every pose at the velocity [s]
     params: ParameterSet  # every unknown (chain first)
     n_chain: int
@@ -123,9 +124,8 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     planned_problem = model.problem(candidates.q[chosen], candidates.visible[chosen])
     random_problem = model.problem(candidates.q[others], candidates.visible[others])
     observable = ~sep.unseparable
-    servo_joints = list(robot.config.servos.ids) if robot.config.servos else robot.joint_names
     return Plan(
-        q=candidates.q[chosen], joints=[j for j in robot.joint_names if j in servo_joints],
+        q=candidates.q[chosen], joints=candidates.joints,
         move_time_s=move_time, params=problem.params, n_chain=problem.n_chain,
         planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
         groups=sep.groups(problem.params.names), candidates=candidates,
@@ -147,7 +147,7 @@ def poses_text(robot: Robot, plan: Plan, options: PlanOptions) -> str:
         f"--criterion {options.criterion}` for {robot.config.name}: {len(plan.q)} poses chosen from "
         f"{len(plan.candidates.q)} candidates,",
         f"# ordered for short moves (about {plan.move_time_s:.0f} s of moves at {options.velocity:.2g} rad/s). "
-        "Joint readings [rad]; every servo joint is named.",
+        "Joint readings [rad]; every joint the plan moves is named.",
         f"velocity: {options.velocity}",
         "poses:",
     ]

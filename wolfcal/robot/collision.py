@@ -182,12 +182,15 @@ def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
     return capsules
 
 
-def collision_model(robot: Robot) -> CollisionModel:
-    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); a clear error without either."""
+def collision_model(robot: Robot, required: bool = True) -> CollisionModel | None:
+    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); without either a clear error, or
+    None when not `required`."""
     body = _bodies(robot)
     capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
     if not capsules:
         capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
+    if not capsules and not required:
+        return None
     if not capsules:
         raise WolfcalError(
             f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
