@@ -151,3 +151,20 @@ def test_capture_refuses_a_script_whose_legs_cross(robot, tmp_path):
         check_collisions(robot, script, path, start={})
     first = load_poses(path, joint_limits(robot, robot.config.servos.ids)).poses[:1]
     assert check_collisions(robot, type(script)(first, script.velocity), path, start={}) is None
+
+
+def test_simulate_renders_a_capture_at_the_planned_poses(robot, small_plan, tmp_path):
+    from wolfcal.encoders import RAD_PER_TICK
+    from wolfcal.io.reader import read_capture
+    from wolfcal.sim.simulate import SimOptions, simulate_capture
+
+    options, plan = small_plan
+    path = tmp_path / "plan.yaml"
+    path.write_text(poses_text(robot, plan, options))
+    out = tmp_path / "sim.mcap"
+    simulate_capture(WOLFGANG, out, SimOptions(poses=path, binning=8, offsets="legs"), say=lambda _m: None)
+    samples = read_capture(out, robot.config).samples
+    assert len(samples) == len(plan.q)
+    for sample, q in zip(samples, plan.q):
+        reading = sample.joint_positions(robot.joint_names)  # the readings are the commanded targets, to the tick
+        np.testing.assert_allclose(reading, q, atol=RAD_PER_TICK)

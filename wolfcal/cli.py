@@ -217,6 +217,8 @@ def simulate(
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
+    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
+                                      "these poses instead of --samples random ones."),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -225,7 +227,7 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth, system=system, external=external, placement=placement,
+        truth_file=truth, system=system, external=external, placement=placement, poses=poses,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)
