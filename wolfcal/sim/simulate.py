@@ -31,6 +31,7 @@ from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
 from wolfcal.sim.external_truth import external_truth_entry
+from wolfcal.sim.mocap import simulate_mocap
 from wolfcal.sim.placement import placement_from_text, random_placement
 from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
@@ -38,7 +39,7 @@ from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
 
 OFFSET_SETS = ("none", "head", "legs", "all")
-SYSTEMS = ("head", "external", "all")
+SYSTEMS = ("head", "external", "all", "mocap")
 START_NS = 1_700_000_000_000_000_000
 
 
@@ -155,8 +156,17 @@ def simulate_capture(
     robot = load_robot(robot_path)
     if options.poses is not None:
         options = replace(options, samples=len(planned_readings(robot, options.poses)))
-    cameras = _cameras(robot, options, camera)
     inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
+    if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
+        check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
+        spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
+        truth = random_truth(robot, spec, np.random.default_rng(options.seed))
+        if options.truth_file is not None:
+            truth = load_corrections(options.truth_file, key="truth")
+        with output_set():
+            simulate_mocap(robot, out, options.samples, options.seed + 1, truth, say=say)
+        return truth
+    cameras = _cameras(robot, options, camera)
     check_outputs([out, *truth_paths(out)], force, inputs)
     with output_set():
         return _simulate(robot, out, options, cameras, say)
