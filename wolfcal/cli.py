@@ -237,6 +237,8 @@ def simulate(
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
+    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
+                                      "these poses instead of --samples random ones."),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -245,10 +247,38 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth, system=system, external=external, placement=placement,
+        truth_file=truth, system=system, external=external, placement=placement, poses=poses,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)
+
+
+@app.command()
+@friendly_errors
+def plan(
+    out: Path = typer.Option(..., "--out", help="Poses file to write (the format `capture --poses` reads)."),
+    robot: Path | None = robot_option(),
+    free: str = typer.Option("leg", "--free", help="Free parameters: camera | head_camera | leg."),
+    side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
+    system: str = typer.Option("head", "--system", help="Measurement system: head | external."),
+    poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
+    candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
+    criterion: str = typer.Option("D", "--criterion", help="D (determinant) | A (trace) | E (worst direction)."),
+    velocity: float = typer.Option(0.5, "--velocity", help="Capture move speed [rad/s] (for the order and time)."),
+    margin: float = typer.Option(0.1, "--margin", help="Kept from each joint limit [rad]."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of the candidates."),
+    external: str | None = typer.Option(None, "--external", help="External camera of the config (default: first)."),
+    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
+                                         "(m, rad, as for simulate); default 1.5 m in front, looking at the robot."),
+    force: bool = force_option(),
+) -> None:
+    """Plan the few calibration poses that tell the most: a poses file and the predicted uncertainty."""
+    from wolfcal.plan.pipeline import PlanOptions, run_plan
+
+    options = PlanOptions(free=free, side=side, system=system, poses=poses, candidates=candidates,
+                          criterion=criterion.upper(), velocity=velocity, margin=margin, seed=seed,
+                          external=external, placement=placement)  # fmt: skip
+    run_plan(default_robot(robot), out, options, say=typer.echo, force=force)
 
 
 @app.command()

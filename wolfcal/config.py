@@ -91,6 +91,7 @@ class RobotConfig:
     floor: FloorConfig | None = None  # the venue ground check (`floor:`), None when not configured
     # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
     sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
+    planning: PlanningConfig = field(default_factory=lambda: PlanningConfig())
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -360,7 +361,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r.check_keys(
         ("name", "urdf", "base_link"),
         ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
-         "sampling_ranges"),
+         "sampling_ranges", *PLANNING_KEYS),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -393,6 +394,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         markers=markers,
         floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
         sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
+        planning=_planning(path, r.data),
     )
 
 
@@ -525,3 +527,27 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
     return FloorConfig(tuple(soles), {str(k): float(v) for k, v in standing.items()}, tuple(tags))
+
+
+# --- pose planning: `rest_pose:` and `collision_radii:` (both optional) ------------------------------------------
+PLANNING_KEYS = ("rest_pose", "collision_radii")
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """Where joints a planned pose leaves alone stand, and the capsule radii of a URDF without <collision>."""
+
+    rest_pose: dict[str, float] = field(default_factory=dict)  # joint -> reading [rad]; others 0
+    collision_radii: dict[str, float] = field(default_factory=dict)  # link -> capsule radius [m]
+
+
+def _planning(path: Path, data: dict) -> PlanningConfig:
+    """`rest_pose: {joint: rad}` and `collision_radii: {link: m}` (names are checked against the URDF later)."""
+    out = {}
+    for key, positive in (("rest_pose", False), ("collision_radii", True)):
+        value = data.get(key) or {}
+        if not isinstance(value, dict):
+            raise WolfcalError(f"{path}: '{key}' must map names to numbers, e.g. {{RKnee: -0.26}}")
+        r = _Reader(path, value, key)
+        out[key] = {str(k): r.number(k, positive=positive) for k in value}
+    return PlanningConfig(**out)

@@ -24,10 +24,10 @@ def run_scripted(session: CaptureSession, script: PoseScript) -> None:
     bus.set_goal_positions(goals)  # torque on must not jump to a stale goal
     bus.set_profile_velocity(joints, velocity)
     bus.set_torque(joints, True)
-    for pose in script.poses:
+    for number, pose in enumerate(script.poses, start=1):
         if session.done():
             return
-        status.pose = pose.name
+        status.pose = f"{pose.name}, pose {number}/{len(script.poses)} of the plan"
         goals.update(pose.joints)
         bus.set_goal_positions(goals)
         reason = wait_arrival(session, goals, index, velocity)

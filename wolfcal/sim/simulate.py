@@ -11,7 +11,7 @@ encoder offsets as `<calibration rising>`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,7 @@ import yaml
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.io.truth import external_truth_entry, truth_paths
@@ -56,6 +57,7 @@ class SimOptions:
     system: str = "head"  # head | external | all
     external: str | None = None  # which external camera of the config (default: the first)
     placement: str | None = None  # 'x,y,z,roll,pitch,yaw' of the external camera (default: random)
+    poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
 
 
 @dataclass
@@ -108,7 +110,9 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
 
 def _poses(robot: Robot, options: SimOptions, cameras: dict[str, _SimCamera], truth: Corrections,
            rng: np.random.Generator) -> np.ndarray:  # fmt: skip
-    """(S, J) true joint angles in which every simulated camera sees tags well."""
+    """(S, J) true joint angles in which every simulated camera sees tags well (or those of the poses file)."""
+    if options.poses is not None:  # the servos reach the commanded readings: true angle = reading + true offset
+        return planned_readings(robot, options.poses) + truth.offset_vector(robot.joint_names)
     if options.system == "head":
         return random_visible_poses(robot, cameras[HEAD_CAMERA].image, truth, options.samples, rng)[0]
     name = next(n for n in cameras if n != HEAD_CAMERA)
@@ -150,7 +154,9 @@ def simulate_capture(
     if options.system not in SYSTEMS:
         raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
-    inputs = [robot.config.path, robot.config.urdf] + ([options.truth_file] if options.truth_file else [])
+    if options.poses is not None:
+        options = replace(options, samples=len(planned_readings(robot, options.poses)))
+    inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
     if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
         check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
         spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
@@ -248,3 +254,15 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
         }
     write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
+
+
+def planned_readings(robot: Robot, path: Path) -> np.ndarray:
+    """(S, J) joint readings [rad] of a poses file, checked as `capture --poses` checks it: each joint at its
+    latest target, joints never named at the rest pose (`rest_pose:`, others 0)."""
+    script = load_poses(path, joint_limits(robot, robot.joint_names))
+    targets = dict(robot.config.planning.rest_pose)
+    rows = []
+    for pose in script.poses:
+        targets.update(pose.joints)
+        rows.append([targets.get(j, 0.0) for j in robot.joint_names])
+    return np.array(rows)
