@@ -58,7 +58,7 @@ PALETTE = [AFTER, (40, 170, 40), (30, 160, 230), (160, 60, 160), (120, 120, 40),
 class Calibration:
     label: str  # the fit folder's name
     fit_dir: str
-    system: str  # the fit's --system
+    system: str  # the measurement systems the fit used (its blocks)
     preset: str  # --free (and --side)
     corrections: Corrections
 
@@ -86,8 +86,9 @@ def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[
                                f"'{robot.config.name}'; compare calibrations of one robot")  # fmt: skip
         robot = robot or fit_robot
         preset = result.free + ("" if result.side == "both" else f" ({result.side})")
-        calibrations.append(Calibration(Path(fit_dir).name, str(Path(fit_dir).resolve()), result.system or "all",
-                                        preset, result.corrections))  # fmt: skip
+        system = ", ".join(result.systems_used) or result.system
+        calibrations.append(Calibration(Path(fit_dir).name, str(Path(fit_dir).resolve()), system, preset,
+                                        result.corrections))  # fmt: skip
         used.append(result.captures)
     labels = [c.label for c in calibrations]
     for c in calibrations:
