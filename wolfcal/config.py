@@ -99,6 +99,18 @@ class RobotConfig:
             raise WolfcalError(f"the robot config {self.path} has no 'camera:'; {why}")
         return self.camera
 
+    def marker_config(self, why: str = "motion capture needs them") -> MarkersConfig:
+        """The motion-capture markers' config; a WolfcalError naming the file when the config has none."""
+        if self.markers is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'markers:'; {why}")
+        return self.markers
+
+    def floor_config(self, why: str = "floor samples need it") -> FloorConfig:
+        """The venue ground check's config; a WolfcalError naming the file when the config has none."""
+        if self.floor is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'floor:'; {why}")
+        return self.floor
+
     def external_camera(self, name: str) -> ExternalCameraConfig:
         """The external camera called `name`; a WolfcalError listing the configured ones otherwise."""
         for camera in self.external_cameras:
@@ -506,7 +518,7 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     tags_data = r.data.get("tags") or []
     if not isinstance(tags_data, list):
         r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
-    tags = []
+    tags: list[FloorTagConfig] = []
     on_links = {t.id for t in link_tags}
     for i, item in enumerate(tags_data):
         t = _Reader(path, item, f"floor.tags[{i}]")

@@ -54,7 +54,7 @@ def run_capture(
     with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
-        if script:  # before anything moves: where the robot stands decides the joints no pose names
+        if script and options.poses:  # before anything moves: where the robot stands decides the joints no pose names
             start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
             note = check_collisions(robot, script, options.poses, start)
             if note:

@@ -9,11 +9,21 @@ camera's pose per placement). The problem and the solver know blocks only throug
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
+from wolfcal.observations import Observations
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
+
+
+class TagViewBlock(Protocol):
+    """A block whose units are tag corners seen by one camera (camera, floor and sole-closure blocks)."""
+
+    obs: Observations
+    camera_name: str
+    tag_ids: list[int]
 
 
 @dataclass

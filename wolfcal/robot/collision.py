@@ -182,19 +182,22 @@ def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
     return capsules
 
 
-def collision_model(robot: Robot, required: bool = True) -> CollisionModel | None:
-    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); without either a clear error, or
-    None when not `required`."""
+def optional_collision_model(robot: Robot) -> CollisionModel | None:
+    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); None without either."""
     body = _bodies(robot)
     capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
     if not capsules:
         capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
-    if not capsules and not required:
-        return None
-    if not capsules:
+    return CollisionModel(robot, capsules, source, rest_configuration(robot)) if capsules else None
+
+
+def collision_model(robot: Robot) -> CollisionModel:
+    """The robot's capsules (`optional_collision_model`); a clear error when it has none."""
+    model = optional_collision_model(robot)
+    if model is None:
         raise WolfcalError(
             f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
             "poses cannot be checked for self-collision; add 'collision_radii: {link: metres}' (capsules between "
             "joint origins) for the links of the body, e.g. collision_radii: {r_lower_leg: 0.04}"
         )
-    return CollisionModel(robot, capsules, source, rest_configuration(robot))
+    return model

@@ -32,7 +32,7 @@ def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.n
     """(4, 3) corners of each floor tag in the floor frame [m], aruco order."""
     out = {}
     for tag_id, (x, y, yaw) in places.items():
-        tag = robot.config.floor.tag(tag_id)
+        tag = robot.config.floor_config().tag(tag_id)
         c, s = np.cos(yaw), np.sin(yaw)
         p = tag_corners(tag.size)
         out[tag_id] = np.stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1],
@@ -46,7 +46,7 @@ def simulate_floor(
     margin_px: float = 10.0, source: str = "floor.mcap",
 ) -> FloorScene:
     """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
-    ids = robot.config.floor.tag_ids
+    ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
     places = {t: np.array([r[k] * np.cos(bearing[k]), r[k] * np.sin(bearing[k]), rng.uniform(-np.pi, np.pi)])

@@ -78,8 +78,8 @@ def detect_observations(
         sample.joint_positions(robot.joint_names)
     families: Families = {}
     floor_tags = robot.config.floor.tags if robot.config.floor is not None else ()
-    for tag in (*robot.config.tags, *floor_tags):  # tags on links and tags lying on the floor
-        families.setdefault(tag.family, set()).add(tag.id)
+    for family, tag_id in [(t.family, t.id) for t in robot.config.tags] + [(t.family, t.id) for t in floor_tags]:
+        families.setdefault(family, set()).add(tag_id)  # tags on links and tags lying on the floor
     jobs = [(s, n) for s in samples for n in s.images if wanted is None or n in wanted]  # one per image
     if not jobs:
         raise WolfcalError(f"no images of camera(s) {', '.join(sorted(wanted or []))} in the samples")
