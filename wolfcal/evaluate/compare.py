@@ -10,7 +10,7 @@ held-out captures can measure, each with the existing evaluation code of its sys
 - motion capture: distance between measured and predicted marker [mm] after the base pose in the motion-capture frame
   and the marker mounts (prior 1 mm) are re-estimated with the chain held at the judged model (`MocapBlock`);
   markers left out as outliers under any model are left out for all.
-- ground error at 4.5 m [cm] from floor samples: not measured yet; its column is added in `COLUMN_BUILDERS`.
+- ground error at 4.5 m [cm] from floor samples: not measured yet (its place: GROUND COLUMN in `run_compare`).
 Each cell: mean and standard deviation over the held-out samples (views, markers) in the column's unit.
 Deploy: among the calibrations that make no column worse than "before" (mean above before's by more than
 `WORSE_TOLERANCE`), the one with the lowest mean ratio to "before" over all columns.
@@ -23,6 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
@@ -41,6 +42,7 @@ from wolfcal.fit.problem import Problem
 from wolfcal.fit.solver import solve
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.mocap_load import load_marker_observations
+from wolfcal.io.samples import Capture
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_output_folder
 from wolfcal.robot.corrections import Corrections
@@ -76,7 +78,8 @@ def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[
     """The robot shared by the fits, each fit as a Calibration, and the captures each was fitted on."""
     if not fit_dirs:
         raise WolfcalError("give at least one fit folder (the --out folder of `wolfcal fit`)")
-    robot, calibrations, used = None, [], []
+    robot: Robot | None = None
+    calibrations, used = [], []
     for fit_dir in fit_dirs:
         if Path(fit_dir).is_dir() and not (Path(fit_dir) / "result.yaml").is_file():
             raise WolfcalError(f"{fit_dir}: no result.yaml; give the --out folder of a `wolfcal fit` run")
@@ -90,6 +93,7 @@ def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[
         calibrations.append(Calibration(Path(fit_dir).name, str(Path(fit_dir).resolve()), system, preset,
                                         result.corrections))  # fmt: skip
         used.append(result.captures)
+    assert robot is not None  # fit_dirs is not empty
     labels = [c.label for c in calibrations]
     for c in calibrations:
         if labels.count(c.label) > 1:
@@ -111,7 +115,7 @@ def _topics(path: Path) -> set[str]:
     return {c.topic for c in summary.channels.values() if counts.get(c.id, 1)}
 
 
-def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list, say: Callable) -> list[Column]:
+def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable) -> list[Column]:
     """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen."""
     samples, _ = samples_of(loaded, robot)
     observations, _ = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
@@ -134,7 +138,9 @@ def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list, sa
     return [px, mm]
 
 
-def _external_columns(robot: Robot, models: dict[str, Corrections], loaded: list, say: Callable) -> list[Column]:
+def _external_columns(
+    robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable
+) -> list[Column]:
     """Each external camera: foot tag relative to torso tag, tag-grid distance [mm] per view."""
     names = [c.name for c in robot.config.external_cameras]
     if not any(n in c.cameras for c in loaded for n in names):
@@ -173,11 +179,6 @@ def _mocap_column(robot: Robot, models: dict[str, Corrections], captures: list[P
     return [column]
 
 
-# Column builders by measurement system. Ground error at 4.5 m [cm] from floor samples: add its builder here
-# (a Column with unit "cm", system "head") once `wolfcal evaluate` measures it.
-COLUMN_BUILDERS = {"head": _head_columns, "external": _external_columns, "mocap": _mocap_column}
-
-
 def _cell(values: np.ndarray) -> dict:
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
@@ -189,7 +190,8 @@ def _cell(values: np.ndarray) -> dict:
 def decide(columns: list[Column], calibrations: list[Calibration]) -> dict:
     """Which calibration to deploy (see the module docstring) and why; per calibration its mean ratio to before and
     the columns it makes worse."""
-    verdicts = {}
+    verdicts: dict[str, dict[str, Any]] = {}
+    ratio_of: dict[str, float] = {}
     for c in calibrations:
         worse, ratios = [], []
         for col in columns:
@@ -199,16 +201,15 @@ def decide(columns: list[Column], calibrations: list[Calibration]) -> dict:
             ratios.append(mine / before)
             if mine > before * (1 + WORSE_TOLERANCE):
                 worse.append(f"{col.title}: {mine:.2f} {col.unit} against {before:.2f} {col.unit} before")
-        verdicts[c.label] = {"mean_ratio_to_before": round(float(np.mean(ratios)), 4) if ratios else None,
-                             "worse_columns": worse}  # fmt: skip
-    eligible = [label for label, v in verdicts.items()
-                if not v["worse_columns"] and v["mean_ratio_to_before"] is not None
-                and v["mean_ratio_to_before"] < 1.0]  # fmt: skip
+        if ratios:
+            ratio_of[c.label] = round(float(np.mean(ratios)), 4)
+        verdicts[c.label] = {"mean_ratio_to_before": ratio_of.get(c.label), "worse_columns": worse}
+    eligible = [label for label, ratio in ratio_of.items() if not verdicts[label]["worse_columns"] and ratio < 1.0]
     if not eligible:
         return {"deploy": None, "calibrations": verdicts,
                 "message": "deploy none of them: each makes a column worse than the input URDF or improves none"}
-    best = min(eligible, key=lambda label: verdicts[label]["mean_ratio_to_before"])
-    ratio = verdicts[best]["mean_ratio_to_before"]
+    best = min(eligible, key=lambda label: ratio_of[label])
+    ratio = ratio_of[best]
     message = (f"deploy {best}: it makes no column worse than the input URDF and has the lowest mean error relative "
                f"to it over the {len(columns)} column(s) ({ratio:.2f} of before's on average)")
     rejected = [f"{label} is worse than before on {'; '.join(v['worse_columns'])}" for label, v in verdicts.items()
@@ -265,14 +266,17 @@ def run_compare(
                            "of the head camera, an external camera or motion capture")  # fmt: skip
     models = {BEFORE_LABEL: Corrections(), **{c.label: c.corrections for c in calibrations}}
     loaded = load_captures(robot, camera_captures, None, say) if camera_captures else []
-    columns = [*COLUMN_BUILDERS["head"](robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say),
-               *COLUMN_BUILDERS["external"](robot, models, loaded, say),
-               *COLUMN_BUILDERS["mocap"](robot, models, mocap_captures, say)]  # fmt: skip
+    # One builder per measurement system. GROUND COLUMN: the measured ground error at 4.5 m [cm] from floor samples
+    # goes here (a Column with unit "cm", system "head") once `wolfcal evaluate` measures it; then drop it from
+    # metrics["not_measured"].
+    columns = [*_head_columns(robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say),
+               *_external_columns(robot, models, loaded, say),
+               *_mocap_column(robot, models, mocap_captures, say)]  # fmt: skip
     if not columns:
         raise WolfcalError(f"{', '.join(map(str, captures))}: no view of a configured tag or marker that the "
                            "calibrations can be measured on; check the captures and the robot config's tags/markers")
     decision = decide(columns, calibrations)
-    metrics = {
+    metrics: dict[str, Any] = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "robot": str(robot.config.path), "robot_name": robot.config.name,
