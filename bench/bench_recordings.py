@@ -17,29 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.poses import random_visible_poses
-from wolfcal.sim.recording import RecordingOptions, write_recording
-from wolfcal.sim.simulate import offset_joints
-from wolfcal.sim.truth import TruthSpec, random_truth
+from wolfcal.sim.recording import RecordingOptions, simulate_recording
 from wolfcal.vision.observe import detect_observations
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
-
-
-def simulate(path: Path, seed: int, poses: int, binning: int, offsets: str, options: RecordingOptions):
-    """Write a recording with true encoder offsets on the joints of `offsets` (none | head); returns (robot, truth)."""
-    robot = load_robot(CONFIG)
-    rng = np.random.default_rng(seed)
-    full = load_camera_info(robot.config.head_camera().intrinsics)
-    camera = full.scaled(1 / binning, 1 / binning, full.width // binning, full.height // binning)
-    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
-    q_still = random_visible_poses(robot, camera, truth, poses, rng)[0]
-    write_recording(path, robot, truth, camera, q_still, RecordingOptions(**{**options.__dict__, "seed": seed}))
-    return robot, truth
 
 
 def z_scores(robot, truth, path: Path, free: str):
@@ -60,7 +44,6 @@ def main() -> None:
     parser.add_argument("--free", nargs="+", default=["head_camera", "camera"])
     parser.add_argument("--verbose", action="store_true", help="print |z| of every parameter")
     args = parser.parse_args()
-    options = RecordingOptions(flicker=args.flicker)
     summary = {free: [] for free in args.free}
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
@@ -69,7 +52,9 @@ def main() -> None:
                 start = time.perf_counter()
                 # the head joints' offsets are true errors only where the preset frees them
                 offsets = "head" if free == "head_camera" else "none"
-                robot, truth = simulate(path, seed, args.poses, args.binning, offsets, options)
+                robot = load_robot(CONFIG)
+                truth = simulate_recording(robot, path, args.poses, offsets, args.binning,
+                                           RecordingOptions(flicker=args.flicker, seed=seed))
                 simulated = time.perf_counter() - start
                 start = time.perf_counter()
                 fit, z = z_scores(robot, truth, path, free)

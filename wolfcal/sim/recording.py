@@ -5,7 +5,8 @@ Per still pose: `move_s` of smooth motion from the previous pose, then `hold_s` 
 `joint_rate_hz` (encoder readings: true angle minus the true offset, quantised to ticks; with `flicker` a reading
 near a tick boundary flips between the two neighbouring ticks from message to message, as a servo's encoder does),
 images of the head camera at `image_rate_hz` (rendered at the true angles of their own stamp, each with its own
-image noise), camera info at 1 Hz. Messages are written with mcap_ros2 directly.
+image noise), camera info at 1 Hz. Messages are written with mcap_ros2 directly. `simulate_recording` draws a
+truth and still poses in which the head camera sees a tag and writes such a recording of them.
 """
 
 from __future__ import annotations
@@ -17,13 +18,17 @@ import cv2
 import numpy as np
 from mcap_ros2.writer import Writer as Ros2Writer
 
+from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.writer import camera_info_message
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
+from wolfcal.sim.poses import random_visible_poses
 from wolfcal.sim.scene import SimScene
+from wolfcal.sim.simulate import offset_joints
+from wolfcal.sim.truth import TruthSpec, random_truth
 
 START_NS = 1_700_000_000_000_000_000
 
@@ -86,3 +91,19 @@ def write_recording(
                 message = camera_info_message(camera, (0, 0), stamp, config.camera.frame)
                 writer.write_message(config.camera.info_topic, schemas[CAMERA_INFO], message, log_time=stamp)
         writer.finish()
+
+
+def simulate_recording(
+    robot: Robot, path: Path, poses: int, offsets: str = "none", binning: int = 4,
+    options: RecordingOptions = RecordingOptions(),
+) -> Corrections:
+    """Write a recording of `poses` random still poses of the head camera (its config intrinsics, images binned by
+    `binning`) with true encoder offsets on the joints of `offsets` (see `offset_joints`); returns the truth.
+    Everything random follows `options.seed`."""
+    rng = np.random.default_rng(options.seed)
+    full = load_camera_info(robot.config.head_camera().intrinsics)
+    camera = full.scaled(1 / binning, 1 / binning, full.width // binning, full.height // binning)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
+    q_still = random_visible_poses(robot, camera, truth, poses, rng)[0]
+    write_recording(path, robot, truth, camera, q_still, options)
+    return truth
