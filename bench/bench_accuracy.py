@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
+from wolfcal.io.truth import truth_paths
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import load_corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors
-from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
+from wolfcal.sim.simulate import SimOptions, simulate_capture
 from wolfcal.vision.observe import detect_observations
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"

@@ -9,12 +9,12 @@ from typer.testing import CliRunner
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.cli import app
+from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.io.reader import read_capture
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.accuracy import camera_pose_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ROOT / "configs" / "wolfgang"

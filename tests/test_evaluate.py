@@ -1,5 +1,6 @@
 """`wolfcal evaluate` against simulated truth: metrics, ground error, deploy files, refusal, report, bad input."""
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -21,11 +22,12 @@ from wolfcal.fit import pipeline as fit_pipeline
 from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
+from wolfcal.io.truth import truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.sim.scenario import synthetic_scenario
-from wolfcal.sim.simulate import SimOptions, simulate_capture, truth_paths
+from wolfcal.sim.simulate import SimOptions, simulate_capture
 from wolfcal.sim.truth import TruthSpec
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -102,6 +104,7 @@ def test_held_out_errors_before_and_after(held_out):
     assert m["after"]["rms_px"] < 0.1 * m["before"]["rms_px"]
     assert m["after"]["tag_grid_mean_mm"] < 0.5 * m["before"]["tag_grid_mean_mm"]
     assert not m["verdict"]["worse"] and m["deploy"]["written"]
+    assert m["verdict"]["deploy"] and not m["structure"]["unexplained"] and m["structure"]["scale"] < 1.5
     assert len(m["samples"]) == m["n_samples"] >= 8
     table = before_after_table(m)
     assert "ground error, ball at 4.5 m [cm]" in table and "tag-grid" in table
@@ -202,6 +205,7 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera, monkeypatch):
     assert m["after"]["rms_px"] > m["before"]["rms_px"]
     assert not any((out / name).exists() for name in DEPLOY_FILES)
     assert "makes held-out error worse" in (out / "report.html").read_text()
+    assert m["verdict"]["message"].startswith("Do not deploy")
     runner = CliRunner()
     args = [
         "evaluate",
@@ -244,3 +248,21 @@ def test_bad_input_is_a_clear_error(tmp_path, sim):
         run_evaluate(sim / "fit", [tmp_path / "other.mcap"], tmp_path / "out", say=quiet)
     result = CliRunner().invoke(app, ["evaluate", str(tmp_path / "nowhere"), "--out", str(tmp_path / "out")])
     assert result.exit_code != 0 and "fit folder not found" in result.output
+
+
+def test_fit_result_round_trip_keeps_the_fit_settings(sim, tmp_path):
+    """result.yaml is read back as the FitResult that was written (same keys and values), with a version, and the
+    settings cross-validation reuses are the fit's own, including non-default outlier and noise rules."""
+    from wolfcal.fit.result import RESULT_VERSION, load_result, write_result
+    from wolfcal.outliers import OutlierRule
+
+    result = load_result(sim / "fit")
+    assert result.version == RESULT_VERSION
+    assert result.options == FitOptions(free="camera", system="all")
+    assert yaml.safe_load((sim / "fit" / "result.yaml").read_text()) == result.to_dict()
+    custom = FitOptions(free="camera", huber_k=2.5, outlier=OutlierRule(factor=5.0, floor=0.7), noise_floor_px=0.08)
+    result.robust_loss = {"kind": "huber", "threshold_sigma": custom.huber_k}
+    result.outlier_rule = {"factor": custom.outlier.factor, "floor_px": custom.outlier.floor}
+    result.noise_floor_px = custom.noise_floor_px
+    write_result(tmp_path / "result.yaml", result)
+    assert load_result(tmp_path).options == dataclasses.replace(custom, system="all")

@@ -21,14 +21,13 @@ from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDE
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, group_by_stamp
 from wolfcal.io.recover import recover_capture
+from wolfcal.io.truth import load_external_truth, truth_paths
 from wolfcal.io.writer import CaptureWriter, camera_info_message
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.external_poses import external_tag_poses
-from wolfcal.sim.external_truth import load_external_truth
 from wolfcal.sim.faulty import rewrite_capture, with_camera_info, with_damaged_image
-from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations
 from wolfcal.vision.tags import tag_corners
 
@@ -93,7 +92,7 @@ def test_config_refuses_bad_external_cameras(tmp_path, cameras, message):
 
 def test_config_needs_some_camera(tmp_path):
     with pytest.raises(WolfcalError, match="needs a head camera"):
-        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None))
+        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None, markers=None))
 
 
 # --- own capture files with several cameras ------------------------------------------------------------------

@@ -8,9 +8,9 @@ import yaml
 from typer.testing import CliRunner
 
 from wolfcal.cli import app
+from wolfcal.evaluate.accuracy import link_position_errors
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.accuracy import link_position_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 CAPTURE = ROOT / "captures" / "external_demo.mcap"

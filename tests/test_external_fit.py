@@ -12,9 +12,9 @@ import yaml
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import link_position_errors
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.accuracy import link_position_errors
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.fit.result import explain
-from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors
 from wolfcal.sim.scenario import synthetic_scenario
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -42,7 +42,7 @@ def test_leg_preset_puts_soles_within_3mm(robot, camera):
     # Exactly confounded pairs are reported in words, not silently fitted.
     sentences = explain(fit.params, fit.solution)
     together = [s for s in sentences if "move together" in s]
-    assert any("HeadTilt.offset" in s and "camera_optical_frame_uncalibrated_frame.rx" in s for s in together)
+    assert any("HeadTilt.offset" in s and "camera.rx" in s for s in together)
     assert any("RAnkleRoll.offset" in s for s in sentences)
 
 
@@ -79,3 +79,19 @@ def test_a_misdetected_tag_is_left_out_but_not_its_sample(robot, camera):
     assert not fit.solution.blocks[0].outlier_samples[s]
     rot, _ = camera_pose_errors(robot, fit.corrections, scenario.truth)
     assert np.rad2deg(rot.max()) < 0.05
+
+
+def test_the_outlier_rule_and_noise_floor_are_the_fits_settings(robot, camera):
+    """FitOptions' outlier rule and noise floor decide the fit: a floor above the misdetection keeps the view, a
+    noise floor above the real noise holds the estimated noise there."""
+    from wolfcal.outliers import OutlierRule
+
+    scenario = synthetic_scenario(robot, camera, n=24, seed=16)
+    obs = scenario.obs
+    s = [s for s in range(obs.n_samples) if len(obs.tags_in_sample(s)) == 2][0]
+    obs.uv[(obs.sample_index == s) & (obs.tag_ids == 44)] += [4.0, -3.0]
+    fit = fit_observations(robot, obs, FitOptions(free="camera", outlier=OutlierRule(factor=4.0, floor=50.0)))
+    assert fit.solution.blocks[0].outlier_views == []
+    fit = fit_observations(robot, obs, FitOptions(free="camera", noise_floor_px=3.0))
+    assert fit.solution.blocks[0].sigma >= 3.0
+    assert fit.solution.blocks[0].outlier_views == [(s, 44)]

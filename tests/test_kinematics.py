@@ -103,6 +103,10 @@ tags:
         (BASE.replace("frame: camera_optical_frame", "frame: eye"), ["camera.frame", "eye"]),
         (BASE.replace("size: 0.08", "size: -1"), ["tags[0].size", "positive"]),
         (BASE + "servos: {ids: {Tail: 3}}\n", ["servos.ids", "Tail"]),
+        (BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: tag43"),
+         ["'camera'", "tag43", "tag<id>"]),
+        (BASE + "external_cameras: [{name: camera, image_topic: /t/i, info_topic: /t/c}]\n",
+         ["camera.name", "external camera's name"]),
     ],
 )
 def test_config_errors_name_file_and_key(tmp_path, text, words):
@@ -111,3 +115,46 @@ def test_config_errors_name_file_and_key(tmp_path, text, words):
         load_robot(path)
     for word in words:
         assert word in str(info.value)
+
+
+@pytest.mark.parametrize("fold_offsets", [False, True])
+def test_calibrated_urdf_round_trip(robot, tmp_path, fold_offsets):
+    """A calibrated URDF read back by an independent reader (yourdfpy, which takes `<calibration rising>` as the
+    encoder offset q_model = q_measured + rising) gives the corrected model's kinematics to 1e-9."""
+    from wolfcal.robot.urdf_writer import write_calibrated_urdf
+
+    rng = np.random.default_rng(5)
+    model = robot.model
+    truth = Corrections(
+        offsets={"RKnee": 0.031, "HeadTilt": -0.017, "LAnklePitch": 0.009},
+        frames={
+            robot.camera_joint: np.array([0.004, -0.002, 0.003, 0.02, -0.05, 0.01]),
+            "RKnee": np.array([0.001, 0.0, -0.002, 0.0, 0.01, 0.0]),
+        },
+    )
+    out = tmp_path / "calibrated.urdf"
+    write_calibrated_urdf(robot.config.urdf, model, truth, out, fold_offsets=fold_offsets)
+    urdf = yourdfpy.URDF.load(str(out), load_meshes=False)
+    rising = {j.name: j.calibration.rising for j in urdf.robot.joints if j.calibration is not None}
+    assert rising == ({} if fold_offsets else truth.offsets)
+    links = ["camera_optical_frame", "r_sole", "l_sole", "head"]
+    q = random_q(model, 8, rng)
+    expected = model.link_poses(q, links, truth, base="base_link")
+    for i in range(len(q)):
+        urdf.update_cfg({j: q[i, model.column(j)] + rising.get(j, 0.0) for j in model.actuated_joint_names})
+        for link in links:
+            np.testing.assert_allclose(urdf.get_transform(link, "base_link"), expected[link][i], atol=1e-9)
+
+
+def test_camera_parameters_take_the_configured_name(tmp_path):
+    """The head camera's pose parameters are named after `camera.name` (default `camera`); they still correct the
+    fixed joint above the optical frame."""
+    from wolfcal.robot.parameters import build_parameter_set
+
+    named = BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: eye")
+    for text, prefix in ((BASE, "camera"), (named, "eye")):
+        robot = load_robot(write_config(tmp_path, text))
+        params = build_parameter_set(robot, "camera", {"head": [43]})
+        frames = [p for p in params.parameters if p.kind == "frame"]
+        assert [p.name for p in frames] == [f"{prefix}.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")]
+        assert {p.target for p in frames} == {"camera_optical_frame_uncalibrated_frame"}

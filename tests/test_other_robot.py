@@ -5,6 +5,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 import yaml
 from mcap_ros2.writer import Writer as Ros2Writer
 from typer.testing import CliRunner
@@ -12,6 +13,7 @@ from typer.testing import CliRunner
 from wolfcal.camera.model import CameraModel
 from wolfcal.cli import app
 from wolfcal.encoders import encoder_readings
+from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform, rotation_angle
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS
 from wolfcal.robot.corrections import Corrections
@@ -132,6 +134,32 @@ def test_fit_on_a_plain_recording_of_another_robot(tmp_path):
     assert np.rad2deg(rotation_angle(error[:, :3, :3])[0]) < 0.25
     assert np.linalg.norm(error[0, :3, 3]) < 0.003
     for p in data["parameters"]:
-        if p["name"].startswith("cam_mount."):
+        if p["name"].startswith("camera."):  # the correction of the URDF joint cam_mount
+            assert p["urdf_joint"] == "cam_mount"
             true = TRUTH.frames["cam_mount"]["x y z rx ry rz".split().index(p["name"].split(".")[1])]
             assert abs(p["value"] - true) < 3 * p["std"], p["name"]
+
+
+def test_simulation_ranges_come_from_the_config_alone(tmp_path):
+    """Without `sampling_ranges` every joint is drawn within its URDF limits shrunk by 10 % at each end; with them,
+    the listed joints within their ranges and the others at 0; simulated poses respect them."""
+    from wolfcal.robot.ranges import sampling_bounds
+    from wolfcal.sim.poses import random_visible_poses
+
+    (tmp_path / "pantilt.urdf").write_text(URDF)
+    (tmp_path / "robot.yaml").write_text(CONFIG)
+    robot = load_robot(tmp_path / "robot.yaml")
+    lo, hi = sampling_bounds(robot, "head")
+    assert robot.joint_names == ["pan", "tilt", "arm"]
+    np.testing.assert_allclose(lo, [-0.8, -0.03, -0.8])
+    np.testing.assert_allclose(hi, [0.8, 1.33, 0.8])
+    (tmp_path / "robot.yaml").write_text(CONFIG + "sampling_ranges:\n  head: {pan: [-0.3, 0.3], tilt: [0.4, 2.0]}\n")
+    robot = load_robot(tmp_path / "robot.yaml")
+    lo, hi = sampling_bounds(robot, "head")
+    np.testing.assert_allclose(lo, [-0.3, 0.4, 0.0])
+    np.testing.assert_allclose(hi, [0.3, 1.5, 0.0])  # tilt's URDF limit is 1.5
+    q, visible = random_visible_poses(robot, CAMERA, TRUTH, 5, np.random.default_rng(0), margin_px=15, min_size_px=15)
+    assert np.all((q >= lo) & (q <= hi)) and visible.any(axis=1).all()
+    (tmp_path / "robot.yaml").write_text(CONFIG + "sampling_ranges:\n  head: {wrist: [-0.3, 0.3]}\n")
+    with pytest.raises(WolfcalError, match=r"sampling_ranges.head.*wrist"):
+        load_robot(tmp_path / "robot.yaml")

@@ -135,7 +135,8 @@ def capture(
 @app.command()
 @friendly_errors
 def fit(
-    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on."),
+    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
+                                          "recordings of the joint states (and Markers, unless --mocap is given)."),
     robot: Path | None = robot_option(),
     free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
@@ -143,8 +144,14 @@ def fit(
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
                                            "(head camera only)."),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
-    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | all "
-                                      "(default: every system the captures contain)."),
+    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | mocap | "
+                                      "all (default: every system the captures contain)."),
+    mocap: list[Path] = typer.Option([], "--mocap", help="Motion-capture file (.c3d, Motive or Vicon .csv) of the "
+                                     "session of each capture, in the same order. Repeatable."),
+    mocap_offset: list[float] = typer.Option([], "--mocap-offset", help="Clock offset of each --mocap file [s]: "
+                                             "t_recording = t_file + offset (default: estimated)."),
+    mocap_moving: bool = typer.Option(False, "--mocap-moving", help="The robot's base moved between samples: one "
+                                      "base pose in the motion-capture frame per sample."),
     external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
                                          "one pose per sample instead of one per capture file."),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
@@ -154,9 +161,11 @@ def fit(
     from wolfcal.fit.pipeline import FitOptions, run_fit
     from wolfcal.vision.cache import cache_enabled
 
-    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving)
+    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving,
+                         mocap_moving=mocap_moving)
     with cache_enabled(not no_cache):
-        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force)
+        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force,
+                mocap=mocap, mocap_offsets=mocap_offset)
 
 
 @app.command()
@@ -168,17 +177,27 @@ def evaluate(
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
     folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
     deploy_worse: bool = typer.Option(
-        False, "--deploy-worse", help="Write the deploy files even if held-out error got worse."
+        False, "--deploy-worse", help="Write the deploy files even when the verdict refuses them."
     ),
     force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
+    ground_limit: float = typer.Option(5.0, "--ground-limit-cm", help="Largest measured ground error at 4.5 m "
+                                       "that may be deployed [cm]."),
+    mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
+                                      "camera by more than this [deg]."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
+    import math
+
     from wolfcal.evaluate.pipeline import run_evaluate
+    from wolfcal.evaluate.verdict import VerdictLimits
     from wolfcal.vision.cache import cache_enabled
 
+    if ground_limit <= 0 or mount_limit <= 0:
+        raise WolfcalError("--ground-limit-cm and --mount-limit-deg must be positive")
     with cache_enabled(not no_cache):
-        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force)
+        limits = VerdictLimits(ground_limit / 100.0, math.radians(mount_limit))
+        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force, limits=limits)
     if not metrics["deploy"]["written"]:
         raise WolfcalError(metrics["deploy"]["reason"])
 
@@ -211,12 +230,15 @@ def simulate(
                                            "the config's)."),
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
     system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
-                               "| all (both in every sample)."),
+                               "| all (both in every sample) | mocap (motion capture: FILE.mcap with joint states "
+                               "and Markers, and FILE.c3d)."),
     external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
                                         "(default: the first)."),
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
+    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
+                                      "these poses instead of --samples random ones."),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -225,10 +247,38 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth, system=system, external=external, placement=placement,
+        truth_file=truth, system=system, external=external, placement=placement, poses=poses,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)
+
+
+@app.command()
+@friendly_errors
+def plan(
+    out: Path = typer.Option(..., "--out", help="Poses file to write (the format `capture --poses` reads)."),
+    robot: Path | None = robot_option(),
+    free: str = typer.Option("leg", "--free", help="Free parameters: camera | head_camera | leg."),
+    side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
+    system: str = typer.Option("head", "--system", help="Measurement system: head | external."),
+    poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
+    candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
+    criterion: str = typer.Option("D", "--criterion", help="D (determinant) | A (trace) | E (worst direction)."),
+    velocity: float = typer.Option(0.5, "--velocity", help="Capture move speed [rad/s] (for the order and time)."),
+    margin: float = typer.Option(0.1, "--margin", help="Kept from each joint limit [rad]."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of the candidates."),
+    external: str | None = typer.Option(None, "--external", help="External camera of the config (default: first)."),
+    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
+                                         "(m, rad, as for simulate); default 1.5 m in front, looking at the robot."),
+    force: bool = force_option(),
+) -> None:
+    """Plan the few calibration poses that tell the most: a poses file and the predicted uncertainty."""
+    from wolfcal.plan.pipeline import PlanOptions, run_plan
+
+    options = PlanOptions(free=free, side=side, system=system, poses=poses, candidates=candidates,
+                          criterion=criterion.upper(), velocity=velocity, margin=margin, seed=seed,
+                          external=external, placement=placement)  # fmt: skip
+    run_plan(default_robot(robot), out, options, say=typer.echo, force=force)
 
 
 @app.command()
@@ -310,4 +360,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

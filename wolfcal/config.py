@@ -31,7 +31,7 @@ class TagConfig:
     link: str
     xyz: tuple[float, float, float]
     rpy: tuple[float, float, float]
-    side: str | None = None  # 'right' / 'left' for the leg preset; None for tags not on a leg
+    side: str | None = None  # 'right' / 'left' (config `side`): the leg it is on, for the leg preset; None: no leg
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,7 @@ class CameraConfig:
     topic: str
     info_topic: str
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
+    name: str = "camera"  # in the names of its pose correction's parameters (`camera.x ... camera.rz`)
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,11 @@ class RobotConfig:
     servos: ServoConfig | None = None
     priors: PriorConfig = PriorConfig()
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
+    markers: MarkersConfig | None = None  # motion-capture markers on the robot (`markers:`), None when absent
+    floor: FloorConfig | None = None  # the venue ground check (`floor:`), None when not configured
+    # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
+    sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
+    planning: PlanningConfig = field(default_factory=lambda: PlanningConfig())
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -198,10 +204,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
     if family not in TAG_FAMILIES:
         r.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
     side = r.data.get("side")
-    if side is None:
-        link = str(r.data["link"]).lower()
-        side = "right" if link.startswith(("r_", "right")) else "left" if link.startswith(("l_", "left")) else None
-    elif side not in ("right", "left"):
+    if side is not None and side not in ("right", "left"):
         r.fail(f"'side' must be 'right' or 'left', found {side!r}")
     return TagConfig(
         id=tag_id,
@@ -259,8 +262,10 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
 
 def _camera(path: Path, data) -> CameraConfig:
     cam = _Reader(path, data, "camera")
-    cam.check_keys(("frame",), ("topic", "info_topic", "intrinsics"))
+    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics"))
+    name = _parameter_name(cam, "camera")
     return CameraConfig(
+        name=name,
         frame=cam.string("frame"),
         topic=cam.string("topic", "/camera/image_raw/compressed"),
         info_topic=cam.string("info_topic", "/camera/camera_info"),
@@ -268,19 +273,51 @@ def _camera(path: Path, data) -> CameraConfig:
     )
 
 
+def _parameter_name(r: _Reader, default: str | None = None) -> str:
+    """A camera's `name`, used in parameter names (`<name>.x`): a letter, then letters, digits and '_', and not
+    `tag<id>` (the tag mounts' names)."""
+    name = r.string("name", default)
+    if not _NAME.fullmatch(name) or re.fullmatch(r"tag\d+", name):
+        r.fail(
+            f"'name' {name!r} must start with a letter, hold only letters, digits and '_' and not be tag<id> "
+            f"(it is used in parameter names such as {name}.x)"
+        )
+    return name
+
+
+SAMPLING_SYSTEMS = ("head", "external", "mocap")
+
+
+def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
+    """`sampling_ranges: {head|external|mocap: {<joint>: [lo, hi]}}` [rad, true angles]; joints: load_robot."""
+    r = _Reader(path, data, "sampling_ranges")
+    r.check_keys((), SAMPLING_SYSTEMS)
+    out = {}
+    for system, joints in r.data.items():
+        if not isinstance(joints, dict) or not joints:
+            r.fail(f"'{system}' must map joint names to [lower, upper] in rad")
+        ranges = {}
+        for joint, value in joints.items():
+            ok = isinstance(value, (list, tuple)) and len(value) == 2
+            ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+            if not ok or value[0] > value[1]:
+                raise WolfcalError(
+                    f"{path}: 'sampling_ranges.{system}.{joint}' must be [lower, upper] in rad with lower <= upper, "
+                    f"found {value!r}"
+                )
+            ranges[str(joint)] = (float(value[0]), float(value[1]))
+        out[system] = ranges
+    return out
+
+
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     if not isinstance(data, list):
         raise WolfcalError(f"{path}: 'external_cameras' must be a list of cameras ({{name, image_topic, info_topic}})")
-    cameras = []
+    cameras: list[ExternalCameraConfig] = []
     for i, item in enumerate(data):
         r = _Reader(path, item, f"external_cameras[{i}]")
         r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))
-        name = r.string("name")
-        if not _NAME.fullmatch(name):
-            r.fail(
-                f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
-                "(it is used in parameter names such as tripod.x)"
-            )
+        name = _parameter_name(r)
         if name == HEAD_CAMERA:
             r.fail(f"'name' must not be {HEAD_CAMERA!r}: that name means the robot's own camera ('camera:')")
         if name in {c.name for c in cameras}:
@@ -322,20 +359,24 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     data = read_yaml(path, "robot config", "give --robot a robot.yaml or a folder holding one")
     r = _Reader(path, data, "")
     r.check_keys(
-        ("name", "urdf", "base_link", "tags"),
-        ("camera", "external_cameras", "joint_states_topic", "servos", "priors"),
+        ("name", "urdf", "base_link"),
+        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
+         "sampling_ranges", *PLANNING_KEYS),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
         raise WolfcalError(f"{path}: 'urdf' file {urdf} not found")
     camera = _camera(path, r.data["camera"]) if r.data.get("camera") is not None else None
     external = _external_cameras(path, r.data["external_cameras"]) if r.data.get("external_cameras") else ()
-    if camera is None and not external:
-        r.fail("needs a head camera ('camera:') or at least one camera under 'external_cameras:'")
+    markers = _markers(path, r.data["markers"]) if r.data.get("markers") is not None else None
+    if camera is None and not external and markers is None:
+        r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:' or motion-capture 'markers:'")
     _check_topics_distinct(path, camera, external)
-    tags_data = r.data["tags"]
-    if not isinstance(tags_data, list) or not tags_data:
-        r.fail("'tags' must be a non-empty list of tags")
+    if camera is not None and camera.name in {c.name for c in external}:
+        r.fail(f"'camera.name' {camera.name!r} is also an external camera's name; each camera needs its own name")
+    tags_data = r.data.get("tags", [] if camera is None and not external else None)
+    if not isinstance(tags_data, list) or (not tags_data and (camera is not None or external)):
+        r.fail("'tags' must be a non-empty list of tags (a config with cameras needs the tags they see)")
     tags = tuple(_tag(path, i, t) for i, t in enumerate(tags_data))
     if len({t.id for t in tags}) != len(tags):
         r.fail("'tags' lists the same tag id twice")
@@ -350,6 +391,10 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
         external_cameras=external,
+        markers=markers,
+        floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
+        sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
+        planning=_planning(path, r.data),
     )
 
 
@@ -366,3 +411,143 @@ def _check_topics_distinct(
         if topic in owners:
             raise WolfcalError(f"{path}: '{key}' {topic} is also '{owners[topic]}'; each camera needs its own topics")
         owners[topic] = key
+
+
+@dataclass(frozen=True)
+class MarkerConfig:
+    """One motion-capture marker: `xyz` [m] places it in `link` (nominal: the fit estimates its mount)."""
+
+    name: str  # as the motion-capture system labels it
+    link: str
+    xyz: tuple[float, float, float]
+    side: str | None = None  # 'right' / 'left': the leg it is on (`side:`, for the leg preset's --side), else None
+
+
+@dataclass(frozen=True)
+class MarkersConfig:
+    """`markers:`: the mocap4r2_msgs/msg/Markers topic of ROS 2 recordings and the markers on the robot."""
+
+    topic: str
+    entries: tuple[MarkerConfig, ...]  # the `list:` of the config, in its order
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.entries]
+
+    def marker(self, name: str) -> MarkerConfig:
+        return self.entries[self.names.index(name)]
+
+
+def _markers(path: Path, data) -> MarkersConfig:
+    r = _Reader(path, data, "markers")
+    r.check_keys(("list",), ("topic",))
+    items = r.data["list"]
+    if not isinstance(items, list) or not items:
+        r.fail("'list' must be a non-empty list of markers ({name, link, xyz})")
+    markers: list[MarkerConfig] = []
+    for i, item in enumerate(items):
+        m = _Reader(path, item, f"markers.list[{i}]")
+        m.check_keys(("name", "link", "xyz"), ("side",))
+        name = m.string("name")
+        if not _NAME.fullmatch(name):
+            m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
+                   "(it is used in parameter names such as marker.r_foot_fl.x)")
+        if name in {k.name for k in markers}:
+            m.fail(f"'name' {name!r} is used by another marker; names must be unique")
+        side = m.data.get("side")
+        if side is not None and side not in ("right", "left"):
+            m.fail(f"'side' must be 'right' or 'left' (the leg the marker is on), found {side!r}")
+        markers.append(MarkerConfig(name=name, link=m.string("link"), xyz=m.vector3("xyz"), side=side))
+    return MarkersConfig(topic=r.string("topic", "/mocap/markers"), entries=tuple(markers))
+
+
+@dataclass(frozen=True)
+class FloorTagConfig:
+    """A tag lying flat on the floor, face up, at a place the fit finds (DESIGN.md `floor.tags`)."""
+
+    id: int
+    family: str
+    size: float  # edge of the black square [m]
+    thickness: float = 0.0  # height of the tag's face above the floor [m]
+
+
+@dataclass(frozen=True)
+class FloorConfig:
+    """The venue ground check (DESIGN.md `floor:`): the floor is the plane of the standing soles."""
+
+    soles: tuple[str, ...]  # links whose frames lie on the floor (z up) when the robot stands
+    standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
+    tags: tuple[FloorTagConfig, ...] = ()
+
+    def tag(self, tag_id: int) -> FloorTagConfig:
+        for tag in self.tags:
+            if tag.id == tag_id:
+                return tag
+        raise KeyError(tag_id)
+
+    @property
+    def tag_ids(self) -> list[int]:
+        return [t.id for t in self.tags]
+
+
+def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
+    """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
+    r = _Reader(path, data, "floor")
+    r.check_keys(("soles", "standing"), ("tags",))
+    soles = r.data["soles"]
+    if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
+        r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
+    standing = r.data["standing"] or {}
+    if not isinstance(standing, dict):
+        r.fail("'standing' must map joint names to readings [rad] (joints not named are 0)")
+    for joint, value in standing.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            r.fail(f"'standing.{joint}' must be a number [rad], found {value!r}")
+    tags_data = r.data.get("tags") or []
+    if not isinstance(tags_data, list):
+        r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
+    tags = []
+    on_links = {t.id for t in link_tags}
+    for i, item in enumerate(tags_data):
+        t = _Reader(path, item, f"floor.tags[{i}]")
+        t.check_keys(("id", "size"), ("family", "thickness"))
+        tag_id = t.data["id"]
+        if isinstance(tag_id, bool) or not isinstance(tag_id, int) or tag_id < 0:
+            t.fail(f"'id' must be a non-negative integer, found {tag_id!r}")
+        if tag_id in on_links:
+            t.fail(f"tag {tag_id} is also configured on a link under 'tags:'; a floor tag lies on the floor, "
+                   "so give it an id no tag on the robot uses")
+        if tag_id in {x.id for x in tags}:
+            t.fail(f"tag {tag_id} is listed twice")
+        family = t.string("family", "tag36h11")
+        if family not in TAG_FAMILIES:
+            t.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
+        thickness = t.number("thickness", 0.0)
+        if thickness < 0:
+            t.fail(f"'thickness' must not be negative, found {thickness!r}")
+        tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
+    return FloorConfig(tuple(soles), {str(k): float(v) for k, v in standing.items()}, tuple(tags))
+
+
+# --- pose planning: `rest_pose:` and `collision_radii:` (both optional) ------------------------------------------
+PLANNING_KEYS = ("rest_pose", "collision_radii")
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """Where joints a planned pose leaves alone stand, and the capsule radii of a URDF without <collision>."""
+
+    rest_pose: dict[str, float] = field(default_factory=dict)  # joint -> reading [rad]; others 0
+    collision_radii: dict[str, float] = field(default_factory=dict)  # link -> capsule radius [m]
+
+
+def _planning(path: Path, data: dict) -> PlanningConfig:
+    """`rest_pose: {joint: rad}` and `collision_radii: {link: m}` (names are checked against the URDF later)."""
+    out = {}
+    for key, positive in (("rest_pose", False), ("collision_radii", True)):
+        value = data.get(key) or {}
+        if not isinstance(value, dict):
+            raise WolfcalError(f"{path}: '{key}' must map names to numbers, e.g. {{RKnee: -0.26}}")
+        r = _Reader(path, value, key)
+        out[key] = {str(k): r.number(k, positive=positive) for k in value}
+    return PlanningConfig(**out)

@@ -3,6 +3,8 @@
 One `Observations` holds what one camera saw: the head camera (`HEAD_CAMERA`) or an external camera of the robot
 config (its `name`). One row per detected corner (vectorised over everything): which sample, which tag, which corner
 (aruco order: top-left, top-right, bottom-right, bottom-left) and where it was seen, in pixels (OpenCV convention).
+A view is one tag in one image (`Observations.views`): the unit the fit leaves out as an outlier and the unit of
+the tag-grid metric.
 """
 
 from __future__ import annotations
@@ -41,9 +43,18 @@ class Observations:
     def n_samples(self) -> int:
         return int(self.q_measured.shape[0])
 
+    def views(self) -> tuple[np.ndarray, np.ndarray]:
+        """The views (one tag in one image): (V, 2) int rows (sample, tag id), sorted by sample then tag id, and
+        the view of each corner (M,)."""
+        labels, view_of_corner = np.unique(
+            np.stack([self.sample_index, self.tag_ids], axis=1).astype(np.int64), axis=0, return_inverse=True
+        )
+        return labels.reshape(-1, 2), view_of_corner.ravel()
+
     def tags_in_sample(self, sample: int) -> list[int]:
-        """The ids of the tags detected in one sample, ascending."""
-        return sorted({int(t) for t in self.tag_ids[self.sample_index == sample]})
+        """The ids of the tags detected in one sample (its views), ascending."""
+        labels, _ = self.views()
+        return [int(t) for t in labels[labels[:, 0] == sample, 1]]
 
     def per_sample_rms(self, values: np.ndarray) -> np.ndarray:
         """(S,) per-axis RMS of per-corner 2-vectors (M, 2) (e.g. pixel residuals), NaN for samples without

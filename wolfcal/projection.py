@@ -1,9 +1,18 @@
-"""Where a kinematic model puts the observed tag corners in the image."""
+"""Where a kinematic model puts tag corners in a camera image: the one projection of fit, evaluation, simulation and
+pose planning.
+
+Frames: T_camera_tag (..., 4, 4) maps points in a tag's frame (aruco convention, `tag_corners`) to the camera's optical
+frame (z forward, x right, y down) [m]; pixels follow OpenCV (centre of the top-left pixel at (0, 0)).
+"""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
+from wolfcal.camera.model import CameraModel
+from wolfcal.config import RobotConfig
+from wolfcal.geometry import transform_points
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
@@ -12,12 +21,57 @@ from wolfcal.vision.tags import tag_corners
 BEHIND_CAMERA_PX = 1e4  # residual given to a corner that a model puts behind the camera [px]
 
 
+def tag_corner_table(config: RobotConfig, tag_ids: list[int]) -> np.ndarray:
+    """(T, 4, 3) the four corners of each tag in its own frame (aruco order) [m]."""
+    return np.stack([tag_corners(config.tag(t).size) for t in tag_ids])
+
+
+def tag_corner_pixels(camera: CameraModel, T_camera_tag: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(..., 4, 2) pixels of tag corners `corners` (..., 4, 3) [m] under the poses T_camera_tag (..., 4, 4)
+    (broadcast); NaN behind the camera."""
+    return camera.project(transform_points(T_camera_tag, corners))
+
+
+def pixel_jacobian(camera: CameraModel, p_camera: np.ndarray) -> np.ndarray:
+    """(M, 2, 3) d(pixel)/d(point in the optical frame) by central differences [px/m]."""
+    h = 1e-6 * np.maximum(np.abs(p_camera[:, 2]), 1e-3)
+    out = np.empty((len(p_camera), 2, 3))
+    for k in range(3):
+        step = np.zeros_like(p_camera)
+        step[:, k] = h
+        out[:, :, k] = (camera.project(p_camera + step) - camera.project(p_camera - step)) / (2 * h[:, None])
+    return out
+
+
+def tag_pose_from_pixels(camera: CameraModel, uv: np.ndarray, size: float) -> np.ndarray | None:
+    """T_camera_tag (4, 4) measured from the four detected corners (4, 2) [px] of one tag of edge `size` [m] alone
+    (cv2.solvePnP, SOLVEPNP_IPPE_SQUARE, on undistorted normalised points), or None when PnP fails."""
+    xy = camera.undistort_normalized(camera.pixels_to_normalized(uv))
+    ok, rvec, tvec = cv2.solvePnP(tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None,
+                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        return None
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.ravel()
+    return T
+
+
+def tag_pose_from_corners(robot: Robot, obs: Observations, sample: int, tag_id: int) -> np.ndarray | None:
+    """T_camera_tag (4, 4) of one tag in one sample from its four detected corners (`tag_pose_from_pixels`), or
+    None when the tag was not fully detected or PnP failed."""
+    rows = np.flatnonzero((obs.sample_index == sample) & (obs.tag_ids == tag_id))
+    if len(rows) != 4:
+        return None
+    rows = rows[np.argsort(obs.corner_index[rows])]
+    return tag_pose_from_pixels(obs.camera, obs.uv[rows], robot.config.tag(tag_id).size)
+
+
 def corner_points(robot: Robot, obs: Observations, tag_ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """Per observed corner: its column in `tag_ids` (M,) and its position in its tag frame (M, 3) [m]."""
     column = {t: i for i, t in enumerate(tag_ids)}
     tag_col = np.array([column[int(t)] for t in obs.tag_ids], dtype=int)
-    corners = np.stack([tag_corners(robot.config.tag(t).size) for t in tag_ids])
-    return tag_col, corners[tag_col, obs.corner_index]
+    return tag_col, tag_corner_table(robot.config, tag_ids)[tag_col, obs.corner_index]
 
 
 def project_corners(obs: Observations, T_camera_tag: np.ndarray, points: tuple[np.ndarray, np.ndarray]) -> np.ndarray:

@@ -142,7 +142,3 @@ class CameraModel:
             return (u >= margin - 0.5) & (u <= self.width - 0.5 - margin) & (v >= margin - 0.5) & (
                 v <= self.height - 0.5 - margin
             )
-
-    @property
-    def opencv_distortion(self) -> np.ndarray:
-        return self.D.copy()

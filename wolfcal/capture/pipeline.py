@@ -17,7 +17,7 @@ from wolfcal.capture.cameras import close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
 from wolfcal.capture.manual import confirm_limp, parse_limp, run_manual
 from wolfcal.capture.options import CaptureOptions, check_options
-from wolfcal.capture.poses import joint_limits, load_poses
+from wolfcal.capture.poses import check_collisions, joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
@@ -54,6 +54,11 @@ def run_capture(
     with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
+        if script:  # before anything moves: where the robot stands decides the joints no pose names
+            start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
+            note = check_collisions(robot, script, options.poses, start)
+            if note:
+                console.print(f"note: {note}")
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
             confirm_limp([j for j in limp if initial[j]], options.yes, ask)
@@ -65,7 +70,7 @@ def run_capture(
             close_sources(cameras)
             raise
         view = LiveView(status, coverage, console)
-        sources = {name: c.source for name, c in cameras.items()}
+        sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
         session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
         failure: BaseException | None = None
         try:

@@ -18,7 +18,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from wolfcal.errors import WolfcalError
+from wolfcal.robot.collision import collision_model
 from wolfcal.robot.robot import Robot
 from wolfcal.yamlfile import read_yaml
 
@@ -99,3 +102,24 @@ def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> Pose
             f"{path}: {len(problems)} problem(s), nothing was moved:\n  " + "\n  ".join(problems)
         )
     return PoseScript(poses, float(velocity))
+
+
+def check_collisions(robot: Robot, script: PoseScript, path: str | Path, start: dict[str, float]) -> str | None:
+    """Refuse a script in which the robot would touch itself (`wolfcal.robot.collision`): each pose with every
+    joint at its latest target, joints never named where they stand at the start (`start`: joint -> rad; others
+    at the rest pose). Returns a note when the robot config has no collision geometry (nothing checked)."""
+    model = collision_model(robot, required=False)
+    if model is None:
+        return (f"{robot.config.path} has no collision geometry ('collision_radii:'): poses not checked for "
+                "self-collision")  # fmt: skip
+    targets = {**robot.config.planning.rest_pose, **start}
+    q = []
+    for pose in script.poses:
+        targets.update(pose.joints)
+        q.append([targets.get(j, 0.0) for j in robot.joint_names])
+    clearance = model.clearance(np.array(q))
+    problems = [f"{pose.name}: {' and '.join(model.colliding_pair(np.array(row)))} would touch"
+                for pose, row, c in zip(script.poses, q, clearance) if c < 0]  # fmt: skip
+    if problems:
+        raise WolfcalError(f"{path}: {len(problems)} pose(s) collide, nothing was moved:\n  " + "\n  ".join(problems))
+    return None

@@ -24,10 +24,10 @@ def run_scripted(session: CaptureSession, script: PoseScript) -> None:
     bus.set_goal_positions(goals)  # torque on must not jump to a stale goal
     bus.set_profile_velocity(joints, velocity)
     bus.set_torque(joints, True)
-    for pose in script.poses:
+    for number, pose in enumerate(script.poses, start=1):
         if session.done():
             return
-        status.pose = pose.name
+        status.pose = f"{pose.name}, pose {number}/{len(script.poses)} of the plan"
         goals.update(pose.joints)
         bus.set_goal_positions(goals)
         reason = wait_arrival(session, goals, index, velocity)
@@ -62,7 +62,7 @@ def wait_arrival(
     deadline = time.monotonic() + distance / velocity + ARRIVAL_MARGIN_S
     while True:
         off = {j: abs(int(state.ticks[index[j]]) - t) for j, t in goal_ticks.items()}
-        worst = max(off, key=off.get)
+        worst = max(off, key=lambda j: off[j])
         if off[worst] <= ARRIVAL_TICKS:  # then the stillness gate waits for it to settle
             return None
         if time.monotonic() > deadline:

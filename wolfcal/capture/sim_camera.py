@@ -13,9 +13,9 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.hardware.emulator import load_truth, read_true_angles
+from wolfcal.io.truth import load_external_truth
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_truth import load_external_truth
 from wolfcal.sim.placement import TARGET_BASE, look_at
 from wolfcal.sim.scene import SimScene
 

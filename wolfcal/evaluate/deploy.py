@@ -30,7 +30,7 @@ DEPLOY_FILES = ("calibrated.urdf", "calibrated_folded.urdf", "joint_offsets.yaml
 
 def camera_correction(robot: Robot, corrections: Corrections) -> dict:
     """T_uncalibrated_calibrated of the camera's optical frame as a static-transform description."""
-    frame = robot.config.camera.frame
+    frame = robot.config.head_camera().frame
     parent = f"{frame}_uncalibrated"
     T = transform_from_twist_params(corrections.frames.get(robot.camera_joint, np.zeros(6)))
     x, y, z = (float(v) for v in T[:3, 3])
@@ -86,26 +86,24 @@ def remove_deploy_files(out_dir: Path) -> list[Path]:
 
 
 def write_or_withhold_deploy_files(
-    robot: Robot, corrections: Corrections, out_dir: Path, worse: bool, deploy_worse: bool
+    robot: Robot, corrections: Corrections, out_dir: Path, refused: str | None, override: bool
 ) -> dict:
-    """Write the deploy files, or (worse held-out error without deploy_worse) remove any an earlier run left.
-
-    Returns metrics.json's 'deploy' record: written, forced, files (names in out_dir), reason.
+    """Write the deploy files, or (refused: the verdict's reason, without the override --deploy-worse) remove any
+    an earlier run left. Returns metrics.json's 'deploy' record: written, forced, files (names in out_dir), reason.
     """
-    if worse and not deploy_worse:
+    if refused and not override:
         removed = remove_deploy_files(out_dir)
         earlier = f" ({len(removed)} file(s) of an earlier run removed)" if removed else ""
         return {
             "written": False,
             "forced": False,
             "files": [],
-            "reason": "The calibration makes held-out error worse, so the deploy files were not written"
-            f"{earlier}. Pass --deploy-worse to write them anyway.",
+            "reason": f"{refused} The deploy files were not written{earlier}; --deploy-worse writes them anyway.",
         }
     paths = write_deploy_files(robot, corrections, out_dir)
     return {
         "written": True,
-        "forced": worse,
+        "forced": bool(refused),
         "files": [p.name for p in paths],
-        "reason": "written despite worse held-out error (--deploy-worse)" if worse else None,
+        "reason": f"written despite the verdict (--deploy-worse): {refused}" if refused else None,
     }

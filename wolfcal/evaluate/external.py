@@ -16,16 +16,17 @@ from collections.abc import Callable
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import link_position_errors
 from wolfcal.evaluate.metrics import tag_grid
-from wolfcal.fit.camera_block import CameraBlock, placements, tag_pose_from_corners
+from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.solver import solve
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
+from wolfcal.projection import tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.accuracy import link_position_errors
 
 SOLES = ("r_sole", "l_sole")
 
@@ -48,12 +49,13 @@ def _tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> list[fl
     out = []
     base = robot.config.base_link
     for s in range(obs.n_samples):
-        measured = {t: tag_pose_from_corners(robot, obs, s, t) for t in fixed + moving}
-        ref = next((t for t in fixed if measured[t] is not None), None)
+        found = {t: tag_pose_from_corners(robot, obs, s, t) for t in fixed + moving}
+        measured = {t: T for t, T in found.items() if T is not None}
+        ref = next((t for t in fixed if t in measured), None)
         if ref is None:
             continue
         for t in moving:
-            if measured[t] is None:
+            if t not in measured:
                 continue
             links = [robot.config.tag(ref).link, robot.config.tag(t).link]
             poses = robot.model.link_poses(obs.q_measured[s : s + 1], links, model, base=base)

@@ -1,109 +1,140 @@
 """Ground error: where a ball on the field lands when the robot localises it through a kinematic model.
 
-A standing robot (straight legs: every joint 0 except the knees' built-in bend, RKnee = -0.2618, LKnee = +0.2618 rad,
-as read by the encoders) tilts its head until a ball on the ground at distance d straight ahead (from the point
-below base_link, along the right sole's x axis) lies on the camera's optical axis under the reference model. The
-pixel where the reference model sees the ball is back-projected through the evaluated model (same encoder readings)
-onto that model's ground plane (the right sole's plane, z = 0 of r_sole). The ground error is the distance between
-the two ground points, each in its own model's sole frame [m]. The ball is a point on the ground (its radius is left
-out: it moves both models' answers alike).
+The robot stands in the pose of its config (`floor.standing`: encoder readings, other joints 0). The floor is the
+plane of the standing soles (`floor.soles`): origin midway between the soles' origins, z along their mean z axis,
+x along their mean x axis made level (`T_base_floor`). A ball lies on the floor at distance d from the point below
+base_link, at a bearing of -30, 0 or +30 deg from the floor's x axis. The robot aims its head (the last two movable
+joints before the camera: pan and tilt) so that the reference model's optical axis points at the ball; the pixel
+where the reference model sees it is turned back through the evaluated model (same encoder readings) into a point
+on that model's floor. The ground error at d is the largest over the bearings of the distance between the two floor
+points, each in its own model's floor frame [m]. The ball is a point on the floor (its radius moves both models'
+answers alike).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import minimize
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.config import FloorConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import floor_frames
+from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
 
 DISTANCES_M = (1.0, 2.0, 4.5, 9.0)
-STANDING = {"RKnee": -0.2618, "LKnee": 0.2618}  # encoder readings of straight Wolfgang legs [rad]
-GROUND_LINK = "r_sole"
+BEARINGS_RAD = tuple(np.deg2rad((-30.0, 0.0, 30.0)))
+VERDICT_DISTANCE_M = 4.5  # half a field: the distance the deploy verdict judges
+
+
+def floor_config(robot: Robot) -> FloorConfig:
+    """The robot's `floor:` config; a WolfcalError naming the file when there is none."""
+    if robot.config.floor is None:
+        raise WolfcalError(
+            f"{robot.config.path}: no 'floor:' (soles and standing pose); the ground error needs them: add "
+            "floor: {soles: [...], standing: {...}} (DESIGN.md)"
+        )
+    return robot.config.floor
 
 
 def standing_pose(robot: Robot) -> np.ndarray:
-    """(J,) encoder readings of the standing robot: all joints 0 except the knees of STANDING [rad]."""
+    """(J,) encoder readings of the standing robot: the config's `floor.standing`, other joints 0 [rad]."""
     q = np.zeros(len(robot.joint_names))
-    for name, value in STANDING.items():
-        if name in robot.joint_names:
-            q[robot.model.column(name)] = value
+    for name, value in floor_config(robot).standing.items():
+        q[robot.model.column(name)] = value
     return q
 
 
-def tilt_joint(robot: Robot) -> str:
-    """The joint that pitches the camera: the last movable joint between base and camera (HeadTilt on Wolfgang)."""
+def camera_in_floor(
+    robot: Robot, q: np.ndarray, corrections: Corrections, camera_frame: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """T_floor_camera (N, 4, 4) and T_floor_base (N, 4, 4) for readings q (N, J) under a model."""
+    frame = camera_frame or robot.config.head_camera("the ground error needs the head camera").frame
+    soles = list(floor_config(robot).soles)
+    poses = robot.model.link_poses(q, [frame, *soles], corrections, base=robot.config.base_link)
+    T_floor_base = invert_transform(floor_frames(np.stack([poses[s] for s in soles])))
+    return T_floor_base @ poses[frame], T_floor_base
+
+
+def aim_joints(robot: Robot) -> list[str]:
+    """The joints that aim the camera: the last two movable joints between base and camera (pan, tilt), or one."""
     joints = [
         j.name
-        for j in robot.model.joints_between(robot.config.base_link, robot.config.camera.frame)
+        for j in robot.model.joints_between(robot.config.base_link, robot.config.head_camera().frame)
         if j.actuated
     ]
     if not joints:
-        raise WolfcalError(
-            f"{robot.config.path}: no movable joint between base and camera; cannot aim the head"
-        )
-    return joints[-1]
+        raise WolfcalError(f"{robot.config.path}: no movable joint between base and camera; cannot aim the head")
+    return joints[-2:]
 
 
-def _poses(robot: Robot, q: np.ndarray, corrections: Corrections) -> tuple[np.ndarray, np.ndarray]:
-    """T_sole_camera (N, 4, 4) and T_sole_base (N, 4, 4) for readings q (N, J)."""
-    links = [robot.config.camera.frame, GROUND_LINK]
-    poses = robot.model.link_poses(q, links, corrections, base=robot.config.base_link)
-    T_sole_base = invert_transform(poses[GROUND_LINK])
-    return T_sole_base @ poses[robot.config.camera.frame], T_sole_base
+def ball_position(robot: Robot, reference: Corrections, distance: float, bearing: float) -> np.ndarray:
+    """(3,) ball on the floor `distance` m from the point below base_link at `bearing` rad, floor frame [m]."""
+    _, T_floor_base = camera_in_floor(robot, standing_pose(robot)[None], reference)
+    origin = T_floor_base[0, :3, 3]
+    return np.array([origin[0] + distance * np.cos(bearing), origin[1] + distance * np.sin(bearing), 0.0])
 
 
-def ball_position(robot: Robot, q: np.ndarray, reference: Corrections, distance: float) -> np.ndarray:
-    """(3,) ball on the ground d metres straight ahead of the point below base_link, right-sole frame [m]."""
-    _, T_sole_base = _poses(robot, q[None], reference)
-    origin = T_sole_base[0, :3, 3]
-    return np.array([origin[0] + distance, origin[1], 0.0])
-
-
-def aim_head(robot: Robot, reference: Corrections, distance: float) -> np.ndarray:
-    """(J,) standing readings with the tilt joint set so the reference model's optical axis points at the ball."""
+def aim_head(robot: Robot, reference: Corrections, ball: np.ndarray) -> np.ndarray:
+    """(J,) standing readings with pan/tilt set so that the reference model's optical axis points at the ball."""
     q0 = standing_pose(robot)
-    tilt = tilt_joint(robot)
-    column = robot.model.column(tilt)
-    joint = robot.model.joints[tilt]
-    ball = ball_position(robot, q0, reference, distance)
+    joints = [robot.model.joints[name] for name in aim_joints(robot)]
+    columns = [robot.model.column(j.name) for j in joints]
+    lo = np.array([max(j.lower, -np.pi) for j in joints])
+    hi = np.array([min(j.upper, np.pi) for j in joints])
 
     def off_axis(values: np.ndarray) -> np.ndarray:
         q = np.repeat(q0[None], len(values), axis=0)
-        q[:, column] = values
-        T_sole_camera, _ = _poses(robot, q, reference)
-        to_ball = ball - T_sole_camera[:, :3, 3]
-        cos = np.einsum("ni,ni->n", T_sole_camera[:, :3, 2], to_ball) / np.linalg.norm(to_ball, axis=1)
+        q[:, columns] = np.clip(values, lo, hi)
+        T_floor_camera, _ = camera_in_floor(robot, q, reference)
+        to_ball = ball - T_floor_camera[:, :3, 3]
+        cos = np.einsum("ni,ni->n", T_floor_camera[:, :3, 2], to_ball) / np.linalg.norm(to_ball, axis=1)
         return np.arccos(np.clip(cos, -1.0, 1.0))
 
-    lo, hi = max(joint.lower, -np.pi), min(joint.upper, np.pi)
-    grid = np.linspace(lo, hi, 721)
+    axes = [np.linspace(a, b, 121 if len(joints) == 2 else 721) for a, b in zip(lo, hi)]
+    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
     best = grid[int(np.argmin(off_axis(grid)))]
-    step = grid[1] - grid[0]
-    found = minimize_scalar(
-        lambda v: float(off_axis(np.array([v]))[0]),
-        bounds=(max(lo, best - step), min(hi, best + step)),
-        method="bounded",
-        options={"xatol": 1e-10},
-    )
-    q0[column] = found.x
+    found = minimize(lambda v: float(off_axis(v[None])[0]), best, method="Nelder-Mead",
+                     options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 2000})  # fmt: skip
+    q0[columns] = np.clip(found.x, lo, hi)
     return q0
 
 
 def ground_point(
     robot: Robot, q: np.ndarray, corrections: Corrections, uv: np.ndarray, camera: CameraModel
 ) -> np.ndarray:
-    """(3,) where the ray through pixel uv meets the ground plane of the model, right-sole frame [m]; NaN above
-    the horizon."""
-    T_sole_camera, _ = _poses(robot, q[None], corrections)
-    ray = T_sole_camera[0, :3, :3] @ camera.unproject(uv)
-    origin = T_sole_camera[0, :3, 3]
+    """(3,) where the ray through pixel uv meets the model's floor, floor frame [m]; NaN above the horizon."""
+    T_floor_camera, _ = camera_in_floor(robot, q[None], corrections)
+    ray = T_floor_camera[0, :3, :3] @ camera.unproject(uv)
+    origin = T_floor_camera[0, :3, 3]
     if ray[2] >= -1e-12:
         return np.full(3, np.nan)
     return origin + (-origin[2] / ray[2]) * ray
+
+
+def ball_views(robot: Robot, camera: CameraModel, reference: Corrections, distance: float) -> list[dict]:
+    """Per bearing: the head readings q (J,), the ball on the floor (3,) and its pixel (2,) under the reference."""
+    views = []
+    for bearing in BEARINGS_RAD:
+        ball = ball_position(robot, reference, distance, bearing)
+        q = aim_head(robot, reference, ball)
+        T_floor_camera, _ = camera_in_floor(robot, q[None], reference)
+        p_camera = invert_transform(T_floor_camera[0]) @ np.append(ball, 1.0)
+        views.append({"bearing": bearing, "q": q, "ball": ball, "uv": camera.project(p_camera[:3])})
+    return views
+
+
+def landing_error(robot: Robot, camera: CameraModel, view: dict, corrections: Corrections) -> tuple[float, float]:
+    """(where the model puts the ball: distance from the robot [m], error on the floor [m]); NaN above horizon."""
+    point = ground_point(robot, view["q"], corrections, view["uv"], camera)
+    if not np.isfinite(point).all():
+        return float("nan"), float("nan")
+    _, T_floor_base = camera_in_floor(robot, view["q"][None], corrections)
+    landed = float(np.linalg.norm(point[:2] - T_floor_base[0, :2, 3]))
+    return landed, float(np.linalg.norm(point[:2] - view["ball"][:2]))
 
 
 def ground_errors(
@@ -113,28 +144,44 @@ def ground_errors(
     models: dict[str, Corrections],
     distances: tuple[float, ...] = DISTANCES_M,
 ) -> list[dict]:
-    """Per distance: the ball's true spot and, per model, where it lands (distance from the robot) and the error [m].
-
-    An error of None means the model puts the ball's pixel above its horizon (the ball would be "in the sky").
-    """
-    if GROUND_LINK not in robot.model.links:
-        raise WolfcalError(
-            f"{robot.config.urdf}: no '{GROUND_LINK}' frame; the ground error needs the sole plane"
-        )
+    """Per distance: per model, where the ball lands (distance from the robot) and the error [m], the worst of
+    the bearings. An error of None means the model puts the ball's pixel above its horizon."""
+    floor_config(robot)
     rows = []
     for d in distances:
-        q = aim_head(robot, reference, d)
-        ball = ball_position(robot, q, reference, d)
-        T_sole_camera, _ = _poses(robot, q[None], reference)
-        p_camera = invert_transform(T_sole_camera[0]) @ np.append(ball, 1.0)
-        uv = camera.project(p_camera[:3])
-        row = {"distance_m": d, "pixel": [float(uv[0]), float(uv[1])], "models": {}}
+        views = ball_views(robot, camera, reference, d)
+        row = {"distance_m": d, "pixel": [float(v) for v in views[len(views) // 2]["uv"]], "models": {}}
         for name, corrections in models.items():
-            point = ground_point(robot, q, corrections, uv, camera)
-            _, T_sole_base_model = _poses(robot, q[None], corrections)
-            below_robot = T_sole_base_model[0, :3, 3]
-            landed = float(np.linalg.norm(point[:2] - below_robot[:2])) if np.isfinite(point).all() else None
-            error = float(np.linalg.norm(point[:2] - ball[:2])) if np.isfinite(point).all() else None
-            row["models"][name] = {"landed_at_m": landed, "error_m": error}
+            results = [landing_error(robot, camera, v, corrections) for v in views]
+            worst = max(range(len(results)), key=lambda k: -1.0 if np.isnan(results[k][1]) else results[k][1])
+            landed, error = results[worst]
+            above = any(np.isnan(e) for _, e in results)
+            row["models"][name] = {
+                "landed_at_m": None if above else landed,
+                "error_m": None if above else error,
+                "worst_bearing_deg": float(np.rad2deg(views[worst]["bearing"])),
+            }
         rows.append(row)
     return rows
+
+
+def predicted_ground_std(
+    robot: Robot, camera: CameraModel, chain: ParameterSet, values: np.ndarray, covariance: np.ndarray,
+    distance: float = VERDICT_DISTANCE_M,
+) -> float:
+    """1-sigma ground error at `distance` [m] that the fit's covariance (P, P) of the chain parameter `values` (P,)
+    [SI] implies: sqrt(trace(J C J^T)) of the landing point on the floor, worst bearing (J by central differences)."""
+    model = chain.corrections(values)
+    worst = 0.0
+    for view in ball_views(robot, camera, model, distance):
+        J = np.zeros((2, len(values)))
+        for i in range(len(values)):
+            step = np.zeros(len(values))
+            step[i] = 1e-6
+            plus = ground_point(robot, view["q"], chain.corrections(values + step), view["uv"], camera)
+            minus = ground_point(robot, view["q"], chain.corrections(values - step), view["uv"], camera)
+            J[:, i] = (plus[:2] - minus[:2]) / 2e-6
+        if not np.all(np.isfinite(J)):
+            return float("inf")
+        worst = max(worst, float(np.sqrt(np.trace(J @ covariance @ J.T))))
+    return worst

@@ -15,18 +15,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from wolfcal.observations import Observations
-from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, project_corners
+from wolfcal.outliers import HELD_OUT_SAMPLE_PX
+from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, project_corners, tag_pose_from_pixels
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 GRID_SHAPE = (5, 4)  # grid points across x and y of the tag's black square
-OUTLIER_FLOOR_PX = 1.0  # a sample is an outlier above max(this, OUTLIER_FACTOR x median sample RMS) [px]
-OUTLIER_FACTOR = 4.0
 
 
 def tag_grid(size: float) -> np.ndarray:
@@ -48,29 +45,16 @@ class TagViews:
 def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
     """Pose of every fully detected tag in the camera frame from its corners (IPPE square on undistorted points)."""
     samples, tags, poses = [], [], []
-    keys = obs.sample_index.astype(np.int64) * 1_000_000 + obs.tag_ids
-    for key in np.unique(keys):
-        rows = np.flatnonzero(keys == key)
+    labels, view_of_corner = obs.views()
+    for k, (sample, tag_id) in enumerate(labels):
+        rows = np.flatnonzero(view_of_corner == k)
         if len(rows) != 4:
             continue
         rows = rows[np.argsort(obs.corner_index[rows])]
-        tag_id = int(obs.tag_ids[rows[0]])
-        xy = obs.camera.undistort_normalized(obs.camera.pixels_to_normalized(obs.uv[rows]))
-        ok, rvec, tvec = cv2.solvePnP(
-            tag_corners(robot.config.tag(tag_id).size),
-            xy.reshape(4, 1, 2),
-            np.eye(3),
-            None,
-            flags=cv2.SOLVEPNP_IPPE_SQUARE,
-        )
-        T = np.full((4, 4), np.nan)
-        if ok:
-            T = np.eye(4)
-            T[:3, :3] = cv2.Rodrigues(rvec)[0]
-            T[:3, 3] = tvec.ravel()
-        samples.append(int(obs.sample_index[rows[0]]))
-        tags.append(tag_id)
-        poses.append(T)
+        T = tag_pose_from_pixels(obs.camera, obs.uv[rows], robot.config.tag(int(tag_id)).size)
+        samples.append(int(sample))
+        tags.append(int(tag_id))
+        poses.append(np.full((4, 4), np.nan) if T is None else T)
     return TagViews(
         np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4)
     )
@@ -141,10 +125,7 @@ def merge_folds(
 def outlier_samples(before: ModelErrors, after: ModelErrors) -> np.ndarray:
     """(S,) samples that the better of the two models does not explain (blurred image, stale joint reading)."""
     better = after if np.nanmedian(after.sample_rms) <= np.nanmedian(before.sample_rms) else before
-    rms = better.sample_rms
-    finite = np.isfinite(rms)
-    limit = max(OUTLIER_FLOOR_PX, OUTLIER_FACTOR * float(np.median(rms[finite]))) if finite.any() else np.inf
-    return finite & (rms > limit)
+    return HELD_OUT_SAMPLE_PX.flags(better.sample_rms)
 
 
 def summary(obs: Observations, views: TagViews, errors: ModelErrors, outliers: np.ndarray) -> dict:

@@ -1,9 +1,10 @@
 """`wolfcal evaluate`: a fit + held-out captures (or k-fold cross-validation) -> report and files to deploy.
 
 Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
-judged model was not fitted on. The deploy files are written only when the held-out reprojection RMS did not get
-worse (or with deploy_worse=True). This module only runs the steps; errors are `metrics` / `ground` / `crossval`, the
-report's words `report_content`, its pictures `report_figures`, the files to deploy `deploy`.
+judged model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
+model explains the data, ground error) allows it, or with deploy_worse=True. This module only runs the steps;
+errors are `metrics` / `ground` / `crossval` / `structure`, the report's words `report_content`, its pictures
+`report_figures`, the files to deploy `deploy`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
+
 import wolfcal
 from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
@@ -20,7 +23,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.ground import DISTANCES_M, GROUND_LINK, STANDING, ground_errors
+from wolfcal.evaluate.ground import DISTANCES_M, ground_errors, predicted_ground_std
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
@@ -29,23 +32,25 @@ from wolfcal.evaluate.report_content import (
     held_out_note,
     report_blocks,
     sample_rows,
-    verdict_message,
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
-from wolfcal.fit.pipeline import FIT_OUTPUTS, FitOptions, load_captures, samples_of
-from wolfcal.fit.result import load_result
+from wolfcal.evaluate.structure import unexplained
+from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
+from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
+from wolfcal.fit.result import FitResult, load_result
 from wolfcal.io.samples import Capture, Sample
+from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
-from wolfcal.sim.simulate import truth_paths
 from wolfcal.vision.observe import detect_observations, observations_of
 
 
-def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
+def _load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
@@ -57,12 +62,10 @@ def _load_fit(fit_dir: Path) -> tuple[dict, Robot, Corrections]:
             f"`wolfcal fit` run, or run the fit again"
         )
     result = load_result(fit_dir)
-    robot_path = Path(result["robot"])
+    robot_path = Path(result.robot)
     if not robot_path.exists():
         raise WolfcalError(f"{fit_dir}: the fit's robot config {robot_path} no longer exists")
-    robot = load_robot(robot_path)
-    corrections = Corrections.from_dict(result["corrections"], f"{fit_dir}/result.yaml: corrections")
-    return result, robot, corrections
+    return result, load_robot(robot_path)
 
 
 def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> None:
@@ -77,7 +80,7 @@ def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> No
 
 
 def _observe(
-    robot: Robot, result: dict, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
+    robot: Robot, result: FitResult, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
 ) -> tuple[list[Sample], Observations, list[int], list[str]]:
     """Samples of the read sources, their corners of the fit's tags, those tags, and detection warnings."""
     samples, _ = samples_of(loaded, robot)
@@ -86,17 +89,17 @@ def _observe(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
     )
     obs = observations_of(observations, HEAD_CAMERA, sources)
-    tags = [t for t in result["tags_used"] if t in obs.observed_tag_ids]
+    tags = [t for t in result.tags_used if t in obs.observed_tag_ids]
     if not tags:
         raise WolfcalError(
-            f"none of the fit's tags ({', '.join(map(str, result['tags_used']))}) was detected in "
+            f"none of the fit's tags ({', '.join(map(str, result.tags_used))}) was detected in "
             f"{', '.join(str(s) for s in sources)}"
         )
     return samples, obs.only_tags(tags), tags, warnings
 
 
 def _run_external_evaluate(
-    robot: Robot, result: dict, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
+    robot: Robot, result: FitResult, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
     out_dir: Path, deploy_worse: bool, say: Callable[[str], None],
 ) -> dict:
     """Held-out external-camera captures (read: `loaded`): `external_metrics` before/after, metrics.json,
@@ -104,14 +107,15 @@ def _run_external_evaluate(
     samples, warnings = samples_of(loaded, robot, cameras=())
     names = [c.name for c in robot.config.external_cameras]
     observations, detect_warnings = detect_observations(samples, robot, cameras=names)
-    tags = set(result["tags_used"])
+    tags = set(result.tags_used)
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
     truth = _truth_reference(captures)
     figures = external_metrics(robot, observations, fitted, truth, say)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
+    refused = "The calibration makes the held-out reprojection error worse." if worse else None
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
              f"fit: {fit_dir.resolve()}; captures: {', '.join(str(c) for c in captures)}", "",
              figures["meaning"], "", "| camera | model | RMS [px] | max [px] | tag grid [mm] mean +- std |",
@@ -132,7 +136,7 @@ def _run_external_evaluate(
     lines += ["", f"**{verdict}**"]
     metrics = {
         "wolfcal_version": wolfcal.__version__, "fit_dir": str(fit_dir.resolve()), "robot": str(robot.config.path),
-        "robot_name": robot.config.name, "free": result["free"], "mode": "held-out",
+        "robot_name": robot.config.name, "free": result.free, "mode": "held-out",
         "captures": [str(Path(c).resolve()) for c in captures], "external": figures,
         "verdict": {"worse": worse, "message": verdict}, "deploy": deploy, "warnings": warnings + detect_warnings,
     }  # fmt: skip
@@ -142,16 +146,6 @@ def _run_external_evaluate(
         say(line)
     say(f"report: {out_dir / 'report.md'}")
     return metrics
-
-
-def _fit_options(result: dict) -> FitOptions:
-    """The options the fit ran with, so that each cross-validation fold is fitted the same way."""
-    return FitOptions(
-        free=result["free"],
-        side=result["side"],
-        fix_tags=result["fix_tags"],
-        huber_k=(result.get("robust_loss") or {}).get("threshold_sigma", 3.0),
-    )
 
 
 def _truth_reference(captures: list[Path]) -> Corrections | None:
@@ -169,12 +163,36 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
 def _ground_rows(
     robot: Robot, camera: CameraModel, reference: Corrections, fitted: Corrections, say: Callable[[str], None]
 ) -> tuple[list[dict], str | None]:
-    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no sole frame)."""
-    if GROUND_LINK not in robot.model.links:
-        return [], f"{robot.config.urdf} has no '{GROUND_LINK}' frame: the ground error was not computed"
+    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no `floor:` config)."""
+    if robot.config.floor is None:
+        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
+                    "computed")
     say("computing the ground error ...")
     models = {"before": Corrections(), "after": fitted}
     return ground_errors(robot, camera, reference, models, DISTANCES_M), None
+
+
+def _predicted_ground(
+    robot: Robot, camera: CameraModel, result: FitResult, tags: list[int], fitted: Corrections
+) -> float | None:
+    """1-sigma ground error at 4.5 m [m] from the fit's covariance of its chain parameters (None without floor)."""
+    covariance = result.covariance
+    if robot.config.floor is None or not covariance:
+        return None
+    chain = build_parameter_set(robot, result.free, {HEAD_CAMERA: tags}, result.side, result.fix_tags)
+    index = {name: i for i, name in enumerate(covariance["names"])}
+    keep = [k for k, name in enumerate(chain.names) if name in index]
+    cols = [index[chain.names[k]] for k in keep]
+    sub = ParameterSet([chain.parameters[k] for k in keep])
+    matrix = np.asarray(covariance["matrix"], dtype=float)[np.ix_(cols, cols)]
+    return predicted_ground_std(robot, camera, sub, sub.values_from(fitted), matrix)
+
+
+def camera_turn(robot: Robot, fitted: Corrections) -> float:
+    """Rotation angle of the fitted camera frame correction [rad] (0 without a head camera)."""
+    if robot.config.camera is None:
+        return 0.0
+    return float(np.linalg.norm(fitted.frames.get(robot.camera_joint, np.zeros(6))[3:]))
 
 
 REPORT_FILES = ("report.html", "report.md", "metrics.json")
@@ -201,10 +219,11 @@ def run_evaluate(
     folds: int = 5,
     say: Callable[[str], None] = print,
     force: bool = False,
+    limits: VerdictLimits = VerdictLimits(),
 ) -> dict:
     """`_evaluate` with all its outputs written as one set: nothing of a failed run replaces an earlier one."""
     with output_set():
-        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force)
+        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force, limits)
 
 
 def _evaluate(
@@ -215,6 +234,7 @@ def _evaluate(
     folds: int = 5,
     say: Callable[[str], None] = print,
     force: bool = False,
+    limits: VerdictLimits = VerdictLimits(),
 ) -> dict:
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
@@ -225,29 +245,31 @@ def _evaluate(
     of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
-    result, robot, fitted = _load_fit(fit_dir)
+    result, robot = _load_fit(fit_dir)
+    fitted = result.corrections
     held_out = bool(captures)
-    _refuse_fitted_captures(captures, result["captures"])
-    sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result["captures"]]
+    _refuse_fitted_captures(captures, result.captures)
+    sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result.captures]
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
-    intrinsics = Path(result["intrinsics"]) if result.get("intrinsics") else None
+    intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
         return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
     samples, obs, tags, warnings = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
-    fold_of = None
+    fold_of, n_folds = None, None
     if held_out:
         after = model_errors(robot, obs, views, fitted)
         after_of_sample = [fitted] * obs.n_samples
-        mode_note = held_out_note(sources, result["captures"])
+        mode_note = held_out_note(sources, result.captures)
     else:
-        fold_of, models = cross_validate(robot, obs, _fit_options(result), folds, say)
+        fold_of, models = cross_validate(robot, obs, result.options, folds, say)
         after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
         after_of_sample = [models[k] for k in fold_of]
+        n_folds = len(models)
         mode_note = cross_validation_note(len(models), obs.n_samples)
     outliers = outlier_samples(before, after)
     check_left_out(
@@ -257,30 +279,33 @@ def _evaluate(
         "that they are of this robot and camera",
     )
     s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
-    worse = bool(s_after["rms_px"] > s_before["rms_px"])
-    verdict = verdict_message(s_before, s_after, worse)
     truth = _truth_reference(sources)
     ground_rows, no_ground = _ground_rows(robot, obs.camera, truth if truth is not None else fitted, fitted, say)
     if no_ground:
         warnings.append(no_ground)
+    structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
+    predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
+    verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, None, predicted,
+                             camera_turn(robot, fitted), limits)  # fmt: skip
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(
-        robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.get("covariance")
+        robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.covariance
     )
     out_dir.mkdir(parents=True, exist_ok=True)
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, worse, deploy_worse)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
+                                            deploy_worse)  # fmt: skip
     metrics = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "fit_dir": str(fit_dir.resolve()),
         "robot": str(robot.config.path),
         "robot_name": robot.config.name,
-        "free": result["free"],
+        "free": result.free,
         "mode": "held-out" if held_out else "cross-validation",
         "mode_note": mode_note,
         "captures": [str(p.resolve()) for p in sources],
-        "folds": None if held_out else int(fold_of.max() + 1),
+        "folds": n_folds,
         "tags_used": tags,
         "n_samples": obs.n_samples,
         "n_outliers": int(outliers.sum()),
@@ -289,17 +314,20 @@ def _evaluate(
         "after": s_after,
         "ground": {
             "reference": "simulator truth" if truth is not None else "calibrated model",
-            "standing_pose_rad": STANDING,
+            "standing_pose_rad": dict(robot.config.floor.standing) if robot.config.floor else {},
+            "soles": list(robot.config.floor.soles) if robot.config.floor else [],
             "rows": ground_rows,
         },
-        "verdict": {"worse": worse, "message": verdict},
+        "verdict": verdict,
+        "structure": structure,
         "deploy": deploy,
         "camera_correction": camera_correction(robot, fitted),
         "parameters": [
-            {k: p[k] for k in ("name", "value", "std", "unit", "data_share", "display")}
-            for p in result["parameters"]
-        ],
-        "correlated_pairs": result.get("correlated_pairs", []),
+            {"name": p.name, "value": p.value, "std": p.std, "unit": p.unit, "data_share": p.data_share,
+             "display": p.display}
+            for p in result.parameters
+        ],  # fmt: skip
+        "correlated_pairs": result.correlated_pairs,
         "samples": sample_rows(obs, before, after, outliers, fold_of),
         "figures": [{"file": f"figures/{name}", "caption": caption} for name, caption in figures[1]],
         "warnings": warnings,
@@ -307,6 +335,7 @@ def _evaluate(
     _write_report(out_dir, metrics, figures)
     for line in before_after_table(metrics).splitlines():
         say(line)
-    say(verdict)
+    for line in [verdict["message"], *verdict["refusals"][1:], *verdict["notes"]]:
+        say(line)
     say(f"report: {out_dir / 'report.html'}")
     return metrics

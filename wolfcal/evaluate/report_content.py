@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.evaluate.ground import STANDING
 from wolfcal.evaluate.metrics import ModelErrors
 from wolfcal.evaluate.report import Block, headline_rows
 from wolfcal.observations import Observations
@@ -61,20 +60,6 @@ def cross_validation_note(n_folds: int, n_samples: int) -> str:
     )
 
 
-def verdict_message(before: dict, after: dict, worse: bool) -> str:
-    """The one-line verdict from the two `metrics.summary` dicts (reprojection RMS [px])."""
-    if worse:
-        return (
-            f"The calibration makes held-out error worse: reprojection RMS {after['rms_px']:.3f} px "
-            f"calibrated vs {before['rms_px']:.3f} px with the input URDF. Keep the input URDF; refit "
-            "with more varied poses, fewer free parameters, or without the outlier samples."
-        )
-    return (
-        f"The calibration improves held-out error: reprojection RMS {before['rms_px']:.3f} px -> "
-        f"{after['rms_px']:.3f} px."
-    )
-
-
 def sample_rows(
     obs: Observations,
     before: ModelErrors,
@@ -109,15 +94,16 @@ def sample_rows(
     return rows
 
 
-def ground_text(reference_is_truth: bool) -> str:
+def ground_text(reference_is_truth: bool, standing: dict[str, float], soles: list[str]) -> str:
     """What the ground-error table means, and what it is measured against."""
-    pose = ", ".join(f"{k} = {v:+.4f} rad" for k, v in STANDING.items())
+    pose = ", ".join(f"{k} = {v:+.4f} rad" for k, v in standing.items()) or "every joint 0"
     common = (
-        f"A standing robot (straight legs: {pose}, all other joints 0 as read by the encoders) tilts its head to "
-        "look at a ball on the ground straight ahead. The pixel where the ball appears is turned back into a spot "
-        "on the field through each model (the ground is the model's sole plane); the error is the distance on the "
-        "field between that spot and where the ball really is. 'Lands at' is the distance from the robot where "
-        "the model puts the ball."
+        f"A standing robot (the config's standing pose: {pose}, all other joints 0 as read by the encoders) turns "
+        "its head to look at a ball on the ground at -30, 0 and +30 deg; the worst of the three is shown. The "
+        "pixel where the ball appears is turned back into a spot on the field through each model (the ground is "
+        f"the plane of the model's standing soles {', '.join(soles)}); the error is the distance on the field "
+        "between that spot and where the ball really is. 'Lands at' is the distance from the robot where the "
+        "model puts the ball."
     )
     if reference_is_truth:
         return (
@@ -148,7 +134,7 @@ def ground_blocks(ground: dict) -> list[Block]:
     headers = ["ball at", "lands at, before", "error before", "lands at, after", "error after"]
     return [
         ("h2", "Where a ball lands on the field"),
-        ("p", ground_text(ground["reference"] == "simulator truth")),
+        ("p", ground_text(ground["reference"] == "simulator truth", ground["standing_pose_rad"], ground["soles"])),
         ("table", (headers, rows, set())),
     ]
 
@@ -157,7 +143,8 @@ def report_blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]
     """The whole report, in order, from metrics.json's content and the figures' (file name, caption)."""
     m = metrics
     blocks: list[Block] = [("h1", f"wolfcal evaluation: {m['robot_name']}, --free {m['free']}")]
-    blocks.append(("banner", (not m["verdict"]["worse"], m["verdict"]["message"])))
+    blocks.append(("banner", (m["verdict"]["deploy"], m["verdict"]["message"])))
+    blocks += [("p", line) for line in m["verdict"]["refusals"] + m["verdict"]["notes"]]
     blocks.append(("p", INTRO))
     blocks.append(("p", m["mode_note"]))
     blocks += _headline_blocks(m)

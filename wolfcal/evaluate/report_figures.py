@@ -13,12 +13,11 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate import figures as fig
 from wolfcal.evaluate.metrics import ModelErrors
-from wolfcal.geometry import transform_points
 from wolfcal.io.samples import Sample
 from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.projection import tag_corner_pixels, tag_corner_table
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 OVERLAYS = 4  # camera images with overlays in the report
 SKELETON_STEPS = 12  # points per link segment, so that lens distortion bends the drawn skeleton as it should
@@ -33,7 +32,7 @@ def skeleton_px(robot: Robot, q: np.ndarray, corrections: Corrections, camera: C
     """
     joints = list(robot.model.joints.values())
     links = sorted({j.parent for j in joints} | {j.child for j in joints})
-    poses = robot.model.link_poses(q[None], links, corrections, base=robot.config.camera.frame)
+    poses = robot.model.link_poses(q[None], links, corrections, base=robot.config.head_camera().frame)
     t = np.linspace(0.0, 1.0, SKELETON_STEPS)[:, None]
     lines = []
     for joint in joints:
@@ -49,11 +48,7 @@ def predicted_corners_px(robot: Robot, obs: Observations, s: int, corrections: C
     rows = np.flatnonzero(obs.sample_index == s)
     tags = sorted({int(t) for t in obs.tag_ids[rows]})
     _, T_camera_tag = robot.camera_and_tag_poses(obs.q_measured[s : s + 1], tags, corrections)
-    out = []
-    for k, tag in enumerate(tags):
-        corners_camera = transform_points(T_camera_tag[0, k], tag_corners(robot.config.tag(tag).size))
-        out.append(obs.camera.project(corners_camera))
-    return np.concatenate(out)
+    return tag_corner_pixels(obs.camera, T_camera_tag[0], tag_corner_table(robot.config, tags)).reshape(-1, 2)
 
 
 def overlay_samples(outliers: np.ndarray, after: ModelErrors) -> list[int]:

@@ -15,6 +15,7 @@ import scipy.sparse
 from scipy.sparse.csgraph import connected_components
 
 from wolfcal.encoders import RAD_PER_TICK
+from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
 
 
@@ -36,7 +37,7 @@ class Block:
     system: str  # 'head' | 'external' | ...
     unit: str  # 'px' | 'm'
     dim: int  # measured numbers per unit
-    outlier_floor: float  # a view is left out only if also off by more than this [unit]
+    outlier_rule: OutlierRule  # which views are left out (`wolfcal.outliers`; floor in the block's unit)
     nuisance: ParameterSet  # the block's own unknowns
     sample_of_unit: np.ndarray  # (U,) sample index of each unit
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit

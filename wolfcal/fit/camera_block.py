@@ -11,7 +11,6 @@ the camera model per corner.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from wolfcal.errors import WolfcalError
@@ -24,34 +23,22 @@ from wolfcal.geometry import (
     skew,
 )
 from wolfcal.observations import Observations
-from wolfcal.projection import BEHIND_CAMERA_PX
+from wolfcal.outliers import FIT_VIEW_PX
+from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, pixel_jacobian, tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, point_motion, tag_key
 from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
-OUTLIER_FLOOR_PX = 0.5  # a tag view is left out only if also off by more than this [px]
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
-
-
-def pixel_jacobian(camera, p_camera: np.ndarray) -> np.ndarray:
-    """(M, 2, 3) d(pixel)/d(point in the optical frame) by central differences [px/m]."""
-    h = 1e-6 * np.maximum(np.abs(p_camera[:, 2]), 1e-3)
-    out = np.empty((len(p_camera), 2, 3))
-    for k in range(3):
-        step = np.zeros_like(p_camera)
-        step[:, k] = h
-        out[:, :, k] = (camera.project(p_camera + step) - camera.project(p_camera - step)) / (2 * h[:, None])
-    return out
 
 
 class CameraBlock(Block):
     """Corners of the tags one camera saw; see the module docstring."""
 
     unit, dim = "px", 2
-    outlier_floor = OUTLIER_FLOOR_PX
+    outlier_rule = FIT_VIEW_PX
 
     def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
                  placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None,
@@ -61,22 +48,19 @@ class CameraBlock(Block):
         self.camera_name = obs.camera_name
         self.system = "external" if external else "head"
         self.name = f"external camera {self.camera_name}" if external else "head camera"
-        column = {t: i for i, t in enumerate(self.tag_ids)}
-        self.tag_col = np.array([column[int(t)] for t in obs.tag_ids], dtype=int)
-        corners = np.stack([tag_corners(robot.config.tag(t).size) for t in self.tag_ids])
-        self.p_tag = corners[self.tag_col, obs.corner_index]  # (M, 3) corner in its tag frame [m]
+        self.tag_col, self.p_tag = corner_points(robot, obs, self.tag_ids)  # (M,), (M, 3) corner in its tag frame [m]
         self.sample_of_unit = obs.sample_index
         self.q_measured = obs.q_measured
-        views, view_of_unit = np.unique(np.stack([obs.sample_index, obs.tag_ids], axis=1), axis=0, return_inverse=True)
-        self.view_of_unit = view_of_unit.ravel()
+        views, self.view_of_unit = obs.views()
         self.view_labels = [(int(s), int(t)) for s, t in views]
+        # (S,) placement of each sample: the external camera's pose it was taken from (the head camera: all 0)
+        self.placement_of_sample = np.zeros(obs.n_samples, dtype=int)
         if external:
             self.viewer = robot.config.base_link
             self.placement_of_sample = np.asarray(placement_of_sample, dtype=int)
             self.nuisance = self._pose_parameters(placement_names or [self.camera_name])
         else:
-            self.viewer = robot.config.camera.frame
-            self.placement_of_sample = None
+            self.viewer = robot.config.head_camera().frame
             self.nuisance = ParameterSet([])
 
     def shared_labels(self) -> np.ndarray:
@@ -160,28 +144,6 @@ def placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
     if len(files) == 1:
         return index, [obs.camera_name]
     return index, [f"{obs.camera_name}@{k + 1}" for k in range(len(files))]
-
-
-def _pnp(camera, uv: np.ndarray, size: float) -> np.ndarray | None:
-    """T_camera_tag (4, 4) from the four corners of one tag (IPPE square on undistorted points), or None."""
-    xy = camera.undistort_normalized(camera.pixels_to_normalized(uv))
-    ok, rvec, tvec = cv2.solvePnP(tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None,
-                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    if not ok:
-        return None
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(rvec)[0]
-    T[:3, 3] = tvec.ravel()
-    return T
-
-
-def tag_pose_from_corners(robot: Robot, obs: Observations, sample: int, tag_id: int) -> np.ndarray | None:
-    """T_camera_tag (4, 4) of one tag in one sample from its four detected corners, or None."""
-    rows = np.flatnonzero((obs.sample_index == sample) & (obs.tag_ids == tag_id))
-    if len(rows) != 4:
-        return None
-    rows = rows[np.argsort(obs.corner_index[rows])]
-    return _pnp(obs.camera, obs.uv[rows], robot.config.tag(tag_id).size)
 
 
 def initial_camera_poses(

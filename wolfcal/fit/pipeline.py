@@ -14,45 +14,35 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
+from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
+from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
-from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
-from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
+from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
+from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
+from wolfcal.markers import MarkerObservations
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.parameters import ParameterSet, build_parameter_set, check_preset, tags_for_preset
+from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
 
-SYSTEMS = ("head", "external", "all")
-
-
-@dataclass(frozen=True)
-class FitOptions:
-    free: str = "camera"
-    side: str = "both"
-    fix_tags: bool = False
-    huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    system: str | None = None  # 'head' | 'external' | 'all'; None: every system the captures contain
-    external_moving: bool = False  # one external-camera pose per sample instead of one per capture file
-
-    def __post_init__(self) -> None:
-        check_preset(self.free, self.side)  # before any file is read
-        if self.system is not None and self.system not in SYSTEMS:
-            raise WolfcalError(f"--system {self.system!r} must be one of {', '.join(SYSTEMS)}")
+SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
 
 @dataclass
 class Fit:
     robot: Robot
     observations: dict[str, Observations]  # per camera, only the tags used
-    blocks: list[Block]
+    blocks: list[Block]  # the measurement blocks (camera, floor, sole closure, motion capture)
     chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
     problem: Problem
     solution: Solution
@@ -64,7 +54,7 @@ class Fit:
 
     @property
     def tag_ids(self) -> list[int]:
-        return sorted({t for b in self.blocks for t in b.tag_ids})
+        return sorted({t for b in self.blocks if b.system != "floor" for t in getattr(b, "tag_ids", ())})
 
     @property
     def corrections(self) -> Corrections:
@@ -100,11 +90,18 @@ def fit_observations(
     observations: dict[str, Observations] | Observations,
     options: FitOptions,
     say: Callable[[str], None] | None = None,
+    markers: MarkerObservations | None = None,
 ) -> Fit:
-    """Choose the free parameters for the observed tags of each camera, check there is enough data, solve."""
+    """Choose the free parameters for the observed tags of each camera and the measured markers, check there is
+    enough data, solve."""
     if isinstance(observations, Observations):
         observations = {observations.camera_name: observations}
-    observations = _systems(robot, observations, options)
+    mocap = mocap_block(robot, markers, options)
+    if options.system == "mocap" or (mocap is not None and not observations):
+        observations = {}
+    else:
+        observations = _systems(robot, observations, options)
+    observations, floor = split_floor(robot, observations)
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
@@ -113,34 +110,86 @@ def fit_observations(
                                              if robot.fixed_to_base(robot.config.tag(t).link)})
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
-    if not used:
+    if not used and mocap is None and floor is None:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
     blocks: list[Block] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids)
         else:
             placement, names = placements(obs, options.external_moving)
-            blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
+        block.outlier_rule = options.outlier
+        blocks.append(block)
+    tags_by_camera = {b.camera_name: b.tag_ids for b in blocks}
+    if floor is not None:
+        check_floor_samples(robot, floor)
+        tags_by_camera.setdefault(HEAD_CAMERA, [])
+        floor_block = FloorBlock(robot, floor)
+        floor_block.outlier_rule = options.outlier
+        blocks.append(floor_block)
+        if len(robot.config.floor.soles) == 2:
+            blocks.append(SoleClosure(robot, floor))
     chain = build_parameter_set(
-        robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags
+        robot, options.free, tags_by_camera, options.side, options.fix_tags,
+        tuple(mocap.links) if mocap is not None else (),
     )
+    blocks += [mocap] if mocap is not None else []
     n_params = len(chain) + sum(len(b.nuisance) for b in blocks)
     n_numbers = sum(b.n_units * b.dim for b in blocks)
     if n_numbers < 2 * n_params:  # ask for twice as many measured numbers as unknowns
-        n_samples = sum(obs.n_samples for obs in used.values())
+        n_samples = sum(len(b.q_measured) for b in blocks)
         needed = max(3, int(np.ceil(n_samples * 2 * n_params / max(n_numbers, 1))))
         raise WolfcalError(
-            f"too few samples for the free parameters: {n_samples} sample(s) with tags give {n_numbers} measured "
-            f"numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free fewer "
-            "parameters"
+            f"too few samples for the free parameters: {n_samples} sample(s) with tags or markers give {n_numbers} "
+            f"measured numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free "
+            "fewer parameters"
         )
     priors = robot.config.priors
-    problem = Problem(chain, blocks, [priors.pixel_noise] * len(blocks), priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say)
+    sigmas = [
+        priors.pixel_noise if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M
+        for b in blocks
+    ]
+    problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
+    solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
     return Fit(robot, used, blocks, chain, problem, solution)
+
+
+def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOptions) -> MocapBlock | None:
+    """The motion-capture block when --system takes it (mocap, all, or none given) and markers were measured;
+    with the leg preset and one --side, the markers of the other leg are left out."""
+    if options.system not in (None, "all", "mocap"):
+        return None
+    if markers is None:
+        if options.system == "mocap":
+            raise WolfcalError("--system mocap: no marker data; give a ROS 2 recording with the robot config's "
+                               "markers topic, or a motion-capture file with --mocap FILE")
+        return None
+    if options.free in ("camera", "head_camera") and options.system == "mocap":
+        raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
+                           "(no marker on the camera's optical frame); use --free leg with --system mocap")
+    if options.free == "leg" and options.side != "both":
+        config = robot.config.markers
+        markers = markers.only_markers([n for n in markers.marker_names
+                                        if config.marker(n).side in (options.side, None)])  # fmt: skip
+    return MocapBlock(robot, markers, options.mocap_moving)
+def split_floor(
+    robot: Robot, observations: dict[str, Observations]
+) -> tuple[dict[str, Observations], Observations | None]:
+    """The head camera's views of floor tags (config `floor.tags`) apart from its views of tags on links."""
+    head = observations.get(HEAD_CAMERA)
+    if head is None or robot.config.floor is None:
+        return observations, None
+    floor_ids = [t for t in head.observed_tag_ids if t in robot.config.floor.tag_ids]
+    if not floor_ids:
+        return observations, None
+    rest = {k: v for k, v in observations.items() if k != HEAD_CAMERA}
+    link_ids = [t for t in head.observed_tag_ids if t not in floor_ids]
+    if link_ids:
+        rest[HEAD_CAMERA] = head.only_tags(link_ids)
+    return rest, head.only_tags(floor_ids)
 
 
 def load_captures(
@@ -215,36 +264,49 @@ def run_fit(
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
     force: bool = False,
-) -> dict:
-    """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
-    Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
+    mocap: list[Path] = (),
+    mocap_offsets: list[float] = (),
+) -> FitResult:
+    """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
+    (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
+    (one per capture, clock offsets `mocap_offsets` or estimated)."""
     robot = load_robot(robot_path)
-    inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
-    required = (HEAD_CAMERA,) if options.system == "head" else ()
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-    observations, detect_warnings = detect_observations(
-        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-    )
-    warnings += detect_warnings
+    markers, warnings, observations = None, [], {}
+    if options.system == "mocap" or mocap:
+        markers = load_marker_observations(robot.config, robot.joint_names, captures, mocap, list(mocap_offsets))
+        say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+            + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+        warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
+                     ] if markers.unknown_names else []  # fmt: skip
+    if options.system != "mocap":
+        required = (HEAD_CAMERA,) if options.system == "head" else ()
+        samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        warnings += read_warnings
+        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+        observations, detect_warnings = detect_observations(
+            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+        )
+        warnings += detect_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
-    fit = fit_observations(robot, observations, options, say)
+    fit = fit_observations(robot, observations, options, say, markers)
     check_solution_left_out(fit, captures)
-    data = result_dict(fit, options, captures, intrinsics, warnings)
+    result = fit_result(fit, options, captures, intrinsics, warnings)
     with output_set():
-        write_result(out_dir / "result.yaml", data)
+        write_result(out_dir / "result.yaml", result)
         write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
         write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
-    for line in summary_lines(data):
+    for line in summary_lines(result):
         say(line)
     for line in explain(fit.params, fit.solution):
         say(f"note: {line}")
     for line in warnings:
         say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
-    return data
+    return result

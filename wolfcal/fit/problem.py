@@ -10,6 +10,7 @@ the Jacobian is sparse when the blocks bring many unknowns (e.g. one camera pose
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -101,16 +102,24 @@ class BlockState:
         reported uncertainty use one noise model."""
         self.sigma = sigma
         tau = self.shared_size(sigma)
-        if self.whitening.shared.tau != tau and np.any(self.whitening.shared.label >= 0):
-            self.whitening = self.whitening.with_shared(replace(self.whitening.shared, tau=tau))
-        self.W = self.whitening.matrix(sigma)
+        shared = self.noise_model.shared
+        if shared.tau != tau and np.any(shared.label >= 0):
+            self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
+        self.W = self.noise_model.matrix(sigma)
+
+    @property
+    def noise_model(self) -> GroupedWhitening:
+        """The whitening of the last `rebuild` (Problem builds one for every block before any use)."""
+        if self.whitening is None:
+            raise RuntimeError(f"{self.block.name}: noise model used before it was built (call rebuild first)")
+        return self.whitening
 
 
 class Problem:
     """See the module docstring. `chain` holds the robot-model parameters; blocks bring their own."""
 
     def __init__(
-        self, chain: ParameterSet, blocks: list[Block], sigmas: list[float], sigma_q: float, huber_k: float = 3.0
+        self, chain: ParameterSet, blocks: Sequence[Block], sigmas: list[float], sigma_q: float, huber_k: float = 3.0
     ) -> None:
         self.chain, self.blocks, self.huber_k, self.sigma_q = chain, blocks, huber_k, sigma_q
         self.n_chain = len(chain)
@@ -178,7 +187,7 @@ class Problem:
             else:
                 J = np.zeros((rows, n))
                 J[:, : self.n_chain] = J_chain
-            if lin.jac_local is not None:
+            if lin.jac_local is not None and lin.local_cols is not None:
                 L = lin.jac_local.shape[-1]
                 r_idx = np.repeat(np.arange(rows), L)
                 c_idx = state.start + np.repeat(lin.local_cols, state.block.dim, axis=0).ravel()

@@ -1,10 +1,12 @@
-"""The fit result: `result.yaml` (every number with its meaning) and the words that say what to trust."""
+"""The fit result: `FitResult`, the one definition of `result.yaml` (written and read here only; every number with its
+meaning), and the words that say what to trust."""
 
 from __future__ import annotations
 
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 import yaml
@@ -12,13 +14,17 @@ import yaml
 import wolfcal
 from wolfcal.atomic import write_text_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.mocap_result import mocap_block_dict
+from wolfcal.fit.options import NOISE_FLOOR_PX, FitOptions
 from wolfcal.fit.solver import Solution
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
+from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.yamlfile import read_yaml
 
 if TYPE_CHECKING:
-    from wolfcal.fit.pipeline import Fit, FitOptions
+    from wolfcal.fit.pipeline import Fit
 
 CONDITION_LIMIT = 100.0
 DATA_SHARE_LIMIT = 0.5
@@ -77,8 +83,8 @@ def _measured_by(fit: Fit) -> list[list[str]]:
     start = len(fit.chain)
     for state, lin in zip(fit.problem.states, fit.problem.evaluate(z)):
         chain = np.abs(lin.jac_chain).reshape(-1, len(fit.chain)).max(axis=0) if len(fit.chain) else np.zeros(0)
-        for i in np.flatnonzero(chain > 0):
-            out[i].append(state.block.name)
+        for column in np.flatnonzero(chain > 0):
+            out[int(column)].append(state.block.name)
         for i in range(len(state.block.nuisance)):
             out[start + i].append(state.block.name)
         start += len(state.block.nuisance)
@@ -88,6 +94,12 @@ def _measured_by(fit: Fit) -> list[list[str]]:
 def _block_dict(fit: Fit, k: int) -> dict:
     """The result of one measurement block: residuals, noise, outliers, per-sample errors."""
     b, block = fit.solution.blocks[k], fit.blocks[k]
+    if block.system == "mocap":
+        state = fit.problem.states[k]
+        values = fit.solution.values[state.start : state.start + len(block.nuisance)]
+        params = fit.problem.params
+        residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
+        return mocap_block_dict(block, b, values, residual)
     obs = block.obs
     unit = b.unit
     samples = []
@@ -137,70 +149,193 @@ def external_camera_poses(fit: Fit) -> dict:
     return out
 
 
-def result_dict(fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None,
-                warnings: list[str]) -> dict:
-    """Everything `result.yaml` holds, as plain data."""
-    config = fit.robot.config
-    solution, params = fit.solution, fit.params
+RESULT_VERSION = 1  # of result.yaml's layout; 0: files written before the key existed (read with the defaults)
+
+
+@dataclass
+class ParameterResult:
+    """One estimated unknown as result.yaml lists it."""
+
+    name: str  # e.g. camera.rx, HeadTilt.offset, tag43.x, tripod.z
+    value: float  # [unit]
+    std: float  # 1-sigma [unit]
+    unit: str  # 'rad' | 'm'
+    prior_sigma: float  # [unit]
+    data_share: float  # share of its information from the data rather than the prior, 0..1
+    measured_by: list[str]  # names of the blocks whose data inform it
+    urdf_joint: str | None = None  # the URDF joint an offset or frame parameter is written to (None: not one)
+    display: str = ""  # value +- std in deg or mm, for people
+
+
+@dataclass
+class FitResult:
+    """Everything result.yaml holds, in its order: the one place that defines the file (`to_dict` / `from_dict`
+    map fields to keys one to one; a field that is None and marked OPTIONAL is left out). To add a key: add a
+    field with a default (files written before it read with that default) and fill it in `fit_result`."""
+
+    wolfcal_version: str
+    created: str  # ISO 8601, UTC
+    robot: str  # absolute path of the robot config
+    urdf: str  # absolute path of its URDF
+    captures: list[str]  # absolute paths
+    intrinsics: str | None
+    free: str  # --free preset
+    side: str
+    fix_tags: bool
+    system: str  # 'head' | 'external' | 'all'
+    external_moving: bool
+    systems_used: list[str]  # block names
+    tags_used: list[int]
+    noise_model: dict  # {joint_sigma_rad, per_block_sigma, meaning}
+    robust_loss: dict  # {kind: huber, threshold_sigma}
+    n_samples: int
+    n_outlier_samples: int
+    n_outlier_tag_views: int
+    n_corners_used: int
+    converged: bool
+    condition_number: float | None  # of the column-scaled Jacobian; None: infinite
+    parameters: list[ParameterResult]
+    correlated_pairs: list[dict]  # {a, b, correlation}
+    covariance: dict  # {names, matrix} [SI units of the parameters]
+    explanations: list[str]
+    warnings: list[str]
+    blocks: list[dict]  # per measurement block, see `_block_dict`
+    external_cameras: dict  # placement -> {camera, xyz, rpy, T_base_camera}
+    samples: list[dict]  # the head camera's per-sample rows (else the first block's)
+    corrections: Corrections
+    version: int = RESULT_VERSION
+    # the head camera's figures at the top level (absent without a head camera); see blocks for their meaning
+    rms_meaning: str | None = None
+    rms_before_px: float | None = None
+    rms_after_px: float | None = None
+    max_after_px: float | None = None
+    outlier_rule: dict = field(default_factory=lambda: {"factor": FIT_VIEW_PX.factor, "floor_px": FIT_VIEW_PX.floor})
+    noise_floor_px: float = NOISE_FLOOR_PX
+    mocap_moving: bool = False  # one base pose in the motion-capture frame per sample
+    # motion-capture file -> clock offset [s]: t_recording = t_file + offset, t_file = seconds since the file's
+    # first frame (absent without motion-capture files)
+    mocap_clock_offset_s: dict[str, float] | None = None
+
+    HEAD_FIGURES: ClassVar[tuple[str, ...]] = ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")
+    OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s")
+    KEY_ORDER: ClassVar[tuple[str, ...]] = (  # result.yaml's key order (fields not listed follow in field order)
+        "version", "wolfcal_version", "created", "robot", "urdf", "captures", "intrinsics", "free", "side", "fix_tags",
+        "system", "external_moving", "systems_used", "tags_used", "rms_meaning", "rms_before_px", "rms_after_px",
+        "max_after_px", "noise_model", "robust_loss", "outlier_rule", "noise_floor_px",
+    )
+
+    @property
+    def options(self) -> FitOptions:
+        """The settings the fit ran with, to fit again exactly the same way (cross-validation folds)."""
+        return FitOptions(
+            free=self.free, side=self.side, fix_tags=self.fix_tags, huber_k=float(self.robust_loss["threshold_sigma"]),
+            system=self.system, external_moving=self.external_moving, mocap_moving=self.mocap_moving,
+            outlier=OutlierRule(float(self.outlier_rule["factor"]), float(self.outlier_rule["floor_px"])),
+            noise_floor_px=self.noise_floor_px,
+        )  # fmt: skip
+
+    def to_dict(self) -> dict:
+        """Plain data for YAML, keys in `KEY_ORDER`."""
+        names = [f.name for f in fields(self)]
+        order = [n for n in self.KEY_ORDER if n in names] + [n for n in names if n not in self.KEY_ORDER]
+        out = {}
+        for name in order:
+            value = getattr(self, name)
+            if value is None and name in self.OPTIONAL:
+                continue
+            if name == "parameters":
+                value = [{k: v for k, v in asdict(p).items() if v is not None} for p in value]
+            elif name == "corrections":
+                value = value.to_dict()
+            out[name] = value
+        return plain(out)
+
+    @classmethod
+    def from_dict(cls, data: dict, path: Path) -> FitResult:
+        """The result of a result.yaml's data; a clear error for a file that is not one."""
+        known = {f.name: f for f in fields(cls)}
+        required = [n for n, f in known.items() if f.default is MISSING and f.default_factory is MISSING]
+        missing = [n for n in required if n not in data]
+        if missing:
+            raise WolfcalError(
+                f"{path}: missing key(s) {', '.join(missing)}; is this a wolfcal fit result? (run `wolfcal fit` again "
+                "to write a complete one)"
+            )
+        values = {k: v for k, v in data.items() if k in known}
+        values.setdefault("version", 0)
+        try:
+            values["parameters"] = [ParameterResult(**p) for p in data["parameters"]]
+        except TypeError as exc:
+            raise WolfcalError(f"{path}: 'parameters' entries do not match a wolfcal fit result ({exc})") from None
+        values["corrections"] = Corrections.from_dict(data["corrections"], f"{path}: corrections")
+        return cls(**values)
+
+
+def _parameter_results(fit: Fit) -> list[ParameterResult]:
+    u, params = fit.solution.uncertainty, fit.params
+    return [
+        ParameterResult(
+            name=p.name, value=float(v), std=float(s), unit=p.unit, prior_sigma=p.prior_sigma,
+            data_share=round(float(share), 4), measured_by=by,
+            urdf_joint=p.target if p.kind in ("offset", "frame") else None,
+            display=f"{_display(v, p.unit)} +- {_display(s, p.unit)[1:]}",
+        )
+        for p, v, s, share, by in zip(params.parameters, fit.solution.values, u.std, u.data_share, _measured_by(fit))
+    ]  # fmt: skip
+
+
+def _noise_model(fit: Fit, blocks: list[dict]) -> dict:
+    return {
+        "joint_sigma_rad": float(f"{fit.solution.sigma_q:.4g}"),
+        "per_block_sigma": {b["name"]: b[f"noise_sigma_{b['unit']}"] for b in blocks},
+        "meaning": "per still pose and block: residual covariance sigma^2 I + sigma_q^2 A A^T, A = d(residuals)"
+        "/d(joint readings); sigma per measured number (pixel axis or metre axis)",
+    }
+
+
+def fit_result(
+    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str]
+) -> FitResult:
+    """The result of a fit, with the settings it ran with."""
+    config, solution, params = fit.robot.config, fit.solution, fit.params
     u = solution.uncertainty
     blocks = [_block_dict(fit, k) for k in range(len(fit.blocks))]
     head = next((b for b in blocks if b["system"] == "head"), None)
-    data = {
-        "wolfcal_version": wolfcal.__version__,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "robot": str(config.path.resolve()),
-        "urdf": str(config.urdf.resolve()),
-        "captures": [str(Path(c).resolve()) for c in captures],
-        "intrinsics": str(intrinsics.resolve()) if intrinsics else None,
-        "free": options.free,
-        "side": options.side,
-        "fix_tags": options.fix_tags,
-        "system": options.system or "all",
-        "external_moving": options.external_moving,
-        "systems_used": [b["name"] for b in blocks],
-        "tags_used": fit.tag_ids,
-    }
-    if head is not None:  # the head camera's figures at the top level, as before
-        data.update({k: head[k] for k in ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")})
-    data.update({
-        "noise_model": {
-            "joint_sigma_rad": float(f"{solution.sigma_q:.4g}"),
-            "per_block_sigma": {b["name"]: b[f"noise_sigma_{b['unit']}"] for b in blocks},
-            "meaning": "per still pose and block: residual covariance sigma^2 I + sigma_q^2 A A^T, A = d(residuals)"
-            "/d(joint readings); sigma per measured number (pixel axis or metre axis)",
-        },
-        "robust_loss": {"kind": "huber", "threshold_sigma": options.huber_k},
-        "n_samples": sum(b["n_samples"] for b in blocks),
-        "n_outlier_samples": sum(b["n_outlier_samples"] for b in blocks),
-        "n_outlier_tag_views": sum(b["n_outlier_views"] for b in blocks),
-        "n_corners_used": sum(b["n_units_used"] for b in blocks),
-        "converged": bool(solution.converged),
-        "condition_number": float(u.condition_number) if np.isfinite(u.condition_number) else None,
-        "parameters": [
-            {
-                "name": p.name,
-                "value": float(v),
-                "std": float(s),
-                "unit": p.unit,
-                "prior_sigma": p.prior_sigma,
-                "data_share": round(float(share), 4),
-                "measured_by": by,
-                "display": f"{_display(v, p.unit)} +- {_display(s, p.unit)[1:]}",
-            }
-            for p, v, s, share, by in zip(params.parameters, solution.values, u.std, u.data_share, _measured_by(fit))
-        ],
-        "correlated_pairs": [
-            {"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in u.correlated_pairs(params.names)
-        ],
-        "covariance": {"names": params.names, "matrix": np.round(u.covariance, 15).tolist()},
-        "explanations": explain(params, solution),
-        "warnings": warnings,
-        "blocks": blocks,
-        "external_cameras": external_camera_poses(fit),
-        "samples": head["samples"] if head is not None else blocks[0]["samples"],
-        "corrections": fit.corrections.to_dict(),
-    })  # fmt: skip
-    return data
+    head_figures = {k: head[k] for k in FitResult.HEAD_FIGURES} if head else {}
+    return FitResult(
+        wolfcal_version=wolfcal.__version__,
+        created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        robot=str(config.path.resolve()),
+        urdf=str(config.urdf.resolve()),
+        captures=[str(Path(c).resolve()) for c in captures],
+        intrinsics=str(intrinsics.resolve()) if intrinsics else None,
+        free=options.free, side=options.side, fix_tags=options.fix_tags, system=options.system or "all",
+        external_moving=options.external_moving,
+        systems_used=[b["name"] for b in blocks],
+        tags_used=fit.tag_ids,
+        **head_figures,
+        noise_model=_noise_model(fit, blocks),
+        robust_loss={"kind": "huber", "threshold_sigma": options.huber_k},
+        outlier_rule={"factor": options.outlier.factor, "floor_px": options.outlier.floor},
+        noise_floor_px=options.noise_floor_px,
+        n_samples=sum(b["n_samples"] for b in blocks),
+        n_outlier_samples=sum(b["n_outlier_samples"] for b in blocks),
+        n_outlier_tag_views=sum(b["n_outlier_views"] for b in blocks),
+        n_corners_used=sum(b["n_units_used"] for b in blocks),
+        converged=bool(solution.converged),
+        condition_number=float(u.condition_number) if np.isfinite(u.condition_number) else None,
+        parameters=_parameter_results(fit),
+        correlated_pairs=[{"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in u.correlated_pairs(params.names)],
+        covariance={"names": params.names, "matrix": np.round(u.covariance, 15).tolist()},
+        explanations=explain(params, solution),
+        warnings=warnings,
+        blocks=blocks,
+        external_cameras=external_camera_poses(fit),
+        samples=head["samples"] if head is not None else blocks[0]["samples"],
+        corrections=fit.corrections,
+        mocap_moving=options.mocap_moving,
+        mocap_clock_offset_s=next((b["mocap_clock_offset_s"] for b in blocks if b["system"] == "mocap"), None),
+    )  # fmt: skip
 
 
 def plain(value):
@@ -216,26 +351,25 @@ def plain(value):
     return value
 
 
-def write_result(path: Path, data: dict) -> None:
-    write_text_atomic(path, yaml.safe_dump(plain(data), sort_keys=False, width=120))
+def write_result(path: Path, result: FitResult) -> None:
+    write_text_atomic(path, yaml.safe_dump(result.to_dict(), sort_keys=False, width=120))
 
 
-def load_result(path: str | Path) -> dict:
+def load_result(path: str | Path) -> FitResult:
     """Read a `result.yaml` (or the folder that holds one)."""
     path = Path(path)
     if path.is_dir():
         path = path / "result.yaml"
     data = read_yaml(path, "fit result", "run `wolfcal fit ... --out DIR` first")
-    for key in ("robot", "captures", "free", "parameters", "corrections"):
-        if not isinstance(data, dict) or key not in data:
-            raise WolfcalError(f"{path}: missing key '{key}'; is this a wolfcal fit result?")
-    return data
+    if not isinstance(data, dict):
+        raise WolfcalError(f"{path}: not a mapping; is this a wolfcal fit result?")
+    return FitResult.from_dict(data, path)
 
 
-def summary_lines(data: dict) -> list[str]:
-    """A short human summary of a result dict."""
+def summary_lines(result: FitResult) -> list[str]:
+    """A short human summary of a fit result."""
     lines = []
-    for b in data["blocks"]:
+    for b in result.blocks:
         u = b["unit"]
         lines += [
             f"{b['name']}: {b['n_samples']} samples ({b['n_outlier_samples']} left out as outliers, "
@@ -244,10 +378,10 @@ def summary_lines(data: dict) -> list[str]:
             f"{b[f'rms_after_{u}']:.3f} {u} after (max {b[f'max_after_{u}']:.2f} {u})",
         ]
     lines += [
-        f"condition number (column-scaled Jacobian): {data['condition_number'] or float('inf'):.1f}",
+        f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.1f}",
         "parameters (value +- std, share of information from data):",
     ]
-    width = max(len(p["name"]) for p in data["parameters"])
-    for p in data["parameters"]:
-        lines.append(f"  {p['name']:<{width}}  {p['display']:>28}  data {p['data_share']:.0%}")
+    width = max(len(p.name) for p in result.parameters)
+    for p in result.parameters:
+        lines.append(f"  {p.name:<{width}}  {p.display:>28}  data {p.data_share:.0%}")
     return lines

@@ -18,16 +18,15 @@ import numpy as np
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening, split_rows
+from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import rms_by
 
-# Bounds of a pixel block's estimated noise [px]. The floor is the detector's systematic error: its corner errors
-# of 0.02-0.05 px repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of
-# them, so the residuals alone would understate it (measured: bench/bench_vision.py, tests/test_other_robot.py).
-MIN_SIGMA = {"px": 0.05, "m": 1e-5}
+# Bounds of a block's estimated noise per unit; the pixel floor is the fit's setting (`FitOptions.noise_floor_px`,
+# see there why).
+MIN_SIGMA = {"px": NOISE_FLOOR_PX, "m": 1e-5}
 MAX_SIGMA = {"px": 50.0, "m": 0.1}
-OUTLIER_FACTOR = 4.0  # a view is an outlier when its whitened RMS exceeds this many times the median view's
 
 
 @dataclass
@@ -71,26 +70,26 @@ def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
 
 
 def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
-    """(V,) views the noise model explains far worse than the others and that are off by more than the floor."""
+    """(V,) views the noise model explains far worse than the others and that are off by more than the floor
+    (the block's `outlier_rule`: spread = whitened view RMS, size = per-axis view RMS [unit])."""
     block, residual = state.block, lin.residual
-    t = view_rms(state, lin)
     size = rms_by(block.view_of_unit, residual, block.n_views)
-    return (t > OUTLIER_FACTOR * np.median(t)) & (size > block.outlier_floor)
+    return block.outlier_rule.flags(view_rms(state, lin), size)
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
     """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
     freedom the free parameters take."""
-    w = state.whitening.whitened(residual.ravel(), sigma)
+    w = state.noise_model.whitened(residual.ravel(), sigma)
     if w.size <= n_params:
         return 1.0
     return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
 
 
-def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float) -> float:
-    """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log);
-    returns the residual scale reached."""
-    lo, hi = np.log(MIN_SIGMA[state.block.unit]), np.log(MAX_SIGMA[state.block.unit])
+def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
+    """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
+    not below `floor` [unit]); returns the residual scale reached."""
+    lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     for _ in range(30):
         mid = 0.5 * (lo + hi)
         if residual_scale(state, residual, float(np.exp(mid)), n_params) > 1.0:
@@ -124,7 +123,39 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
     )  # fmt: skip
 
 
-def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
+def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
+    """Flag each block's outlier views at these linearisations; whether any outlier set changed."""
+    changed = False
+    for state, lin in zip(problem.states, lins):
+        outliers = flag_outliers(state, lin)
+        changed |= not np.array_equal(outliers, state.excluded)
+        state.excluded = outliers
+    return changed
+
+
+def _update_noise(
+    problem: Problem, lins: list[Linearization], n_params: int, rows_total: int, min_sigma: dict[str, float]
+) -> tuple[bool, list[str]]:
+    """Re-estimate each block's noise level (its share of the free parameters by rows); whether every level
+    settled (changed by less than 10 %), and one progress note per block."""
+    settled, notes = True, []
+    for state, lin in zip(problem.states, lins):
+        previous = state.sigma
+        share = n_params * lin.residual.size / rows_total
+        scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
+        settled &= abs(state.sigma / previous - 1.0) < 0.1
+        notes.append(
+            f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
+            f"{state.block.unit} (scale {scale:.2f})"
+        )
+    return settled, notes
+
+
+def solve(
+    problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
+    min_sigma: dict[str, float] = MIN_SIGMA,
+) -> Solution:
+    """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
     say = progress or (lambda _msg: None)
     n_params = len(problem.params)
     z = np.zeros(n_params)
@@ -134,23 +165,10 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     for round_index in range(max_rounds):
         result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
         z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
-        changed, settled = False, True
         lins = problem.evaluate(z)
-        for state, lin in zip(problem.states, lins):
-            outliers = flag_outliers(state, lin)
-            changed |= not np.array_equal(outliers, state.excluded)
-            state.excluded = outliers
+        changed = _update_outliers(problem, lins)
         problem.linearize(z)
-        notes = []
-        for state, lin in zip(problem.states, lins):
-            previous = state.sigma
-            share = n_params * lin.residual.size / rows_total
-            scale = estimate_noise(state, lin.residual, share)
-            settled &= abs(state.sigma / previous - 1.0) < 0.1
-            notes.append(
-                f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
-                f"{state.block.unit} (scale {scale:.2f})"
-            )
+        settled, notes = _update_noise(problem, lins, n_params, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break

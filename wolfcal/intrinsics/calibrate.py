@@ -19,6 +19,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import exp_so3
 from wolfcal.intrinsics.detect import Detection
+from wolfcal.outliers import INTRINSICS_VIEW_PX
 from wolfcal.vision.board import Board
 
 DISTORTION_NAMES = {
@@ -26,8 +27,6 @@ DISTORTION_NAMES = {
     "rational_polynomial": ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
     "equidistant": ["k1", "k2", "k3", "k4"],
 }
-OUTLIER_FACTOR = 3.0  # a view is an outlier above this multiple of the median per-view RMS ...
-OUTLIER_FLOOR_PX = 0.25  # ... and above this per-point RMS [px]
 MAX_REJECTED_SHARE = 1 / 3
 
 
@@ -137,7 +136,7 @@ def _solve(
     try:
         if model == "equidistant":
             flags = cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW
-            _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(
+            _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(  # type: ignore[call-overload]  # None K/D: stubs lack it
                 [o.reshape(1, -1, 3).astype(np.float64) for o in obj],  # OpenCV 5 takes (1, N, 3) here
                 [i.reshape(1, -1, 2).astype(np.float64) for i in img],
                 size,
@@ -165,7 +164,7 @@ def calibrate_views(
     min_views: int = 10,
     reject_outliers: bool = True,
 ) -> Calibration:
-    """Calibrate; while the worst view's RMS is an outlier (see OUTLIER_*), drop it and calibrate again."""
+    """Calibrate; while the worst view's RMS is an outlier (`INTRINSICS_VIEW_PX`), drop it and calibrate again."""
     if model not in DISTORTION_NAMES:
         raise WolfcalError(f"unknown --model {model!r}; use one of {', '.join(DISTORTION_NAMES)}")
     if len(views) < min_views:
@@ -190,9 +189,8 @@ def calibrate_views(
         residuals = [r[view == i] for i in range(len(used))]
         rms = np.array([np.sqrt(np.mean(np.sum(e**2, axis=1))) for e in residuals])
         worst = int(np.argmax(rms))
-        threshold = max(OUTLIER_FACTOR * float(np.median(rms)), OUTLIER_FLOOR_PX)
         can_drop = len(rejected) < max_rejected and len(used) > min_views
-        if not (reject_outliers and can_drop and rms[worst] > threshold):
+        if not (reject_outliers and can_drop and INTRINSICS_VIEW_PX.flags(rms)[worst]):
             break
         rejected.append((used.pop(worst), float(rms[worst])))
     std = _intrinsics_std(camera, rvecs, tvecs, obj, img, view)

@@ -33,7 +33,7 @@ def finite_joint_states(
             kept.append(message)
             continue
         dropped.add(stamp)
-        joints.update(str(names[k]) if k < len(names) else f"position[{k}]" for k in bad)
+        joints.update(str(names[k]) if k < len(names) else f"position[{k}]" for k in bad.tolist())
     if not joints:
         return messages, set(), []
     n_bad = len(messages) - len(kept)

@@ -31,14 +31,14 @@ class Corrections:
     def plus(self, other: Corrections) -> Corrections:
         """Offsets and correction vectors added (exact when one side is empty; first order otherwise)."""
         offsets = dict(self.offsets)
-        for k, v in other.offsets.items():
-            offsets[k] = offsets.get(k, 0.0) + v
+        for joint, offset in other.offsets.items():
+            offsets[joint] = offsets.get(joint, 0.0) + offset
         frames = {k: np.asarray(v, float).copy() for k, v in self.frames.items()}
-        for k, v in other.frames.items():
-            frames[k] = frames.get(k, np.zeros(6)) + v
+        for joint, vec in other.frames.items():
+            frames[joint] = frames.get(joint, np.zeros(6)) + vec
         tags = {k: np.asarray(v, float).copy() for k, v in self.tags.items()}
-        for k, v in other.tags.items():
-            tags[k] = tags.get(k, np.zeros(6)) + v
+        for tag_id, vec in other.tags.items():
+            tags[tag_id] = tags.get(tag_id, np.zeros(6)) + vec
         return Corrections(offsets, frames, tags)
 
     def to_dict(self) -> dict:

@@ -1,8 +1,10 @@
 """Free-parameter sets: names, units, priors, and the presets `camera`, `head_camera`, `leg`.
 
 A parameter is a deviation from the nominal model (nominal value 0). Names follow DESIGN.md and mean the same
-everywhere: `<joint>.offset` (encoder offset, rad), `<joint>.x|y|z|rx|ry|rz` (frame correction of a joint origin
-in its child frame, m / rad), `tag<id>.x|...|rz` (tag mount correction in the tag frame, m / rad).
+everywhere: `<joint>.offset` (encoder offset, rad), `<camera>.x|y|z|rx|ry|rz` (the head camera's pose correction:
+the frame correction of the fixed joint above its optical frame, in that joint's child frame, m / rad; `<camera>` is
+the config's `camera.name`, default `camera`; result.yaml says which URDF joint it is written to),
+`tag<id>.x|...|rz` (tag mount correction in the tag frame, m / rad).
 """
 
 from __future__ import annotations
@@ -64,9 +66,8 @@ class ParameterSet:
             if p.kind == "offset":
                 out.offsets[p.target] = out.offsets.get(p.target, 0.0) + float(value)
             else:
-                store = out.frames if p.kind == "frame" else out.tags
-                key = p.target if p.kind == "frame" else int(p.target)
-                vec = store.setdefault(key, np.zeros(6))
+                vec = (out.frames.setdefault(p.target, np.zeros(6)) if p.kind == "frame"
+                       else out.tags.setdefault(int(p.target), np.zeros(6)))  # fmt: skip
                 vec[p.component] += value
         return out
 
@@ -79,9 +80,9 @@ class ParameterSet:
             elif p.kind == "offset":
                 values.append(corrections.offsets.get(p.target, 0.0))
             else:
-                store = corrections.frames if p.kind == "frame" else corrections.tags
-                key = p.target if p.kind == "frame" else int(p.target)
-                values.append(float(store[key][p.component]) if key in store else 0.0)
+                vec = (corrections.frames.get(p.target) if p.kind == "frame"
+                       else corrections.tags.get(int(p.target)))  # fmt: skip
+                values.append(float(vec[p.component]) if vec is not None else 0.0)
         return np.array(values, dtype=float)
 
 
@@ -112,14 +113,17 @@ def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side
 
 
 def build_parameter_set(
-    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False
+    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False,
+    marker_links: tuple[str, ...] = (),
 ) -> ParameterSet:
     """Free chain parameters of a preset for the tags each camera ('head' or an external camera's name) uses.
 
     With the head camera: camera = its frame correction + the mounts of the tags used; head_camera = + offsets of
     the joints between base and camera; leg = + offsets of the joints between base and each used tag's link (the
     chain camera -> tag). With an external camera, leg frees the offsets of the joints between the base and the
-    links of the tags it sees (the torso-to-foot chains) and those tags' mounts (the torso tag's too).
+    links of the tags it sees (the torso-to-foot chains) and those tags' mounts (the torso tag's too). With motion
+    capture, leg also frees the offsets of the joints between the base and the links of the markers used
+    (`marker_links`); the marker mounts are the motion-capture block's own unknowns.
     """
     check_preset(preset, side)
     priors = robot.config.priors
@@ -127,12 +131,12 @@ def build_parameter_set(
     links: list[str] = []
     if "head" in tags_by_camera:
         camera_joint = robot.camera_joint
-        params += frame_parameters(camera_joint, "frame", camera_joint, priors.camera_translation,
-                                   priors.camera_rotation)  # fmt: skip
+        params += frame_parameters(robot.config.head_camera().name, "frame", camera_joint,
+                                   priors.camera_translation, priors.camera_rotation)  # fmt: skip
         if preset in ("head_camera", "leg"):
-            links.append(robot.config.camera.frame)
+            links.append(robot.config.head_camera().frame)
     if preset == "leg":
-        links += [robot.config.tag(t).link for tags in tags_by_camera.values() for t in tags]
+        links += [robot.config.tag(t).link for tags in tags_by_camera.values() for t in tags] + list(marker_links)
     params += [offset_parameter(joint, priors.offset) for joint in robot.actuated_joints_to(links)]
     if not fix_tags:
         for tag_id in sorted({t for tags in tags_by_camera.values() for t in tags}):

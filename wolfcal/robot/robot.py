@@ -92,6 +92,19 @@ def load_robot(config_path: str | Path) -> Robot:
             raise WolfcalError(
                 f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}"
             )
+    for i, marker in enumerate(config.markers.entries if config.markers is not None else ()):
+        if marker.link not in model.links:
+            raise WolfcalError(
+                f"{where}: 'markers.list[{i}].link' {marker.link!r} (marker {marker.name}) is not a link of "
+                f"{config.urdf}"
+            )
+    for system, ranges in config.sampling_ranges.items():
+        unknown = [j for j in ranges if j not in model.actuated_joint_names]
+        if unknown:
+            raise WolfcalError(
+                f"{where}: 'sampling_ranges.{system}' names joint(s) {', '.join(unknown)} that are not movable "
+                f"joints of {config.urdf}"
+            )
     if config.servos is not None:
         unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
         if unknown:
@@ -99,4 +112,20 @@ def load_robot(config_path: str | Path) -> Robot:
                 f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of "
                 f"{config.urdf}"
             )
+    _check_floor(config, model)
     return Robot(config=config, model=model)
+
+
+def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
+    """The floor's soles must be links and its standing readings movable joints of the URDF."""
+    if config.floor is None:
+        return
+    for i, sole in enumerate(config.floor.soles):
+        if sole not in model.links:
+            raise WolfcalError(f"{config.path}: 'floor.soles[{i}]' {sole!r} is not a link of {config.urdf}")
+    unknown = [j for j in config.floor.standing if j not in model.actuated_joint_names]
+    if unknown:
+        raise WolfcalError(
+            f"{config.path}: 'floor.standing' names joint(s) {', '.join(unknown)} that are not movable joints of "
+            f"{config.urdf}"
+        )

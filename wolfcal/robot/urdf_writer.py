@@ -95,13 +95,3 @@ def write_calibrated_urdf(
         raise WolfcalError(f"{out_path}: refusing to overwrite the input URDF; choose another output folder")
     write_bytes_atomic(out_path, calibrated_urdf_bytes(urdf_path, model, corrections, fold_offsets))
 
-
-def read_calibration_offsets(urdf_path: str | Path) -> dict[str, float]:
-    """Encoder offsets stored as `<calibration rising>` in a URDF (joint -> rad)."""
-    tree = read_urdf_xml(urdf_path)
-    out = {}
-    for joint in tree.getroot().iter("joint"):
-        element = joint.find("calibration")
-        if element is not None and element.get("rising") is not None:
-            out[joint.get("name")] = float(element.get("rising"))
-    return out

@@ -1,13 +1,14 @@
 """Random leg poses of a robot on a stand (base fixed) seen by an external camera at T_base_camera.
 
-Joint values are true angles [rad]. The Wolfgang's foot tags lie face up on plates ahead of the feet, so a camera
-in front sees them well only when the feet are lifted forward and tilted towards it: the legs are drawn from
-`EXTERNAL_RANGES` (hips swung forward up to about 90 deg, knees bent, ankles pitched both ways, small yaw and roll;
-head and arms at 0), and a pose is kept when the external camera sees the torso tag (every tag on a link rigidly
-fixed to the base) and at least one foot tag fully inside the image (margin 2 % of the width), at least 1.5 % of the
-width per edge, facing it (less than `MAX_ANGLE_RAD` off the viewing ray), and apart from every other tag in the
-image (bounding boxes grown by `SEPARATION` of their size must not overlap: a foot tag lifted in front of the torso
-tag would hide it or break its white border). Occlusion by the robot's body is not modelled.
+Joint values are true angles [rad]. The Wolfgang's foot tags lie face up on plates ahead of the feet, so a camera in
+front sees them well only when the feet are lifted forward and tilted towards it: the legs are drawn from the
+config's `sampling_ranges.external` (`wolfcal.robot.ranges`; Wolfgang: hips swung forward up to about 90 deg, knees
+bent, ankles pitched both ways, small yaw and roll; head and arms at 0), and a pose is kept when the external camera
+sees the torso tag (every tag on a link rigidly fixed to the base) and at least one foot tag fully inside the image
+(margin 2 % of the width), at least 1.5 % of the width per edge, facing it (less than `MAX_ANGLE_RAD` off the
+viewing ray), and apart from every other tag in the image (bounding boxes grown by `SEPARATION` of their size must
+not overlap: a foot tag lifted in front of the torso tag would hide it or break its white border). Occlusion by the
+robot's body is not modelled.
 """
 
 from __future__ import annotations
@@ -16,33 +17,15 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import invert_transform
+from wolfcal.geometry import invert_transform, transform_points
+from wolfcal.projection import tag_corner_pixels
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.poses import sampling_bounds, visible_in_view
+from wolfcal.sim.poses import visible_in_view
 from wolfcal.vision.tags import tag_corners
 
-EXTERNAL_RANGES = {
-    "RHipYaw": (-0.3, 0.3),
-    "LHipYaw": (-0.3, 0.3),
-    "RHipRoll": (-0.3, 0.3),
-    "LHipRoll": (-0.3, 0.3),
-    "RHipPitch": (-1.6, 0.2),
-    "LHipPitch": (-0.2, 1.6),
-    "RKnee": (-1.6, -0.26),
-    "LKnee": (0.26, 1.6),
-    "RAnklePitch": (-0.37, 1.42),
-    "LAnklePitch": (-1.42, 0.37),
-    "RAnkleRoll": (-0.3, 0.3),
-    "LAnkleRoll": (-0.3, 0.3),
-}
 MAX_ANGLE_RAD = np.deg2rad(55.0)
 SEPARATION = 0.3  # share of a tag's image size kept free around it
-
-
-def external_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) per actuated joint: EXTERNAL_RANGES intersected with the URDF limits (others at 0)."""
-    return sampling_bounds(robot, EXTERNAL_RANGES)
 
 
 def base_tag_ids(robot: Robot) -> list[int]:
@@ -79,9 +62,8 @@ def external_visibility(
 def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     """(N, T) bool: the tag's grown image box overlaps no other tag's in front of the camera."""
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
-    in_front = np.all(p[..., 2] > 0, axis=-1)  # (N, T)
-    uv = camera.project(np.where(p[..., 2:] > 0, p, np.nan))
+    in_front = np.all(transform_points(T_camera_tag, corners)[..., 2] > 0, axis=-1)  # (N, T)
+    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # NaN behind the camera
     lo, hi = np.nanmin(uv, axis=2), np.nanmax(uv, axis=2)  # (N, T, 2)
     grow = SEPARATION * (hi - lo).max(axis=-1, keepdims=True)
     lo, hi = lo - grow, hi + grow

@@ -10,9 +10,9 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.projection import tag_corner_pixels, tag_corner_table
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 
 def observations_from_poses(
@@ -24,10 +24,9 @@ def observations_from_poses(
     with Gaussian pixel noise [px], and the encoder readings a real robot would report."""
     tag_ids = robot.config.tag_ids
     s_idx, t_idx = np.nonzero(visible)
-    corners = np.stack([tag_corners(robot.config.tag(t).size) for t in tag_ids])  # (T, 4, 3)
-    T = T_camera_tag[s_idx, t_idx]  # (V, 4, 4)
-    p = np.einsum("vij,vcj->vci", T[:, :3, :3], corners[t_idx]) + T[:, None, :3, 3]
-    uv = camera.project(p) + rng.normal(0.0, noise_px, size=p.shape[:2] + (2,))
+    corners = tag_corner_table(robot.config, tag_ids)[t_idx]  # (V, 4, 3)
+    uv = tag_corner_pixels(camera, T_camera_tag[s_idx, t_idx], corners)
+    uv = uv + rng.normal(0.0, noise_px, size=uv.shape)
     n = len(q_true)
     return Observations(
         joint_names=list(robot.joint_names),

@@ -65,3 +65,9 @@ def placement_from_text(text: str) -> np.ndarray:
         )
     return transform_from_xyz_rpy(values[:3], values[3:]) @ T_BODY_OPTICAL
 
+
+
+def expected_placement() -> np.ndarray:
+    """(4, 4) T_base_camera at the middle of the random placements' ranges: straight ahead, level roll."""
+    position_base = np.array([np.mean(DISTANCE_M), 0.0, np.mean(HEIGHT_M)])
+    return look_at(position_base, TARGET_BASE)

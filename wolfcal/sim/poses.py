@@ -11,44 +11,11 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.projection import tag_corner_pixels
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
-
-# Sampling ranges of the Wolfgang joints for calibration poses (true angles, rad); other joints stay at 0 unless
-# their limits exclude it. Joints not listed here and not in the robot's URDF are ignored.
-WOLFGANG_RANGES = {
-    "HeadPan": (-0.9, 0.9),
-    "HeadTilt": (-1.7, -0.5),
-    "RHipYaw": (-0.4, 0.4),
-    "LHipYaw": (-0.4, 0.4),
-    "RHipRoll": (-0.35, 0.35),
-    "LHipRoll": (-0.35, 0.35),
-    "RHipPitch": (-1.2, 0.4),
-    "LHipPitch": (-0.4, 1.2),
-    "RKnee": (-1.8, -0.26),
-    "LKnee": (0.26, 1.8),
-    "RAnklePitch": (-0.37, 1.0),
-    "LAnklePitch": (-1.0, 0.37),
-    "RAnkleRoll": (-0.35, 0.35),
-    "LAnkleRoll": (-0.35, 0.35),
-}
-
-
-def sampling_bounds(
-    robot: Robot, ranges: dict[str, tuple[float, float]] = WOLFGANG_RANGES
-) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) per actuated joint: `ranges` [rad] intersected with the URDF limits (others at 0)."""
-    lo, hi = [], []
-    for name in robot.joint_names:
-        joint = robot.model.joints[name]
-        a, b = ranges.get(name, (0.0, 0.0))
-        a, b = max(a, joint.lower), min(b, joint.upper)
-        if a > b:  # range and limits disjoint: sit at the limit nearest to 0
-            a = b = float(np.clip(0.0, joint.lower, joint.upper))
-        lo.append(a)
-        hi.append(b)
-    return np.array(lo), np.array(hi)
 
 
 def visible_in_view(
@@ -58,8 +25,7 @@ def visible_in_view(
     """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
     margin, appears at least `min_size_px` per edge and faces the camera (less than `max_angle_rad` off the ray)."""
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    p = np.einsum("ntij,tcj->ntci", T_camera_tag[..., :3, :3], corners) + T_camera_tag[:, :, None, :3, 3]
-    uv = camera.project(p)  # (N, T, 4, 2)
+    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # (N, T, 4, 2)
     inside = np.all(camera.in_image(uv, margin_px), axis=-1)
     edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
     big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px
@@ -88,7 +54,7 @@ def random_visible_poses(
     tag_ids = tag_ids or robot.config.tag_ids
     margin_px = 0.03 * camera.width if margin_px is None else margin_px
     min_size_px = 0.02 * camera.width if min_size_px is None else min_size_px
-    lo, hi = sampling_bounds(robot)
+    lo, hi = sampling_bounds(robot, "head")
     kept_q, kept_vis = [], []
     for _ in range(200):
         q = rng.uniform(lo, hi, size=(4000, len(lo)))

@@ -10,8 +10,9 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_tag_poses, external_visibility
+from wolfcal.sim.external_poses import external_pose_ok, external_tag_poses, external_visibility
 from wolfcal.sim.observations import observations_from_poses, synthetic_observations
 from wolfcal.sim.placement import random_placement
 from wolfcal.sim.poses import random_visible_poses
@@ -62,7 +63,7 @@ def synthetic_external_scenario(
     camera sees a tag fixed to the base and at least one other tag; legs move, the base stays fixed."""
     rng = np.random.default_rng(seed)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
-    lo, hi = external_bounds(robot)
+    lo, hi = sampling_bounds(robot, "external")
     qs, poses, visibility, sources, cameras = [], [], [], [], []
     for k in range(placements):
         count = n // placements + (1 if k < n % placements else 0)

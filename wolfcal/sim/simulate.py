@@ -11,7 +11,7 @@ encoder offsets as `<calibration rising>`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,24 +20,27 @@ import yaml
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
-from wolfcal.sim.external_truth import external_truth_entry
+from wolfcal.sim.external_poses import external_pose_ok, external_visibility
+from wolfcal.sim.mocap import simulate_mocap
 from wolfcal.sim.placement import placement_from_text, random_placement
-from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
+from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
 
 OFFSET_SETS = ("none", "head", "legs", "all")
-SYSTEMS = ("head", "external", "all")
+SYSTEMS = ("head", "external", "all", "mocap")
 START_NS = 1_700_000_000_000_000_000
 
 
@@ -54,6 +57,7 @@ class SimOptions:
     system: str = "head"  # head | external | all
     external: str | None = None  # which external camera of the config (default: the first)
     placement: str | None = None  # 'x,y,z,roll,pitch,yaw' of the external camera (default: random)
+    poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
 
 
 @dataclass
@@ -61,11 +65,6 @@ class _SimCamera:
     model: CameraModel  # full resolution
     image: CameraModel  # binned
     T_base_camera: np.ndarray | None = None  # external cameras only
-
-
-def truth_paths(out: Path) -> tuple[Path, Path]:
-    stem = out.with_suffix("")
-    return Path(f"{stem}.truth.yaml"), Path(f"{stem}.truth.urdf")
 
 
 def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
@@ -111,19 +110,25 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
 
 def _poses(robot: Robot, options: SimOptions, cameras: dict[str, _SimCamera], truth: Corrections,
            rng: np.random.Generator) -> np.ndarray:  # fmt: skip
-    """(S, J) true joint angles in which every simulated camera sees tags well."""
+    """(S, J) true joint angles in which every simulated camera sees tags well (or those of the poses file)."""
+    if options.poses is not None:  # the servos reach the commanded readings: true angle = reading + true offset
+        return planned_readings(robot, options.poses) + truth.offset_vector(robot.joint_names)
     if options.system == "head":
         return random_visible_poses(robot, cameras[HEAD_CAMERA].image, truth, options.samples, rng)[0]
     name = next(n for n in cameras if n != HEAD_CAMERA)
     external = cameras[name]
-    lo, hi = external_bounds(robot)
-    checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, external.T_base_camera,
+    T_base_camera = external.T_base_camera
+    if T_base_camera is None:
+        raise WolfcalError(f"simulated external camera '{name}' has no placement")
+    lo, hi = sampling_bounds(robot, "external")
+    checks = [lambda q: external_pose_ok(robot, external_visibility(robot, external.image, T_base_camera,
                                                                     q, truth))]  # fmt: skip
     what = f"camera '{name}' sees the torso tag and a foot tag"
     if HEAD_CAMERA in cameras:
+        head_lo, head_hi = sampling_bounds(robot, "head")
         for k, joint in enumerate(robot.joint_names):
-            if joint in robot.camera_and_leg_joints(sides=()) and joint in WOLFGANG_RANGES:
-                lo[k], hi[k] = WOLFGANG_RANGES[joint]
+            if joint in robot.camera_and_leg_joints(sides=()):  # the head camera's joints move as for head poses
+                lo[k], hi[k] = head_lo[k], head_hi[k]
         head = cameras[HEAD_CAMERA].image
         margin, size = 0.03 * head.width, 0.02 * head.width
         checks.append(lambda q: np.any(tag_visibility(robot, head, q, truth, robot.config.tag_ids, margin, size), 1))
@@ -149,8 +154,19 @@ def simulate_capture(
     if options.system not in SYSTEMS:
         raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
+    if options.poses is not None:
+        options = replace(options, samples=len(planned_readings(robot, options.poses)))
+    inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
+    if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
+        check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
+        spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
+        truth = random_truth(robot, spec, np.random.default_rng(options.seed))
+        if options.truth_file is not None:
+            truth = load_corrections(options.truth_file, key="truth")
+        with output_set():
+            simulate_mocap(robot, out, options.samples, options.seed + 1, truth, say=say)
+        return truth
     cameras = _cameras(robot, options, camera)
-    inputs = [robot.config.path, robot.config.urdf] + ([options.truth_file] if options.truth_file else [])
     check_outputs([out, *truth_paths(out)], force, inputs)
     with output_set():
         return _simulate(robot, out, options, cameras, say)
@@ -217,7 +233,7 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
                  kinds: dict[int, str]) -> None:  # fmt: skip
     """FILE.truth.yaml and FILE.truth.urdf beside the capture."""
     truth_yaml, truth_urdf = truth_paths(out)
-    data = {"truth": truth.to_dict()}
+    data: dict[str, object] = {"truth": truth.to_dict()}
     if HEAD_CAMERA in cameras:
         data["camera"] = camera_info_dict(cameras[HEAD_CAMERA].model)
     data |= {
@@ -230,11 +246,23 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
         "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]",
         "system": options.system,
     }
-    external = {n: c for n, c in cameras.items() if c.T_base_camera is not None}
+    external = {n: (c.T_base_camera, c.model) for n, c in cameras.items() if c.T_base_camera is not None}
     if external:
         data["external_cameras"] = {
-            n: {**external_truth_entry(c.T_base_camera), "camera": camera_info_dict(c.model)}
-            for n, c in external.items()
+            n: {**external_truth_entry(T_base_camera), "camera": camera_info_dict(model)}
+            for n, (T_base_camera, model) in external.items()
         }
     write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
+
+
+def planned_readings(robot: Robot, path: Path) -> np.ndarray:
+    """(S, J) joint readings [rad] of a poses file, checked as `capture --poses` checks it: each joint at its
+    latest target, joints never named at the rest pose (`rest_pose:`, others 0)."""
+    script = load_poses(path, joint_limits(robot, robot.joint_names))
+    targets = dict(robot.config.planning.rest_pose)
+    rows = []
+    for pose in script.poses:
+        targets.update(pose.joints)
+        rows.append([targets.get(j, 0.0) for j in robot.joint_names])
+    return np.array(rows)

@@ -77,7 +77,8 @@ def detect_observations(
     for sample in samples:  # every joint of the robot read in every sample, before any image is decoded
         sample.joint_positions(robot.joint_names)
     families: Families = {}
-    for tag in robot.config.tags:
+    floor_tags = robot.config.floor.tags if robot.config.floor is not None else ()
+    for tag in (*robot.config.tags, *floor_tags):  # tags on links and tags lying on the floor
         families.setdefault(tag.family, set()).add(tag.id)
     jobs = [(s, n) for s in samples for n in s.images if wanted is None or n in wanted]  # one per image
     if not jobs:

@@ -9,8 +9,8 @@ import numpy as np
 
 from wolfcal.geometry import invert_transform, rotation_angle
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.poses import sampling_bounds
 
 
 def _pose_errors(
@@ -43,5 +43,5 @@ def link_position_errors(
     robot: Robot, link: str, estimate: Corrections, truth: Corrections, n: int, rng: np.random.Generator
 ) -> np.ndarray:
     """Position error [m] of `link` (e.g. a sole) in the base frame over n random calibration-range poses."""
-    lo, hi = sampling_bounds(robot)
+    lo, hi = sampling_bounds(robot, "head")
     return _pose_errors(robot, rng.uniform(lo, hi, size=(n, len(lo))), link, estimate, truth)[1]

@@ -1,4 +1,7 @@
-"""The true poses of simulated external cameras, kept in FILE.truth.yaml under `external_cameras`.
+"""A simulation's truth files beside its capture (FILE.truth.yaml, FILE.truth.urdf), and the true poses of simulated
+external cameras kept in FILE.truth.yaml under `external_cameras`.
+
+Here (io), not in the simulator, because evaluation and the emulated capture read what the simulator wrote.
 
 `external_cameras: {<name>: {T_base_camera: 4x4 list, meaning: ...}}`: the pose of the camera's optical frame
 (z forward, x right, y down) in the robot's base frame, p_base = T_base_camera @ p_camera [m]. One placement per
@@ -18,6 +21,12 @@ MEANING = (
     "pose of the external camera's optical frame (z forward, x right, y down) in the robot's base frame: "
     "p_base = T_base_camera @ p_camera [m]; one placement per capture file"
 )
+
+
+def truth_paths(capture: Path) -> tuple[Path, Path]:
+    """FILE.truth.yaml (true corrections, cameras, settings) and FILE.truth.urdf beside the capture FILE.mcap."""
+    stem = capture.with_suffix("")
+    return Path(f"{stem}.truth.yaml"), Path(f"{stem}.truth.urdf")
 
 
 def external_truth_entry(T_base_camera: np.ndarray) -> dict:

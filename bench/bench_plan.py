@@ -1,0 +1,99 @@
+"""Planned against random poses: accuracy of the fit and the std it reports, and the time planning takes.
+
+Scenarios (Wolfgang, 2048x1536 head camera / 1280x720 tripod webcam at the expected placement): `leg` (--free leg
+--side both, head camera, 0.025 rad rms offsets on head and legs), `head_camera` (head camera, offsets on the head),
+`external` (--free leg, tripod camera, offsets on the legs). Per seed: a random truth; 12 planned poses (2000
+candidates, D-optimal) against 30 and 12 random valid candidates. Observations are tag corners projected at the true
+kinematics with 0.15 px Gaussian noise and quantised encoder readings (no rendering; `wolfcal simulate --poses`
+renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position max
+over 500 random leg poses, or camera pose max over the head range), median over the seeds; the worst reported std
+among the parameters some pose can observe (12 planned vs 12 random); planning time.
+Run: python bench/bench_plan.py [--seeds 5] [--scenarios leg head_camera external]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
+
+from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
+from wolfcal.plan.candidates import plan_camera  # noqa: E402
+from wolfcal.plan.pipeline import PlanOptions, make_plan  # noqa: E402
+from wolfcal.robot.corrections import Corrections  # noqa: E402
+from wolfcal.robot.robot import load_robot  # noqa: E402
+from wolfcal.sim.external_poses import external_tag_poses  # noqa: E402
+from wolfcal.sim.observations import observations_from_poses  # noqa: E402
+from wolfcal.sim.simulate import offset_joints  # noqa: E402
+from wolfcal.sim.truth import TruthSpec, random_truth  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+SCENARIOS = {"leg": ("head", "leg", "all"), "head_camera": ("head", "head_camera", "head"),
+             "external": ("external", "leg", "legs")}  # fmt: skip
+NOISE_PX = 0.15
+
+
+def observe(robot, plan, truth: Corrections, idx: np.ndarray, camera, rng):
+    """Observations of candidates idx at the true kinematics (readings = the commanded targets)."""
+    q_true = plan.candidates.q[idx] + truth.offset_vector(robot.joint_names)
+    frames = Corrections(frames=truth.frames, tags=truth.tags)
+    if camera.external:
+        T = external_tag_poses(robot, camera.T_base_camera, q_true, frames, robot.config.tag_ids)
+    else:
+        T = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, frames)[1]
+    return observations_from_poses(robot, camera.model, truth, q_true, T, plan.candidates.visible[idx], NOISE_PX,
+                                   rng, camera.name)  # fmt: skip
+
+
+def run(name: str, seed: int) -> dict:
+    system, free, offsets = SCENARIOS[name]
+    robot = load_robot(CONFIG)
+    rng = np.random.default_rng(100 + seed)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
+    start = time.perf_counter()
+    plan = make_plan(robot, PlanOptions(free=free, system=system, poses=12, seed=seed), say=lambda _m: None)
+    planning = time.perf_counter() - start
+    camera = plan_camera(robot, system)
+    chosen = np.flatnonzero((plan.candidates.q[:, None, :] == plan.q[None]).all(axis=2).any(axis=1))
+    others = rng.permutation(np.setdiff1d(np.arange(len(plan.candidates.q)), chosen))
+    out = {"planning_s": planning}
+    for label, idx in (("planned12", chosen), ("random30", others[:30]), ("random12", others[:12])):
+        obs = observe(robot, plan, truth, idx, camera, rng)
+        fit = fit_observations(robot, obs, FitOptions(free=free, system=system))
+        if free == "leg":
+            err = max(link_position_errors(robot, s, fit.corrections, truth, 500, np.random.default_rng(seed)).max()
+                      for s in ("r_sole", "l_sole"))  # fmt: skip
+        else:
+            err = camera_pose_errors(robot, fit.corrections, truth)[1].max()
+        names = fit.params.names[: len(fit.chain)]
+        keep = [i for i, n in enumerate(names) if plan.observable[plan.params.names.index(n)]]
+        units = np.array([p.unit for p in fit.params.parameters])[keep]
+        std = fit.solution.std[keep]
+        out[label] = (err, std[units == "m"].max(), std[units == "rad"].max())
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
+    args = parser.parse_args()
+    for name in args.scenarios:
+        runs = [run(name, seed) for seed in range(args.seeds)]
+        med = {k: np.median([r[k] for r in runs], axis=0) for k in ("planned12", "random30", "random12")}
+        ratio_m = np.median([r["random12"][1] / r["planned12"][1] for r in runs])
+        ratio_rad = np.median([r["random12"][2] / r["planned12"][2] for r in runs])
+        print(f"{name:12s} true error (median of {args.seeds} seeds): 12 planned {med['planned12'][0] * 1000:.2f} mm, "
+              f"30 random {med['random30'][0] * 1000:.2f} mm, 12 random {med['random12'][0] * 1000:.2f} mm; "
+              f"worst reported std random12/planned12: {ratio_m:.1f}x (m), {ratio_rad:.1f}x (rad); "
+              f"planning {np.median([r['planning_s'] for r in runs]):.1f} s (12 of 2000)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

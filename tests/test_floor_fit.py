@@ -1,0 +1,95 @@
+"""The floor block against simulated truth (corners projected without images): a robot config, camera and tag ids
+the shipped demos do not use, 0.025 rad rms head and leg offsets, the camera off by ~4 deg; floor tags of 0.12-0.2 m
+lying 1-4 m away."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.ground import ground_errors
+from wolfcal.fit.floor_block import check_floor_samples
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.floor import simulate_floor
+from wolfcal.sim.scenario import synthetic_scenario
+
+WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
+                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory):
+    """Wolfgang's URDF with other tag ids and sizes (feet 7, 8; torso 3) and floor tags 60-65 of 0.12-0.2 m."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
+    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
+    data.pop("external_cameras", None)
+    new_ids = {43: 7, 44: 8, 42: 3}
+    for tag in data["tags"]:
+        tag["size"] = 0.12 if tag["id"] == 42 else 0.1
+        tag["id"] = new_ids[tag["id"]]
+    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    path = tmp_path_factory.mktemp("floor") / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_robot(path)
+
+
+def joined(a: Observations, b: Observations) -> Observations:
+    """Feet samples then floor samples, as one head-camera capture."""
+    return Observations(
+        a.joint_names, np.concatenate([a.q_measured, b.q_measured]), np.concatenate([a.stamps_ns, b.stamps_ns]),
+        a.sources + b.sources, a.camera, np.concatenate([a.sample_index, b.sample_index + a.n_samples]),
+        np.concatenate([a.tag_ids, b.tag_ids]), np.concatenate([a.corner_index, b.corner_index]),
+        np.concatenate([a.uv, b.uv]),
+    )  # fmt: skip
+
+
+def scene(robot, seed, offsets="all"):
+    feet = synthetic_scenario(robot, CAMERA, 30, seed, offsets=offsets)
+    floor = simulate_floor(robot, CAMERA, feet.truth, 30, np.random.default_rng(seed + 100))
+    return feet, floor
+
+
+def ground_4_5(robot, truth, model):
+    row = ground_errors(robot, CAMERA, truth, {"m": model}, (4.5,))[0]
+    return row["models"]["m"]["error_m"]
+
+
+def test_floor_tag_seen_once_is_refused(robot):
+    feet, floor = scene(robot, 1)
+    once = floor.obs.subset(np.arange(floor.obs.n_samples))
+    first = int(once.tag_ids[0])
+    keep = (once.tag_ids != first) | (once.sample_index == once.sample_index[0])
+    lonely = Observations(once.joint_names, once.q_measured, once.stamps_ns, once.sources, once.camera,
+                          once.sample_index[keep], once.tag_ids[keep], once.corner_index[keep], once.uv[keep])
+    with pytest.raises(WolfcalError, match=f"floor tag\\(s\\) {first} seen in only one sample"):
+        check_floor_samples(robot, lonely)
+
+
+def test_floor_samples_not_standing_are_refused(robot):
+    _, floor = scene(robot, 1)
+    obs = floor.obs
+    obs.q_measured[3, robot.model.column("RKnee")] -= 0.6  # one knee bent: that foot is off the floor
+    with pytest.raises(WolfcalError, match="not in a standing pose .* at most 10 deg and 3 cm"):
+        check_floor_samples(robot, obs)
+
+
+@pytest.mark.slow
+def test_leg_fit_with_floor_samples_brings_the_ground_error_down(robot):
+    feet, floor = scene(robot, 1)
+    before = ground_4_5(robot, feet.truth, Corrections())
+    feet_only = fit_observations(robot, {"head": feet.obs}, FitOptions(free="leg"))
+    both = fit_observations(robot, {"head": joined(feet.obs, floor.obs)}, FitOptions(free="leg"))
+    assert [b.name for b in both.blocks] == ["head camera", "floor", "sole closure"]
+    assert any(p.startswith("floor.tag60.") for p in both.params.names)
+    after_feet, after_both = ground_4_5(robot, feet.truth, feet_only.corrections), ground_4_5(
+        robot, feet.truth, both.corrections)
+    assert before > 1.0  # over a metre at 4.5 m before
+    assert after_both < 0.05 and after_both < after_feet, (after_feet, after_both)

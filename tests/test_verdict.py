@@ -1,0 +1,73 @@
+"""The deploy verdict: the issue's failing case (a camera fit on a robot whose legs are off: green banner and deploy
+files while the ball lands half a metre off) must end in "the legs need calibration" and no deploy files."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_evaluate import quiet, split_capture
+from typer.testing import CliRunner
+
+from wolfcal.cli import app
+from wolfcal.evaluate.deploy import DEPLOY_FILES
+from wolfcal.evaluate.pipeline import run_evaluate
+from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
+from wolfcal.fit.pipeline import FitOptions, run_fit
+from wolfcal.sim.simulate import SimOptions, simulate_capture
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+
+
+def test_camera_fit_on_a_robot_with_leg_offsets_is_refused(tmp_path, robot, camera):
+    simulate_capture(CONFIG, tmp_path / "all.mcap", SimOptions(samples=24, seed=3, binning=4, offsets="legs"),
+                     say=quiet)  # fmt: skip
+    split_capture(tmp_path / "all.mcap", {tmp_path / "fit.mcap": range(16), tmp_path / "held.mcap": range(16, 24)},
+                  robot, camera)  # fmt: skip
+    run_fit([tmp_path / "fit.mcap"], CONFIG, tmp_path / "fit", FitOptions(free="camera"), say=quiet)
+    out = tmp_path / "report"
+    m = run_evaluate(tmp_path / "fit", [tmp_path / "held.mcap"], out, say=quiet)
+    ground = {r["distance_m"]: r["models"] for r in m["ground"]["rows"]}
+    assert m["after"]["rms_px"] < m["before"]["rms_px"]  # pixels alone say "improves" ...
+    assert ground[4.5]["after"]["error_m"] > 0.10  # ... while the ball lands more than 10 cm off (true error)
+    assert m["structure"]["unexplained"], m["structure"]
+    assert not m["verdict"]["deploy"] and not m["deploy"]["written"]
+    assert "the legs need calibration: run the leg preset" in m["verdict"]["message"]
+    assert not any((out / name).exists() for name in DEPLOY_FILES)
+    assert "the legs need calibration" in (out / "report.md").read_text()
+    assert any("ground error was not measured" in n and "predicts +-" in n for n in m["verdict"]["notes"])
+    result = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
+                                      "--out", str(out), "--force"])  # fmt: skip
+    assert result.exit_code != 0 and "the legs need calibration" in result.output and "Traceback" not in result.output
+    forced = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
+                                      "--out", str(out), "--force", "--deploy-worse"])  # fmt: skip
+    assert forced.exit_code == 0 and all((out / name).exists() for name in DEPLOY_FILES)
+
+
+STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "corner_noise_px": 0.2}
+
+
+@pytest.mark.parametrize("ground, deploy, words", [
+    ({"before_m": 0.30, "after_m": 0.40, "after_std_m": 0.01}, False, "gets worse: 30.0 cm -> 40.0 cm"),
+    ({"before_m": 0.30, "after_m": 0.08, "after_std_m": 0.01}, False, "stays above the limit: 8.0 cm > 5 cm"),
+    ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 cm"),
+])
+def test_measured_ground_error_decides(ground, deploy, words):
+    v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, ground, None, 0.0)
+    assert v["deploy"] is deploy
+    assert words in " ".join([v["message"], *v["refusals"]])
+    assert not any("not measured" in n for n in v["notes"])
+
+
+def test_limits_are_options():
+    ground = {"before_m": 0.30, "after_m": 0.08, "after_std_m": 0.01}
+    assert deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, ground, None, 0.0, VerdictLimits(ground_limit_m=0.1))["deploy"]
+    turn = np.deg2rad(3.0)
+    assert any("3.0 deg" in n for n in deploy_verdict("camera", 2.0, 0.3, STRUCTURE_OK, None, 0.01, turn)["notes"])
+    quiet_limits = VerdictLimits(mount_limit_rad=np.deg2rad(5.0))
+    assert not any("deg" in n for n in deploy_verdict("camera", 2.0, 0.3, STRUCTURE_OK, None, 0.01, turn,
+                                                      quiet_limits)["notes"])  # fmt: skip
+
+
+def test_worse_pixels_refuse():
+    v = deploy_verdict("camera", 0.3, 0.4, STRUCTURE_OK, None, None, 0.0)
+    assert not v["deploy"] and v["worse"] and v["message"].startswith("Do not deploy: keep the input URDF")

@@ -1,0 +1,100 @@
+"""The deploy verdict: whether the files to deploy are written, judged on every metric the evaluation has.
+
+Refused (unless overridden with --deploy-worse) when
+- the held-out reprojection error gets worse;
+- the model's free parameters cannot explain the held-out data (`structure.unexplained`): with the camera presets
+  that is the legs, whose offsets tilt the standing robot in a way no camera correction can undo;
+- the measured ground error at 4.5 m (floor samples) gets worse, or stays above the limit (default 5 cm).
+(More than 20 % of the samples left out as outliers is refused earlier, by the one outlier rule: `leftout`.)
+Without floor samples the ground error is not measured: the verdict says so, gives the ground error the fit's
+covariance predicts, and warns when the camera correction turns the camera by more than a mount moves (2 deg).
+The banner says in one sentence what to do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+GROUND_LIMIT_M = 0.05  # largest measured ground error at 4.5 m that may be deployed [m]
+MOUNT_LIMIT_RAD = float(np.deg2rad(2.0))  # a camera correction beyond this is more than a mount moves [rad]
+
+
+@dataclass(frozen=True)
+class VerdictLimits:
+    ground_limit_m: float = GROUND_LIMIT_M
+    mount_limit_rad: float = MOUNT_LIMIT_RAD
+
+
+LEGS_ADVICE = (
+    "the legs need calibration: run the leg preset (wolfcal fit FEET.mcap FLOOR.mcap --free leg, with floor "
+    "samples if possible) instead of deploying this"
+)
+
+FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the legs with them (--free leg)"
+
+
+def deploy_verdict(
+    free: str,
+    before_px: float,
+    after_px: float,
+    structure: dict | None,
+    measured_ground: dict | None,
+    predicted_ground_m: float | None,
+    camera_turn_rad: float,
+    limits: VerdictLimits = VerdictLimits(),
+) -> dict:
+    """metrics.json's 'verdict': deploy (bool), worse (the pixel rule), refusals and notes (sentences), banner.
+
+    measured_ground: {'before_m', 'after_m', 'after_std_m'} at 4.5 m from floor samples, or None;
+    predicted_ground_m: 1-sigma ground error at 4.5 m from the fit's covariance [m], or None;
+    camera_turn_rad: rotation angle of the fitted camera frame correction [rad].
+    """
+    refusals: list[tuple[str, str]] = []  # (what to do, why)
+    notes: list[str] = []
+    worse = bool(after_px > before_px)
+    if structure is not None and structure["unexplained"]:
+        what = (LEGS_ADVICE if free in ("camera", "head_camera") else
+                "the fitted model does not explain the held-out data: check the tags' ids, sizes and links, the "
+                "camera intrinsics, and that the captures are of this robot")  # fmt: skip
+        refusals.append((what, (
+            f"Held-out tags are off by {structure['view_shift_rms_px']:.2f} px RMS per axis, {structure['scale']:.1f} "
+            f"times what detection noise ({structure['corner_noise_px']:.2f} px) and joint quantisation explain: "
+            f"{what}.")))
+    if worse:
+        refusals.append(("keep the input URDF and refit with more varied poses or fewer free parameters", (
+            f"The calibration makes held-out error worse: reprojection RMS {after_px:.3f} px calibrated vs "
+            f"{before_px:.3f} px with the input URDF.")))
+    limit_cm = limits.ground_limit_m * 100
+    if measured_ground is not None:
+        b, a = measured_ground["before_m"] * 100, measured_ground["after_m"] * 100
+        if a > b:
+            refusals.append((LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE,
+                             f"The measured ground error at 4.5 m gets worse: {b:.1f} cm -> {a:.1f} cm."))
+        elif a > limit_cm:
+            refusals.append((LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE, (
+                f"The measured ground error at 4.5 m stays above the limit: {a:.1f} cm > {limit_cm:g} cm "
+                "(--ground-limit-cm).")))
+    else:
+        predicted = "" if predicted_ground_m is None else (
+            f"; the fit's uncertainty alone predicts +- {predicted_ground_m * 100:.1f} cm at 4.5 m (1 sigma), "
+            "which does not include errors its free parameters cannot represent")  # fmt: skip
+        notes.append(f"The ground error was not measured (no floor samples held out){predicted}.")
+    if camera_turn_rad > limits.mount_limit_rad:
+        notes.append(
+            f"The camera correction turns the camera by {np.rad2deg(camera_turn_rad):.1f} deg, more than a camera "
+            f"mount moves ({np.rad2deg(limits.mount_limit_rad):g} deg): it may be absorbing joint offsets; check "
+            "the ground error with floor samples before deploying."
+        )
+    deploy = not refusals
+    if deploy:
+        ground = ("" if measured_ground is None else
+                  f", measured ground error at 4.5 m {measured_ground['after_m'] * 100:.1f} cm")  # fmt: skip
+        banner = (f"Deploy the files below: held-out reprojection RMS {before_px:.3f} px -> {after_px:.3f} px"
+                  f"{ground}" + ("." if not notes else "; read the notes below first."))  # fmt: skip
+    else:
+        banner = f"Do not deploy: {refusals[0][0]}."
+    return {"deploy": deploy, "worse": worse, "refusals": [why for _, why in refusals], "notes": notes,
+            "message": banner, "ground_limit_m": limits.ground_limit_m,
+            "mount_limit_rad": limits.mount_limit_rad}  # fmt: skip

@@ -1,0 +1,61 @@
+"""The one outlier rule of wolfcal: a unit (a view, a sample) is left out when it is far worse than the typical one
+AND off by more than a floor.
+
+    outlier = (spread > factor * median(spread over all units)) & (size > floor)
+
+`spread` is how badly the unit fits relative to what is expected (the fit: its residuals whitened by the noise model;
+elsewhere the plain RMS), `size` how far off it is in the measured unit (pixels, metres). The factor says "far worse
+than the others"; the floor keeps a good data set (every unit near the noise) from losing its best-but-one units, since
+a median of tiny numbers times a factor is still tiny. The parameter sets below are the only places the numbers live;
+where they differ, the reason is given beside them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class OutlierRule:
+    factor: float  # a unit is an outlier above this multiple of the median unit's spread ...
+    floor: float  # ... and only when also off by more than this [the unit's measure, e.g. px]
+
+    def flags(self, spread: np.ndarray, size: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool outliers among units with `spread` (N,) and `size` (N,) (default: size = spread); NaN units
+        (nothing measured) are never outliers and do not count in the median."""
+        spread = np.asarray(spread, dtype=float)
+        size = spread if size is None else np.asarray(size, dtype=float)
+        finite = np.isfinite(spread)
+        if not finite.any():
+            return np.zeros(spread.shape, dtype=bool)
+        limit = self.factor * float(np.median(spread[finite]))
+        with np.errstate(invalid="ignore"):
+            return finite & (spread > limit) & (size > self.floor)
+
+
+# The fit's tag views (one tag in one image): spread = whitened RMS under the view's own noise covariance (the
+# noise model knows the joint-reading error each view carries), size = per-axis RMS [px].
+FIT_VIEW_PX = OutlierRule(factor=4.0, floor=0.5)
+
+# Motion-capture markers, one marker in one sample: spread = whitened RMS, size = per-axis RMS [m]. Tighter factor:
+# a reflection 2 mm away is 4-7 noise sigmas at 0.3 mm marker noise and must still be caught; the floor (1 mm) is
+# about three times the raw per-axis noise.
+MOCAP_MARKER_M = OutlierRule(factor=3.0, floor=0.001)
+
+# The closure of the standing soles (both on one plane), per floor sample [m]: a sample is left out only when the
+# soles disagree by more than 5 mm beyond the others (a foot not flat on the floor).
+SOLE_CLOSURE_M = OutlierRule(factor=4.0, floor=0.005)
+
+# Held-out evaluation, per sample: held-out data have no noise model (nothing is fitted on them), so spread = size =
+# the plain per-axis RMS [px] of the sample under the better model. That RMS still carries the joint-reading error
+# the fit's noise model whitens away (larger on far tags), so the floor is twice the fit's. The unit is the sample,
+# not the view: a stale joint reading or a blurred image spoils every tag of the sample.
+HELD_OUT_SAMPLE_PX = OutlierRule(factor=4.0, floor=1.0)
+
+# Intrinsics, per board view: spread = size = the per-POINT RMS [px] (sqrt(mean(du^2 + dv^2)), OpenCV's convention,
+# not per axis) of the view after OpenCV's calibration, applied to the worst view only and repeated after each
+# recalibration (so no view is judged under another outlier's pull; at most a third of the views are dropped).
+# Board corners carry no joint-reading error, so a good view's RMS is lower than a tag view's and so is the floor.
+INTRINSICS_VIEW_PX = OutlierRule(factor=3.0, floor=0.25)

@@ -1,0 +1,1 @@
+"""`wolfcal plan`: the few calibration poses that tell the most."""

@@ -1,0 +1,172 @@
+"""Candidate calibration poses: random joint readings inside the URDF limits that show the tags and do not collide.
+
+The joints a plan moves are those between the base and the viewer and between the base and each tag used; each is
+drawn uniformly within its URDF limits shrunk by `margin` [rad] at both ends, the others stand at the rest pose.
+Joint values are readings of the nominal model [rad] (what the servos are commanded to). A configuration is kept
+when the camera sees the tags it needs in full (head camera: at least one used tag; external camera: the tags fixed
+to the base and one other, as the simulator asks, `wolfcal.sim`), none of them hidden by the robot's own body (the
+line from the camera centre to each corner misses every capsule but those of the tag's and the viewer's bodies),
+and no two bodies come closer than CLEARANCE_M (`wolfcal.robot.collision`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.observations import HEAD_CAMERA
+from wolfcal.robot.collision import CollisionModel, rest_configuration
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+from wolfcal.sim.external_poses import external_pose_ok, external_visibility
+from wolfcal.sim.placement import expected_placement, placement_from_text
+from wolfcal.sim.poses import tag_visibility
+from wolfcal.vision.tags import tag_corners
+
+BATCH = 4000  # configurations drawn at a time
+MAX_BATCHES = 250
+HOPELESS_BATCHES = 25  # give up after this many batches without a single candidate
+CLEARANCE_M = 0.005  # smallest distance kept between two bodies of a candidate pose [m]
+
+
+@dataclass(frozen=True)
+class PlanCamera:
+    """The camera a plan is made for: the head camera or an external camera at an expected placement."""
+
+    name: str  # 'head' or the external camera's name in the robot config
+    model: CameraModel
+    T_base_camera: np.ndarray | None = None  # (4, 4) external cameras only [m]
+
+    @property
+    def external(self) -> bool:
+        return self.name != HEAD_CAMERA
+
+
+@dataclass
+class Candidates:
+    q: np.ndarray  # (N, J) joint readings [rad], model order
+    visible: np.ndarray  # (N, T) bool over robot.config.tag_ids: tag used and well in view
+    joints: list[str]  # the joints the plan moves
+    drawn: int  # configurations drawn to find them
+    rejected: dict[str, int]  # configurations left out, by reason
+
+
+def plan_camera(robot: Robot, system: str, external: str | None = None, placement: str | None = None) -> PlanCamera:
+    """The camera of a --system (head | external), its intrinsics from the robot config; an external camera at
+    `placement` ('x,y,z,roll,pitch,yaw', see `wolfcal.sim.placement`) or the simulator's expected placement."""
+    if system == "head":
+        name = HEAD_CAMERA
+        robot.config.head_camera("--system head plans for it")
+    else:
+        if not robot.config.external_cameras:
+            raise WolfcalError(f"{robot.config.path}: --system external needs a camera under 'external_cameras:'")
+        name = external or robot.config.external_cameras[0].name
+    intrinsics, key = robot.config.camera_intrinsics(name)
+    if intrinsics is None:
+        raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML): the plan needs the intrinsics")
+    T = None if name == HEAD_CAMERA else (placement_from_text(placement) if placement else expected_placement())
+    return PlanCamera(name, load_camera_info(intrinsics), T)
+
+
+def plan_joints(robot: Robot, camera: PlanCamera, tag_ids: list[int]) -> list[str]:
+    """The joints that move the used tags relative to the camera, in model order."""
+    links = [robot.config.tag(t).link for t in tag_ids]
+    if not camera.external:
+        links.append(robot.config.head_camera().frame)
+    moved = set(robot.actuated_joints_to(links))
+    return [j for j in robot.joint_names if j in moved]
+
+
+def joint_bounds(robot: Robot, joints: list[str], margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) readings (J,) [rad]: `joints` within their limits shrunk by margin, the others at rest."""
+    lo, hi = rest_configuration(robot), rest_configuration(robot)
+    for name in joints:
+        joint, k = robot.model.joints[name], robot.model.column(name)
+        a, b = max(joint.lower, -np.pi) + margin, min(joint.upper, np.pi) - margin
+        if a > b:
+            raise WolfcalError(f"{robot.config.urdf}: joint {name} has a range narrower than twice the margin")
+        lo[k], hi[k] = a, b
+    return lo, hi
+
+
+def tag_views(robot: Robot, camera: PlanCamera, q: np.ndarray, tag_ids: list[int]) -> np.ndarray:
+    """(N, T) bool over config.tag_ids: tag in `tag_ids`, fully in the image with a margin, large and facing the
+    camera (the simulator's rules, nominal model); line of sight is checked by `line_of_sight`."""
+    nominal = Corrections()
+    used = np.isin(robot.config.tag_ids, tag_ids)
+    if camera.external:
+        return external_visibility(robot, camera.model, camera.T_base_camera, q, nominal) & used
+    width = camera.model.width
+    return tag_visibility(robot, camera.model, q, nominal, robot.config.tag_ids, 0.03 * width, 0.02 * width) & used
+
+
+def line_of_sight(robot: Robot, camera: PlanCamera, q: np.ndarray, collisions: CollisionModel) -> np.ndarray:
+    """(N, T) bool over config.tag_ids: no capsule (but the tag's and the viewer's bodies) between the camera centre
+    and any corner of the tag."""
+    config = robot.config
+    links = [config.tag(t).link for t in config.tag_ids]
+    viewer = config.base_link if camera.external else config.head_camera().frame
+    poses = robot.model.link_poses(q, links + [viewer])
+    T_root_camera = poses[viewer] @ (camera.T_base_camera if camera.external else np.eye(4))
+    corners = []
+    for t in config.tag_ids:
+        T_root_tag = poses[config.tag(t).link] @ robot.T_link_tag(t)
+        corners.append(np.einsum("nij,cj->nci", T_root_tag[:, :3, :3], tag_corners(config.tag(t).size))
+                       + T_root_tag[:, None, :3, 3])  # fmt: skip
+    points = np.concatenate(corners, axis=1)  # (N, 4T, 3)
+    body = collisions.body_of_link
+    viewer_body = -1 if camera.external else body[viewer]
+    skip = np.repeat([[body[config.tag(t).link], viewer_body] for t in config.tag_ids], 4, axis=0)
+    blocked = collisions.blocked(q, T_root_camera[:, :3, 3], points, skip)
+    return ~blocked.reshape(len(q), len(config.tag_ids), 4).any(axis=2)
+
+
+def pose_ok(robot: Robot, camera: PlanCamera, visible: np.ndarray) -> np.ndarray:
+    """(N,) bool: the camera sees what it needs (see the module docstring)."""
+    if camera.external:
+        return external_pose_ok(robot, visible)
+    return visible.any(axis=1)
+
+
+def draw_candidates(
+    robot: Robot, camera: PlanCamera, tag_ids: list[int], n: int, rng: np.random.Generator,
+    collisions: CollisionModel, margin: float = 0.1,
+) -> Candidates:
+    """Up to n candidate poses (see the module docstring); a clear error when none shows the tags."""
+    joints = plan_joints(robot, camera, tag_ids)
+    lo, hi = joint_bounds(robot, joints, margin)
+    kept_q, kept_v, drawn = [], [], 0
+    rejected = {"tags not in view": 0, "self-collision": 0, "tags hidden by the body": 0}
+    for _ in range(MAX_BATCHES):
+        q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
+        drawn += BATCH
+        visible = tag_views(robot, camera, q, tag_ids)
+        ok = pose_ok(robot, camera, visible)
+        rejected["tags not in view"] += int((~ok).sum())
+        q, visible = q[ok], visible[ok]
+        free = collisions.clearance(q) >= CLEARANCE_M if len(q) else np.zeros(0, bool)
+        rejected["self-collision"] += int((~free).sum())
+        q, visible = q[free], visible[free]
+        if len(q):
+            visible &= line_of_sight(robot, camera, q, collisions)
+        ok = pose_ok(robot, camera, visible)
+        rejected["tags hidden by the body"] += int((~ok).sum())
+        kept_q.append(q[ok])
+        kept_v.append(visible[ok])
+        found = sum(len(k) for k in kept_q)
+        if found >= n or (not found and drawn >= HOPELESS_BATCHES * BATCH):
+            break
+    q, visible = np.concatenate(kept_q)[:n], np.concatenate(kept_v)[:n]
+    if not len(q):
+        what = "the tags fixed to the base and another tag" if camera.external else "a tag"
+        raise WolfcalError(
+            f"none of {drawn} random poses within the joint limits shows the {camera.name} camera {what} "
+            f"(tags {', '.join(map(str, tag_ids))}; left out: "
+            + ", ".join(f"{k} {v}" for k, v in rejected.items())
+            + "); check the tags' links and poses in the robot config, the camera's intrinsics and placement"
+        )
+    return Candidates(q, visible, joints, drawn, rejected)

@@ -1,0 +1,195 @@
+"""`wolfcal plan`: candidates -> expected information -> chosen poses -> capture order -> poses file + table.
+
+The poses file is the one `wolfcal capture --poses` and `wolfcal simulate --poses` read (`wolfcal.capture.poses`):
+every pose names every joint the plan moves; the others stay where they stand (planned and checked at the
+rest pose; `capture --poses` checks again where they really stand). The table compares the
+standard deviations the fit would report (configured pixel and encoder noise) for the planned poses and for as many
+random candidate poses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.atomic import write_text_atomic
+from wolfcal.errors import WolfcalError
+from wolfcal.fit.uncertainty import Uncertainty, uncertainty
+from wolfcal.outputs import check_outputs
+from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
+from wolfcal.plan.information import PlanModel, check_observable, factors, predicted, separability
+from wolfcal.plan.order import capture_order
+from wolfcal.plan.select import check_criterion, select
+from wolfcal.robot.collision import collision_model, rest_configuration
+from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
+from wolfcal.robot.robot import Robot, load_robot
+
+PLAN_SYSTEMS = ("head", "external")  # a new measurement system adds its camera or block in `plan_camera`
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    free: str = "leg"
+    side: str = "both"
+    system: str = "head"
+    poses: int = 12
+    candidates: int = 2000
+    criterion: str = "D"
+    velocity: float = 0.5  # profile velocity of the capture [rad/s]
+    margin: float = 0.1  # kept from each URDF joint limit [rad]
+    seed: int = 0
+    external: str | None = None  # which external camera (default: the config's first)
+    placement: str | None = None  # its expected pose 'x,y,z,roll,pitch,yaw' (default: the simulator's middle)
+
+    def __post_init__(self) -> None:
+        check_preset(self.free, self.side)
+        check_criterion(self.criterion)
+        if self.system not in PLAN_SYSTEMS:
+            raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
+        if self.poses < 1 or self.candidates < self.poses:
+            raise WolfcalError("--poses must be at least 1 and --candidates at least --poses")
+        if not 0 < self.velocity <= 6:
+            raise WolfcalError(f"--velocity {self.velocity}: give a speed in rad/s in (0, 6]")
+
+
+@dataclass
+class Plan:
+    q: np.ndarray  # (n, J) planned joint readings in capture order [rad]
+    joints: list[str]  # joints written per pose: those the plan moves
+    move_time_s: float  # moves from the rest pose through every pose at the velocity [s]
+    params: ParameterSet  # every unknown (chain first)
+    n_chain: int
+    planned: Uncertainty
+    random: Uncertainty
+    observable: np.ndarray  # (P,) bool: parameters some pose can inform
+    groups: list[list[str]]  # parameters no pose separates, in groups
+    candidates: Candidates
+    condition: tuple[float, float]  # planned, random: over the observable parameters
+
+    def worst_std(self, which: Uncertainty, unit: str) -> float:
+        """Largest std among the observable chain parameters of a unit ('m' | 'rad') [unit]."""
+        units = np.array([p.unit for p in self.params.parameters[: self.n_chain]])
+        keep = self.observable[: self.n_chain] & (units == unit)
+        return float(which.std[: self.n_chain][keep].max()) if keep.any() else 0.0
+
+
+def used_tags(robot: Robot, options: PlanOptions, external: bool) -> list[int]:
+    """The tags the fit would use for this preset and camera (all the preset's, plus the base-fixed ones for an
+    external camera)."""
+    tags = tags_for_preset(robot, options.free, robot.config.tag_ids, options.side)
+    if options.free == "leg" and not external:
+        tags = [t for t in tags if robot.config.tag(t).side is not None]
+    if external:
+        tags = sorted(set(tags) | {t for t in robot.config.tag_ids if robot.fixed_to_base(robot.config.tag(t).link)})
+    return tags
+
+
+def seen_tags(robot: Robot, options: PlanOptions, tags: list[int], candidates: Candidates, say) -> list[int]:
+    """The used tags some candidate shows; a leg-preset tag that none shows is an error, others a note."""
+    seen = [t for t in tags if candidates.visible[:, robot.config.tag_ids.index(t)].any()]
+    for t in sorted(set(tags) - set(seen)):
+        tag = robot.config.tag(t)
+        message = (f"tag {t} (on {tag.link}) is in view in none of the {len(candidates.q)} candidate poses, so the "
+                   f"--system {options.system} camera cannot observe the joints behind it")  # fmt: skip
+        if options.free == "leg" and tag.side is not None:
+            raise WolfcalError(f"{message}; choose another --side or --system, or move the tag")
+        say(f"note: {message}; it is left out")
+    return seen
+
+
+def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = print) -> Plan:
+    """Candidates, selection and order (no file written)."""
+    rng = np.random.default_rng(options.seed)
+    collisions = collision_model(robot)
+    camera = plan_camera(robot, options.system, options.external, options.placement)
+    tags = used_tags(robot, options, camera.external)
+    say(f"drawing {options.candidates} candidate poses (collisions: capsules from {collisions.source}) ...")
+    candidates = draw_candidates(robot, camera, tags, options.candidates, rng, collisions, options.margin)
+    say(f"{len(candidates.q)} candidates from {candidates.drawn} random poses; left out: "
+        + ", ".join(f"{k} {v}" for k, v in candidates.rejected.items()))  # fmt: skip
+    model = PlanModel(robot, camera, options.free, options.side, seen_tags(robot, options, tags, candidates, say))
+    problem = model.problem(candidates.q, candidates.visible, independent=True)
+    G = factors(problem)
+    sep = separability(G, problem.n_chain)
+    check_observable(problem.params, G, sep, len(G))
+    say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
+    chosen, _ = select(G, options.poses, sep.basis, options.criterion)
+    order, move_time = capture_order(candidates.q[chosen], rest_configuration(robot), options.velocity)
+    chosen = np.array(chosen)[order]
+    others = rng.choice(np.setdiff1d(np.arange(len(G)), chosen), size=min(options.poses, len(G) - len(chosen)),
+                        replace=False) if len(G) > len(chosen) else chosen  # fmt: skip
+    planned_problem = model.problem(candidates.q[chosen], candidates.visible[chosen])
+    random_problem = model.problem(candidates.q[others], candidates.visible[others])
+    observable = ~sep.unseparable
+    return Plan(
+        q=candidates.q[chosen], joints=candidates.joints,
+        move_time_s=move_time, params=problem.params, n_chain=problem.n_chain,
+        planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
+        groups=sep.groups(problem.params.names), candidates=candidates,
+        condition=(_condition(planned_problem, observable), _condition(random_problem, observable)),
+    )  # fmt: skip
+
+
+def _condition(problem, observable: np.ndarray) -> float:
+    """Condition number of the column-scaled Jacobian over the observable parameters (the others at their prior)."""
+    J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
+    return uncertainty(J[:, observable], problem.params.prior_sigmas[observable]).condition_number
+
+
+def poses_text(robot: Robot, plan: Plan, options: PlanOptions) -> str:
+    """The poses file (`wolfcal capture --poses` format) of a plan."""
+    columns = [robot.model.column(j) for j in plan.joints]
+    lines = [
+        f"# Planned by `wolfcal plan --free {options.free} --side {options.side} --system {options.system} "
+        f"--criterion {options.criterion}` for {robot.config.name}: {len(plan.q)} poses chosen from "
+        f"{len(plan.candidates.q)} candidates,",
+        f"# ordered for short moves (about {plan.move_time_s:.0f} s of moves at {options.velocity:.2g} rad/s). "
+        "Joint readings [rad]; every joint the plan moves is named.",
+        f"velocity: {options.velocity}",
+        "poses:",
+    ]
+    for i, q in enumerate(plan.q):
+        joints = ", ".join(f"{j}: {q[c]:.5f}" for j, c in zip(plan.joints, columns))
+        lines += [f"- name: plan{i + 1:02d}", f"  joints: {{{joints}}}"]
+    return "\n".join(lines) + "\n"
+
+
+def table_lines(plan: Plan) -> list[str]:
+    """The printed comparison: per free parameter, predicted std for the planned and as many random poses."""
+    n = len(plan.q)
+    lines = [f"predicted standard deviation (configured noise) for {n} planned and {n} random candidate poses:",
+             f"  {'parameter':44s} {'prior':>9s} {'planned':>9s} {'random':>9s}"]  # fmt: skip
+    for i, p in enumerate(plan.params.parameters[: plan.n_chain]):
+        scale, unit = (1000.0, "mm") if p.unit == "m" else (np.rad2deg(1.0), "deg")
+        note = "" if plan.observable[i] else "  (no pose separates it: keeps its prior)"
+        lines.append(f"  {p.name:44s} {p.prior_sigma * scale:7.3f}{unit:>2s} {plan.planned.std[i] * scale:7.3f}"
+                     f"{unit:>2s} {plan.random.std[i] * scale:7.3f}{unit:>2s}{note}")  # fmt: skip
+    for unit, scale, shown in (("m", 1000.0, "mm"), ("rad", np.rad2deg(1.0), "deg")):
+        planned, random = plan.worst_std(plan.planned, unit) * scale, plan.worst_std(plan.random, unit) * scale
+        lines.append(f"  worst std of the observable parameters in {shown}: planned {planned:.3f}, random {random:.3f}")
+    lines.append("  condition number (column-scaled Jacobian, observable parameters): "
+                 f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}")
+    for group in plan.groups:
+        lines.append(f"  no pose separates {' ~ '.join(group)} (equivalent motions; they keep their prior)")
+    names = plan.params.names
+    observable_names = [nm for nm, ok in zip(names, plan.observable) if ok]
+    for a, b, r in plan.planned.correlated_pairs(names):
+        if a in observable_names and b in observable_names:
+            lines.append(f"  correlated in the plan: {a} ~ {b} ({r:+.2f})")
+    return lines
+
+
+def run_plan(robot_path: Path, out: Path, options: PlanOptions, say: Callable[[str], None] = print,
+             force: bool = False) -> Plan:  # fmt: skip
+    """The whole `wolfcal plan` job: writes the poses file `out` and prints the table."""
+    robot = load_robot(robot_path)
+    check_outputs([out], force, [robot.config.path, robot.config.urdf])
+    plan = make_plan(robot, options, say)
+    write_text_atomic(out, poses_text(robot, plan, options))
+    for line in table_lines(plan):
+        say(line)
+    say(f"wrote {out}: {len(plan.q)} poses, about {plan.move_time_s:.0f} s of moves at {options.velocity} rad/s")
+    return plan

@@ -1,0 +1,93 @@
+"""Choose n of N candidate poses by the expected information: a greedy start, then exchanges (DETMAX-like).
+
+Information in the fit's prior-normalised unknowns z: M(S) = I + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
+Jacobian rows of candidate k, `wolfcal.plan.information`), covariance C = M^-1. The criterion looks at the
+covariance of the observable chain unknowns, C_obs = B^T C_cc B (B: (c, k) basis without the directions no pose can
+inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs (default), A = trace
+C_obs, E = largest eigenvalue of C_obs; smaller is better. Adding candidate k is a rank-r update, evaluated for all
+candidates at once: with S_k = I + G_k C G_k^T and V_k = G_k C_cB,
+C_obs' = C_obs - V_k^T S_k^-1 V_k, log det C_obs' = log det C_obs + log det(S_k - V_k C_obs^-1 V_k^T) - log det S_k.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wolfcal.errors import WolfcalError
+
+CRITERIA = ("D", "A", "E")
+MAX_SWEEPS = 20
+TOLERANCE = 1e-9  # relative improvement an exchange must bring
+
+
+def check_criterion(criterion: str) -> str:
+    if criterion.upper() not in CRITERIA:
+        raise WolfcalError(f"--criterion {criterion!r} must be one of {', '.join(CRITERIA)}")
+    return criterion.upper()
+
+
+def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
+    """The criterion of information matrix M (P, P) (smaller is better)."""
+    c = basis.shape[0]
+    C_obs = basis.T @ np.linalg.inv(M)[:c, :c] @ basis
+    if criterion == "D":
+        return float(np.linalg.slogdet(C_obs)[1])
+    if criterion == "A":
+        return float(np.trace(C_obs))
+    return float(np.linalg.eigvalsh(C_obs)[-1])
+
+
+def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criterion: str) -> np.ndarray:
+    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates."""
+    c = basis.shape[0]
+    C = np.linalg.inv(M)
+    C = 0.5 * (C + C.T)
+    C_obs = basis.T @ C[:c, :c] @ basis
+    GC = G @ C  # (N, r, P)
+    S = np.eye(G.shape[1]) + GC @ np.swapaxes(G, 1, 2)  # (N, r, r)
+    V = GC[:, :, :c] @ basis  # (N, r, k)
+    if criterion == "D":
+        inner = S - V @ np.linalg.solve(C_obs, np.swapaxes(V, 1, 2))
+        return np.linalg.slogdet(C_obs)[1] + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
+    SinvV = np.linalg.solve(S, V)  # (N, r, k)
+    if criterion == "A":
+        return np.trace(C_obs) - np.einsum("nrk,nrk->n", V, SinvV)
+    return np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
+
+
+def information(G: np.ndarray, chosen) -> np.ndarray:
+    """M = I + sum of the chosen candidates' information (P, P)."""
+    chosen = np.asarray(list(chosen), dtype=int)
+    return np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+
+
+def select(G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D") -> tuple[list[int], float]:
+    """n distinct candidate indices and their criterion value: greedy additions, then sweeps that exchange each
+    chosen pose for the best other candidate while that improves the criterion."""
+    if n > len(G):
+        raise WolfcalError(f"--poses {n}: only {len(G)} candidate poses were found; ask for fewer poses")
+    chosen: list[int] = []
+    M = information(G, [])
+    for _ in range(n):
+        values = values_after_adding(M, G, basis, criterion)
+        values[chosen] = np.inf
+        best = int(np.argmin(values))
+        chosen.append(best)
+        M += G[best].T @ G[best]
+    value = criterion_value(M, basis, criterion)
+    for _ in range(MAX_SWEEPS):
+        improved = False
+        for position in range(n):
+            out = chosen[position]
+            M_without = M - G[out].T @ G[out]
+            values = values_after_adding(M_without, G, basis, criterion)
+            values[[k for k in chosen if k != out]] = np.inf
+            best = int(np.argmin(values))
+            if best != out and values[best] < value - TOLERANCE * max(abs(value), 1.0):
+                chosen[position] = best
+                M = M_without + G[best].T @ G[best]
+                value = criterion_value(M, basis, criterion)
+                improved = True
+        if not improved:
+            break
+    return chosen, value

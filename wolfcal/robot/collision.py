@@ -1,0 +1,200 @@
+"""The robot's body as capsules: self-collision and line of sight, vectorised over configurations.
+
+Geometry, in this order of preference:
+- the URDF's `<collision>` primitives, each bounded by a capsule (cylinder: its axis and radius; sphere: a point;
+  box: its longest axis, radius half the diagonal of the other two edges); mesh geometry is refused;
+- otherwise `collision_radii: {link: m}` of the robot config: per listed link, capsules from the link's origin to
+  the origin of each of its child joints (a sphere at the origin for a link without children).
+Capsules of links joined by fixed joints form one body. Pairs never checked (as in MoveIt's allowed-collision
+matrix): bodies joined by one joint, and bodies touching in the rest pose (`rest_pose:`, others 0), where the robot
+stands without harm. Joint values are readings of the nominal model [rad]; lengths in metres, in the root frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import yourdfpy
+
+from wolfcal.errors import WolfcalError
+from wolfcal.robot.robot import Robot
+
+REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other
+
+
+@dataclass(frozen=True)
+class Capsule:
+    link: str
+    body: int  # index of the rigid body (links joined by fixed joints)
+    a_link: np.ndarray  # (3,) segment start in the link frame [m]
+    b_link: np.ndarray  # (3,) segment end in the link frame [m]
+    radius: float  # [m]
+
+
+def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """(...) shortest distance between segments p0-p1 and q0-q1 ((..., 3) each, broadcast) [m] (closest points of
+    two segments, Ericson, Real-Time Collision Detection 5.1.9)."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e = np.sum(d1 * d1, -1), np.sum(d2 * d2, -1)
+    b, c, f = np.sum(d1 * d2, -1), np.sum(d1 * r, -1), np.sum(d2 * r, -1)
+    tiny = 1e-18
+    denom = a * e - b * b
+    s = np.where(denom > tiny, np.clip((b * f - c * e) / np.maximum(denom, tiny), 0.0, 1.0), 0.0)
+    t = np.where(e > tiny, (b * s + f) / np.maximum(e, tiny), 0.0)
+    s = np.where(t < 0.0, np.where(a > tiny, np.clip(-c / np.maximum(a, tiny), 0.0, 1.0), 0.0), s)
+    s = np.where(t > 1.0, np.where(a > tiny, np.clip((b - c) / np.maximum(a, tiny), 0.0, 1.0), 0.0), s)
+    t = np.clip(t, 0.0, 1.0)
+    gap = (p0 + d1 * s[..., None]) - (q0 + d2 * t[..., None])
+    return np.linalg.norm(gap, axis=-1)
+
+
+class CollisionModel:
+    """Capsules of a robot's links and the body pairs to check; see the module docstring."""
+
+    def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray) -> None:
+        self.robot, self.capsules, self.source = robot, capsules, source
+        self.links = sorted({c.link for c in capsules})
+        self.radius = np.array([c.radius for c in capsules])
+        self.body = np.array([c.body for c in capsules])
+        i, j = np.triu_indices(len(capsules), k=1)
+        keep = self.body[i] != self.body[j]
+        adjacent = _adjacent_bodies(robot, self.body_of_link)
+        keep &= ~np.array([(self.body[a], self.body[b]) in adjacent for a, b in zip(i, j)], dtype=bool)
+        self.pairs = np.stack([i[keep], j[keep]], axis=1)
+        touching = self._pair_clearance(np.atleast_2d(rest))[0] < REST_CLEARANCE_M
+        self.pairs = self.pairs[~touching]
+
+    @property
+    def body_of_link(self) -> dict[str, int]:
+        return _bodies(self.robot)
+
+    def segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J)."""
+        poses = self.robot.model.link_poses(np.atleast_2d(q), self.links)
+        a = np.stack([poses[c.link][:, :3, :3] @ c.a_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
+        b = np.stack([poses[c.link][:, :3, :3] @ c.b_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
+        return a, b
+
+    def _pair_clearance(self, q: np.ndarray) -> np.ndarray:
+        """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]."""
+        a, b = self.segments(q)
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        return segment_distance(a[:, i], b[:, i], a[:, j], b[:, j]) - self.radius[i] - self.radius[j]
+
+    def clearance(self, q: np.ndarray) -> np.ndarray:
+        """(N,) smallest surface distance between checked bodies [m] (negative: they overlap)."""
+        d = self._pair_clearance(q)
+        return d.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
+
+    def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
+        """The links of the closest overlapping pair at one configuration q (J,), or None."""
+        d = self._pair_clearance(np.atleast_2d(q))[0]
+        if not len(d) or d.min() >= 0:
+            return None
+        i, j = self.pairs[int(np.argmin(d))]
+        return self.capsules[i].link, self.capsules[j].link
+
+    def blocked(self, q: np.ndarray, origin: np.ndarray, points: np.ndarray, skip_bodies: np.ndarray) -> np.ndarray:
+        """(N, K) bool: the straight line from `origin` (N, 3) to `points` (N, K, 3) (root frame [m]) passes
+        through a capsule; capsules of the bodies in skip_bodies (K, B) (-1: none) are ignored."""
+        a, b = self.segments(q)
+        d = segment_distance(origin[:, None, None, :], points[:, :, None, :], a[:, None], b[:, None])  # (N, K, C)
+        hit = d < self.radius
+        skip = np.any(self.body[None, :, None] == skip_bodies[:, None, :], axis=2)  # (K, C)
+        return np.any(hit & ~skip[None], axis=2)
+
+
+def _bodies(robot: Robot) -> dict[str, int]:
+    """Rigid body index of every link: links joined by fixed joints share one."""
+    model = robot.model
+    body: dict[str, int] = {}
+    for link in sorted(model.links, key=lambda name: len(model.path_from_root(name))):
+        joint = model.joint_to_child.get(link)
+        if joint is not None and joint.type == "fixed":
+            body[link] = body[joint.parent]
+        else:
+            body[link] = len(set(body.values()))
+    return body
+
+
+def _adjacent_bodies(robot: Robot, body: dict[str, int]) -> set[tuple[int, int]]:
+    """Pairs of bodies joined by one moving joint (both orders)."""
+    out = set()
+    for joint in robot.model.joints.values():
+        a, b = body[joint.parent], body[joint.child]
+        out |= {(a, b), (b, a)}
+    return out
+
+
+def rest_configuration(robot: Robot) -> np.ndarray:
+    """(J,) the rest pose of the robot config (`rest_pose:`, others 0) [rad]; unknown joints are refused."""
+    rest = robot.config.planning.rest_pose
+    unknown = sorted(set(rest) - set(robot.joint_names))
+    if unknown:
+        raise WolfcalError(
+            f"{robot.config.path}: 'rest_pose' names {', '.join(unknown)}, not movable joints of {robot.config.urdf}"
+        )
+    return np.array([rest.get(j, 0.0) for j in robot.joint_names])
+
+
+def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
+    """Capsules bounding the URDF's <collision> primitives (empty when it has none)."""
+    urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False,
+                              build_collision_scene_graph=False)  # fmt: skip
+    capsules = []
+    for link in urdf.robot.links:
+        for collision in link.collisions:
+            T = np.eye(4) if collision.origin is None else np.asarray(collision.origin, float)
+            g = collision.geometry
+            if g.cylinder is not None:
+                half, radius = 0.5 * g.cylinder.length * T[:3, 2], g.cylinder.radius
+            elif g.sphere is not None:
+                half, radius = np.zeros(3), g.sphere.radius
+            elif g.box is not None:
+                size = np.asarray(g.box.size, float)
+                k = int(np.argmax(size))
+                radius = 0.5 * float(np.linalg.norm(np.delete(size, k)))
+                half = max(0.5 * size[k] - radius, 0.0) * T[:3, k]
+            else:
+                raise WolfcalError(
+                    f"{robot.config.urdf}: link '{link.name}' has <collision> mesh geometry, which wolfcal cannot "
+                    "check; use boxes, cylinders or spheres there, or remove <collision> and give "
+                    "'collision_radii:' in the robot config"
+                )
+            capsules.append(Capsule(link.name, body[link.name], T[:3, 3] - half, T[:3, 3] + half, float(radius)))
+    return capsules
+
+
+def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
+    """Capsules from `collision_radii:` (see the module docstring)."""
+    radii = robot.config.planning.collision_radii
+    unknown = sorted(set(radii) - robot.model.links)
+    if unknown:
+        raise WolfcalError(
+            f"{robot.config.path}: 'collision_radii' names {', '.join(unknown)}, not links of {robot.config.urdf}"
+        )
+    capsules = []
+    for link, radius in radii.items():
+        children = [j for j in robot.model.joints.values() if j.parent == link]
+        ends = [j.T_parent_origin[:3, 3] for j in children] or [np.zeros(3)]
+        capsules += [Capsule(link, body[link], np.zeros(3), np.asarray(end, float), radius) for end in ends]
+    return capsules
+
+
+def collision_model(robot: Robot, required: bool = True) -> CollisionModel | None:
+    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); without either a clear error, or
+    None when not `required`."""
+    body = _bodies(robot)
+    capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
+    if not capsules:
+        capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
+    if not capsules and not required:
+        return None
+    if not capsules:
+        raise WolfcalError(
+            f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
+            "poses cannot be checked for self-collision; add 'collision_radii: {link: metres}' (capsules between "
+            "joint origins) for the links of the body, e.g. collision_radii: {r_lower_leg: 0.04}"
+        )
+    return CollisionModel(robot, capsules, source, rest_configuration(robot))

@@ -1,0 +1,85 @@
+"""Synthetic floor samples without images: the robot stands, turns its head, and sees tags lying on the floor.
+
+The robot stands at the true joint angles of its config's standing pose (the soles of the true model lie on one
+plane, the floor); its encoders report those angles minus the true offsets. Floor tags lie face up at random places
+`distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt (the two joints before the
+camera) are drawn so that each sample sees at least one floor tag whole, at least `min_edge_px` wide.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.encoders import encoder_readings
+from wolfcal.evaluate.ground import aim_joints, camera_in_floor, standing_pose
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+from wolfcal.vision.tags import tag_corners
+
+
+@dataclass
+class FloorScene:
+    obs: Observations  # head-camera corners of the floor tags
+    places: dict[int, np.ndarray]  # true (x, y, yaw) of each floor tag in the true floor frame [m, rad]
+    q_true: np.ndarray  # (S, J) [rad]
+
+
+def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """(4, 3) corners of each floor tag in the floor frame [m], aruco order."""
+    out = {}
+    for tag_id, (x, y, yaw) in places.items():
+        tag = robot.config.floor.tag(tag_id)
+        c, s = np.cos(yaw), np.sin(yaw)
+        p = tag_corners(tag.size)
+        out[tag_id] = np.stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1],
+                                np.full(4, tag.thickness)], axis=1)  # fmt: skip
+    return out
+
+
+def simulate_floor(
+    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
+    distance: tuple[float, float] = (1.0, 4.0), noise_px: float = 0.15, min_edge_px: float = 12.0,
+    margin_px: float = 10.0, source: str = "floor.mcap",
+) -> FloorScene:
+    """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
+    ids = robot.config.floor.tag_ids
+    r = rng.uniform(*distance, len(ids))
+    bearing = rng.uniform(-0.6, 0.6, len(ids))
+    places = {t: np.array([r[k] * np.cos(bearing[k]), r[k] * np.sin(bearing[k]), rng.uniform(-np.pi, np.pi)])
+              for k, t in enumerate(ids)}  # fmt: skip
+    corners = floor_corners(robot, places)
+    joints = [robot.model.joints[j] for j in aim_joints(robot)]
+    columns = [robot.model.column(j.name) for j in joints]
+    q = np.repeat(standing_pose(robot)[None], 4000, axis=0)
+    for j, col in zip(joints, columns):
+        q[:, col] = rng.uniform(max(j.lower, -1.2), min(j.upper, 1.2), len(q))
+    T_floor_camera, _ = camera_in_floor(robot, q, Corrections(frames=truth.frames, tags=truth.tags))  # true angles
+    T_camera_floor = np.linalg.inv(T_floor_camera)
+    all_corners = np.stack([corners[t] for t in ids])  # (T, 4, 3)
+    p = np.einsum("sij,tcj->stci", T_camera_floor[:, :3, :3], all_corners) + T_camera_floor[:, None, None, :3, 3]
+    uv = camera.project(p.reshape(-1, 3)).reshape(p.shape[:3] + (2,))
+    inside = (uv[..., 0] > margin_px) & (uv[..., 0] < camera.width - margin_px)
+    inside &= (uv[..., 1] > margin_px) & (uv[..., 1] < camera.height - margin_px) & (p[..., 2] > 0.1)
+    edge = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=3).min(axis=2)
+    visible = inside.all(axis=2) & np.nan_to_num(edge > min_edge_px)  # (S, T)
+    candidates = np.flatnonzero(visible.any(axis=1))
+    chosen = rng.choice(candidates, size=min(n, len(candidates)), replace=False)
+    q_true, vis, uv = q[chosen], visible[chosen], uv[chosen]
+    s_idx, t_idx = np.nonzero(vis)
+    detected = uv[s_idx, t_idx] + rng.normal(0.0, noise_px, (len(s_idx), 4, 2))
+    obs = Observations(
+        joint_names=list(robot.joint_names),
+        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        stamps_ns=np.arange(len(chosen), dtype=np.int64) + 10**6,
+        sources=[source] * len(chosen),
+        camera=camera,
+        sample_index=np.repeat(s_idx, 4),
+        tag_ids=np.repeat(np.array(ids)[t_idx], 4),
+        corner_index=np.tile(np.arange(4), len(s_idx)),
+        uv=detected.reshape(-1, 2),
+    )
+    return FloorScene(obs, places, q_true)
