@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
@@ -35,6 +34,7 @@ from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_pos
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
+from wolfcal.yamlfile import dump_yaml
 
 OFFSET_SETS = ("none", "head", "legs", "all")
 SYSTEMS = ("head", "external", "all")
@@ -236,5 +236,5 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
             n: {**external_truth_entry(c.T_base_camera), "camera": camera_info_dict(c.model)}
             for n, c in external.items()
         }
-    write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
+    write_text_atomic(truth_yaml, dump_yaml(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
