@@ -41,7 +41,8 @@ T0 = 1_700_000_000_000_000_000  # [ns]
 def render_poses(folder: Path) -> tuple[list[str], np.ndarray, list[bytes]]:
     """Joint names, measured readings (POSES, J) [rad] and jpeg bytes of POSES simulated still poses."""
     capture_path = folder / "poses.mcap"
-    simulate_capture(CONFIG, capture_path, SimOptions(samples=POSES, seed=5, offsets="all"), say=lambda _: None, force=True)
+    options = SimOptions(samples=POSES, seed=5, offsets="all")
+    simulate_capture(CONFIG, capture_path, options, say=lambda _: None, force=True)
     capture = read_capture(capture_path, load_robot_config(CONFIG))
     names = capture.samples[0].joint_names
     q = np.stack([s.positions for s in capture.samples])
