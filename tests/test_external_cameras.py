@@ -93,7 +93,7 @@ def test_config_refuses_bad_external_cameras(tmp_path, cameras, message):
 
 def test_config_needs_some_camera(tmp_path):
     with pytest.raises(WolfcalError, match="needs a head camera"):
-        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None))
+        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None, markers=None))
 
 
 # --- own capture files with several cameras ------------------------------------------------------------------

@@ -135,7 +135,8 @@ def capture(
 @app.command()
 @friendly_errors
 def fit(
-    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on."),
+    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
+                                          "recordings of the joint states (and Markers, unless --mocap is given)."),
     robot: Path | None = robot_option(),
     free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
@@ -143,8 +144,14 @@ def fit(
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
                                            "(head camera only)."),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
-    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | all "
-                                      "(default: every system the captures contain)."),
+    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | mocap | "
+                                      "all (default: every system the captures contain)."),
+    mocap: list[Path] = typer.Option([], "--mocap", help="Motion-capture file (.c3d, Motive or Vicon .csv) of the "
+                                     "session of each capture, in the same order. Repeatable."),
+    mocap_offset: list[float] = typer.Option([], "--mocap-offset", help="Clock offset of each --mocap file [s]: "
+                                             "t_recording = t_file + offset (default: estimated)."),
+    mocap_moving: bool = typer.Option(False, "--mocap-moving", help="The robot's base moved between samples: one "
+                                      "base pose in the motion-capture frame per sample."),
     external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
                                          "one pose per sample instead of one per capture file."),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
@@ -154,9 +161,11 @@ def fit(
     from wolfcal.fit.pipeline import FitOptions, run_fit
     from wolfcal.vision.cache import cache_enabled
 
-    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving)
+    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving,
+                         mocap_moving=mocap_moving)
     with cache_enabled(not no_cache):
-        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force)
+        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force,
+                mocap=mocap, mocap_offsets=mocap_offset)
 
 
 @app.command()
@@ -211,7 +220,8 @@ def simulate(
                                            "the config's)."),
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
     system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
-                               "| all (both in every sample)."),
+                               "| all (both in every sample) | mocap (motion capture: FILE.mcap with joint states "
+                               "and Markers, and FILE.c3d)."),
     external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
                                         "(default: the first)."),
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
@@ -310,4 +320,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -86,6 +86,7 @@ class RobotConfig:
     servos: ServoConfig | None = None
     priors: PriorConfig = PriorConfig()
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
+    markers: MarkersConfig | None = None  # motion-capture markers on the robot (`markers:`), None when absent
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -188,6 +189,12 @@ def _resolve(base: Path, value: str) -> Path:
     return p if p.is_absolute() else (base / p)
 
 
+def side_of_link(link: str) -> str | None:
+    """'right' / 'left' for a link named r_... / l_... (or right... / left...), else None."""
+    low = link.lower()
+    return "right" if low.startswith(("r_", "right")) else "left" if low.startswith(("l_", "left")) else None
+
+
 def _tag(path: Path, index: int, data) -> TagConfig:
     r = _Reader(path, data, f"tags[{index}]")
     r.check_keys(("id", "size", "link"), ("family", "xyz", "rpy", "side"))
@@ -199,8 +206,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
         r.fail(f"'family' {family!r} is not supported; use one of {', '.join(TAG_FAMILIES)}")
     side = r.data.get("side")
     if side is None:
-        link = str(r.data["link"]).lower()
-        side = "right" if link.startswith(("r_", "right")) else "left" if link.startswith(("l_", "left")) else None
+        side = side_of_link(str(r.data["link"]))
     elif side not in ("right", "left"):
         r.fail(f"'side' must be 'right' or 'left', found {side!r}")
     return TagConfig(
@@ -271,7 +277,7 @@ def _camera(path: Path, data) -> CameraConfig:
 def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
     if not isinstance(data, list):
         raise WolfcalError(f"{path}: 'external_cameras' must be a list of cameras ({{name, image_topic, info_topic}})")
-    cameras = []
+    cameras: list[ExternalCameraConfig] = []
     for i, item in enumerate(data):
         r = _Reader(path, item, f"external_cameras[{i}]")
         r.check_keys(("name", "image_topic", "info_topic"), ("intrinsics",))
@@ -322,20 +328,21 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     data = read_yaml(path, "robot config", "give --robot a robot.yaml or a folder holding one")
     r = _Reader(path, data, "")
     r.check_keys(
-        ("name", "urdf", "base_link", "tags"),
-        ("camera", "external_cameras", "joint_states_topic", "servos", "priors"),
+        ("name", "urdf", "base_link"),
+        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers"),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
         raise WolfcalError(f"{path}: 'urdf' file {urdf} not found")
     camera = _camera(path, r.data["camera"]) if r.data.get("camera") is not None else None
     external = _external_cameras(path, r.data["external_cameras"]) if r.data.get("external_cameras") else ()
-    if camera is None and not external:
-        r.fail("needs a head camera ('camera:') or at least one camera under 'external_cameras:'")
+    markers = _markers(path, r.data["markers"]) if r.data.get("markers") is not None else None
+    if camera is None and not external and markers is None:
+        r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:' or motion-capture 'markers:'")
     _check_topics_distinct(path, camera, external)
-    tags_data = r.data["tags"]
-    if not isinstance(tags_data, list) or not tags_data:
-        r.fail("'tags' must be a non-empty list of tags")
+    tags_data = r.data.get("tags", [] if camera is None and not external else None)
+    if not isinstance(tags_data, list) or (not tags_data and (camera is not None or external)):
+        r.fail("'tags' must be a non-empty list of tags (a config with cameras needs the tags they see)")
     tags = tuple(_tag(path, i, t) for i, t in enumerate(tags_data))
     if len({t.id for t in tags}) != len(tags):
         r.fail("'tags' lists the same tag id twice")
@@ -350,6 +357,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         servos=_servos(path, r.data["servos"]) if r.data.get("servos") is not None else None,
         priors=_priors(path, r.data["priors"]) if r.data.get("priors") is not None else PriorConfig(),
         external_cameras=external,
+        markers=markers,
     )
 
 
@@ -366,3 +374,49 @@ def _check_topics_distinct(
         if topic in owners:
             raise WolfcalError(f"{path}: '{key}' {topic} is also '{owners[topic]}'; each camera needs its own topics")
         owners[topic] = key
+
+
+@dataclass(frozen=True)
+class MarkerConfig:
+    """One motion-capture marker: `xyz` [m] places it in `link` (nominal: the fit estimates its mount)."""
+
+    name: str  # as the motion-capture system labels it
+    link: str
+    xyz: tuple[float, float, float]
+    side: str | None = None  # 'right' / 'left' from the link name (leg preset --side), None otherwise
+
+
+@dataclass(frozen=True)
+class MarkersConfig:
+    """`markers:`: the mocap4r2_msgs/msg/Markers topic of ROS 2 recordings and the markers on the robot."""
+
+    topic: str
+    entries: tuple[MarkerConfig, ...]  # the `list:` of the config, in its order
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.entries]
+
+    def marker(self, name: str) -> MarkerConfig:
+        return self.entries[self.names.index(name)]
+
+
+def _markers(path: Path, data) -> MarkersConfig:
+    r = _Reader(path, data, "markers")
+    r.check_keys(("list",), ("topic",))
+    items = r.data["list"]
+    if not isinstance(items, list) or not items:
+        r.fail("'list' must be a non-empty list of markers ({name, link, xyz})")
+    markers: list[MarkerConfig] = []
+    for i, item in enumerate(items):
+        m = _Reader(path, item, f"markers.list[{i}]")
+        m.check_keys(("name", "link", "xyz"))
+        name = m.string("name")
+        if not _NAME.fullmatch(name):
+            m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
+                   "(it is used in parameter names such as marker.r_foot_fl.x)")
+        if name in {k.name for k in markers}:
+            m.fail(f"'name' {name!r} is used by another marker; names must be unique")
+        link = m.string("link")
+        markers.append(MarkerConfig(name=name, link=link, xyz=m.vector3("xyz"), side=side_of_link(link)))
+    return MarkersConfig(topic=r.string("topic", "/mocap/markers"), entries=tuple(markers))

@@ -140,3 +140,15 @@ def right_jacobian_so3(rotvec: np.ndarray) -> np.ndarray:
     a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
     b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (safe - np.sin(safe)) / safe**3)
     return np.eye(3) - a * K + b * (K @ K)
+
+
+def rigid_registration(p_b: np.ndarray, p_a: np.ndarray) -> np.ndarray:
+    """T_a_b (4, 4), the rotation and translation (no scale) that best maps points p_b (N, 3) onto p_a (N, 3) in the
+    least-squares sense (Kabsch / Umeyama, N >= 3 points not on one line)."""
+    c_a, c_b = p_a.mean(axis=0), p_b.mean(axis=0)
+    U, _, Vt = np.linalg.svd((p_a - c_a).T @ (p_b - c_b))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    T = np.eye(4)
+    T[:3, :3] = U @ D @ Vt
+    T[:3, 3] = c_a - T[:3, :3] @ c_b
+    return T

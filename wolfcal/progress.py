@@ -47,7 +47,7 @@ class Progress:
         if since < self.interval_s or done <= 0:
             return
         self.last_said = now
-        rate = done / elapsed
-        left = f", about {_duration((total - done) / rate)} left" if total > done else ""
+        per_s = done / elapsed
+        left = f", about {_duration((total - done) / per_s)} left" if total > done else ""
         of = f"/{total}" if total > 0 else ""
-        self.say(f"{self.what}: {done}{of} {self.unit}, {rate:.1f} {self.unit}/s{left}")
+        self.say(f"{self.what}: {done}{of} {self.unit}, {per_s:.1f} {self.unit}/s{left}")

@@ -19,6 +19,8 @@ from wolfcal.robot.robot import Robot
 
 def joint_groups(robot: Robot) -> dict[str, list[str]]:
     """Groups of the servo joints: head (base -> camera), legs (base -> foot tags), arms (the rest), all."""
+    if robot.config.servos is None:
+        raise WolfcalError(f"{robot.config.path}: no 'servos' section: manual capture reads the joints over the bus")
     servo_joints = list(robot.config.servos.ids)
     head = [j for j in robot.camera_and_leg_joints(sides=()) if j in servo_joints]
     legs = [j for j in robot.camera_and_leg_joints() if j in servo_joints and j not in head]

@@ -65,7 +65,7 @@ def run_capture(
             close_sources(cameras)
             raise
         view = LiveView(status, coverage, console)
-        sources = {name: c.source for name, c in cameras.items()}
+        sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
         session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
         failure: BaseException | None = None
         try:

@@ -62,7 +62,7 @@ def wait_arrival(
     deadline = time.monotonic() + distance / velocity + ARRIVAL_MARGIN_S
     while True:
         off = {j: abs(int(state.ticks[index[j]]) - t) for j, t in goal_ticks.items()}
-        worst = max(off, key=off.get)
+        worst = max(off, key=lambda j: off[j])
         if off[worst] <= ARRIVAL_TICKS:  # then the stillness gate waits for it to settle
             return None
         if time.monotonic() > deadline:

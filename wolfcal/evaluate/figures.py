@@ -117,8 +117,8 @@ def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str
         cv2.line(ax.img, (ax.x0, y_of(c)), (ax.x1, y_of(c)), GRID, 1)
         _text(ax.img, str(c), (ax.x0 - 6, y_of(c)), anchor="right")
     overlay = ax.img.copy()
-    for c, color in zip(counts, (BEFORE, AFTER)):
-        for i, n in enumerate(c):
+    for bin_counts, color in zip(counts, (BEFORE, AFTER)):
+        for i, n in enumerate(bin_counts):
             if n:
                 cv2.rectangle(
                     overlay, (x_of(edges[i]) + 1, y_of(n)), (x_of(edges[i + 1]) - 1, ax.y1), color, -1

@@ -14,6 +14,8 @@ import numpy as np
 
 from wolfcal.robot.parameters import ParameterSet
 
+OUTLIER_FACTOR = 4.0  # a view is an outlier when its whitened RMS exceeds this many times the median view's
+
 
 @dataclass
 class Linearization:
@@ -34,6 +36,7 @@ class Block:
     unit: str  # 'px' | 'm'
     dim: int  # measured numbers per unit
     outlier_floor: float  # a view is left out only if also off by more than this [unit]
+    outlier_factor: float = OUTLIER_FACTOR  # ... and its whitened RMS exceeds this many times the median view's
     nuisance: ParameterSet  # the block's own unknowns
     sample_of_unit: np.ndarray  # (U,) sample index of each unit
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit

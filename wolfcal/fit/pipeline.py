@@ -14,12 +14,15 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
+from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import explain, result_dict, summary_lines, write_result
 from wolfcal.fit.solver import Solution, solve
+from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
+from wolfcal.markers import MarkerObservations
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
@@ -31,7 +34,7 @@ from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
 
-SYSTEMS = ("head", "external", "all")
+SYSTEMS = ("head", "external", "mocap", "all")
 
 
 @dataclass(frozen=True)
@@ -40,8 +43,9 @@ class FitOptions:
     side: str = "both"
     fix_tags: bool = False
     huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]
-    system: str | None = None  # 'head' | 'external' | 'all'; None: every system the captures contain
+    system: str | None = None  # 'head' | 'external' | 'mocap' | 'all'; None: every system the captures contain
     external_moving: bool = False  # one external-camera pose per sample instead of one per capture file
+    mocap_moving: bool = False  # one base pose in the motion-capture frame per sample instead of one per source
 
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)  # before any file is read
@@ -65,7 +69,7 @@ class Fit:
 
     @property
     def tag_ids(self) -> list[int]:
-        return sorted({t for b in self.blocks for t in b.tag_ids})
+        return sorted({t for b in self.blocks for t in getattr(b, "tag_ids", ())})
 
     @property
     def corrections(self) -> Corrections:
@@ -101,11 +105,17 @@ def fit_observations(
     observations: dict[str, Observations] | Observations,
     options: FitOptions,
     say: Callable[[str], None] | None = None,
+    markers: MarkerObservations | None = None,
 ) -> Fit:
-    """Choose the free parameters for the observed tags of each camera, check there is enough data, solve."""
+    """Choose the free parameters for the observed tags of each camera and the measured markers, check there is
+    enough data, solve."""
     if isinstance(observations, Observations):
         observations = {observations.camera_name: observations}
-    observations = _systems(robot, observations, options)
+    mocap = mocap_block(robot, markers, options)
+    if options.system == "mocap" or (mocap is not None and not observations):
+        observations = {}
+    else:
+        observations = _systems(robot, observations, options)
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
@@ -114,7 +124,7 @@ def fit_observations(
                                              if robot.fixed_to_base(robot.config.tag(t).link)})
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
-    if not used:
+    if not used and mocap is None:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
@@ -126,22 +136,45 @@ def fit_observations(
             placement, names = placements(obs, options.external_moving)
             blocks.append(CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names))
     chain = build_parameter_set(
-        robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags
+        robot, options.free, {b.camera_name: b.tag_ids for b in blocks}, options.side, options.fix_tags,
+        tuple(mocap.links) if mocap is not None else (),
     )
+    blocks += [mocap] if mocap is not None else []
     n_params = len(chain) + sum(len(b.nuisance) for b in blocks)
     n_numbers = sum(b.n_units * b.dim for b in blocks)
     if n_numbers < 2 * n_params:  # ask for twice as many measured numbers as unknowns
-        n_samples = sum(obs.n_samples for obs in used.values())
+        n_samples = sum(len(b.q_measured) for b in blocks)
         needed = max(3, int(np.ceil(n_samples * 2 * n_params / max(n_numbers, 1))))
         raise WolfcalError(
-            f"too few samples for the free parameters: {n_samples} sample(s) with tags give {n_numbers} measured "
-            f"numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free fewer "
-            "parameters"
+            f"too few samples for the free parameters: {n_samples} sample(s) with tags or markers give {n_numbers} "
+            f"measured numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free "
+            "fewer parameters"
         )
     priors = robot.config.priors
-    problem = Problem(chain, blocks, [priors.pixel_noise] * len(blocks), priors.encoder_noise, options.huber_k)
+    sigmas = [MOCAP_NOISE_START_M if b.system == "mocap" else priors.pixel_noise for b in blocks]
+    problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
     solution = solve(problem, progress=say)
     return Fit(robot, used, blocks, chain, problem, solution)
+
+
+def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOptions) -> MocapBlock | None:
+    """The motion-capture block when --system takes it (mocap, all, or none given) and markers were measured;
+    with the leg preset and one --side, the markers of the other leg are left out."""
+    if options.system not in (None, "all", "mocap"):
+        return None
+    if markers is None:
+        if options.system == "mocap":
+            raise WolfcalError("--system mocap: no marker data; give a ROS 2 recording with the robot config's "
+                               "markers topic, or a motion-capture file with --mocap FILE")
+        return None
+    if options.free in ("camera", "head_camera") and options.system == "mocap":
+        raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
+                           "(no marker on the camera's optical frame); use --free leg with --system mocap")
+    if options.free == "leg" and options.side != "both":
+        config = robot.config.markers
+        markers = markers.only_markers([n for n in markers.marker_names
+                                        if config.marker(n).side in (options.side, None)])  # fmt: skip
+    return MocapBlock(robot, markers, options.mocap_moving)
 
 
 def load_captures(
@@ -216,25 +249,38 @@ def run_fit(
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
     force: bool = False,
+    mocap: list[Path] = (),
+    mocap_offsets: list[float] = (),
 ) -> dict:
     """The whole `wolfcal fit` job; returns the result dict that was written to out_dir/result.yaml.
-    Existing outputs in out_dir are replaced only with `force`; both files are written as one set."""
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
+    (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
+    (one per capture, clock offsets `mocap_offsets` or estimated)."""
     robot = load_robot(robot_path)
-    inputs = [*captures, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
-    required = (HEAD_CAMERA,) if options.system == "head" else ()
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-    observations, detect_warnings = detect_observations(
-        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-    )
-    warnings += detect_warnings
+    markers, warnings, observations = None, [], {}
+    if options.system == "mocap" or mocap:
+        markers = load_marker_observations(robot.config, robot.joint_names, captures, mocap, list(mocap_offsets))
+        say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+            + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+        warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
+                     ] if markers.unknown_names else []  # fmt: skip
+    if options.system != "mocap":
+        required = (HEAD_CAMERA,) if options.system == "head" else ()
+        samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        warnings += read_warnings
+        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+        observations, detect_warnings = detect_observations(
+            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+        )
+        warnings += detect_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
-    fit = fit_observations(robot, observations, options, say)
+    fit = fit_observations(robot, observations, options, say, markers)
     check_solution_left_out(fit, captures)
     data = result_dict(fit, options, captures, intrinsics, warnings)
     with output_set():

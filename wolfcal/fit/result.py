@@ -12,6 +12,7 @@ import yaml
 import wolfcal
 from wolfcal.atomic import write_text_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.mocap_result import mocap_block_dict
 from wolfcal.fit.solver import Solution
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.robot.parameters import ParameterSet
@@ -88,6 +89,12 @@ def _measured_by(fit: Fit) -> list[list[str]]:
 def _block_dict(fit: Fit, k: int) -> dict:
     """The result of one measurement block: residuals, noise, outliers, per-sample errors."""
     b, block = fit.solution.blocks[k], fit.blocks[k]
+    if block.system == "mocap":
+        state = fit.problem.states[k]
+        values = fit.solution.values[state.start : state.start + len(block.nuisance)]
+        params = fit.problem.params
+        residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
+        return mocap_block_dict(block, b, values, residual)
     obs = block.obs
     unit = b.unit
     samples = []
@@ -200,6 +207,9 @@ def result_dict(fit: Fit, options: FitOptions, captures: list[Path], intrinsics:
         "samples": head["samples"] if head is not None else blocks[0]["samples"],
         "corrections": fit.corrections.to_dict(),
     })  # fmt: skip
+    mocap = [b for b in blocks if b["system"] == "mocap"]
+    if mocap:  # t_recording = t_file + offset [s], t_file: seconds since the file's first frame
+        data["mocap_clock_offset_s"] = mocap[0]["mocap_clock_offset_s"]
     return data
 
 

@@ -27,7 +27,6 @@ from wolfcal.observations import rms_by
 # them, so the residuals alone would understate it (measured: bench/bench_vision.py, tests/test_other_robot.py).
 MIN_SIGMA = {"px": 0.05, "m": 1e-5}
 MAX_SIGMA = {"px": 50.0, "m": 0.1}
-OUTLIER_FACTOR = 4.0  # a view is an outlier when its whitened RMS exceeds this many times the median view's
 
 
 @dataclass
@@ -75,7 +74,7 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     block, residual = state.block, lin.residual
     t = view_rms(state, lin)
     size = rms_by(block.view_of_unit, residual, block.n_views)
-    return (t > OUTLIER_FACTOR * np.median(t)) & (size > block.outlier_floor)
+    return (t > block.outlier_factor * np.median(t)) & (size > block.outlier_floor)
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:

@@ -37,7 +37,7 @@ class BusError(WolfcalError):
     exit_code = 3
 
 
-def ticks_to_rad(ticks: np.ndarray | int) -> np.ndarray | float:
+def ticks_to_rad(ticks: np.ndarray) -> np.ndarray:
     """Joint angle(s) [rad] of present position(s) [ticks]."""
     return (np.asarray(ticks) - P.CENTRE_TICK) * RAD_PER_TICK
 

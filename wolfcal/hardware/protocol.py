@@ -116,7 +116,7 @@ class PacketParser:
 
     def feed(self, data: bytes) -> list[Packet]:
         self.buffer.extend(data)
-        packets = []
+        packets: list[Packet] = []
         while True:
             start = self.buffer.find(HEADER[:3])
             if start < 0:

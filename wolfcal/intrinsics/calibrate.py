@@ -137,7 +137,7 @@ def _solve(
     try:
         if model == "equidistant":
             flags = cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW
-            _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(
+            _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(  # type: ignore[call-overload]  # None K/D: stubs lack it
                 [o.reshape(1, -1, 3).astype(np.float64) for o in obj],  # OpenCV 5 takes (1, N, 3) here
                 [i.reshape(1, -1, 2).astype(np.float64) for i in img],
                 size,

@@ -55,7 +55,7 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         image = cv2.cvtColor(image, code)
     if image.dtype != np.uint8:
-        image = cv2.normalize(image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        image = cv2.normalize(image, None, 0, 255, cv2.NORM_MINMAX)  # type: ignore[call-overload]  # dst=None is valid; the stubs lack it.astype(np.uint8)
     return image
 
 
@@ -139,10 +139,10 @@ def detect_board(
     gray = to_gray(image)
     size = (gray.shape[1], gray.shape[0])
     if board.is_charuco:
-        found = _charuco(gray, board)
-        if found is None:
+        charuco = _charuco(gray, board)
+        if charuco is None:
             return Failure(name, f"fewer than {_MIN_CHARUCO_CORNERS} ChArUco corners found ({board.describe()})")
-        return Detection(name, found[0].astype(float), found[1], size)
+        return Detection(name, charuco[0].astype(float), charuco[1], size)
     alternatives: tuple[tuple[int, np.ndarray], ...] = ()
     if method == "sb":
         corners = _checkerboard_sb(gray, board)

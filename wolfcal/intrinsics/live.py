@@ -13,7 +13,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from rich.console import Console, Group
+from rich.console import Console, Group, RenderableType
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
@@ -61,7 +61,7 @@ def render(selector: ViewSelector, frames: int, min_views: int) -> Group:
     table = Table.grid(padding=(0, 1))
     for name, value in zip(PARAM_NAMES, selector.coverage.progress(), strict=True):
         table.add_row(Text(f"{name:>4}"), _bar(float(value)), Text(f"{100 * value:3.0f} %"))
-    lines = [
+    lines: list[RenderableType] = [
         table,
         Text(f"views kept {len(selector.kept)} (need {min_views}), frames seen {frames}"),
         Text(selector.status, style="bold"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import glob
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -63,7 +64,7 @@ def read_image(path: Path) -> np.ndarray:
 
 def image_jobs(paths: list[Path]) -> list[Job]:
     """One lazy load per image file, for `detect.detect_many`."""
-    return [(str(p), lambda p=p: read_image(p)) for p in paths]
+    return [(str(p), partial(read_image, p)) for p in paths]
 
 
 def open_stream(source: str | int) -> cv2.VideoCapture:

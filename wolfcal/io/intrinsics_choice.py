@@ -63,10 +63,10 @@ class IntrinsicsChooser:
             fix = f"set '{key}' in {self.config.path} to a file calibrated for {images}"
             fix = f"{override}, or {fix}" if self.camera == HEAD_CAMERA else fix
             what = (f"{file} (intrinsics of camera '{self.camera}' for {self.path})", YAML_FIELDS, fix)
-        key = (id(base), binning, size)
-        if key not in self.cache:
-            self.cache[key] = self._at_size(base, binning, size, what)
-        return self.cache[key]
+        cache_key = (id(base), binning, size)
+        if cache_key not in self.cache:
+            self.cache[cache_key] = self._at_size(base, binning, size, what)
+        return self.cache[cache_key]
 
     def _config_intrinsics(self) -> CameraModel:
         if self.fallback is None:

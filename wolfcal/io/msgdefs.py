@@ -10,6 +10,7 @@ from __future__ import annotations
 JOINT_STATE = "sensor_msgs/msg/JointState"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+MARKERS = "mocap4r2_msgs/msg/Markers"  # MOCAP4ROS2's marker set (motion capture)
 
 _SEPARATOR = "=" * 80
 
@@ -54,6 +55,26 @@ sensor_msgs/RegionOfInterest roi
 """
 
 
+_MARKERS = """std_msgs/Header header
+uint32 frame_number
+mocap4r2_msgs/Marker[] markers
+"""
+
+_MARKER = """int8 USE_NAME=0
+int8 USE_INDEX=1
+int8 USE_BOTH=2
+int8 id_type
+int32 marker_index
+string marker_name
+geometry_msgs/Point translation
+"""
+
+_POINT = """float64 x
+float64 y
+float64 z
+"""
+
+
 def _with_dependencies(definition: str, *dependencies: tuple[str, str]) -> str:
     parts = [definition]
     for name, text in dependencies:
@@ -69,6 +90,9 @@ MSGDEFS: dict[str, str] = {
     COMPRESSED_IMAGE: _with_dependencies(_COMPRESSED_IMAGE, *_HEADER_DEPS),
     CAMERA_INFO: _with_dependencies(
         _CAMERA_INFO, *_HEADER_DEPS, ("sensor_msgs/RegionOfInterest", _REGION_OF_INTEREST)
+    ),
+    MARKERS: _with_dependencies(
+        _MARKERS, *_HEADER_DEPS, ("mocap4r2_msgs/Marker", _MARKER), ("geometry_msgs/Point", _POINT)
     ),
 }
 

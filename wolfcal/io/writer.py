@@ -166,7 +166,7 @@ class CaptureWriter:
         for name, image in images.items():
             self._check_size(name, image)
         stamp = stamp_dict(stamp_ns)
-        messages = [
+        messages: list[tuple[str, str, dict[str, object]]] = [
             (
                 self.config.joint_states_topic,
                 JOINT_STATE,

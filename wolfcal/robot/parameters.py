@@ -112,14 +112,17 @@ def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side
 
 
 def build_parameter_set(
-    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False
+    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False,
+    marker_links: tuple[str, ...] = (),
 ) -> ParameterSet:
     """Free chain parameters of a preset for the tags each camera ('head' or an external camera's name) uses.
 
     With the head camera: camera = its frame correction + the mounts of the tags used; head_camera = + offsets of
     the joints between base and camera; leg = + offsets of the joints between base and each used tag's link (the
     chain camera -> tag). With an external camera, leg frees the offsets of the joints between the base and the
-    links of the tags it sees (the torso-to-foot chains) and those tags' mounts (the torso tag's too).
+    links of the tags it sees (the torso-to-foot chains) and those tags' mounts (the torso tag's too). With motion
+    capture, leg also frees the offsets of the joints between the base and the links of the markers used
+    (`marker_links`); the marker mounts are the motion-capture block's own unknowns.
     """
     check_preset(preset, side)
     priors = robot.config.priors
@@ -132,7 +135,7 @@ def build_parameter_set(
         if preset in ("head_camera", "leg"):
             links.append(robot.config.camera.frame)
     if preset == "leg":
-        links += [robot.config.tag(t).link for tags in tags_by_camera.values() for t in tags]
+        links += [robot.config.tag(t).link for tags in tags_by_camera.values() for t in tags] + list(marker_links)
     params += [offset_parameter(joint, priors.offset) for joint in robot.actuated_joints_to(links)]
     if not fix_tags:
         for tag_id in sorted({t for tags in tags_by_camera.values() for t in tags}):

@@ -90,6 +90,12 @@ def load_robot(config_path: str | Path) -> Robot:
             raise WolfcalError(
                 f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}"
             )
+    for i, marker in enumerate(config.markers.entries if config.markers is not None else ()):
+        if marker.link not in model.links:
+            raise WolfcalError(
+                f"{where}: 'markers.list[{i}].link' {marker.link!r} (marker {marker.name}) is not a link of "
+                f"{config.urdf}"
+            )
     if config.servos is not None:
         unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
         if unknown:

@@ -17,6 +17,8 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
+from wolfcal.errors import WolfcalError
+
 Edit = Callable[[str, int, Any], Any]  # (topic, index of the message on its topic, decoded message) -> message | None
 
 
@@ -25,6 +27,8 @@ def rewrite_capture(src: Path, dst: Path, edit: Edit) -> None:
     with open(src, "rb") as handle, open(dst, "wb") as out:
         reader = make_reader(handle, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
+        if summary is None:
+            raise WolfcalError(f"{src}: no MCAP summary (the file is torn: run `wolfcal recover` on it first)")
         writer = McapWriter(out)
         writer.start(profile="ros2", library="wolfcal-faulty")
         schema_ids = {k: writer.register_schema(s.name, s.encoding, s.data) for k, s in summary.schemas.items()}
@@ -38,7 +42,7 @@ def rewrite_capture(src: Path, dst: Path, edit: Edit) -> None:
             index = counts[channel.topic]
             counts[channel.topic] += 1
             changed = edit(channel.topic, index, decoded)
-            if changed is not None:
+            if changed is not None and schema is not None:
                 data = encoders[schema.name](changed)
                 channel_id = channel_ids[channel.id]
                 writer.add_message(channel_id, message.log_time, data, message.publish_time, message.sequence)

@@ -29,6 +29,7 @@ from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.sim.external_poses import external_bounds, external_pose_ok, external_visibility
 from wolfcal.sim.external_truth import external_truth_entry
+from wolfcal.sim.mocap import simulate_mocap
 from wolfcal.sim.placement import placement_from_text, random_placement
 from wolfcal.sim.poses import WOLFGANG_RANGES, draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
@@ -37,7 +38,7 @@ from wolfcal.vision.render import motion_blur
 from wolfcal.yamlfile import dump_yaml
 
 OFFSET_SETS = ("none", "head", "legs", "all")
-SYSTEMS = ("head", "external", "all")
+SYSTEMS = ("head", "external", "all", "mocap")
 START_NS = 1_700_000_000_000_000_000
 
 
@@ -149,8 +150,17 @@ def simulate_capture(
     if options.system not in SYSTEMS:
         raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
-    cameras = _cameras(robot, options, camera)
     inputs = [robot.config.path, robot.config.urdf] + ([options.truth_file] if options.truth_file else [])
+    if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
+        check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
+        spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
+        truth = random_truth(robot, spec, np.random.default_rng(options.seed))
+        if options.truth_file is not None:
+            truth = load_corrections(options.truth_file, key="truth")
+        with output_set():
+            simulate_mocap(robot, out, options.samples, options.seed + 1, truth, say=say)
+        return truth
+    cameras = _cameras(robot, options, camera)
     check_outputs([out, *truth_paths(out)], force, inputs)
     with output_set():
         return _simulate(robot, out, options, cameras, say)

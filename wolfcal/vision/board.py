@@ -139,7 +139,7 @@ def make_board(
     if dictionary is None and (marker is not None or legacy):
         raise WolfcalError("--marker and --legacy describe ChArUco boards: add --charuco DICTIONARY")
     board = Board(cols, rows, square, dictionary, marker, legacy)
-    if board.is_charuco:
+    if dictionary is not None:  # a ChArUco board
         needed = (cols + 1) * (rows + 1) // 2
         available = len(aruco_dictionary(dictionary).bytesList)
         if needed > available:

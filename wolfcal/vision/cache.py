@@ -19,7 +19,7 @@ import hashlib
 import json
 import os
 import zipfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -43,7 +43,7 @@ class DetectorSettings:
     refine: str = "edges"
 
     @classmethod
-    def of(cls, families: dict[str, set[int] | None], refine: str = "edges") -> DetectorSettings:
+    def of(cls, families: Mapping[str, set[int] | None], refine: str = "edges") -> DetectorSettings:
         items = sorted((f, None if ids is None else tuple(sorted(ids))) for f, ids in families.items())
         return cls(tuple(items), refine)
 

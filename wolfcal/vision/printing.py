@@ -136,8 +136,8 @@ def sheet_png(sheet: Sheet, dpi: float) -> bytes:
     ppm = dpi / 0.0254
     page = np.full((int(round(sheet.height * ppm)), int(round(sheet.width * ppm))), 255, np.uint8)
     for image, x, y, w, h in sheet.images:
-        x0, y0, x1, y1 = (int(round(a * ppm)) for a in (x, y, x + w, y + h))
-        page[y0:y1, x0:x1] = cv2.resize(image, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)
+        c0, r0, c1, r1 = (int(round(a * ppm)) for a in (x, y, x + w, y + h))
+        page[r0:r1, c0:c1] = cv2.resize(image, (c1 - c0, r1 - r0), interpolation=cv2.INTER_NEAREST)
     for x0, y0, x1, y1, width in sheet.lines:
         cv2.line(
             page,
