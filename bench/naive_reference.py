@@ -32,11 +32,11 @@ def link_pose(robot: Robot, q: dict[str, float], link: str, corrections: Correct
                 angle = multiplier * (q[master] + corrections.offsets.get(master, 0.0)) + offset
             else:
                 angle = q[joint.name] + corrections.offsets.get(joint.name, 0.0)
+            motion = np.eye(4)
             if joint.type == "prismatic":
-                motion = np.eye(4)
                 motion[:3, 3] = joint.axis * angle
             else:
-                motion = axis_angle_matrix(joint.axis, np.array([angle]))[0]
+                motion[:3, :3] = axis_angle_matrix(joint.axis, np.array([angle]))[0]
             T = T @ motion
     return T
 
@@ -48,7 +48,7 @@ def predicted(robot: Robot, obs: Observations, corrections: Corrections) -> np.n
     for row, (s, t) in enumerate(zip(obs.sample_index.tolist(), obs.tag_ids.tolist())):
         views.setdefault((s, t), []).append(row)
     camera_frame = robot.config.head_camera().frame
-    K, D = obs.camera.K, obs.camera.opencv_distortion()
+    K, D = obs.camera.K, obs.camera.opencv_distortion
     for (s, t), rows in views.items():
         q = dict(zip(obs.joint_names, obs.q_measured[s]))
         T_root_base = link_pose(robot, q, robot.config.base_link, corrections)
