@@ -34,6 +34,7 @@ from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
+from wolfcal.yamlfile import load_yaml
 
 SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
@@ -233,7 +234,7 @@ def load_samples(
 def attached_robot_name(config_text: str | None) -> str | None:
     """The `name` of a robot config attached to a capture (None when absent or unreadable)."""
     try:
-        data = yaml.safe_load(config_text) if config_text else None
+        data = load_yaml(config_text) if config_text else None
     except yaml.YAMLError:
         return None
     return data.get("name") if isinstance(data, dict) else None

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import yourdfpy
 
 from wolfcal.errors import WolfcalError
 from wolfcal.robot.robot import Robot
@@ -140,6 +139,8 @@ def rest_configuration(robot: Robot) -> np.ndarray:
 
 def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
     """Capsules bounding the URDF's <collision> primitives (empty when it has none)."""
+    import yourdfpy  # its mesh library is slow to import: only pose planning and pose checks need it
+
     urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False,
                               build_collision_scene_graph=False)  # fmt: skip
     capsules = []

@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
@@ -38,6 +37,7 @@ from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibilit
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
+from wolfcal.yamlfile import dump_yaml
 
 OFFSET_SETS = ("none", "head", "legs", "all")
 SYSTEMS = ("head", "external", "all", "mocap")
@@ -252,7 +252,7 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
             n: {**external_truth_entry(T_base_camera), "camera": camera_info_dict(model)}
             for n, (T_base_camera, model) in external.items()
         }
-    write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
+    write_text_atomic(truth_yaml, dump_yaml(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
 
 
