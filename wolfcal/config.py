@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -143,14 +144,22 @@ class RobotConfig:
         return ([HEAD_CAMERA] if self.camera is not None else []) + [c.name for c in self.external_cameras]
 
     def tag(self, tag_id: int) -> TagConfig:
-        for tag in self.tags:
-            if tag.id == tag_id:
-                return tag
-        raise KeyError(tag_id)
+        return _by_id(self.tags, tag_id)
 
     @property
     def tag_ids(self) -> list[int]:
         return [t.id for t in self.tags]
+
+
+_Tag = TypeVar("_Tag", "TagConfig", "FloorTagConfig")
+
+
+def _by_id(tags: tuple[_Tag, ...], tag_id: int) -> _Tag:
+    """The tag with id `tag_id`; KeyError when none has it."""
+    for tag in tags:
+        if tag.id == tag_id:
+            return tag
+    raise KeyError(tag_id)
 
 
 class _Reader:
@@ -492,10 +501,7 @@ class FloorConfig:
     tags: tuple[FloorTagConfig, ...] = ()
 
     def tag(self, tag_id: int) -> FloorTagConfig:
-        for tag in self.tags:
-            if tag.id == tag_id:
-                return tag
-        raise KeyError(tag_id)
+        return _by_id(self.tags, tag_id)
 
     @property
     def tag_ids(self) -> list[int]:
