@@ -113,8 +113,9 @@ def assert_recovers_truth(result: dict) -> None:
 def assert_same_still_moment(robot, capture) -> None:
     """The tags in each image lie where the true model puts them at the recorded joint angles + true offsets.
 
-    Detection noise on these small binned tags is up to ~1.5 px a corner; joints from another moment would be
-    off by tens of pixels.
+    Detection noise on these small binned tags is up to ~1.5 px a corner, a few px on the oblique views near the
+    image edge that planned poses reach (configs/wolfgang/poses.yaml is a `wolfcal plan`); joints from another
+    moment would be off by tens of pixels, so the limits (2 px RMS, 6 px per corner) still tell the two apart.
     """
     camera = capture.samples[0].images[HEAD_CAMERA].camera
     for sample in capture.samples:
@@ -132,7 +133,7 @@ def assert_same_still_moment(robot, capture) -> None:
                 + T_camera_tag[0, k, :3, 3]
             )
             errors += list(np.linalg.norm(camera.project(p) - found[tag_id], axis=1))
-        assert np.sqrt(np.mean(np.square(errors))) < 1.0 and max(errors) < 2.5, sample.stamp_ns
+        assert np.sqrt(np.mean(np.square(errors))) < 2.0 and max(errors) < 6.0, sample.stamp_ns
 
 
 # --- scripted -----------------------------------------------------------------------------------------------
