@@ -10,6 +10,7 @@ import yaml
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
+from wolfcal.evaluate.pipeline import run_evaluate
 from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
@@ -46,3 +47,17 @@ def test_fit_on_rendered_feet_and_floor_captures(tmp_path):
     rows = ground_errors(robot, model, truth, {"before": Corrections(), "after": result.corrections}, (4.5,))
     before, after = (rows[0]["models"][k]["error_m"] for k in ("before", "after"))
     assert before > 1.0 and after < 0.1, (before, after)  # measured: 6.0 m -> 7.8 cm (binned 640x480 images)
+    # held out: feet and floor samples of the same robot; the measured ground error (no truth used) in metrics.json
+    held_feet, held_floor = tmp_path / "held_feet.mcap", tmp_path / "held_floor.mcap"
+    truth_file = tmp_path / "feet.truth.yaml"
+    simulate_capture(WOLFGANG, held_feet, SimOptions(samples=12, seed=13, binning=2, truth_file=truth_file), say=say)
+    simulate_capture(WOLFGANG, held_floor, SimOptions(samples=16, seed=14, binning=2, floor=True,
+                                                      truth_file=truth_file), say=say)  # fmt: skip
+    metrics = run_evaluate(tmp_path / "fit", [held_feet, held_floor], tmp_path / "eval", say=say)
+    k = [r["distance_m"] for r in metrics["ground"]["rows"]].index(4.5)
+    true_before = metrics["ground"]["rows"][k]["models"]["before"]["error_m"]
+    measured = metrics["ground"]["measured"]["models"]
+    measured_before, measured_after = measured["before"]["rows"][k]["error_m"], measured["after"]["rows"][k]["error_m"]
+    assert abs(measured_before - true_before) < 0.2 * true_before, (measured_before, true_before)
+    assert measured_after < 0.1 * measured_before
+    assert (tmp_path / "eval" / "report.md").read_text().count("Measured ground error") == 1
