@@ -197,7 +197,7 @@ def test_detect_by_source_keeps_input_order_across_files_and_cameras(capture, im
     sources = [str(path), str(other), "", str(path)] * 3  # "" : samples made in memory, never cached
     names = ["head", "head", "head", "tripod"] * 3
     picks = [k % len(images) for k in range(len(sources))]
-    found = cache.detect_by_source(sources, list(range(len(sources))), lambda k: images[picks[k]], names,
+    found = cache.detect_by_source(sources, list(range(len(sources))), lambda ix: (images[picks[k]] for k in ix), names,
                                    DetectorSettings.of(FAMILIES))  # fmt: skip
     assert_same(found, fresh([images[k] for k in picks]))
     assert len(entries(tmp_path / "cache")) == 3  # (capture, head), (other, head), (capture, tripod)

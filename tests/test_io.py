@@ -97,7 +97,7 @@ def test_colour_jpeg_and_no_velocities(tmp_path, config, camera):
     (sample,) = read_capture(path, config).samples
     assert sample.images[HEAD_CAMERA].format == "jpeg" and sample.velocities is None
     assert sample.images[HEAD_CAMERA].decode().shape == (96, 128, 3)
-    assert image_size(sample.images[HEAD_CAMERA].data) == (128, 96)
+    assert image_size(sample.images[HEAD_CAMERA].encoded()) == (128, 96)
 
 
 def test_file_is_a_ros2_mcap_with_statistics_schemas_and_attachments(tmp_path, config, camera):

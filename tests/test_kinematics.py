@@ -34,6 +34,20 @@ def test_fk_matches_yourdfpy_on_random_configurations(robot):
             np.testing.assert_allclose(poses[link][i], urdf.get_transform(link, "base_link"), atol=1e-9)
 
 
+def test_urdf_joints_read_as_yourdfpy_reads_them(robot):
+    urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False)
+    assert robot.model.name == urdf.robot.name and len(robot.model.joints) == len(urdf.robot.joints)
+    for j in urdf.robot.joints:
+        ours = robot.model.joints[j.name]
+        assert (ours.type, ours.parent, ours.child) == (j.type, j.parent, j.child)
+        np.testing.assert_allclose(ours.T_parent_origin, np.eye(4) if j.origin is None else j.origin, atol=1e-12)
+        if j.axis is not None:
+            np.testing.assert_allclose(ours.axis, j.axis / np.linalg.norm(j.axis), atol=1e-12)
+        if j.type in ("revolute", "prismatic") and j.limit is not None:
+            assert (ours.lower, ours.upper) == (j.limit.lower, j.limit.upper)
+        assert (ours.mimic is None) == (j.mimic is None)
+
+
 def test_published_straight_leg_check(robot):
     q = np.zeros((1, len(robot.joint_names)))
     q[0, robot.model.column("RKnee")] = -0.2618

@@ -204,6 +204,24 @@ def evaluate(
 
 @app.command()
 @friendly_errors
+def compare(
+    fit_dirs: list[Path] = typer.Argument(..., help="Folders written by `wolfcal fit` (each holds result.yaml)."),
+    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap) of the head camera, an "
+                                       "external camera or motion capture, used by none of the fits. Repeatable."),
+    out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, figures/."),
+    force: bool = force_option(),
+    no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
+) -> None:
+    """Calibrations side by side on held-out captures of every measurement system; says which to deploy."""
+    from wolfcal.evaluate.compare import run_compare
+    from wolfcal.vision.cache import cache_enabled
+
+    with cache_enabled(not no_cache):
+        run_compare(fit_dirs, capture, out, say=typer.echo, force=force)
+
+
+@app.command()
+@friendly_errors
 def demo(
     out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
     root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),

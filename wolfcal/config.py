@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -99,6 +100,18 @@ class RobotConfig:
             raise WolfcalError(f"the robot config {self.path} has no 'camera:'; {why}")
         return self.camera
 
+    def marker_config(self, why: str = "motion capture needs them") -> MarkersConfig:
+        """The motion-capture markers' config; a WolfcalError naming the file when the config has none."""
+        if self.markers is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'markers:'; {why}")
+        return self.markers
+
+    def floor_config(self, why: str = "floor samples need it") -> FloorConfig:
+        """The venue ground check's config; a WolfcalError naming the file when the config has none."""
+        if self.floor is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'floor:'; {why}")
+        return self.floor
+
     def external_camera(self, name: str) -> ExternalCameraConfig:
         """The external camera called `name`; a WolfcalError listing the configured ones otherwise."""
         for camera in self.external_cameras:
@@ -131,14 +144,22 @@ class RobotConfig:
         return ([HEAD_CAMERA] if self.camera is not None else []) + [c.name for c in self.external_cameras]
 
     def tag(self, tag_id: int) -> TagConfig:
-        for tag in self.tags:
-            if tag.id == tag_id:
-                return tag
-        raise KeyError(tag_id)
+        return _by_id(self.tags, tag_id)
 
     @property
     def tag_ids(self) -> list[int]:
         return [t.id for t in self.tags]
+
+
+_Tag = TypeVar("_Tag", "TagConfig", "FloorTagConfig")
+
+
+def _by_id(tags: tuple[_Tag, ...], tag_id: int) -> _Tag:
+    """The tag with id `tag_id`; KeyError when none has it."""
+    for tag in tags:
+        if tag.id == tag_id:
+            return tag
+    raise KeyError(tag_id)
 
 
 class _Reader:
@@ -480,10 +501,7 @@ class FloorConfig:
     tags: tuple[FloorTagConfig, ...] = ()
 
     def tag(self, tag_id: int) -> FloorTagConfig:
-        for tag in self.tags:
-            if tag.id == tag_id:
-                return tag
-        raise KeyError(tag_id)
+        return _by_id(self.tags, tag_id)
 
     @property
     def tag_ids(self) -> list[int]:
@@ -506,7 +524,7 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     tags_data = r.data.get("tags") or []
     if not isinstance(tags_data, list):
         r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
-    tags = []
+    tags: list[FloorTagConfig] = []
     on_links = {t.id for t in link_tags}
     for i, item in enumerate(tags_data):
         t = _Reader(path, item, f"floor.tags[{i}]")

@@ -54,7 +54,7 @@ def run_capture(
     with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
-        if script:  # before anything moves: where the robot stands decides the joints no pose names
+        if script and options.poses:  # before anything moves: where the robot stands decides the joints no pose names
             start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
             note = check_collisions(robot, script, options.poses, start)
             if note:
@@ -91,15 +91,22 @@ def run_capture(
                 bus.recover_port()
                 failed = leave_torque(bus, initial, touched, options.exit_torque)
         failure = failure or interruption(noted)
-    summary = session.summary
+    _say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
+    return session.summary
+
+
+def _say_end(
+    summary: CaptureSummary, failure: BaseException | None, failed: list[str], exit_torque: str, port: str,
+    console: Console,
+) -> None:
+    """What the file holds and how the torque was left; raises the capture's failure (with that said) if any."""
     saved = f"{summary.samples} sample(s) saved in {summary.path}" if summary.path else "no sample taken, no file"
     if failed:
-        saved += (f"\ntorque could not be left as chosen (--exit-torque {options.exit_torque}) on {', '.join(failed)}: "
+        saved += (f"\ntorque could not be left as chosen (--exit-torque {exit_torque}) on {', '.join(failed)}: "
                   "check these joints before touching the robot")
-        failure = failure if isinstance(failure, WolfcalError) else BusError(f"{bus.port_name}: bus failure at exit")
+        failure = failure if isinstance(failure, WolfcalError) else BusError(f"{port}: bus failure at exit")
     if isinstance(failure, WolfcalError):
         raise type(failure)(f"{failure}\n{saved}") from None
     console.print(saved)
     if failure is not None:  # Ctrl-C, SIGTERM, SIGHUP, or an unexpected error (its traceback is wanted)
         raise failure
-    return summary

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.robot.collision import collision_model
+from wolfcal.robot.collision import optional_collision_model
 from wolfcal.robot.robot import Robot
 from wolfcal.yamlfile import read_yaml
 
@@ -108,7 +108,7 @@ def check_collisions(robot: Robot, script: PoseScript, path: str | Path, start: 
     """Refuse a script in which the robot would touch itself (`wolfcal.robot.collision`): each pose with every
     joint at its latest target, joints never named where they stand at the start (`start`: joint -> rad; others
     at the rest pose). Returns a note when the robot config has no collision geometry (nothing checked)."""
-    model = collision_model(robot, required=False)
+    model = optional_collision_model(robot)
     if model is None:
         return (f"{robot.config.path} has no collision geometry ('collision_radii:'): poses not checked for "
                 "self-collision")  # fmt: skip
@@ -118,7 +118,7 @@ def check_collisions(robot: Robot, script: PoseScript, path: str | Path, start: 
         targets.update(pose.joints)
         q.append([targets.get(j, 0.0) for j in robot.joint_names])
     clearance = model.clearance(np.array(q))
-    problems = [f"{pose.name}: {' and '.join(model.colliding_pair(np.array(row)))} would touch"
+    problems = [f"{pose.name}: {' and '.join(model.colliding_pair(np.array(row)) or ('?', '?'))} would touch"
                 for pose, row, c in zip(script.poses, q, clearance) if c < 0]  # fmt: skip
     if problems:
         raise WolfcalError(f"{path}: {len(problems)} pose(s) collide, nothing was moved:\n  " + "\n  ".join(problems))

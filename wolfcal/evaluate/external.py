@@ -40,7 +40,7 @@ def _reprojection(robot: Robot, obs: Observations, model: Corrections) -> dict:
     return {"rms_px": round(b.rms_after, 4), "max_px": round(b.max_after, 4), "outlier_views": len(b.outlier_views)}
 
 
-def _tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> list[float]:
+def foot_tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> list[float]:
     """Per sample with the torso tag and a foot tag fully seen: mean grid distance [mm] of each foot tag."""
     fixed = [t for t in obs.observed_tag_ids if robot.fixed_to_base(robot.config.tag(t).link)]
     moving = [t for t in obs.observed_tag_ids if t not in fixed]
@@ -82,7 +82,7 @@ def external_metrics(
         say(f"external camera {name}: fitting each placement's pose with the chain held, before and after ...")
         rows = {}
         for label, model in models.items():
-            grid = _tag_grid_mm(robot, obs, model)
+            grid = foot_tag_grid_mm(robot, obs, model)
             rows[label] = {
                 **_reprojection(robot, obs, model),
                 "tag_grid_mm_mean": round(float(np.mean(grid)), 3) if grid else None,

@@ -98,10 +98,16 @@ def _count_ticks(top: int) -> list[int]:
 
 def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str) -> bytes:
     """Histograms of two error samples (e.g. corner distances [px]) on a log-spaced x axis."""
+    return histograms_png([("before (input URDF)", before, BEFORE), ("after (calibrated)", after, AFTER)], xlabel,
+                          title)  # fmt: skip
+
+
+def histograms_png(series: list[tuple[str, np.ndarray, tuple[int, int, int]]], xlabel: str, title: str) -> bytes:
+    """Overlaid histograms of several error samples (label, values, BGR colour) on a log-spaced x axis."""
     ax = LogAxes(760, 364, title)
-    lo, hi = _log_range(np.concatenate([before, after]))
+    lo, hi = _log_range(np.concatenate([np.asarray(v, dtype=float) for _, v, _ in series]))
     edges = np.logspace(np.log10(lo), np.log10(hi), 41)
-    counts = [np.histogram(np.clip(v, lo, hi), edges)[0] for v in (before, after)]
+    counts = [np.histogram(np.clip(v, lo, hi), edges)[0] for _, v, _ in series]
     top = max(1, max(int(c.max()) for c in counts))
 
     def x_of(v: float) -> int:
@@ -117,7 +123,7 @@ def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str
         cv2.line(ax.img, (ax.x0, y_of(c)), (ax.x1, y_of(c)), GRID, 1)
         _text(ax.img, str(c), (ax.x0 - 6, y_of(c)), anchor="right")
     overlay = ax.img.copy()
-    for bin_counts, color in zip(counts, (BEFORE, AFTER)):
+    for bin_counts, (_, _, color) in zip(counts, series):
         for i, n in enumerate(bin_counts):
             if n:
                 cv2.rectangle(
@@ -125,7 +131,7 @@ def histogram_png(before: np.ndarray, after: np.ndarray, xlabel: str, title: str
                 )
     ax.img[:] = cv2.addWeighted(overlay, 0.65, ax.img, 0.35, 0)
     ax.frame()
-    ax.legend([("before (input URDF)", BEFORE), ("after (calibrated)", AFTER)])
+    ax.legend([(label, color) for label, _, color in series])
     _text(ax.img, xlabel, ((ax.x0 + ax.x1) // 2, ax.y1 + 36), anchor="center")
     _text(ax.img, "count", (8, ax.y0 - 12))
     return png(ax.img)

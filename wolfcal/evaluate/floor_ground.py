@@ -82,8 +82,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections) -> dict | No
     ids, inverse, counts = np.unique(tags, return_inverse=True, return_counts=True)
     if len(tags) < MIN_VIEWS or counts.min() < 2:
         return None
-    printed = np.stack([tag_corners(robot.config.floor.tag(int(i)).size)[:, :2] for i in ids])  # (T, 4, 2)
-    height = np.array([robot.config.floor.tag(int(i)).thickness for i in ids])[inverse][:, None]
+    printed = np.stack([tag_corners(robot.config.floor_config().tag(int(i)).size)[:, :2] for i in ids])  # (T, 4, 2)
+    height = np.array([robot.config.floor_config().tag(int(i)).thickness for i in ids])[inverse][:, None]
 
     def meet(x: np.ndarray) -> np.ndarray:
         T = _real_camera(x, T_floor_camera)

@@ -150,13 +150,14 @@ def ground_errors(
     rows = []
     for d in distances:
         views = ball_views(robot, camera, reference, d)
-        row = {"distance_m": d, "pixel": [float(v) for v in views[len(views) // 2]["uv"]], "models": {}}
+        models_out: dict[str, dict] = {}
+        row = {"distance_m": d, "pixel": [float(v) for v in views[len(views) // 2]["uv"]], "models": models_out}
         for name, corrections in models.items():
             results = [landing_error(robot, camera, v, corrections) for v in views]
             worst = max(range(len(results)), key=lambda k: -1.0 if np.isnan(results[k][1]) else results[k][1])
             landed, error = results[worst]
             above = any(np.isnan(e) for _, e in results)
-            row["models"][name] = {
+            models_out[name] = {
                 "landed_at_m": None if above else landed,
                 "error_m": None if above else error,
                 "worst_bearing_deg": float(np.rad2deg(views[worst]["bearing"])),

@@ -51,7 +51,7 @@ from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.vision.observe import detect_observations, observations_of
 
 
-def _load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
+def load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
@@ -69,7 +69,7 @@ def _load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     return result, load_robot(robot_path)
 
 
-def _refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> None:
+def refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> None:
     """A held-out capture must not be one the fit used."""
     fitted_on = {Path(c).resolve() for c in fit_captures}
     reused = [str(c) for c in captures if Path(c).resolve() in fitted_on]
@@ -268,10 +268,10 @@ def _evaluate(
     of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
-    result, robot = _load_fit(fit_dir)
+    result, robot = load_fit(fit_dir)
     fitted = result.corrections
     held_out = bool(captures)
-    _refuse_fitted_captures(captures, result.captures)
+    refuse_fitted_captures(captures, result.captures)
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result.captures]
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import base64
 import html
+from typing import Any
 
-Block = tuple[str, object]
+# (kind, content): the content's type depends on the kind (module docstring), so it is checked where rendered
+Block = tuple[str, Any]
 
 
 def _num(value: float | None, scale: float = 1.0, digits: int = 2) -> str:

@@ -33,9 +33,9 @@ def unexplained(
     lin = block.linearize(np.zeros(0), np.zeros(0), ParameterSet([]))
     keep = inlier_samples[obs.sample_index] & np.all(np.isfinite(residuals), axis=1)
     view, n_views = block.view_of_unit, block.n_views
-    count = np.bincount(view[keep], minlength=n_views)
+    count = np.bincount(view[keep], minlength=n_views).astype(float)
     mean = np.stack([np.bincount(view[keep], residuals[keep, k], n_views) for k in range(2)], axis=1)
-    mean /= np.maximum(count, 1)[:, None]
+    mean = mean / np.maximum(count, 1)[:, None]
     deviation = (residuals - mean[view])[keep]
     dof = 2 * int(np.sum(np.maximum(count - 1, 0)))
     corner = float(np.sqrt(np.sum(deviation**2) / dof)) if dof else 0.0

@@ -9,11 +9,24 @@ camera's pose per placement). The problem and the solver know blocks only throug
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+import scipy.sparse
+from scipy.sparse.csgraph import connected_components
 
+from wolfcal.encoders import RAD_PER_TICK
+from wolfcal.observations import Observations
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
+
+
+class TagViewBlock(Protocol):
+    """A block whose units are tag corners seen by one camera (camera, floor and sole-closure blocks)."""
+
+    obs: Observations
+    camera_name: str
+    tag_ids: list[int]
 
 
 @dataclass
@@ -50,9 +63,18 @@ class Block:
         return len(self.view_labels)
 
     def noise_groups(self) -> np.ndarray:
-        """(U,) group of each unit: units of samples with identical joint readings share their error."""
-        _, group_of_sample = np.unique(self.q_measured, axis=0, return_inverse=True)
-        return group_of_sample.ravel()[self.sample_of_unit]
+        """(U,) group of each unit: the units of one still pose share its joint readings' error. A still pose is the
+        samples with identical readings, joined with the next sample when no reading differs by more than one
+        encoder tick (a recording's frames of one pose, while an encoder flickers between two ticks)."""
+        ticks = np.round(self.q_measured / RAD_PER_TICK).astype(np.int64)
+        _, same = np.unique(ticks, axis=0, return_inverse=True)
+        same = same.ravel()
+        n, S = int(same.max()) + 1 if len(same) else 0, len(ticks)
+        near = np.flatnonzero(np.all(np.abs(np.diff(ticks, axis=0)) <= 1, axis=1))
+        edges = np.concatenate([[same, n + np.arange(S)], [n + near, n + near + 1]], axis=1)
+        graph = scipy.sparse.coo_matrix((np.ones(edges.shape[1]), tuple(edges)), shape=(n + S, n + S))
+        group_of_sample = connected_components(graph, directed=False)[1][n:]
+        return group_of_sample[self.sample_of_unit]
 
     def shared_labels(self) -> np.ndarray:
         """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""

@@ -40,7 +40,7 @@ STEP = 1e-6  # central-difference step [SI]
 
 def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray, np.ndarray]:
     """T_camera_floor (S, 4, 4) and the sole poses in the base frame (K, S, 4, 4) under a model."""
-    frame, soles = robot.config.head_camera().frame, list(robot.config.floor.soles)
+    frame, soles = robot.config.head_camera().frame, list(robot.config.floor_config().soles)
     poses = robot.model.link_poses(q, [frame, *soles], model, base=robot.config.base_link)
     sole_poses = np.stack([poses[s] for s in soles])
     return invert_transform(poses[frame]) @ floor_frames(sole_poses), sole_poses
@@ -76,7 +76,7 @@ class FloorBlock(Block):
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()
         self.name, self.camera_name = "floor", obs.camera_name
-        floor = robot.config.floor
+        floor = robot.config.floor_config()
         self.tag_ids = obs.observed_tag_ids
         column = {t: i for i, t in enumerate(self.tag_ids)}
         self.tag_col = np.array([column[int(t)] for t in obs.tag_ids], dtype=int)
@@ -184,7 +184,8 @@ class SoleClosure(Block):
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()
-        self.tag_ids, self.camera_name = [], obs.camera_name
+        self.tag_ids: list[int] = []
+        self.camera_name = obs.camera_name
         self.q_measured = obs.q_measured
         self.sample_of_unit = np.arange(obs.n_samples)
         self.view_of_unit = np.arange(obs.n_samples)
@@ -213,7 +214,7 @@ def check_floor_samples(robot: Robot, obs: Observations) -> None:
             f"{sources}: floor tag(s) {', '.join(map(str, once))} seen in only one sample; a floor tag's place is "
             "unknown, so it needs at least two views: capture more head angles that show it, or remove it"
         )
-    if len(robot.config.floor.soles) < 2:
+    if len(robot.config.floor_config().soles) < 2:
         return
     gap = sole_disagreement(robot, obs.q_measured, Corrections())
     tilt = np.arcsin(np.clip(np.linalg.norm(gap[:, 2:], axis=1) / SOLE_LEVER_M, 0.0, 1.0))

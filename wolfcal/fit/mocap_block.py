@@ -45,7 +45,7 @@ class MocapBlock(Block):
         self.robot, self.obs, self.moving = robot, obs, moving
         self.fixed = fixed or Corrections()
         self.base = robot.config.base_link
-        markers = [robot.config.markers.marker(n) for n in obs.marker_names]
+        markers = [robot.config.marker_config().marker(n) for n in obs.marker_names]
         self.links = list(dict.fromkeys(m.link for m in markers))
         self.link_col = np.array([self.links.index(m.link) for m in markers], dtype=int)  # (K,)
         self.xyz_link = np.array([m.xyz for m in markers], dtype=float)  # (K, 3) nominal [m]

@@ -58,6 +58,7 @@ class GroupedWhitening:
     sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are independent."""
 
     def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
+        self.groups, self.shared = groups, shared
         self.n_rows = len(shared.A)
         sizes = np.array([len(g) for g in groups], dtype=int)
         self._classes = []  # (rows (G, n), eigenvalues (G, n), eigenvectors (G, n, n))
@@ -71,6 +72,10 @@ class GroupedWhitening:
         for k, g in enumerate(groups):
             self.group_of_row[g] = k
         self.n_groups = len(groups)
+
+    def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
+        """The same groups under another shared part (e.g. another size of the shared detection error)."""
+        return GroupedWhitening(self.groups, shared)
 
     def rotate(self, r: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per size class: U^T r of each group (G, n) and its eigenvalues (G, n)."""

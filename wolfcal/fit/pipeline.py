@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +34,7 @@ from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
+from wolfcal.yamlfile import load_yaml
 
 SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
@@ -114,7 +115,7 @@ def fit_observations(
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
-    blocks: list[Block] = []
+    camera_blocks: list[CameraBlock] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
             block = CameraBlock(robot, obs, obs.observed_tag_ids)
@@ -122,15 +123,16 @@ def fit_observations(
             placement, names = placements(obs, options.external_moving)
             block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
         block.outlier_rule = options.outlier
-        blocks.append(block)
-    tags_by_camera = {b.camera_name: b.tag_ids for b in blocks}
+        camera_blocks.append(block)
+    blocks: list[Block] = [*camera_blocks]
+    tags_by_camera = {b.camera_name: b.tag_ids for b in camera_blocks}
     if floor is not None:
         check_floor_samples(robot, floor)
         tags_by_camera.setdefault(HEAD_CAMERA, [])
         floor_block = FloorBlock(robot, floor)
         floor_block.outlier_rule = options.outlier
         blocks.append(floor_block)
-        if len(robot.config.floor.soles) == 2:
+        if len(robot.config.floor_config().soles) == 2:
             blocks.append(SoleClosure(robot, floor))
     chain = build_parameter_set(
         robot, options.free, tags_by_camera, options.side, options.fix_tags,
@@ -171,7 +173,7 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
         raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
                            "(no marker on the camera's optical frame); use --free leg with --system mocap")
     if options.free == "leg" and options.side != "both":
-        config = robot.config.markers
+        config = robot.config.marker_config()
         markers = markers.only_markers([n for n in markers.marker_names
                                         if config.marker(n).side in (options.side, None)])  # fmt: skip
     return MocapBlock(robot, markers, options.mocap_moving)
@@ -232,7 +234,7 @@ def load_samples(
 def attached_robot_name(config_text: str | None) -> str | None:
     """The `name` of a robot config attached to a capture (None when absent or unreadable)."""
     try:
-        data = yaml.safe_load(config_text) if config_text else None
+        data = load_yaml(config_text) if config_text else None
     except yaml.YAMLError:
         return None
     return data.get("name") if isinstance(data, dict) else None
@@ -264,8 +266,8 @@ def run_fit(
     intrinsics: Path | None = None,
     say: Callable[[str], None] = print,
     force: bool = False,
-    mocap: list[Path] = (),
-    mocap_offsets: list[float] = (),
+    mocap: Sequence[Path] = (),
+    mocap_offsets: Sequence[float] = (),
 ) -> FitResult:
     """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
     Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
@@ -274,9 +276,11 @@ def run_fit(
     robot = load_robot(robot_path)
     inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
-    markers, warnings, observations = None, [], {}
+    markers: MarkerObservations | None = None
+    warnings: list[str] = []
+    observations: dict[str, Observations] = {}
     if options.system == "mocap" or mocap:
-        markers = load_marker_observations(robot.config, robot.joint_names, captures, mocap, list(mocap_offsets))
+        markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
         say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
             + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
         warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"

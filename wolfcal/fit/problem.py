@@ -11,6 +11,7 @@ the Jacobian is sparse when the blocks bring many unknowns (e.g. one camera pose
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse
@@ -40,13 +41,17 @@ class BlockState:
         self.block, self.start, self.sigma, self.sigma_q = block, start, sigma, sigma_q
         # A detection error that repeats (the same tag seen from the same place) cannot show in the residuals: the
         # tag mount and the camera pose absorb it. Its size is the configured detection noise (priors.pixel_noise),
-        # or the estimated noise level when that is larger.
+        # or the estimated noise level when that is larger (`shared_size`).
         self.shared_floor = sigma
         self.excluded = np.zeros(block.n_views, dtype=bool)
         self.groups = block.noise_groups()  # (U,) fixed: derived once
         self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.whitening: GroupedWhitening | None = None
         self.W: scipy.sparse.csr_matrix | None = None
+
+    def shared_size(self, sigma: float) -> float:
+        """Size of a repeating detection error per axis [the block's unit] at the noise level `sigma`."""
+        return max(sigma, self.shared_floor)
 
     @property
     def inlier_units(self) -> np.ndarray:
@@ -70,7 +75,7 @@ class BlockState:
             reading=np.repeat(self.reading_of_unit, d),
             label=np.repeat(label, d),
             axis=np.tile(np.arange(d), block.n_units),
-            tau=max(self.sigma, self.shared_floor),
+            tau=self.shared_size(self.sigma),
         )
 
     def rebuild(self, lin: Linearization) -> None:
@@ -92,7 +97,14 @@ class BlockState:
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:
+        """Set the noise level per measured number [the block's unit]. The shared detection error's size follows
+        it (`shared_size`); when that size changes the groups are decomposed again, so the next solve and the
+        reported uncertainty use one noise model."""
         self.sigma = sigma
+        tau = self.shared_size(sigma)
+        shared = self.noise_model.shared
+        if shared.tau != tau and np.any(shared.label >= 0):
+            self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
         self.W = self.noise_model.matrix(sigma)
 
     @property

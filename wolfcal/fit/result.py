@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
 import yaml
@@ -14,6 +14,9 @@ import yaml
 import wolfcal
 from wolfcal.atomic import write_text_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.blocks import TagViewBlock
+from wolfcal.fit.camera_block import CameraBlock
+from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.mocap_result import mocap_block_dict
 from wolfcal.fit.options import NOISE_FLOOR_PX, FitOptions
 from wolfcal.fit.solver import Solution
@@ -94,13 +97,14 @@ def _measured_by(fit: Fit) -> list[list[str]]:
 def _block_dict(fit: Fit, k: int) -> dict:
     """The result of one measurement block: residuals, noise, outliers, per-sample errors."""
     b, block = fit.solution.blocks[k], fit.blocks[k]
-    if block.system == "mocap":
+    if isinstance(block, MocapBlock):
         state = fit.problem.states[k]
         values = fit.solution.values[state.start : state.start + len(block.nuisance)]
         params = fit.problem.params
         residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
         return mocap_block_dict(block, b, values, residual)
-    obs = block.obs
+    views = cast(TagViewBlock, block)
+    obs = views.obs
     unit = b.unit
     samples = []
     for i in range(obs.n_samples):
@@ -117,9 +121,9 @@ def _block_dict(fit: Fit, k: int) -> dict:
     return {
         "name": b.name,
         "system": b.system,
-        "camera": block.camera_name,
+        "camera": views.camera_name,
         "unit": unit,
-        "tags_used": block.tag_ids,
+        "tags_used": views.tag_ids,
         "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views",
         f"rms_before_{unit}": round(b.rms_before, 4),
         f"rms_after_{unit}": round(b.rms_after, 4),
@@ -137,6 +141,8 @@ def external_camera_poses(fit: Fit) -> dict:
     """T_base_camera of every external camera placement, as xyz [m] and rpy [rad] with the 4x4 matrix."""
     out = {}
     for block in fit.blocks:
+        if not isinstance(block, CameraBlock):
+            continue
         for name in dict.fromkeys(p.target for p in block.nuisance.parameters if p.kind == "pose"):
             idx = [i for i, p in enumerate(fit.params.parameters) if p.kind == "pose" and p.target == name]
             T = transform_from_twist_params(fit.solution.values[idx])

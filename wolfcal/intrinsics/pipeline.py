@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +18,7 @@ from wolfcal.intrinsics.coverage import PARAM_NAMES, Coverage, ViewSelector, emp
 from wolfcal.intrinsics.detect import METHODS, Detection, Failure, detect_many, probe_board_size
 from wolfcal.intrinsics.refine_choice import choose_window
 from wolfcal.intrinsics.report import REPORT_FILES, write_detections, write_report
-from wolfcal.intrinsics.sources import camera_source, expand_inputs, image_jobs, read_image, stream_frames
+from wolfcal.intrinsics.sources import Inputs, camera_source, expand_inputs, image_jobs, read_image, stream_frames
 from wolfcal.outputs import check_output_folder, check_outputs
 from wolfcal.vision.board import Board
 
@@ -101,23 +101,7 @@ def run_intrinsics(
     say: Callable[[str], None] = print,
 ) -> Calibration:
     """Detect, calibrate, write `out` (camera_info YAML) and the report folder; return the calibration."""
-    if options.method not in METHODS:
-        raise WolfcalError(f"unknown --detector {options.method!r}; use one of {', '.join(METHODS)}")
-    if options.model not in DISTORTION_NAMES:
-        raise WolfcalError(f"unknown --model {options.model!r}; use one of {', '.join(DISTORTION_NAMES)}")
-    if not inputs and camera is None:
-        raise WolfcalError("give images, folders or videos to calibrate from, or --camera for the live camera")
-    found = expand_inputs(inputs)
-    report = options.report or out.with_name(f"{out.stem}_report")
-    check_outputs([out], options.force, found.images + found.videos)
-    check_output_folder(report, REPORT_FILES, options.force, found.images + found.videos, "--report")
-    if options.save_frames is not None:
-        check_output_folder(options.save_frames, [], options.force, option="--save-frames")
-        if not options.force and options.save_frames.is_dir() and any(options.save_frames.glob("view_*.png")):
-            raise WolfcalError(
-                f"--save-frames {options.save_frames}: holds frames of an earlier run (view_*.png); pass --force "
-                "to replace them, or choose another folder"
-            )
+    found, report = _check_request(inputs, out, options, camera)
     failures = list(found.missing)
     for failure in failures:
         say(f"{failure.name}: {failure.reason}")
@@ -135,23 +119,7 @@ def run_intrinsics(
         say(f"board found in {len(views)} of {len(found.images)} images")
     streams = [(str(p), p.name) for p in found.videos] + ([(camera_source(camera), None)] if camera else [])
     if streams:
-        from wolfcal.intrinsics.live import LiveView, collect_views  # rich's live display: only for streams
-
-        selector = ViewSelector(board, Coverage([view_params(v, board) for v in views]), list(views))
-        for source, name in streams:
-            say(f"collecting still, distinct views from {name or f'camera {source}'} (Ctrl-C stops)")
-            frames = stream_frames(source, name)
-            try:
-                if options.live_view:
-                    with LiveView(options.min_views) as view:
-                        collect_views(frames, selector, options.min_views, options.method, options.save_frames, view)
-                else:
-                    collect_views(frames, selector, options.min_views, options.method, options.save_frames)
-            except KeyboardInterrupt:
-                say("stopped; calibrating with the views kept so far")
-            if selector.coverage.complete(options.min_views):
-                break
-        views = selector.kept
+        views = _views_from_streams(streams, views, board, options, say)
     write_detections(report, views, failures)
     if not views:
         raise WolfcalError(
@@ -175,6 +143,54 @@ def run_intrinsics(
     _say_result(calibration, failures, warnings, say)
     say(f"wrote {out} and the report {report}/summary.md")
     return calibration
+
+
+def _check_request(
+    inputs: list[str], out: Path, options: IntrinsicsOptions, camera: str | None
+) -> tuple[Inputs, Path]:
+    """The options checked and the inputs found, and the outputs checked before any work; the report folder."""
+    if options.method not in METHODS:
+        raise WolfcalError(f"unknown --detector {options.method!r}; use one of {', '.join(METHODS)}")
+    if options.model not in DISTORTION_NAMES:
+        raise WolfcalError(f"unknown --model {options.model!r}; use one of {', '.join(DISTORTION_NAMES)}")
+    if not inputs and camera is None:
+        raise WolfcalError("give images, folders or videos to calibrate from, or --camera for the live camera")
+    found = expand_inputs(inputs)
+    report = options.report or out.with_name(f"{out.stem}_report")
+    check_outputs([out], options.force, found.images + found.videos)
+    check_output_folder(report, REPORT_FILES, options.force, found.images + found.videos, "--report")
+    if options.save_frames is not None:
+        check_output_folder(options.save_frames, [], options.force, option="--save-frames")
+        if not options.force and options.save_frames.is_dir() and any(options.save_frames.glob("view_*.png")):
+            raise WolfcalError(
+                f"--save-frames {options.save_frames}: holds frames of an earlier run (view_*.png); pass --force "
+                "to replace them, or choose another folder"
+            )
+    return found, report
+
+
+def _views_from_streams(
+    streams: Sequence[tuple[str | int, str | None]], views: list[Detection], board: Board, options: IntrinsicsOptions,
+    say: Callable[[str], None],
+) -> list[Detection]:
+    """Still, distinct views from videos or the live camera added to `views` until the coverage is complete."""
+    from wolfcal.intrinsics.live import LiveView, collect_views  # rich's live display: only for streams
+
+    selector = ViewSelector(board, Coverage([view_params(v, board) for v in views]), list(views))
+    for source, name in streams:
+        say(f"collecting still, distinct views from {name or f'camera {source}'} (Ctrl-C stops)")
+        frames = stream_frames(source, name)
+        try:
+            if options.live_view:
+                with LiveView(options.min_views) as view:
+                    collect_views(frames, selector, options.min_views, options.method, options.save_frames, view)
+            else:
+                collect_views(frames, selector, options.min_views, options.method, options.save_frames)
+        except KeyboardInterrupt:
+            say("stopped; calibrating with the views kept so far")
+        if selector.coverage.complete(options.min_views):
+            break
+    return selector.kept
 
 
 def _say_result(calibration: Calibration, failures: list[Failure], warnings: list[str], say) -> None:

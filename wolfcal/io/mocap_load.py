@@ -36,6 +36,8 @@ def load_marker_observations(
             traj = read_mocap_file(Path(mocap_files[i]))
             columns = match_labels(traj, config)[1]
             offset = offsets_s[i] if offsets_s else estimate_offset(traj, columns, states)
+        if traj is None:  # a recording read without its markers and no --mocap file: cannot happen (see above)
+            raise WolfcalError(f"{recording}: no marker data")
         parts.append(marker_samples(traj, states, config, joint_names, offset))
     return concatenate(parts)
 

@@ -44,7 +44,7 @@ def read_recording(
     """Joint states (config `joint_states_topic`) and, with `with_markers`, the Markers topic of a ROS 2 recording."""
     check_mcap(path)
     joints, frames = [], []
-    topics = [config.joint_states_topic] + ([config.markers.topic] if with_markers else [])
+    topics = [config.joint_states_topic] + ([config.marker_config().topic] if with_markers else [])
     try:
         with path.open("rb") as handle:
             reader = make_reader(handle, decoder_factories=[DecoderFactory()])
@@ -66,7 +66,7 @@ def read_recording(
     if not with_markers:
         return states, None
     if not frames:
-        raise WolfcalError(f"{path}: no mocap4r2_msgs/msg/Markers on {config.markers.topic} (robot config "
+        raise WolfcalError(f"{path}: no mocap4r2_msgs/msg/Markers on {config.marker_config().topic} (robot config "
                            "'markers.topic'); give the motion-capture file with --mocap FILE")
     labels = list(dict.fromkeys(name for _, markers in frames for name, _ in markers))
     column = {n: i for i, n in enumerate(labels)}
@@ -81,7 +81,7 @@ def read_recording(
 
 def match_labels(traj: MarkerTrajectories, config: RobotConfig) -> tuple[list[str], list[int], list[str]]:
     """(configured names found, their columns in traj, unknown labels); a clear error when none is configured."""
-    names = config.markers.names
+    names = config.marker_config().names
     found = [n for n in names if n in traj.labels]
     unknown = sorted({label for label in traj.labels if label not in names})
     if not found:
@@ -151,7 +151,11 @@ def marker_samples(traj: MarkerTrajectories, states: JointStates, config: RobotC
     if missing:
         raise WolfcalError(f"{traj.path}: the joint states lack {', '.join(missing[:5])}; record every joint")
     still = still_frames(traj.times_ns, xyz)
-    q, stamps, sample_rows, marker_rows, points = [], [], [], [], []
+    q: list[np.ndarray] = []
+    stamps: list[int] = []
+    sample_rows: list[int] = []
+    marker_rows: list[int] = []
+    points: list[np.ndarray] = []
     shift = int(round(offset_s * 1e9))
     for a, b in still_periods(traj.times_ns, still):
         reading = _still_joints(states, int(traj.times_ns[a]) + shift, int(traj.times_ns[b - 1]) + shift)
@@ -162,7 +166,7 @@ def marker_samples(traj: MarkerTrajectories, states: JointStates, config: RobotC
         median = nanmedian(block)
         for k in np.flatnonzero(seen >= 0.5 * (b - a)):
             sample_rows.append(len(q))
-            marker_rows.append(k)
+            marker_rows.append(int(k))
             points.append(median[k])
         q.append(reading[[states.names.index(j) for j in joint_names]])
         stamps.append((int(traj.times_ns[a]) + int(traj.times_ns[b - 1])) // 2 + shift)

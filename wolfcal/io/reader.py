@@ -6,9 +6,10 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
 kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
 (see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
-camera only). Two passes: the first decides which frames to keep from stamps and image headers, the second fetches
-the encoded bytes of the kept frames only (a long recording's images need not fit in memory); `SampleImage.decode()`
-decodes on demand.
+camera only). One pass: frames are kept from stamps and image headers; a kept image holds only its location in
+the file (`wolfcal.io.stream`), its bytes are read back when they are detected or drawn. Memory does not grow with
+the images: a ten-minute recording at 2048x1536 reads in the memory of a one-minute one (bench/bench_stream.py);
+joint states are kept compactly (`JointLog`, ~20 MB for ten minutes of 20 joints at 100 Hz).
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
@@ -21,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, NamedTuple
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -32,12 +33,13 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
-from wolfcal.io.images import image_kind, image_size
+from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
 from wolfcal.io.msgdefs import header_stamp_ns
-from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, JointStates, Paired, group_by_stamp, pair_frame
+from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, JointLog, JointStates, Paired, group_by_stamp, pair_frame
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
+from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_states
 from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
@@ -89,12 +91,23 @@ def require_cameras(captures: Iterable[Capture], cameras: Iterable[str], config:
                 )
 
 
+class _Header(NamedTuple):
+    """What the reader keeps of an image message."""
+
+    stamp: int  # header stamp [ns]
+    kind: str | None  # 'png' | 'jpeg' | None (anything else)
+    size: tuple[int, int] | None  # (width, height) from the encoded header
+    damage: str | None  # why the bytes are damaged, None when whole
+    log_time: int  # [ns]
+
+
 @dataclass
 class _Frame:
     camera: str
     stamp: int
-    image: SampleImage  # bytes filled in pass 2
+    image: SampleImage  # its location in the file, no bytes
     paired: Paired
+    damage: str | None
 
 
 def _pass_one(
@@ -105,11 +118,11 @@ def _pass_one(
     info_cameras: set[str],
     progress: ProgressCallback | None,
 ):
-    """Joint-state messages, per-camera image headers (stamp, kind, size) and per-camera CameraInfo models."""
+    """Joint-state messages, per-camera image headers and per-camera CameraInfo models."""
     image_topics = {config.camera_topics(n)[0]: n for n in cameras}
     info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
-    joint_messages: list[tuple] = []
-    images: dict[str, list[tuple[int, str | None, tuple[int, int] | None]]] = {n: [] for n in cameras}
+    joint_messages = JointLog()
+    images: dict[str, list[_Header]] = {n: [] for n in cameras}
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
     topics = [config.joint_states_topic, *image_topics, *info_topics]
@@ -119,9 +132,11 @@ def _pass_one(
             progress(count, total)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
-            joint_messages.append((stamp, decoded.name, decoded.position, decoded.velocity))
+            joint_messages.add(stamp, decoded.name, decoded.position, decoded.velocity)
         elif channel.topic in image_topics:
-            images[image_topics[channel.topic]].append((stamp, image_kind(decoded.data), image_size(decoded.data)))
+            kind, data = image_kind(decoded.data), decoded.data
+            damage = image_damage(data) if kind else None
+            images[image_topics[channel.topic]].append(_Header(stamp, kind, image_size(data), damage, message.log_time))
         else:
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
@@ -140,18 +155,19 @@ def _read(
     intrinsics: CameraModel | None,
     progress: ProgressCallback | None,
 ) -> Capture:
-    """Both passes over an open file: pair and select frames per camera, fetch the kept bytes, leave out damaged
-    images, group the frames into samples."""
+    """Read an open file: pair and select frames per camera, leave out damaged images, group the frames into
+    samples."""
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
     joint_messages, images, infos = _pass_one(path, reader, config, found.cameras, info_cameras, progress)
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
-    image_stamps = {s for frames in images.values() for s, _, _ in frames}
+    image_stamps = {h.stamp for headers in images.values() for h in headers}
     # a capture file: one joint state per sample, with the stamp of the sample's images
-    exact = len(joint_messages) == len(image_stamps) and image_stamps <= {m[0] for m in joint_messages}
-    finite, bad_stamps, skipped = finite_joint_states(path, config.joint_states_topic, joint_messages)
-    states = JointStates.from_messages(finite)
+    exact = joint_messages.count == len(image_stamps) and image_stamps <= {
+        int(t) for _, stamps, _, _ in joint_messages.groups() for t in stamps
+    }
+    states, bad_stamps, skipped = finite_joint_states(path, config.joint_states_topic, joint_messages)
     frames: list[_Frame] = []
     for name in found.cameras:
         frames += _keep_frames(
@@ -161,10 +177,9 @@ def _read(
         counts = ", ".join(f"{len(images[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}" for n in images)
         why = f"; e.g. {skipped[0]}" if skipped else ""
         raise WolfcalError(
-            f"{path}: no usable samples ({counts}, {len(joint_messages)} joint state(s) on "
+            f"{path}: no usable samples ({counts}, {joint_messages.count} joint state(s) on "
             f"{config.joint_states_topic}{why}); record the robot holding still poses with the camera running"
         )
-    _fetch_bytes(reader, config, frames)
     frames = _drop_damaged(path, images, frames, skipped)
     samples = _group(path, states, frames, 0 if exact else SAMPLE_TOLERANCE_NS)
     return Capture(
@@ -181,7 +196,7 @@ def _keep_frames(
     path: Path,
     config: RobotConfig,
     name: str,
-    images: list[tuple[int, str | None, tuple[int, int] | None]],
+    images: list[_Header],
     infos: list[tuple[int, InfoModel | None]],
     states: JointStates,
     exact: bool,
@@ -194,10 +209,10 @@ def _keep_frames(
     chooser = IntrinsicsChooser(path, config, name, intrinsics)
     topic = config.camera_topics(name)[0]
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
-    images = sorted(images, key=lambda item: item[0])
-    start = images[0][0] if images else 0
+    images = sorted(images, key=lambda item: item.stamp)
+    start = images[0].stamp if images else 0
     kept: dict[int, _Frame] = {}
-    for stamp, kind, size in images:
+    for stamp, kind, size, damage, log_time in images:
         where = f"'{name}' image {(stamp - start) / 1e9:.3f} s after its first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
@@ -212,22 +227,24 @@ def _keep_frames(
             skipped.append(f"{where}: a second image with the same stamp")
             continue
         info = infos[int(np.argmin(np.abs(info_stamps - stamp)))][1] if len(infos) else None
-        image = SampleImage(b"", kind, chooser.for_image(size, info), f"{path}: {topic}", stamp)
-        kept[stamp] = _Frame(name, stamp, image, paired)
+        location = ImageLocation(path, topic, log_time, stamp)
+        image = SampleImage(b"", kind, chooser.for_image(size, info), f"{path}: {topic}", stamp, location)
+        kept[stamp] = _Frame(name, stamp, image, paired, damage)
     return list(kept.values())
 
 
 def _drop_damaged(
     path: Path,
-    images: dict[str, list[tuple[int, str | None, tuple[int, int] | None]]],
+    images: dict[str, list[_Header]],
     frames: list[_Frame],
     skipped: list[str],
 ) -> list[_Frame]:
     """The frames whose image is whole; the others are named (camera, index, time) in `skipped`."""
     whole: set[tuple[str, int]] = set()
     for name, headers in images.items():
-        kept = {f.stamp: f.image for f in frames if f.camera == name}
-        skipped += drop_damaged_images(path, name, kept, sorted(stamp for stamp, _, _ in headers))
+        damage = {f.stamp: f.damage for f in frames if f.camera == name}
+        kept, notes = drop_damaged_images(path, name, damage, sorted(h.stamp for h in headers))
+        skipped += notes
         whole |= {(name, stamp) for stamp in kept}
     return [f for f in frames if (f.camera, f.stamp) in whole]
 
@@ -249,13 +266,3 @@ def _group(path: Path, states: JointStates, frames: list[_Frame], tolerance_ns: 
             )
         )
     return samples
-
-
-def _fetch_bytes(reader, config: RobotConfig, frames: list[_Frame]) -> None:
-    """Pass 2: the encoded bytes of the kept frames only."""
-    wanted = {(config.camera_topics(f.camera)[0], f.stamp): f.image for f in frames}
-    topics = sorted({topic for topic, _ in wanted})
-    for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
-        image = wanted.get((channel.topic, header_stamp_ns(decoded.header, message.log_time)))
-        if image is not None and not image.data:
-            image.data = bytes(decoded.data)

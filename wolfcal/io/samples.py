@@ -2,13 +2,16 @@
 
 A sample is one still moment: the joint angles the encoders reported (radians, `q_measured`, before any calibration
 offset) and the image of each camera that saw the moment: the head camera (`HEAD_CAMERA`) and/or external cameras
-(by their config names). Images stay encoded bytes, decoded on demand (hundreds of full-resolution images do not fit
-in memory at once), each with the intrinsics at its own resolution (binning already applied).
+(by their config names). An image read from a file holds only its location there, and its bytes are read back
+when needed (`wolfcal.io.stream`; hundreds of full-resolution images do not fit in memory at once); an image made
+in memory holds its encoded bytes. Each has the intrinsics at its own resolution (binning already applied).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import groupby
 from pathlib import Path
 
 import cv2
@@ -16,28 +19,47 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.io.stream import ImageLocation, stream_images
 from wolfcal.observations import HEAD_CAMERA
 
-__all__ = ["HEAD_CAMERA", "Capture", "Sample", "SampleImage"]
+__all__ = ["HEAD_CAMERA", "Capture", "Sample", "SampleImage", "encoded_images"]
 
 
 @dataclass
 class SampleImage:
-    data: bytes  # encoded image (png or jpeg)
+    data: bytes  # encoded image (png or jpeg); empty when `location` says where to read it
     format: str  # 'png' | 'jpeg'
     camera: CameraModel  # intrinsics at this image's resolution
     source: str = ""  # capture file and topic, for messages
     stamp_ns: int = 0  # header stamp of the image [ns]
+    location: ImageLocation | None = None  # where its bytes lie in the file it was read from
+
+    def encoded(self) -> bytes:
+        """The encoded bytes (read from the file when the image holds only its location)."""
+        if self.data or self.location is None:
+            return self.data
+        return next(stream_images([self.location]))
 
     def decode(self) -> np.ndarray:
         """Decoded image: (H, W) uint8 for mono, (H, W, 3) uint8 BGR for colour."""
-        image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        data = self.encoded()
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise WolfcalError(
                 f"{self.source}: the {self.format} image at t={self.stamp_ns} ns cannot be decoded "
-                f"({len(self.data)} bytes); the file is damaged or the image was not stored as png/jpeg"
+                f"({len(data)} bytes); the file is damaged or the image was not stored as png/jpeg"
             )
         return image
+
+
+def encoded_images(images: Iterable[SampleImage]) -> Iterator[bytes]:
+    """The encoded bytes of each image, in order; images of files are streamed (`stream_images`): consecutive
+    ones of one file in one pass, none kept after it is handed on."""
+    for from_file, run in groupby(images, key=lambda image: image.location is not None):
+        if from_file:
+            yield from stream_images(image.location for image in run)  # type: ignore[misc]
+        else:
+            yield from (image.data for image in run)
 
 
 @dataclass

@@ -45,6 +45,12 @@ class PlanCamera:
     def external(self) -> bool:
         return self.name != HEAD_CAMERA
 
+    def pose(self) -> np.ndarray:
+        """T_base_camera (4, 4) of an external camera [m]; a clear error for the head camera (it moves)."""
+        if self.T_base_camera is None:
+            raise WolfcalError(f"camera {self.name!r} has no fixed placement (the head camera moves with the head)")
+        return self.T_base_camera
+
 
 @dataclass
 class Candidates:
@@ -99,7 +105,7 @@ def tag_views(robot: Robot, camera: PlanCamera, q: np.ndarray, tag_ids: list[int
     nominal = Corrections()
     used = np.isin(robot.config.tag_ids, tag_ids)
     if camera.external:
-        return external_visibility(robot, camera.model, camera.T_base_camera, q, nominal) & used
+        return external_visibility(robot, camera.model, camera.pose(), q, nominal) & used
     width = camera.model.width
     return tag_visibility(robot, camera.model, q, nominal, robot.config.tag_ids, 0.03 * width, 0.02 * width) & used
 
@@ -122,14 +128,14 @@ def line_of_sight(robot: Robot, camera: PlanCamera, q: np.ndarray, collisions: C
     viewer_body = -1 if camera.external else body[viewer]
     skip = np.repeat([[body[config.tag(t).link], viewer_body] for t in config.tag_ids], 4, axis=0)
     blocked = collisions.blocked(q, T_root_camera[:, :3, 3], points, skip)
-    return ~blocked.reshape(len(q), len(config.tag_ids), 4).any(axis=2)
+    return np.asarray(~blocked.reshape(len(q), len(config.tag_ids), 4).any(axis=2), dtype=bool)
 
 
 def pose_ok(robot: Robot, camera: PlanCamera, visible: np.ndarray) -> np.ndarray:
     """(N,) bool: the camera sees what it needs (see the module docstring)."""
     if camera.external:
-        return external_pose_ok(robot, visible)
-    return visible.any(axis=1)
+        return np.asarray(external_pose_ok(robot, visible), dtype=bool)
+    return np.asarray(visible.any(axis=1), dtype=bool)
 
 
 def draw_candidates(

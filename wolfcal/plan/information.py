@@ -60,7 +60,7 @@ class PlanModel:
         """Noise-free corners of the visible tags (visible: (N, T) over config.tag_ids) at readings q (N, J)."""
         robot, nominal = self.robot, Corrections()
         if self.camera.external:
-            T_camera_tag = external_tag_poses(robot, self.camera.T_base_camera, q, nominal, robot.config.tag_ids)
+            T_camera_tag = external_tag_poses(robot, self.camera.pose(), q, nominal, robot.config.tag_ids)
         else:
             T_camera_tag = robot.camera_and_tag_poses(q, robot.config.tag_ids)[1]
         return observations_from_poses(robot, self.camera.model, nominal, q, T_camera_tag, visible, 0.0,

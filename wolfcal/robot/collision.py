@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import yourdfpy
 
 from wolfcal.errors import WolfcalError
 from wolfcal.robot.robot import Robot
@@ -140,6 +139,8 @@ def rest_configuration(robot: Robot) -> np.ndarray:
 
 def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
     """Capsules bounding the URDF's <collision> primitives (empty when it has none)."""
+    import yourdfpy  # its mesh library is slow to import: only pose planning and pose checks need it
+
     urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False,
                               build_collision_scene_graph=False)  # fmt: skip
     capsules = []
@@ -182,19 +183,22 @@ def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
     return capsules
 
 
-def collision_model(robot: Robot, required: bool = True) -> CollisionModel | None:
-    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); without either a clear error, or
-    None when not `required`."""
+def optional_collision_model(robot: Robot) -> CollisionModel | None:
+    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); None without either."""
     body = _bodies(robot)
     capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
     if not capsules:
         capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
-    if not capsules and not required:
-        return None
-    if not capsules:
+    return CollisionModel(robot, capsules, source, rest_configuration(robot)) if capsules else None
+
+
+def collision_model(robot: Robot) -> CollisionModel:
+    """The robot's capsules (`optional_collision_model`); a clear error when it has none."""
+    model = optional_collision_model(robot)
+    if model is None:
         raise WolfcalError(
             f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
             "poses cannot be checked for self-collision; add 'collision_radii: {link: metres}' (capsules between "
             "joint origins) for the links of the body, e.g. collision_radii: {r_lower_leg: 0.04}"
         )
-    return CollisionModel(robot, capsules, source, rest_configuration(robot))
+    return model

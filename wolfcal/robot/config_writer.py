@@ -10,13 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
 from wolfcal.atomic import write_text_atomic
 from wolfcal.geometry import matrix_to_rpy
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.yamlfile import read_yaml
+from wolfcal.yamlfile import dump_yaml, read_yaml
 
 _PATH_KEYS = (("urdf",), ("camera", "intrinsics"))
 
@@ -51,5 +49,5 @@ def write_calibrated_config(robot: Robot, corrections: Corrections, path: Path) 
         f"# {robot.config.name}: robot config of {robot.config.path} with the tag mounts fitted by wolfcal fit.\n"
         "# Use it as --robot for a later fit (add --fix-tags to hold these mounts).\n"
     )
-    body = yaml.safe_dump(calibrated_config(robot, corrections), sort_keys=False, width=120, default_flow_style=None)
+    body = dump_yaml(calibrated_config(robot, corrections), sort_keys=False, width=120, default_flow_style=None)
     write_text_atomic(path, header + body)

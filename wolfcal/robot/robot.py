@@ -12,7 +12,6 @@ from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform, transform_from_twist_params, transform_from_xyz_rpy
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.kinematics import KinematicModel
-from wolfcal.robot.urdf_writer import read_urdf_xml
 
 
 @dataclass
@@ -75,8 +74,7 @@ class Robot:
 def load_robot(config_path: str | Path) -> Robot:
     """Load a robot config and its URDF; every link and joint the config names must exist in the URDF."""
     config = load_robot_config(config_path)
-    read_urdf_xml(config.urdf)  # strictly, before any work: what loads must also write back
-    model = KinematicModel.from_urdf(config.urdf)
+    model = KinematicModel.from_urdf(config.urdf)  # read strictly (`read_urdf_xml`): what loads also writes back
     where = str(config.path)
     if config.base_link not in model.links:
         raise WolfcalError(f"{where}: 'base_link' {config.base_link!r} is not a link of {config.urdf}")

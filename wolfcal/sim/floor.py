@@ -34,7 +34,7 @@ def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.n
     """(4, 3) corners of each floor tag in the floor frame [m], aruco order."""
     out = {}
     for tag_id, (x, y, yaw) in places.items():
-        tag = robot.config.floor.tag(tag_id)
+        tag = robot.config.floor_config().tag(tag_id)
         c, s = np.cos(yaw), np.sin(yaw)
         p = tag_corners(tag.size)
         out[tag_id] = np.stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1],
@@ -48,7 +48,7 @@ def floor_tag_poses(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np
     for tag_id, (x, y, yaw) in places.items():
         T = np.eye(4)
         T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
-        T[:3, 3] = x, y, robot.config.floor.tag(tag_id).thickness
+        T[:3, 3] = x, y, robot.config.floor_config().tag(tag_id).thickness
         out[tag_id] = T
     return out
 
@@ -67,7 +67,7 @@ def floor_views(
     distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
 ) -> FloorViews:
     """Places of the floor tags and n standing poses with head pan/tilt that see at least one of them whole."""
-    ids = robot.config.floor.tag_ids
+    ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
     places = {t: np.array([r[k] * np.cos(bearing[k]), r[k] * np.sin(bearing[k]), rng.uniform(-np.pi, np.pi)])
@@ -101,7 +101,7 @@ def simulate_floor(
     margin_px: float = 10.0, source: str = "floor.mcap",
 ) -> FloorScene:
     """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
-    ids = robot.config.floor.tag_ids
+    ids = robot.config.floor_config().tag_ids
     views = floor_views(robot, camera, truth, n, rng, distance, min_edge_px, margin_px)
     q_true, vis, uv = views.q_true, views.visible, views.uv
     s_idx, t_idx = np.nonzero(vis)
@@ -128,7 +128,7 @@ def render_floor(robot: Robot, camera: CameraModel, views: FloorViews, i: int, n
         T_camera_tag = views.T_camera_floor[i] @ T_floor_tag
         if T_camera_tag[2, 3] <= 0.05:
             continue
-        tag = robot.config.floor.tag(tag_id)
+        tag = robot.config.floor_config().tag(tag_id)
         texture = tag_texture(tag.family, tag_id)
         width = tag_texture_width(tag.family, tag.size, texture)
         targets.append(PlanarTarget(T_camera_tag, texture, width, width))

@@ -41,7 +41,7 @@ START_NS = 1_700_000_000_000_000_000
 def mocap_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) per joint [rad]: joints between the base and the markers' links within the config's mocap
     sampling ranges (`wolfcal.robot.ranges`); the others stay at 0 (clipped to their limits)."""
-    moving = set(robot.actuated_joints_to([m.link for m in robot.config.markers.entries]))
+    moving = set(robot.actuated_joints_to([m.link for m in robot.config.marker_config().entries]))
     lo, hi = sampling_bounds(robot, "mocap")
     for k, name in enumerate(robot.joint_names):
         if name not in moving:
@@ -121,7 +121,7 @@ def _write_recording(robot: Robot, out: Path, t: np.ndarray, q_read: np.ndarray,
     buffer = io.BytesIO()
     writer = Ros2Writer(buffer)
     schemas = {name: writer.register_msgdef(name, MSGDEFS[name]) for name in (JOINT_STATE, MARKERS)}
-    names = robot.config.markers.names
+    names = robot.config.marker_config().names
     for i, ti in enumerate(t):
         stamp = START_NS + int(round(ti * 1e9))
         header = {"stamp": stamp_dict(stamp), "frame_id": ""}
@@ -129,7 +129,7 @@ def _write_recording(robot: Robot, out: Path, t: np.ndarray, q_read: np.ndarray,
             "header": header, "name": robot.joint_names, "position": [float(v) for v in q_read[i]],
             "velocity": [], "effort": []}, log_time=stamp, publish_time=stamp)  # fmt: skip
         seen = [k for k in range(len(names)) if np.all(np.isfinite(p[i, k]))]
-        writer.write_message(robot.config.markers.topic, schemas[MARKERS], {
+        writer.write_message(robot.config.marker_config().topic, schemas[MARKERS], {
             "header": {"stamp": stamp_dict(stamp), "frame_id": "mocap"}, "frame_number": i,
             "markers": [{"id_type": 0, "marker_index": k, "marker_name": names[k], "translation": {
                 "x": float(p[i, k, 0]), "y": float(p[i, k, 1]), "z": float(p[i, k, 2])}} for k in seen],

@@ -30,7 +30,7 @@ def true_marker_positions(robot: Robot, q_true: np.ndarray, truth: Corrections, 
                           T_mocap_base: np.ndarray) -> np.ndarray:  # fmt: skip
     """(N, K, 3) markers of the robot config (in its order) in the mocap frame [m] at true angles q_true (N, J);
     `mounts` (K, 3) [m] are the true offsets from the configured places (link frames)."""
-    markers = robot.config.markers.entries
+    markers = robot.config.marker_config().entries
     links = list(dict.fromkeys(m.link for m in markers))
     true_frames = Corrections(frames=truth.frames, tags=truth.tags)
     poses = robot.model.link_poses(np.atleast_2d(q_true), links, true_frames, base=robot.config.base_link)

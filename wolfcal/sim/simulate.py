@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
@@ -40,6 +39,7 @@ from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibilit
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
+from wolfcal.yamlfile import dump_yaml
 
 OFFSET_SETS = ("none", "head", "legs", "all")
 SYSTEMS = ("head", "external", "all", "mocap")
@@ -162,7 +162,7 @@ def simulate_capture(
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
     if options.floor:
         floor_config(robot)
-        if not robot.config.floor.tags:
+        if not robot.config.floor_config().tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
     if options.poses is not None:
         options = replace(options, samples=len(planned_readings(robot, options.poses)))
@@ -229,8 +229,9 @@ def _simulate(
                 reading[moving] += rng.normal(0.0, 0.04, len(moving))
             stamp = START_NS + i * 2_000_000_000
             writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), images)
+            floor_ids = robot.config.floor_config().tag_ids if floor is not None else []
             seen = _seen(robot, scenes, q_true[i]) if floor is None else [
-                "floor tags " + ", ".join(str(t) for t, v in zip(robot.config.floor.tag_ids, floor.visible[i]) if v)]
+                "floor tags " + ", ".join(str(t) for t, v in zip(floor_ids, floor.visible[i]) if v)]
             say(f"sample {i + 1}/{options.samples}: " + "; ".join(seen)
                 + (f" ({kinds[i]})" if i in kinds else ""))  # fmt: skip
     _write_truth(robot, out, options, truth, cameras, kinds, floor.places if floor is not None else None)
@@ -279,7 +280,7 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
     if floor_places is not None:
         data["floor_tags"] = {int(t): {"x": float(p[0]), "y": float(p[1]), "yaw": float(p[2])}
                               for t, p in floor_places.items()}  # fmt: skip
-    write_text_atomic(truth_yaml, yaml.safe_dump(data, sort_keys=False))
+    write_text_atomic(truth_yaml, dump_yaml(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
 
 

@@ -172,7 +172,7 @@ def cached_detect(
 def detect_by_source(
     sources: list[str],
     stamps: list[int],
-    image: Callable[[int], bytes],
+    images: Callable[[list[int]], Iterable[bytes]],
     camera_name: str | list[str],
     settings: DetectorSettings,
     progress: Callable[[int, int], None] | None = None,
@@ -180,8 +180,9 @@ def detect_by_source(
     workers: int | None = None,
 ) -> list[Detections]:
     """`cached_detect` for images from several capture files and cameras: image i came from `sources[i]` (a
-    path) with stamp `stamps[i]` [ns], seen by `camera_name` (one name for all, or one per image); `image(i)`
-    gives its encoded bytes. One cache entry per (file, camera). Results in input order."""
+    path) with stamp `stamps[i]` [ns], seen by `camera_name` (one name for all, or one per image);
+    `images(indices)` gives the encoded bytes of those images in that order, lazily (a generator: read only when
+    the cache misses, as the detection goes). One cache entry per (file, camera). Results in input order."""
     names = [camera_name] * len(sources) if isinstance(camera_name, str) else list(camera_name)
     groups: dict[tuple[str, str], list[int]] = {}
     for index, key in enumerate(zip(sources, names, strict=True)):
@@ -191,9 +192,8 @@ def detect_by_source(
     for (source, name), indices in groups.items():
         step = (lambda n, _t, base=done: progress(base + n, len(sources))) if progress else None
         named = (lambda k, ix=indices: labels(ix[k])) if labels else None
-        images = (image(i) for i in indices)
         times = [stamps[i] for i in indices]
-        results = cached_detect(Path(source), name, times, images, settings, step, named, workers)
+        results = cached_detect(Path(source), name, times, images(indices), settings, step, named, workers)
         for i, result in zip(indices, results, strict=True):
             found[i] = result
         done += len(indices)

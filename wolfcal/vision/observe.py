@@ -1,5 +1,6 @@
 """Samples -> Observations per camera: detect the configured tags in every image (all cores, cached) and stack the
-corners.
+corners. Images of capture files are streamed from the file as detection goes (bounded memory, none read when the
+cache holds the file's detections).
 
 One `Observations` per camera name ('head' or an external camera's name), holding the samples in which that camera
 saw at least one configured tag, with those samples' joint readings, stamps and sources. All images of one camera
@@ -14,7 +15,7 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.io.samples import Sample, SampleImage
+from wolfcal.io.samples import Sample, SampleImage, encoded_images
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.cache import DetectorSettings, detect_by_source
@@ -78,15 +79,16 @@ def detect_observations(
         sample.joint_positions(robot.joint_names)
     families: Families = {}
     floor_tags = robot.config.floor.tags if robot.config.floor is not None else ()
-    for tag in (*robot.config.tags, *floor_tags):  # tags on links and tags lying on the floor
-        families.setdefault(tag.family, set()).add(tag.id)
+    for family, tag_id in [(t.family, t.id) for t in robot.config.tags] + [(t.family, t.id) for t in floor_tags]:
+        families.setdefault(family, set()).add(tag_id)  # tags on links and tags lying on the floor
     jobs = [(s, n) for s in samples for n in s.images if wanted is None or n in wanted]  # one per image
     if not jobs:
         raise WolfcalError(f"no images of camera(s) {', '.join(sorted(wanted or []))} in the samples")
     models = {name: _check_one_camera(name, [s.images[name] for s, n in jobs if n == name])
               for name in dict.fromkeys(n for _, n in jobs)}  # fmt: skip
     found = detect_by_source(
-        [s.source for s, _ in jobs], [s.stamp_ns for s, _ in jobs], lambda k: jobs[k][0].images[jobs[k][1]].data,
+        [s.source for s, _ in jobs], [s.stamp_ns for s, _ in jobs],
+        lambda ks: encoded_images(jobs[k][0].images[jobs[k][1]] for k in ks),
         [n for _, n in jobs], DetectorSettings.of(families), progress,
         labels=lambda k: f"{jobs[k][0].source}: the {jobs[k][1]} image at t={jobs[k][0].stamp_ns} ns",
         workers=workers,

@@ -1,0 +1,139 @@
+"""Peak memory of `wolfcal fit` on long plain ROS 2 recordings: 600 and 6000 frames at 2048x1536.
+
+Run: python bench/bench_stream.py [--frames 600,6000] [--keep DIR]. Generates the recordings in a temporary
+folder, then runs `wolfcal fit --free camera --no-cache` on each in a child process and prints its peak
+resident memory (ru_maxrss of the child), wall time and the number of samples used.
+
+The recordings: the head camera at 10 Hz, joint states of all 20 joints at 100 Hz, no CameraInfo (the config's
+intrinsics). The robot holds a pose for 2 s, then moves to the next in 1 s, cycling through 12 poses; about
+half of the frames are still (kept). Rendering 6000 distinct 2048x1536 frames would take most of an hour here,
+so each pose is rendered once (`wolfcal simulate`, true geometry) and its jpeg (quality 95) is reused for every
+frame of that pose: the reader and the detector still read, decode and detect every frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from mcap_ros2.writer import Writer as Ros2Writer
+
+from wolfcal.config import load_robot_config
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
+from wolfcal.io.reader import read_capture
+from wolfcal.observations import HEAD_CAMERA
+from wolfcal.sim.simulate import SimOptions, simulate_capture
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+POSES = 12
+CAMERA_HZ, JOINT_HZ = 10, 100
+HOLD_S, MOVE_S = 2.0, 1.0
+T0 = 1_700_000_000_000_000_000  # [ns]
+
+
+def render_poses(folder: Path) -> tuple[list[str], np.ndarray, list[bytes]]:
+    """Joint names, measured readings (POSES, J) [rad] and jpeg bytes of POSES simulated still poses."""
+    capture_path = folder / "poses.mcap"
+    options = SimOptions(samples=POSES, seed=5, offsets="all")
+    simulate_capture(CONFIG, capture_path, options, say=lambda _: None, force=True)
+    capture = read_capture(capture_path, load_robot_config(CONFIG))
+    names = capture.samples[0].joint_names
+    q = np.stack([s.positions for s in capture.samples])
+    jpegs = [
+        cv2.imencode(".jpg", s.images[HEAD_CAMERA].decode(), [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
+        for s in capture.samples
+    ]
+    return names, q, jpegs
+
+
+def joint_state_at(t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Positions [rad], velocities [rad/s] at time t [s] and the pose whose image the camera sees."""
+    period = HOLD_S + MOVE_S
+    k, phase_t = divmod(t, period)
+    a, b = int(k) % len(q), (int(k) + 1) % len(q)
+    if phase_t < HOLD_S:
+        return q[a], np.zeros(q.shape[1]), a
+    s = (phase_t - HOLD_S) / MOVE_S
+    blend = (1 - np.cos(np.pi * s)) / 2
+    velocity = (q[b] - q[a]) * np.pi / (2 * MOVE_S) * np.sin(np.pi * s)
+    return q[a] + blend * (q[b] - q[a]), velocity, a
+
+
+def write_recording(path: Path, frames: int, names: list[str], q: np.ndarray, jpegs: list[bytes]) -> None:
+    config = load_robot_config(CONFIG)
+    duration = frames / CAMERA_HZ
+    with path.open("wb") as handle:
+        writer = Ros2Writer(handle, compression=None)
+        schemas = {name: writer.register_msgdef(name, text) for name, text in MSGDEFS.items()}
+        events = [(i / JOINT_HZ, 0, i) for i in range(int(duration * JOINT_HZ))]
+        events += [(0.003 + i / CAMERA_HZ, 1, i) for i in range(frames)]
+        for t, kind, _ in sorted(events):
+            stamp = T0 + int(round(t * 1e9))
+            header = {"stamp": stamp_dict(stamp), "frame_id": ""}
+            position, velocity, pose = joint_state_at(t, q)
+            if kind == 0:
+                message = {"header": header, "name": names, "position": position.tolist(),
+                           "velocity": velocity.tolist(), "effort": []}  # fmt: skip
+                writer.write_message(config.joint_states_topic, schemas[JOINT_STATE], message, log_time=stamp)
+            else:
+                message = {"header": header, "format": "jpeg", "data": jpegs[pose]}
+                writer.write_message(config.camera.topic, schemas[COMPRESSED_IMAGE], message, log_time=stamp)
+        writer.finish()
+
+
+def run_fit(recording: Path, out: Path) -> tuple[float, float, str]:
+    """(peak RSS of the child [MB], wall [s], its 'read ... sample(s)' line)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    start = time.perf_counter()
+    command = [sys.executable, "-c", "from wolfcal.cli import app; app()", "fit", str(recording), "--robot",
+               str(CONFIG), "--free", "camera", "--out", str(out), "--no-cache", "--force"]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if done.returncode != 0:
+        raise SystemExit(f"fit failed:\n{done.stdout}\n{done.stderr}")
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    if peak <= before:
+        print("note: this child's peak is not above an earlier child's; run one size per process")
+    line = next((x for x in done.stdout.splitlines() if x.startswith("head camera:")), "")
+    return peak / 1024, wall, line
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--frames", default="600,6000")
+    parser.add_argument("--keep", type=Path, default=None, help="folder for the recordings (default: temporary)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as temp:
+        folder = args.keep or Path(temp)
+        folder.mkdir(parents=True, exist_ok=True)
+        names, q, jpegs = render_poses(folder)
+        print(f"{POSES} poses rendered at 2048x1536, jpeg {np.mean([len(j) for j in jpegs]) / 1e6:.2f} MB each")
+        for frames in (int(f) for f in args.frames.split(",")):
+            path = folder / f"recording_{frames}.mcap"
+            if not path.exists():
+                start = time.perf_counter()
+                write_recording(path, frames, names, q, jpegs)
+                print(f"wrote {path.name}: {path.stat().st_size / 1e9:.2f} GB in {time.perf_counter() - start:.0f} s")
+            # one child per size: ru_maxrss of RUSAGE_CHILDREN is the largest child's so far
+            measure = [sys.executable, __file__, "--measure", str(path)]
+            print(subprocess.run(measure, capture_output=True, text=True, check=True).stdout.strip())
+
+
+def measure(path: Path) -> None:
+    with tempfile.TemporaryDirectory() as out:
+        peak, wall, line = run_fit(path, Path(out))
+    print(f"{path.name}: peak RSS {peak:.0f} MB, {wall:.1f} s wall; {line}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 3 and sys.argv[1] == "--measure":
+        measure(Path(sys.argv[2]))
+    else:
+        main()

@@ -1,0 +1,168 @@
+"""Issue 13's table in one run: wolfcal side by side with the bare detector and a naive reference solver.
+
+Run: python bench/bench_table.py [--views 30]. Simulated captures are cached in the temp folder (the first run
+renders them: about 1-2 minutes); each fit gets a fresh detection cache folder. Prints, with units:
+1. End to end (`run_fit` in this process: read, detect, solve, uncertainty, write) on 2048x1536 captures, camera
+   fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU; the floor (reading the images,
+   decoding them and OpenCV's bare aruco detector on all cores, wall); the naive reference in CPU (the same
+   detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second run (cache).
+2. The solve alone (`fit_observations` on the same detections) vs the naive solve, CPU.
+3. Leg fits of 400 and 1000 samples at 512x384 (2048x1536 binned 4x4), end to end, first run: wall, in this
+   process and as a `wolfcal fit` process (start-up and imports included).
+4. Detection accuracy (median, 95th percentile corner error [px]) on bench/bench_vision.py's rendered views,
+   next to the figures that bench printed before (README).
+BLAS runs on one thread, as in the `wolfcal` command.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+import argparse  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ThreadPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_vision import BINNED, FULL, accuracy, render_views  # noqa: E402
+from naive_reference import naive_solve, predicted  # noqa: E402
+
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, run_fit  # noqa: E402
+from wolfcal.io.samples import encoded_images  # noqa: E402
+from wolfcal.observations import HEAD_CAMERA  # noqa: E402
+from wolfcal.projection import predict_corners  # noqa: E402
+from wolfcal.robot.corrections import Corrections  # noqa: E402
+from wolfcal.robot.robot import load_robot  # noqa: E402
+from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
+from wolfcal.vision.batch import cpu_count  # noqa: E402
+from wolfcal.vision.cache import cache_enabled  # noqa: E402
+from wolfcal.vision.observe import detect_observations  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+CACHE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
+README_ACCURACY = {"2048x1536": (0.02, 0.13), "512x384": (0.04, 0.13)}  # median, p95 [px] before issue 13
+
+
+def quiet(_: str) -> None:
+    pass
+
+
+def capture(samples: int, binning: int, offsets: str, seed: int) -> Path:
+    """A simulated capture (cached in the temp folder)."""
+    path = CACHE / f"sim_{samples}_b{binning}_{offsets}_s{seed}.mcap"
+    if not path.is_file():
+        CACHE.mkdir(parents=True, exist_ok=True)
+        start = time.perf_counter()
+        simulate_capture(CONFIG, path, SimOptions(samples=samples, seed=seed, binning=binning, offsets=offsets),
+                         say=quiet, force=True)  # fmt: skip
+        print(f"  (simulated {path.name} in {time.perf_counter() - start:.0f} s)")
+    return path
+
+
+def timed(fn):
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = fn()
+    return result, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def fit_run(path: Path, options: FitOptions, cache_dir: Path) -> tuple[float, float]:
+    """(wall, CPU) [s] of `run_fit` with the detection cache in `cache_dir`."""
+    os.environ["WOLFCAL_CACHE_DIR"] = str(cache_dir)
+    with tempfile.TemporaryDirectory() as out:
+        _, wall, cpu = timed(lambda: run_fit([path], CONFIG, Path(out), options, say=quiet, force=True))
+    return wall, cpu
+
+
+def floor(path: Path) -> float:
+    """Wall [s] of reading + decoding every image and OpenCV's bare aruco detector, on all cores."""
+    robot = load_robot(CONFIG)
+    samples, _ = load_samples(robot, [path], None)
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+
+    def detect(data: bytes) -> int:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        ids = cv2.aruco.ArucoDetector(dictionary).detectMarkers(image)[1]
+        return 0 if ids is None else len(ids)
+
+    start = time.perf_counter()
+    with ThreadPoolExecutor(cpu_count()) as pool:
+        list(pool.map(detect, encoded_images(s.images[HEAD_CAMERA] for s in samples)))
+    return time.perf_counter() - start
+
+
+def end_to_end(label: str, path: Path, options: FitOptions) -> None:
+    robot = load_robot(CONFIG)
+    with tempfile.TemporaryDirectory() as cache_dir:
+        first_wall, first_cpu = fit_run(path, options, Path(cache_dir))
+        second_wall, second_cpu = fit_run(path, options, Path(cache_dir))
+    bare = floor(path)
+    with cache_enabled(False):  # the detection's own cost, the naive reference uses the same detections
+        samples, _ = load_samples(robot, [path], None)
+        (observations, _), _, detect_cpu = timed(lambda: detect_observations(samples, robot))
+    fit, solve_wall, solve_cpu = timed(lambda: fit_observations(robot, observations, options))
+    obs = fit.observations[HEAD_CAMERA]
+    check = np.nanmax(np.abs(predicted(robot, obs, Corrections()) - predict_corners(robot, obs, Corrections())))
+    _, naive_wall, naive_cpu = timed(lambda: naive_solve(robot, obs, fit.chain, robot.config.priors.pixel_noise))
+    naive_total = detect_cpu + naive_cpu
+    print(f"\n{label}: {obs.n_samples} samples with tags, {len(obs.uv)} corners, {len(fit.chain)} unknowns "
+          f"(naive model = wolfcal's to {check:.1e} px)")  # fmt: skip
+    print(f"  first run      {first_wall:6.2f} s wall, {first_cpu:6.2f} s CPU; floor (read + decode + bare aruco, "
+          f"{cpu_count()} threads) {bare:.2f} s wall -> {first_wall / bare:.2f}x the floor (target <= 1.3)")
+    print(f"  naive reference {naive_total:6.2f} s CPU (detection {detect_cpu:.2f} + naive solve {naive_cpu:.2f}) "
+          f"-> wolfcal {naive_total / first_cpu:.1f}x faster in CPU (target >= 3)")
+    print(f"  second run     {second_wall:6.2f} s wall, {second_cpu:6.2f} s CPU (cache) -> "
+          f"{naive_total / second_cpu:.1f}x faster than the naive reference in CPU (target >= 20)")
+    print(f"  solve alone    {solve_wall:6.2f} s wall, {solve_cpu:6.2f} s CPU; naive solve {naive_wall:.2f} s wall, "
+          f"{naive_cpu:.2f} s CPU -> {naive_cpu / solve_cpu:.1f}x (target >= 10)")
+
+
+def large_leg_fit(samples: int, limit: float) -> None:
+    path = capture(samples, 4, "all", seed=samples)
+    options = FitOptions(free="leg", side="both")
+    with tempfile.TemporaryDirectory() as cache_dir:
+        wall, cpu = fit_run(path, options, Path(cache_dir))
+    with tempfile.TemporaryDirectory() as cache_dir, tempfile.TemporaryDirectory() as out:
+        command = [sys.executable, "-c", "from wolfcal.cli import app; app()", "fit", str(path), "--robot",
+                   str(CONFIG), "--free", "leg", "--out", out, "--force"]  # fmt: skip
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True, env={**os.environ, "WOLFCAL_CACHE_DIR": cache_dir})
+        process_wall = time.perf_counter() - start
+    print(f"  {samples:4d} samples: {wall:.2f} s wall ({cpu:.2f} s CPU) in this process, {process_wall:.2f} s wall "
+          f"as a `wolfcal fit` process (target < {limit:g} s)")  # fmt: skip
+
+
+def detection_accuracy(views: int) -> None:
+    print(f"\ndetection accuracy, {views} rendered views per camera, corner error [px] (before: README)")
+    for camera, label in ((FULL, "2048x1536"), (BINNED, "512x384")):
+        err, rate, _ = accuracy(render_views(camera, views, seed=11), "edges")
+        median, p95 = README_ACCURACY[label]
+        print(f"  {label:10s} median {np.median(err):.4f} (before {median:.2f})  p95 {np.percentile(err, 95):.4f} "
+              f"(before {p95:.2f})  detected {100 * rate:.0f}%")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--views", type=int, default=30)
+    args = parser.parse_args()
+    print(f"issue 13 table, {cpu_count()} cores")
+    camera_capture = capture(24, 1, "none", seed=1)
+    leg_capture = capture(40, 1, "all", seed=2)
+    end_to_end("camera fit, 24 samples at 2048x1536", camera_capture, FitOptions(free="camera"))
+    end_to_end("leg fit, 40 samples at 2048x1536", leg_capture, FitOptions(free="leg", side="both"))
+    print("\nleg fit at 512x384, end to end, first run (no cache)")
+    large_leg_fit(400, 2.0)
+    large_leg_fit(1000, 5.0)
+    detection_accuracy(args.views)
+
+
+if __name__ == "__main__":
+    main()

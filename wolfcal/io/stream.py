@@ -1,0 +1,87 @@
+"""Encoded images read back from MCAP files by location, as a stream.
+
+The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
+back when they are needed (detection, a figure): one pass over the part of the file they span, each image's
+bytes handed on and then dropped, so a long recording's images never sit in memory together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from itertools import groupby
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from wolfcal.errors import WolfcalError
+from wolfcal.io.msgdefs import header_stamp_ns
+
+
+@dataclass(frozen=True)
+class ImageLocation:
+    """Where an image message lies in an MCAP file."""
+
+    path: Path
+    topic: str
+    log_time: int  # [ns] the message's log time (what the file's index is ordered by)
+    stamp_ns: int  # [ns] its header stamp (tells apart messages of one topic with one log time)
+
+
+def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
+    """The encoded bytes of the image at each location, in the order given.
+
+    Consecutive locations in one file are read in one pass over the time span they cover, in the file's order;
+    an image that comes before its turn waits in memory until then (none waits when the order given is the
+    file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the file
+    changed since it was read)."""
+    for path, run in groupby(locations, key=lambda location: location.path):
+        yield from _stream_file(path, list(run))
+
+
+def _stream_file(path: Path, wanted: list[ImageLocation]) -> Iterator[bytes]:
+    keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
+    remaining: dict[tuple[str, int, int], int] = {}
+    for key in keys:
+        remaining[key] = remaining.get(key, 0) + 1
+    times = {(topic, log_time) for topic, log_time, _ in keys}
+    waiting: dict[tuple[str, int, int], bytes] = {}
+    factory = DecoderFactory()
+    turn = 0
+    try:
+        with path.open("rb") as handle:
+            reader = make_reader(handle)
+            messages = reader.iter_messages(
+                topics=sorted({topic for topic, _, _ in keys}),
+                starting_at=min(log_time for _, log_time, _ in keys),
+                ending_at=max(log_time for _, log_time, _ in keys),
+            )
+            for schema, channel, message in messages:
+                if (channel.topic, message.log_time) not in times:
+                    continue
+                decoder = factory.decoder_for(channel.message_encoding, schema)
+                if decoder is None:
+                    raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} "
+                                       "messages (wolfcal reads ROS 2 CDR recordings)")
+                decoded = decoder(message.data)
+                key = (channel.topic, message.log_time, header_stamp_ns(decoded.header, message.log_time))
+                if not remaining.get(key) or key in waiting:
+                    continue
+                waiting[key] = bytes(decoded.data)
+                while turn < len(keys) and keys[turn] in waiting:
+                    data = waiting[keys[turn]]
+                    remaining[keys[turn]] -= 1
+                    if not remaining[keys[turn]]:
+                        del waiting[keys[turn]]
+                    turn += 1
+                    yield data
+    except (OSError, McapError) as exc:
+        raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
+    if turn < len(keys):
+        topic, _, stamp = keys[turn]
+        raise WolfcalError(
+            f"{path}: the image on {topic} with stamp {stamp} ns is no longer in the file; was the file changed "
+            "while wolfcal read it? Run again"
+        )
