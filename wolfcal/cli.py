@@ -257,6 +257,8 @@ def simulate(
                                          "1-2 m in front, looking at the robot."),
     poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
                                       "these poses instead of --samples random ones."),
+    floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands and turns its head to see the "
+                               "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml)."),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -265,7 +267,7 @@ def simulate(
 
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth, system=system, external=external, placement=placement, poses=poses,
+        truth_file=truth, system=system, external=external, placement=placement, poses=poses, floor=floor,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)

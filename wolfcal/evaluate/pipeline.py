@@ -23,7 +23,8 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.ground import DISTANCES_M, ground_errors, predicted_ground_std
+from wolfcal.evaluate.floor_ground import measured_ground_errors
+from wolfcal.evaluate.ground import DISTANCES_M, VERDICT_DISTANCE_M, ground_errors, predicted_ground_std
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
@@ -89,13 +90,35 @@ def _observe(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
     )
     obs = observations_of(observations, HEAD_CAMERA, sources)
+    floor_ids = [t for t in obs.observed_tag_ids if robot.config.floor is not None and t in robot.config.floor.tag_ids]
+    floor = obs.only_tags(floor_ids) if floor_ids else None
     tags = [t for t in result.tags_used if t in obs.observed_tag_ids]
     if not tags:
         raise WolfcalError(
             f"none of the fit's tags ({', '.join(map(str, result.tags_used))}) was detected in "
             f"{', '.join(str(s) for s in sources)}"
         )
-    return samples, obs.only_tags(tags), tags, warnings
+    return samples, obs.only_tags(tags), tags, warnings, floor
+
+
+def _measured_ground(robot: Robot, floor: Observations | None, fitted: Corrections, held_out: bool,
+                     say: Callable[[str], None]) -> dict | None:  # fmt: skip
+    """`floor_ground.measured_ground_errors` of the held-out floor views, before and after (None: not measured)."""
+    if floor is None or not held_out:
+        return None
+    say("measuring the ground error on the held-out floor views ...")
+    return measured_ground_errors(robot, floor, {"before": Corrections(), "after": fitted}, DISTANCES_M)
+
+
+def _verdict_ground(measured: dict | None) -> dict | None:
+    """The verdict's {'before_m', 'after_m', 'after_std_m'} at 4.5 m (inf: the ball lies above the horizon)."""
+    if measured is None:
+        return None
+    k = DISTANCES_M.index(VERDICT_DISTANCE_M)
+    before, after = (measured["models"][m]["rows"][k] for m in ("before", "after"))
+    inf = float("inf")
+    return {"before_m": inf if before["error_m"] is None else before["error_m"],
+            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"]}
 
 
 def _run_external_evaluate(
@@ -257,7 +280,7 @@ def _evaluate(
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
         return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
-    samples, obs, tags, warnings = _observe(robot, result, loaded, sources, say)
+    samples, obs, tags, warnings, floor = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
     fold_of, n_folds = None, None
@@ -285,7 +308,9 @@ def _evaluate(
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
     predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
-    verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, None, predicted,
+    measured = _measured_ground(robot, floor, fitted, held_out, say)
+    verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, _verdict_ground(measured),
+                             predicted,
                              camera_turn(robot, fitted), limits)  # fmt: skip
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
@@ -317,6 +342,7 @@ def _evaluate(
             "standing_pose_rad": dict(robot.config.floor.standing) if robot.config.floor else {},
             "soles": list(robot.config.floor.soles) if robot.config.floor else [],
             "rows": ground_rows,
+            "measured": measured,
         },
         "verdict": verdict,
         "structure": structure,

@@ -14,11 +14,13 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
+from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import aim_joints, camera_in_floor, standing_pose
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
+from wolfcal.vision.render import PlanarTarget, render_targets
+from wolfcal.vision.tags import tag_corners, tag_texture, tag_texture_width
 
 
 @dataclass
@@ -40,12 +42,31 @@ def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.n
     return out
 
 
-def simulate_floor(
+def floor_tag_poses(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """T_floor_tag (4, 4) of each floor tag lying face up at its place (x, y, yaw) [m, rad]."""
+    out = {}
+    for tag_id, (x, y, yaw) in places.items():
+        T = np.eye(4)
+        T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+        T[:3, 3] = x, y, robot.config.floor_config().tag(tag_id).thickness
+        out[tag_id] = T
+    return out
+
+
+@dataclass
+class FloorViews:
+    places: dict[int, np.ndarray]  # true (x, y, yaw) of each floor tag in the true floor frame [m, rad]
+    q_true: np.ndarray  # (S, J) [rad]
+    visible: np.ndarray  # (S, T) bool over config floor.tag_ids: the tag is whole in view, wide enough
+    uv: np.ndarray  # (S, T, 4, 2) true corner pixels
+    T_camera_floor: np.ndarray  # (S, 4, 4) true
+
+
+def floor_views(
     robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
-    distance: tuple[float, float] = (1.0, 4.0), noise_px: float = 0.15, min_edge_px: float = 12.0,
-    margin_px: float = 10.0, source: str = "floor.mcap",
-) -> FloorScene:
-    """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
+    distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
+) -> FloorViews:
+    """Places of the floor tags and n standing poses with head pan/tilt that see at least one of them whole."""
     ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
@@ -67,19 +88,48 @@ def simulate_floor(
     edge = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=3).min(axis=2)
     visible = inside.all(axis=2) & np.nan_to_num(edge > min_edge_px)  # (S, T)
     candidates = np.flatnonzero(visible.any(axis=1))
-    chosen = rng.choice(candidates, size=min(n, len(candidates)), replace=False)
-    q_true, vis, uv = q[chosen], visible[chosen], uv[chosen]
+    if len(candidates) < n:
+        raise WolfcalError(f"{robot.config.path}: only {len(candidates)} of 4000 head pan/tilt poses see a floor "
+                           f"tag whole and at least {min_edge_px:.0f} px wide; asked for {n} floor samples")
+    chosen = rng.choice(candidates, size=n, replace=False)
+    return FloorViews(places, q[chosen], visible[chosen], uv[chosen], T_camera_floor[chosen])
+
+
+def simulate_floor(
+    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
+    distance: tuple[float, float] = (1.0, 4.0), noise_px: float = 0.15, min_edge_px: float = 12.0,
+    margin_px: float = 10.0, source: str = "floor.mcap",
+) -> FloorScene:
+    """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
+    ids = robot.config.floor_config().tag_ids
+    views = floor_views(robot, camera, truth, n, rng, distance, min_edge_px, margin_px)
+    q_true, vis, uv = views.q_true, views.visible, views.uv
     s_idx, t_idx = np.nonzero(vis)
     detected = uv[s_idx, t_idx] + rng.normal(0.0, noise_px, (len(s_idx), 4, 2))
     obs = Observations(
         joint_names=list(robot.joint_names),
         q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        stamps_ns=np.arange(len(chosen), dtype=np.int64) + 10**6,
-        sources=[source] * len(chosen),
+        stamps_ns=np.arange(len(q_true), dtype=np.int64) + 10**6,
+        sources=[source] * len(q_true),
         camera=camera,
         sample_index=np.repeat(s_idx, 4),
         tag_ids=np.repeat(np.array(ids)[t_idx], 4),
         corner_index=np.tile(np.arange(4), len(s_idx)),
         uv=detected.reshape(-1, 2),
     )
-    return FloorScene(obs, places, q_true)
+    return FloorScene(obs, views.places, q_true)
+
+
+def render_floor(robot: Robot, camera: CameraModel, views: FloorViews, i: int, noise_sigma: float,
+                 rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+    """Gray uint8 image of sample i: every floor tag in front of the camera, rendered at its true place."""
+    targets = []
+    for tag_id, T_floor_tag in floor_tag_poses(robot, views.places).items():
+        T_camera_tag = views.T_camera_floor[i] @ T_floor_tag
+        if T_camera_tag[2, 3] <= 0.05:
+            continue
+        tag = robot.config.floor_config().tag(tag_id)
+        texture = tag_texture(tag.family, tag_id)
+        width = tag_texture_width(tag.family, tag.size, texture)
+        targets.append(PlanarTarget(T_camera_tag, texture, width, width))
+    return render_targets(camera, targets, noise_sigma=noise_sigma, rng=rng)

@@ -22,6 +22,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.ground import floor_config
 from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
@@ -31,6 +32,7 @@ from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.sim.external_poses import external_pose_ok, external_visibility
+from wolfcal.sim.floor import floor_views, render_floor
 from wolfcal.sim.mocap import simulate_mocap
 from wolfcal.sim.placement import placement_from_text, random_placement
 from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibility
@@ -42,6 +44,7 @@ from wolfcal.yamlfile import dump_yaml
 OFFSET_SETS = ("none", "head", "legs", "all")
 SYSTEMS = ("head", "external", "all", "mocap")
 START_NS = 1_700_000_000_000_000_000
+FLOOR_DISTANCE_M = (0.5, 5.0)  # floor tags lie this far from the robot (`--floor`)
 
 
 @dataclass
@@ -58,6 +61,7 @@ class SimOptions:
     external: str | None = None  # which external camera of the config (default: the first)
     placement: str | None = None  # 'x,y,z,roll,pitch,yaw' of the external camera (default: random)
     poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
+    floor: bool = False  # floor samples: the robot stands and its head camera sees the config's floor tags
 
 
 @dataclass
@@ -154,6 +158,12 @@ def simulate_capture(
     if options.system not in SYSTEMS:
         raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
     robot = load_robot(robot_path)
+    if options.floor and (options.system != "head" or options.poses is not None):
+        raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
+    if options.floor:
+        floor_config(robot)
+        if not robot.config.floor_config().tags:
+            raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
     if options.poses is not None:
         options = replace(options, samples=len(planned_readings(robot, options.poses)))
     inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
@@ -184,7 +194,14 @@ def _simulate(
         if name != HEAD_CAMERA:
             placement = options.placement
             sim_camera.T_base_camera = placement_from_text(placement) if placement else random_placement(rng)
-    q_true = _poses(robot, options, cameras, truth, rng)
+    floor = None
+    if options.floor:  # the robot stands; the floor tags lie 0.5-5 m away
+        head = cameras[HEAD_CAMERA].image
+        floor = floor_views(robot, head, truth, options.samples, rng, FLOOR_DISTANCE_M, 0.01 * head.width,
+                            0.01 * head.width)  # fmt: skip
+        q_true = floor.q_true
+    else:
+        q_true = _poses(robot, options, cameras, truth, rng)
     offsets = truth.offset_vector(robot.joint_names)
     q_measured = encoder_readings(q_true, offsets)
     n_out = int(round(options.outlier_fraction * options.samples))
@@ -199,7 +216,11 @@ def _simulate(
     b = options.binning
     with CaptureWriter(out, robot.config, {name: (c.model, (b, b)) for name, c in cameras.items()}) as writer:
         for i in range(options.samples):
-            images = {name: scene.render_true(q_true[i]) for name, scene in scenes.items()}
+            if floor is None:
+                images = {name: scene.render_true(q_true[i]) for name, scene in scenes.items()}
+            else:
+                images = {HEAD_CAMERA: render_floor(robot, cameras[HEAD_CAMERA].image, floor, i, options.noise_sigma,
+                                                    scenes[HEAD_CAMERA].rng)}  # fmt: skip
             reading = q_measured[i].copy()
             if kinds.get(i) == "motion_blur":
                 length, angle = rng.uniform(0.008, 0.015), rng.uniform(0, np.pi)
@@ -208,9 +229,12 @@ def _simulate(
                 reading[moving] += rng.normal(0.0, 0.04, len(moving))
             stamp = START_NS + i * 2_000_000_000
             writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), images)
-            say(f"sample {i + 1}/{options.samples}: " + "; ".join(_seen(robot, scenes, q_true[i]))
+            floor_ids = robot.config.floor_config().tag_ids if floor is not None else []
+            seen = _seen(robot, scenes, q_true[i]) if floor is None else [
+                "floor tags " + ", ".join(str(t) for t, v in zip(floor_ids, floor.visible[i]) if v)]
+            say(f"sample {i + 1}/{options.samples}: " + "; ".join(seen)
                 + (f" ({kinds[i]})" if i in kinds else ""))  # fmt: skip
-    _write_truth(robot, out, options, truth, cameras, kinds)
+    _write_truth(robot, out, options, truth, cameras, kinds, floor.places if floor is not None else None)
     say(f"wrote {out}, {truth_paths(out)[0]}, {truth_paths(out)[1]}")
     return truth
 
@@ -230,8 +254,9 @@ def _seen(robot: Robot, scenes: dict[str, SimScene], q_true: np.ndarray) -> list
 
 
 def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Corrections, cameras: dict[str, _SimCamera],
-                 kinds: dict[int, str]) -> None:  # fmt: skip
-    """FILE.truth.yaml and FILE.truth.urdf beside the capture."""
+                 kinds: dict[int, str], floor_places: dict[int, np.ndarray] | None = None) -> None:  # fmt: skip
+    """FILE.truth.yaml and FILE.truth.urdf beside the capture (with `floor_tags`: each floor tag's true place
+    x, y [m], yaw [rad] in the true floor frame)."""
     truth_yaml, truth_urdf = truth_paths(out)
     data: dict[str, object] = {"truth": truth.to_dict()}
     if HEAD_CAMERA in cameras:
@@ -252,6 +277,9 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
             n: {**external_truth_entry(T_base_camera), "camera": camera_info_dict(model)}
             for n, (T_base_camera, model) in external.items()
         }
+    if floor_places is not None:
+        data["floor_tags"] = {int(t): {"x": float(p[0]), "y": float(p[1]), "yaw": float(p[2])}
+                              for t, p in floor_places.items()}  # fmt: skip
     write_text_atomic(truth_yaml, dump_yaml(data, sort_keys=False))
     write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
 
