@@ -82,8 +82,9 @@ def refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> Non
 
 def _observe(
     robot: Robot, result: FitResult, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
-) -> tuple[list[Sample], Observations, list[int], list[str]]:
-    """Samples of the read sources, their corners of the fit's tags, those tags, and detection warnings."""
+) -> tuple[list[Sample], Observations, list[int], list[str], Observations | None]:
+    """Samples of the read sources, their corners of the fit's tags, those tags, detection warnings, and the views
+    of floor tags (None without)."""
     samples, _ = samples_of(loaded, robot)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
     observations, warnings = detect_observations(
