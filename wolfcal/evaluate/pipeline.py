@@ -25,7 +25,15 @@ from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_wi
 from wolfcal.evaluate.external import external_metrics
 from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground import DISTANCES_M, VERDICT_DISTANCE_M, ground_errors, predicted_ground_std
-from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
+from wolfcal.evaluate.metrics import (
+    ModelErrors,
+    TagViews,
+    measure_tag_views,
+    merge_folds,
+    model_errors,
+    outlier_samples,
+    summary,
+)
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
     MEANINGS,
@@ -250,6 +258,37 @@ def run_evaluate(
         return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force, limits)
 
 
+PARAMETER_KEYS = ("name", "value", "std", "unit", "data_share", "display")  # of each fitted parameter in metrics
+
+
+def _after(
+    robot: Robot, obs: Observations, views: TagViews, result: FitResult, held_out: list[Path] | None, folds: int,
+    say: Callable[[str], None],
+) -> tuple[ModelErrors, list[Corrections], np.ndarray | None, str]:
+    """Errors of the calibrated model: on held-out captures (`held_out`) the fitted one, otherwise each sample under
+    the model of the cross-validation fold that left it out. Also the model per sample, the fold of each sample
+    (None when held out) and the sentence saying which."""
+    fitted = result.corrections
+    if held_out is not None:
+        note = held_out_note(held_out, result.captures)
+        return model_errors(robot, obs, views, fitted), [fitted] * obs.n_samples, None, note
+    fold_of, models = cross_validate(robot, obs, result.options, folds, say)
+    after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
+    return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs.n_samples)
+
+
+def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: dict | None) -> dict:
+    """metrics['ground']: the ground error rows of the standing robot and the one measured on floor views."""
+    floor = robot.config.floor
+    return {
+        "reference": "simulator truth" if from_truth else "calibrated model",
+        "standing_pose_rad": dict(floor.standing) if floor else {},
+        "soles": list(floor.soles) if floor else [],
+        "rows": rows,
+        "measured": measured,
+    }
+
+
 def _evaluate(
     fit_dir: Path,
     captures: list[Path],
@@ -284,17 +323,8 @@ def _evaluate(
     samples, obs, tags, warnings, floor = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     before = model_errors(robot, obs, views, Corrections())
-    fold_of, n_folds = None, None
-    if held_out:
-        after = model_errors(robot, obs, views, fitted)
-        after_of_sample = [fitted] * obs.n_samples
-        mode_note = held_out_note(sources, result.captures)
-    else:
-        fold_of, models = cross_validate(robot, obs, result.options, folds, say)
-        after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
-        after_of_sample = [models[k] for k in fold_of]
-        n_folds = len(models)
-        mode_note = cross_validation_note(len(models), obs.n_samples)
+    after, after_of_sample, fold_of, mode_note = _after(robot, obs, views, result, sources if held_out else None,
+                                                       folds, say)  # fmt: skip
     outliers = outlier_samples(before, after)
     check_left_out(
         {"samples": (int(outliers.sum()), obs.n_samples)},
@@ -331,29 +361,19 @@ def _evaluate(
         "mode": "held-out" if held_out else "cross-validation",
         "mode_note": mode_note,
         "captures": [str(p.resolve()) for p in sources],
-        "folds": n_folds,
+        "folds": None if fold_of is None else int(fold_of.max()) + 1,
         "tags_used": tags,
         "n_samples": obs.n_samples,
         "n_outliers": int(outliers.sum()),
         "meanings": dict(MEANINGS),
         "before": s_before,
         "after": s_after,
-        "ground": {
-            "reference": "simulator truth" if truth is not None else "calibrated model",
-            "standing_pose_rad": dict(robot.config.floor.standing) if robot.config.floor else {},
-            "soles": list(robot.config.floor.soles) if robot.config.floor else [],
-            "rows": ground_rows,
-            "measured": measured,
-        },
+        "ground": _ground_section(robot, truth is not None, ground_rows, measured),
         "verdict": verdict,
         "structure": structure,
         "deploy": deploy,
         "camera_correction": camera_correction(robot, fitted),
-        "parameters": [
-            {"name": p.name, "value": p.value, "std": p.std, "unit": p.unit, "data_share": p.data_share,
-             "display": p.display}
-            for p in result.parameters
-        ],  # fmt: skip
+        "parameters": [{k: getattr(p, k) for k in PARAMETER_KEYS} for p in result.parameters],
         "correlated_pairs": result.correlated_pairs,
         "samples": sample_rows(obs, before, after, outliers, fold_of),
         "figures": [{"file": f"figures/{name}", "caption": caption} for name, caption in figures[1]],
