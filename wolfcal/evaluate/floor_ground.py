@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M, aim_head, ball_position, camera_in_floor
+from wolfcal.geometry import exp_so3, invert_transform
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
@@ -46,22 +46,17 @@ def floor_view_rays(robot: Robot, obs: Observations, model: Corrections) -> tupl
 def _plane(values: np.ndarray) -> np.ndarray:
     """T_model_real (4, 4) of plane unknowns (rx, ry, dz) [rad, m]."""
     T = np.eye(4)
-    T[:3, :3] = _rotation(np.array([values[0], values[1], 0.0]))
+    T[:3, :3] = exp_so3(np.array([values[0], values[1], 0.0]))
     T[2, 3] = values[2]
     return T
-
-
-def _rotation(r: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of a rotation vector r (3,) [rad]."""
-    return Rotation.from_rotvec(r).as_matrix()
 
 
 def _real_camera(unknowns: np.ndarray, T_floor_camera: np.ndarray) -> np.ndarray:
     """T_real_camera (..., 4, 4): the model's camera turned by the camera rotation unknowns[3:6], in the real floor
     (plane unknowns[:3])."""
     C = np.eye(4)
-    C[:3, :3] = _rotation(unknowns[3:6])
-    return np.linalg.inv(_plane(unknowns[:3])) @ T_floor_camera @ C
+    C[:3, :3] = exp_so3(unknowns[3:6])
+    return invert_transform(_plane(unknowns[:3])) @ T_floor_camera @ C
 
 
 def _meet(T_real_model: np.ndarray, origins: np.ndarray, rays: np.ndarray, height: np.ndarray) -> np.ndarray:
@@ -125,9 +120,9 @@ def _landing_error(unknowns: np.ndarray, aimed: tuple[np.ndarray, np.ndarray], d
     a ball `distance` m away at `bearing`; NaN above the model's horizon."""
     T_model_real = _plane(unknowns[:3])
     T_floor_camera, T_floor_base = aimed
-    below = (np.linalg.inv(T_model_real) @ T_floor_base[0, :, 3])[:2]  # point below base, real floor coordinates
+    below = (invert_transform(T_model_real) @ T_floor_base[0, :, 3])[:2]  # point below base, real floor coordinates
     ball = np.array([*(below + distance * np.array([np.cos(bearing), np.sin(bearing)])), 0.0, 1.0])
-    ray_camera = (np.linalg.inv(_real_camera(unknowns, T_floor_camera[0])) @ ball)[:3]
+    ray_camera = (invert_transform(_real_camera(unknowns, T_floor_camera[0])) @ ball)[:3]
     landed = _meet(np.eye(4), T_floor_camera[0, :3, 3], T_floor_camera[0, :3, :3] @ ray_camera, np.array(0.0))
     return float(np.linalg.norm(landed - ball[:2]))
 

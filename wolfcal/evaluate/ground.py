@@ -17,7 +17,6 @@ import numpy as np
 from scipy.optimize import minimize
 
 from wolfcal.camera.model import CameraModel
-from wolfcal.config import FloorConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
@@ -30,20 +29,14 @@ BEARINGS_RAD = tuple(np.deg2rad((-30.0, 0.0, 30.0)))
 VERDICT_DISTANCE_M = 4.5  # half a field: the distance the deploy verdict judges
 
 
-def floor_config(robot: Robot) -> FloorConfig:
-    """The robot's `floor:` config; a WolfcalError naming the file when there is none."""
-    if robot.config.floor is None:
-        raise WolfcalError(
-            f"{robot.config.path}: no 'floor:' (soles and standing pose); the ground error needs them: add "
-            "floor: {soles: [...], standing: {...}} (DESIGN.md)"
-        )
-    return robot.config.floor
+# why `floor:` is needed, for the error that names the robot config when it is missing
+FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
 
 
 def standing_pose(robot: Robot) -> np.ndarray:
     """(J,) encoder readings of the standing robot: the config's `floor.standing`, other joints 0 [rad]."""
     q = np.zeros(len(robot.joint_names))
-    for name, value in floor_config(robot).standing.items():
+    for name, value in robot.config.floor_config(FLOOR_NEEDED).standing.items():
         q[robot.model.column(name)] = value
     return q
 
@@ -53,7 +46,7 @@ def camera_in_floor(
 ) -> tuple[np.ndarray, np.ndarray]:
     """T_floor_camera (N, 4, 4) and T_floor_base (N, 4, 4) for readings q (N, J) under a model."""
     frame = camera_frame or robot.config.head_camera("the ground error needs the head camera").frame
-    soles = list(floor_config(robot).soles)
+    soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
     poses = robot.model.link_poses(q, [frame, *soles], corrections, base=robot.config.base_link)
     T_floor_base = invert_transform(floor_frames(np.stack([poses[s] for s in soles])))
     return T_floor_base @ poses[frame], T_floor_base
@@ -146,7 +139,7 @@ def ground_errors(
 ) -> list[dict]:
     """Per distance: per model, where the ball lands (distance from the robot) and the error [m], the worst of
     the bearings. An error of None means the model puts the ball's pixel above its horizon."""
-    floor_config(robot)
+    robot.config.floor_config(FLOOR_NEEDED)  # before any work
     rows = []
     for d in distances:
         views = ball_views(robot, camera, reference, d)

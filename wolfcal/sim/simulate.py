@@ -22,7 +22,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import floor_config
+from wolfcal.evaluate.ground import FLOOR_NEEDED
 from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
@@ -161,8 +161,7 @@ def simulate_capture(
     if options.floor and (options.system != "head" or options.poses is not None):
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
     if options.floor:
-        floor_config(robot)
-        if not robot.config.floor_config().tags:
+        if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
     if options.poses is not None:
         options = replace(options, samples=len(planned_readings(robot, options.poses)))
