@@ -4,6 +4,7 @@ import os
 from pathlib import Path
 
 import pytest
+import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.robot.robot import load_robot
@@ -22,6 +23,20 @@ def detection_cache_dir(tmp_path_factory):
         os.environ.pop("WOLFCAL_CACHE_DIR", None)
     else:
         os.environ["WOLFCAL_CACHE_DIR"] = previous
+
+
+def wolfgang_with_other_tags() -> dict:
+    """Wolfgang's robot.yaml (absolute paths, no external cameras) with other tag ids and sizes: feet 7 and 8 of
+    0.1 m, torso 3 of 0.12 m: a config the shipped data were not made for."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
+    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
+    data.pop("external_cameras", None)
+    new_ids = {43: 7, 44: 8, 42: 3}
+    for tag in data["tags"]:
+        tag["size"] = 0.12 if tag["id"] == 42 else 0.1
+        tag["id"] = new_ids[tag["id"]]
+    return data
 
 
 @pytest.fixture(scope="session")

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import wolfgang_with_other_tags
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
@@ -30,14 +31,7 @@ SOLE_LIMIT_M = 0.0035
 @pytest.fixture(scope="module")
 def other_robot(tmp_path_factory):
     """Wolfgang's URDF with other tag ids (foot 7 and 8, torso 3) and sizes (0.1 m feet, 0.12 m torso)."""
-    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
-    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
-    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
-    data.pop("external_cameras", None)
-    new_ids = {43: 7, 44: 8, 42: 3}
-    for tag in data["tags"]:
-        tag["size"] = 0.12 if tag["id"] == 42 else 0.1
-        tag["id"] = new_ids[tag["id"]]
+    data = wolfgang_with_other_tags()
     path = tmp_path_factory.mktemp("other") / "robot.yaml"
     path.write_text(yaml.safe_dump(data))
     return load_robot(path)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import wolfgang_with_other_tags
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
@@ -27,14 +28,7 @@ CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0]
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory):
     """Wolfgang's URDF with other tag ids and sizes (feet 7, 8; torso 3) and floor tags 60-65 of 0.12-0.2 m."""
-    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
-    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
-    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
-    data.pop("external_cameras", None)
-    new_ids = {43: 7, 44: 8, 42: 3}
-    for tag in data["tags"]:
-        tag["size"] = 0.12 if tag["id"] == 42 else 0.1
-        tag["id"] = new_ids[tag["id"]]
+    data = wolfgang_with_other_tags()
     data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
     path = tmp_path_factory.mktemp("floor") / "robot.yaml"
     path.write_text(yaml.safe_dump(data))
