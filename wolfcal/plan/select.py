@@ -1,7 +1,8 @@
 """Choose n of N candidate poses by the expected information: a greedy start, then exchanges (DETMAX-like).
 
-Information in the fit's prior-normalised unknowns z: M(S) = I + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
-Jacobian rows of candidate k, `wolfcal.plan.information`), covariance C = M^-1. The criterion looks at the
+Information in the fit's prior-normalised unknowns z: M(S) = I + M_0 + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
+Jacobian rows of candidate k, M_0: what every plan of n poses gets, the repeated views, `wolfcal.plan.information`),
+covariance C = M^-1. The criterion looks at the
 covariance of the observable chain unknowns, C_obs = B^T C_cc B (B: (c, k) basis without the directions no pose can
 inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs (default), A = trace
 C_obs, E = largest eigenvalue of C_obs; smaller is better. Adding candidate k is a rank-r update, evaluated for all
@@ -55,19 +56,22 @@ def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criteri
     return np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
 
 
-def information(G: np.ndarray, chosen) -> np.ndarray:
-    """M = I + sum of the chosen candidates' information (P, P)."""
+def information(G: np.ndarray, chosen, M0: np.ndarray | None = None) -> np.ndarray:
+    """M = I + M0 + sum of the chosen candidates' information (P, P)."""
     chosen = np.asarray(list(chosen), dtype=int)
-    return np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    M = np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    return M if M0 is None else M + M0
 
 
-def select(G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D") -> tuple[list[int], float]:
-    """n distinct candidate indices and their criterion value: greedy additions, then sweeps that exchange each
-    chosen pose for the best other candidate while that improves the criterion."""
+def select(
+    G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D", M0: np.ndarray | None = None
+) -> tuple[list[int], float]:
+    """n distinct candidate indices and their criterion value: greedy additions (from I + M0), then sweeps that
+    exchange each chosen pose for the best other candidate while that improves the criterion."""
     if n > len(G):
         raise WolfcalError(f"--poses {n}: only {len(G)} candidate poses were found; ask for fewer poses")
     chosen: list[int] = []
-    M = information(G, [])
+    M = information(G, [], M0)
     for _ in range(n):
         values = values_after_adding(M, G, basis, criterion)
         values[chosen] = np.inf
