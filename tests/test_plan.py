@@ -249,3 +249,30 @@ def test_missing_collision_mesh_is_a_clear_error(tmp_path):
     result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code != 0 and "Traceback" not in result.output
     assert "torso.stl" in result.output and "not found" in result.output
+
+
+def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(robot):
+    """The selection's information (per-pose rows + the repeated views) equals the fit's own on the chosen poses,
+    with the torso tag's repeating detection error: n views of it tell far less than n times one view."""
+    from wolfcal.plan.candidates import draw_candidates, plan_camera
+    from wolfcal.plan.information import PlanModel, factors, repeated_information
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+
+    options = PlanOptions(free="leg", system="external", poses=6, candidates=30)
+    camera = plan_camera(robot, "external")
+    tags = used_tags(robot, options, True)
+    cands = draw_candidates(robot, camera, tags, 30, np.random.default_rng(2), collision_model(robot))
+    model = PlanModel(robot, camera, "leg", "both", tags)
+    problem = model.problem(cands.q, cands.visible, independent=True)
+    G = factors(problem)
+    chosen = [3, 7, 11, 19, 23, 29]
+    M_rep = repeated_information(model, problem, cands.q, cands.visible, len(chosen))
+    fit = model.problem(cands.q[chosen], cands.visible[chosen])  # the fit's problem, its full noise model
+    J = np.asarray(fit.data_jacobian(np.zeros(len(fit.params)), robust=False))
+    M_fit = np.eye(len(fit.params)) + J.T @ J
+    np.testing.assert_allclose(information(G, chosen, M_rep), M_fit, atol=1e-6 * np.abs(M_fit).max())
+    # n views with noise sigma and a repeating error tau (= sigma, priors.pixel_noise) tell n / (sigma^2 + n tau^2):
+    # 6 views 6/7 of what one view tells without its repeating error, where 6 independent views would tell 6 times
+    one = repeated_information(model, problem, cands.q, cands.visible, 1)
+    np.testing.assert_allclose(M_rep, one * 6 / 7, atol=1e-9 * np.abs(one).max())

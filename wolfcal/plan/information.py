@@ -180,7 +180,8 @@ def separability(G: np.ndarray, n_chain: int, M_repeated: np.ndarray | None = No
     floor = null @ np.linalg.solve(null.T @ (np.eye(P) + M_repeated) @ null, null.T) if null.size else np.zeros((P, P))
     unseparable = np.diag(floor) > UNSEPARABLE_SHARE
     mu, U = np.linalg.eigh(floor[:n_chain, :n_chain])
-    return Separability(floor, np.sum(null**2, axis=1), unseparable, U[:, mu <= 0.25])  # directions that keep under a quarter of the prior
+    keep = mu <= 0.25  # chain directions that keep less than a quarter of their prior variance
+    return Separability(floor, np.sum(null**2, axis=1), unseparable, U[:, keep])
 
 
 def check_observable(params: ParameterSet, G: np.ndarray, M_repeated: np.ndarray, n_candidates: int) -> None:
