@@ -276,3 +276,27 @@ def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(ro
     # 6 views 6/7 of what one view tells without its repeating error, where 6 independent views would tell 6 times
     one = repeated_information(model, problem, cands.q, cands.visible, 1)
     np.testing.assert_allclose(M_rep, one * 6 / 7, atol=1e-9 * np.abs(one).max())
+
+
+def test_capsule_distances_are_exact_where_they_matter(robot):
+    """The midpoint prefilter of the capsule pairs changes no distance below its limit (brute force on all pairs)."""
+    from wolfcal.robot.collision import EXACT_BELOW_M, collision_model, segment_distance
+
+    model = collision_model(robot)
+    q = np.random.default_rng(1).uniform(-1, 1, size=(2000, len(robot.joint_names)))
+    a, b = model.segments(q)
+    i, j = model.pairs.T
+    exact = segment_distance(a[:, i], b[:, i], a[:, j], b[:, j]) - model.radius[i] - model.radius[j]
+    fast = model._pair_clearance(q)
+    near = exact < EXACT_BELOW_M
+    assert near.any() and (~near).any()
+    np.testing.assert_allclose(fast[near], exact[near], atol=1e-12)
+    assert np.all(fast[~near] >= EXACT_BELOW_M - 1e-12) and np.all(fast <= exact + 1e-12)
+
+
+@pytest.mark.parametrize("system", ["mocap", "floor"])
+def test_systems_not_planned_yet_are_refused_with_the_reason(tmp_path, system):
+    out = tmp_path / "p.yaml"
+    result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", system, "--out", str(out)])
+    assert result.exit_code != 0 and "Traceback" not in result.output and not out.exists()
+    assert f"--system {system}" in result.output and "not built yet" in result.output

@@ -35,6 +35,11 @@ from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
 PLAN_SYSTEMS = ("head", "external")  # a new measurement system adds its camera or block in `plan_camera`
+NOT_PLANNED = {  # systems the fit supports but plan does not yet, and why
+    "mocap": "planning for motion capture is not built yet (it needs a rule for which markers the cameras see and "
+             "the fit's MocapBlock as the information)",
+    "floor": "planning floor samples (head pan/tilt while standing, floor tags in view) is not built yet",
+}
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,10 @@ class PlanOptions:
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)
         check_criterion(self.criterion)
+        if self.system in NOT_PLANNED:
+            raise WolfcalError(f"--system {self.system}: {NOT_PLANNED[self.system]}; plan for --system "
+                               f"{' or '.join(PLAN_SYSTEMS)} meanwhile, or capture the poses of "
+                               "configs/<robot>/poses.yaml")  # fmt: skip
         if self.system not in PLAN_SYSTEMS:
             raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
         if self.poses < 1 or self.candidates < self.poses:

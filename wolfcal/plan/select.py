@@ -39,17 +39,23 @@ def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
 
 
 def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criterion: str) -> np.ndarray:
-    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates."""
+    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates (one matrix
+    product over all candidates' rows for each quadratic form)."""
+    N, r, P = G.shape
     c = basis.shape[0]
     C = np.linalg.inv(M)
     C = 0.5 * (C + C.T)
+    Y = C[:, :c] @ basis  # (P, k): C_zB
     C_obs = basis.T @ C[:c, :c] @ basis
-    GC = G @ C  # (N, r, P)
-    S = np.eye(G.shape[1]) + GC @ np.swapaxes(G, 1, 2)  # (N, r, r)
-    V = GC[:, :, :c] @ basis  # (N, r, k)
+    rows = G.reshape(N * r, P)
+    Gt = np.swapaxes(G, 1, 2)
+    S = np.eye(r) + (rows @ C).reshape(N, r, P) @ Gt  # (N, r, r)
     if criterion == "D":
-        inner = S - V @ np.linalg.solve(C_obs, np.swapaxes(V, 1, 2))
+        # S_k - V_k C_obs^-1 V_k^T = I + G_k (C - Y C_obs^-1 Y^T) G_k^T
+        D = C - Y @ np.linalg.solve(C_obs, Y.T)
+        inner = np.eye(r) + (rows @ D).reshape(N, r, P) @ Gt
         return np.linalg.slogdet(C_obs)[1] + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
+    V = (rows @ Y).reshape(N, r, -1)  # (N, r, k)
     SinvV = np.linalg.solve(S, V)  # (N, r, k)
     if criterion == "A":
         return np.trace(C_obs) - np.einsum("nrk,nrk->n", V, SinvV)
