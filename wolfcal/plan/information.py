@@ -85,10 +85,18 @@ class PlanModel:
         return Problem(self.chain(), [block], [priors.pixel_noise], priors.encoder_noise)
 
 
+def camera_block(problem: Problem) -> CameraBlock:
+    """The plan problem's one block (`PlanModel.problem`)."""
+    block = problem.blocks[0]
+    if not isinstance(block, CameraBlock):
+        raise TypeError(f"a plan problem holds one camera block, not {type(block).__name__}")
+    return block
+
+
 def repeated_units(problem: Problem) -> np.ndarray:
     """(U,) bool: units of the (independent) candidate block whose detection error the fit shares between poses (a
     label of `CameraBlock.shared_labels` that spans samples): their view is the same in every pose."""
-    block = problem.blocks[0]
+    block = camera_block(problem)
     labels, samples = CameraBlock.shared_labels(block), block.sample_of_unit
     lowest = np.full(labels.max() + 1, samples.max())
     highest = np.zeros(labels.max() + 1, dtype=samples.dtype)
@@ -119,7 +127,7 @@ def repeated_information(model: PlanModel, problem: Problem, q: np.ndarray, visi
     P = len(problem.params)
     if not repeated.any():
         return np.zeros((P, P))
-    block = problem.blocks[0]
+    block = camera_block(problem)
     tags = np.unique(np.asarray(block.tag_ids)[block.tag_col[repeated]])
     shown = visible[:n] & np.isin(model.robot.config.tag_ids, tags)
     shared = model.problem(q[:n], shown)

@@ -86,7 +86,8 @@ class CollisionModel:
         mid, half = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2)
         d = np.linalg.norm(mid[:, i] - mid[:, j], axis=2) - half[:, i] - half[:, j] - self.radius[i] - self.radius[j]
         n, k = np.nonzero(d < EXACT_BELOW_M)
-        d[n, k] = segment_distance(a[n, i[k]], b[n, i[k]], a[n, j[k]], b[n, j[k]]) - self.radius[i[k]] - self.radius[j[k]]
+        ik, jk = i[k], j[k]
+        d[n, k] = segment_distance(a[n, ik], b[n, ik], a[n, jk], b[n, jk]) - self.radius[ik] - self.radius[jk]
         return d
 
     def clearance(self, q: np.ndarray) -> np.ndarray:

@@ -65,7 +65,7 @@ def mesh_box(urdf: Path, path: Path, scale: np.ndarray) -> tuple[np.ndarray, np.
 
     try:
         mesh = trimesh.load(str(path), force="mesh")
-        vertices = np.asarray(mesh.vertices, dtype=float) * scale
+        vertices = np.array(getattr(mesh, "vertices", []), dtype=np.float64).reshape(-1, 3) * scale
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise WolfcalError(f"{urdf}: cannot read collision mesh {path} ({exc}); give an STL, OBJ, PLY or DAE") from None
     if len(vertices) < 1 or not np.all(np.isfinite(vertices)):
