@@ -102,6 +102,9 @@ def test_planned_poses_beat_random_ones(small_plan):
 def test_rank_updates_match_direct_criteria_and_exchange_improves_greedy():
     rng = np.random.default_rng(0)
     G = rng.normal(size=(40, 3, 6)) * rng.uniform(0.1, 3, size=(1, 1, 6))
+    G[::3, 2:] = 0.0  # candidates with fewer rows (padded with zeros at the end, as `factors` packs them)
+    G[1::7, 1:] = 0.0
+    G[4] = 0.0  # a candidate that tells nothing
     basis = np.linalg.qr(rng.normal(size=(4, 3)))[0]  # 4 chain unknowns, one direction left out
     M = information(G, [1, 5])
     for criterion in ("D", "A", "E"):
@@ -300,3 +303,63 @@ def test_systems_not_planned_yet_are_refused_with_the_reason(tmp_path, system):
     result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", system, "--out", str(out)])
     assert result.exit_code != 0 and "Traceback" not in result.output and not out.exists()
     assert f"--system {system}" in result.output and "not built yet" in result.output
+
+
+def test_collision_checks_split_by_the_head_joints_are_exact(robot):
+    """The candidate draw checks the pairs the head does not move once per leg configuration and the others per
+    head configuration: together (and in the early-exit order) they keep exactly the poses with clearance."""
+    from wolfcal.plan.candidates import CLEARANCE_M
+    from wolfcal.robot.collision import collision_model
+
+    model = collision_model(robot)
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-1.2, 1.2, size=(3000, len(robot.joint_names)))
+    head = ["HeadPan", "HeadTilt"]
+    moved = model.pairs_moved_by(head)
+    assert moved.any() and (~moved).any()
+    full = model.clearance(q) >= CLEARANCE_M
+    assert full.any() and (~full).any()
+    np.testing.assert_array_equal(model.collision_free(q, CLEARANCE_M), full)
+    split = model.collision_free(q, CLEARANCE_M, ~moved) & model.collision_free(q, CLEARANCE_M, moved)
+    np.testing.assert_array_equal(split, full)
+    # the pairs the head does not move keep their distance whatever the head does; the others do not
+    q2 = q.copy()
+    q2[:, [robot.joint_names.index(j) for j in head]] = rng.uniform(-1.2, 1.2, size=(len(q), 2))
+    d1, d2 = model._pair_clearance(q), model._pair_clearance(q2)
+    np.testing.assert_allclose(d1[:, ~moved], d2[:, ~moved], atol=1e-12)
+    assert np.all(np.abs(d1[:, moved] - d2[:, moved]).max(axis=0) > 1e-6)
+
+
+def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk(robot):
+    """Legs drawn once for many head configurations: every candidate passes the full checks (all capsule pairs,
+    tags in view by a full forward-kinematics pass, line of sight), and the head views from the legs' tag poses
+    equal those of a full pass."""
+    from wolfcal.plan.candidates import (
+        CLEARANCE_M,
+        base_tag_poses,
+        draw_candidates,
+        line_of_sight,
+        plan_camera,
+        pose_ok,
+        tag_views,
+    )
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+
+    model = collision_model(robot)
+    camera = plan_camera(robot, "head")
+    tags = used_tags(robot, PlanOptions(), False)
+    cands = draw_candidates(robot, camera, tags, 300, np.random.default_rng(5), model)
+    assert len(cands.q) == 300
+    assert cands.drawn >= sum(cands.rejected.values()) + len(cands.q)  # every configuration drawn is accounted for
+    assert np.all(model.clearance(cands.q) >= CLEARANCE_M)
+    views = tag_views(robot, camera, cands.q, tags) & line_of_sight(robot, camera, cands.q, model)
+    np.testing.assert_array_equal(views, cands.visible)
+    assert pose_ok(robot, camera, views).all()
+    ids = [t for t in robot.config.tag_ids if t in tags]
+    q = np.random.default_rng(6).uniform(-1.5, 1.5, size=(500, len(robot.joint_names)))
+    np.testing.assert_array_equal(tag_views(robot, camera, q, tags, base_tag_poses(robot, q, ids)),
+                                  tag_views(robot, camera, q, tags))
+    # the head is drawn uniformly: the candidates' head angles spread over the range that shows the feet
+    pan = cands.q[:, robot.joint_names.index("HeadPan")]
+    assert pan.min() < -0.3 and pan.max() > 0.3

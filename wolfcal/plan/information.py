@@ -106,12 +106,12 @@ def repeated_units(problem: Problem) -> np.ndarray:
 
 
 def factors(problem: Problem) -> np.ndarray:
-    """(N, r, P) whitened Jacobian rows that change with the pose, per sample, in z units (zero rows pad samples with
-    fewer tags; the rows of `repeated_units` are left out: `repeated_information` counts them)."""
+    """(N, r, P) whitened Jacobian rows that change with the pose, per sample, in z units (zero rows at the end pad
+    samples with fewer tags; the rows of `repeated_units` are left out: `repeated_information` counts them)."""
     J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
     block = problem.blocks[0]
-    J = J * np.repeat(~repeated_units(problem), block.dim)[:, None]  # each unit is its own noise group here
-    sample_of_row = np.repeat(block.sample_of_unit, block.dim)
+    keep = np.repeat(~repeated_units(problem), block.dim)  # each unit is its own noise group here
+    J, sample_of_row = J[keep], np.repeat(block.sample_of_unit, block.dim)[keep]
     order = np.argsort(sample_of_row, kind="stable")
     counts = np.bincount(sample_of_row, minlength=len(block.q_measured))
     slot = np.arange(len(order)) - np.repeat(np.cumsum(counts) - counts, counts)

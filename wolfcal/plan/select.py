@@ -39,27 +39,36 @@ def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
 
 
 def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criterion: str) -> np.ndarray:
-    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates (one matrix
-    product over all candidates' rows for each quadratic form)."""
-    N, r, P = G.shape
+    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P), zero rows padding at the end, as
+    `wolfcal.plan.information.factors` packs them), by rank-r updates: candidates with as many rows up to their last
+    nonzero one are evaluated together, with one matrix product over all their rows for each quadratic form."""
     c = basis.shape[0]
     C = np.linalg.inv(M)
     C = 0.5 * (C + C.T)
     Y = C[:, :c] @ basis  # (P, k): C_zB
     C_obs = basis.T @ C[:c, :c] @ basis
-    rows = G.reshape(N * r, P)
-    Gt = np.swapaxes(G, 1, 2)
-    S = np.eye(r) + (rows @ C).reshape(N, r, P) @ Gt  # (N, r, r)
-    if criterion == "D":
-        # S_k - V_k C_obs^-1 V_k^T = I + G_k (C - Y C_obs^-1 Y^T) G_k^T
-        D = C - Y @ np.linalg.solve(C_obs, Y.T)
-        inner = np.eye(r) + (rows @ D).reshape(N, r, P) @ Gt
-        return np.linalg.slogdet(C_obs)[1] + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
-    V = (rows @ Y).reshape(N, r, -1)  # (N, r, k)
-    SinvV = np.linalg.solve(S, V)  # (N, r, k)
-    if criterion == "A":
-        return np.trace(C_obs) - np.einsum("nrk,nrk->n", V, SinvV)
-    return np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
+    base = criterion_value(M, basis, criterion)
+    # D: S_k - V_k C_obs^-1 V_k^T = I + G_k (C - Y C_obs^-1 Y^T) G_k^T
+    D = C - Y @ np.linalg.solve(C_obs, Y.T) if criterion == "D" else None
+    nonzero = np.any(G != 0.0, axis=2)  # (N, r)
+    rows_used = np.where(nonzero.any(axis=1), G.shape[1] - np.argmax(nonzero[:, ::-1], axis=1), 0)  # to the last
+    out = np.full(len(G), base)
+    for r in np.unique(rows_used[rows_used > 0]):
+        which = np.flatnonzero(rows_used == r)
+        Gr = G[which, :r]
+        flat, Gt = Gr.reshape(-1, Gr.shape[2]), np.swapaxes(Gr, 1, 2)
+        S = np.eye(r) + (flat @ C).reshape(Gr.shape) @ Gt  # (n, r, r)
+        if D is not None:
+            inner = np.eye(r) + (flat @ D).reshape(Gr.shape) @ Gt
+            out[which] = base + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
+            continue
+        V = (flat @ Y).reshape(len(which), r, -1)  # (n, r, k)
+        SinvV = np.linalg.solve(S, V)
+        if criterion == "A":
+            out[which] = base - np.einsum("nrk,nrk->n", V, SinvV)
+        else:
+            out[which] = np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
+    return out
 
 
 def information(G: np.ndarray, chosen, M0: np.ndarray | None = None) -> np.ndarray:
