@@ -14,8 +14,8 @@ against the capsule pairs the head joints do not move (their distance is the sam
 for each leg configuration that passes, VIEWS_PER_BODY head configurations are drawn, each uniform over the head's
 range, and every (legs, head) pair is tested in full: tags in view (tag poses from the legs' pass, camera pose from
 the head's), the pairs the head moves, line of sight. Rejecting the legs before drawing the head rejects exactly the
-pairs the full test would; what it saves is the legs' forward kinematics and most collision checks, repeated 32 times
-per leg configuration by plain rejection (only about 1 in 400 uniform poses shows a foot tag without colliding).
+pairs the full test would; what it saves is the legs' forward kinematics and most collision checks, which plain
+rejection repeats for every pose drawn (only about 1 in 400 uniform poses shows a foot tag without colliding).
 Candidates that share a leg configuration (on average about one per leg configuration) are not independent draws;
 each one is uniform over the valid poses. An external camera has no head joints: each configuration is drawn whole.
 """"""
