@@ -18,7 +18,7 @@ pairs the full test would; what it saves is the legs' forward kinematics and mos
 rejection repeats for every pose drawn (only about 1 in 400 uniform poses shows a foot tag without colliding).
 Candidates that share a leg configuration (on average about one per leg configuration) are not independent draws;
 each one is uniform over the valid poses. An external camera has no head joints: each configuration is drawn whole.
-""""""
+"""
 
 from __future__ import annotations
 
