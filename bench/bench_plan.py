@@ -5,9 +5,9 @@ Scenarios (Wolfgang, 2048x1536 head camera / 1280x720 tripod webcam at the expec
 `external` (--free leg, tripod camera, offsets on the legs). Per seed: a random truth; 12 planned poses (2000
 candidates, D-optimal) against 30 and 12 random valid candidates. Observations are tag corners projected at the true
 kinematics with 0.15 px Gaussian noise and quantised encoder readings (no rendering; `wolfcal simulate --poses`
-renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position max
-over 500 random leg poses, or camera pose max over the head range), median over the seeds; the worst reported std
-among the parameters some pose can observe (12 planned vs 12 random); planning time.
+renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position
+max over 500 random leg poses, or camera position and rotation max over the head range), median over the seeds;
+the worst reported std among the parameters some pose can observe (12 planned vs 12 random); planning time.
 `--timing`: CPU and wall time of planning 20 of 2000 candidates per system and criterion, with the load average.
 Run: python bench/bench_plan.py [--seeds 5] [--scenarios leg head_camera external] [--timing]
 """
@@ -67,16 +67,18 @@ def run(name: str, seed: int) -> dict:
     for label, idx in (("planned12", chosen), ("random30", others[:30]), ("random12", others[:12])):
         obs = observe(robot, plan, truth, idx, camera, rng)
         fit = fit_observations(robot, obs, FitOptions(free=free, system=system))
+        rot = 0.0
         if free == "leg":
             err = max(link_position_errors(robot, s, fit.corrections, truth, 500, np.random.default_rng(seed)).max()
                       for s in ("r_sole", "l_sole"))  # fmt: skip
         else:
-            err = camera_pose_errors(robot, fit.corrections, truth)[1].max()
+            rot_errors, pos_errors = camera_pose_errors(robot, fit.corrections, truth)
+            err, rot = pos_errors.max(), rot_errors.max()
         names = fit.params.names[: len(fit.chain)]
         keep = [i for i, n in enumerate(names) if plan.observable[plan.params.names.index(n)]]
         units = np.array([p.unit for p in fit.params.parameters])[keep]
         std = fit.solution.std[keep]
-        out[label] = (err, std[units == "m"].max(), std[units == "rad"].max())
+        out[label] = (err, std[units == "m"].max(), std[units == "rad"].max(), rot)
     return out
 
 
@@ -116,6 +118,11 @@ def main() -> None:
                   f"{r['planned12'][1] * 1000:.3f} mm {np.rad2deg(r['planned12'][2]):.3f} deg, random12 "
                   f"{r['random12'][1] * 1000:.3f} mm {np.rad2deg(r['random12'][2]):.3f} deg", flush=True)
         med = {k: np.median([r[k] for r in runs], axis=0) for k in ("planned12", "random30", "random12")}
+        if name == "head_camera":
+            mdeg = {k: np.rad2deg(v[3]) * 1000 for k, v in med.items()}
+            print(f"{name:12s} camera rotation error (median of {args.seeds} seeds): 12 planned "
+                  f"{mdeg['planned12']:.1f} mdeg, 30 random {mdeg['random30']:.1f} mdeg, 12 random "
+                  f"{mdeg['random12']:.1f} mdeg", flush=True)  # fmt: skip
         ratio_m = np.median([r["random12"][1] / r["planned12"][1] for r in runs])
         ratio_rad = np.median([r["random12"][2] / r["planned12"][2] for r in runs])
         print(f"{name:12s} true error (median of {args.seeds} seeds): 12 planned {med['planned12'][0] * 1000:.2f} mm, "

@@ -363,3 +363,21 @@ def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk
     # the head is drawn uniformly: the candidates' head angles spread over the range that shows the feet
     pan = cands.q[:, robot.joint_names.index("HeadPan")]
     assert pan.min() < -0.3 and pan.max() > 0.3
+
+
+def test_criterion_looks_at_the_parameters_of_interest_and_marginalises_the_others():
+    """Ds-optimality: with the tags' mounts left out of the criterion, the basis has no component on them, and the
+    criterion is the covariance of the other unknowns with the tags' uncertainty marginalised (not fixed)."""
+    from wolfcal.plan.information import separability
+
+    rng = np.random.default_rng(7)
+    G = rng.normal(size=(50, 4, 6))
+    G[:, :, 5] = G[:, :, 4]  # unknowns 4 and 5 only ever move together: their difference is not observable
+    interest = np.array([True, True, False, True, False, False])
+    sep = separability(G, 6, None, interest)
+    assert sep.basis.shape == (6, 3) and np.allclose(sep.basis[~interest], 0.0)
+    M = information(G, [0, 1, 2])
+    C = np.linalg.inv(M)
+    idx = np.flatnonzero(interest)
+    expected = np.linalg.slogdet(C[np.ix_(idx, idx)])[1]  # marginal covariance of the unknowns of interest
+    assert np.isclose(criterion_value(M, sep.basis, "D"), expected)

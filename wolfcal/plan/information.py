@@ -177,9 +177,12 @@ class Separability:
         return bool(self.floor[i, i] > 0.9 * self.prior_floor[i])
 
 
-def separability(G: np.ndarray, n_chain: int, M_repeated: np.ndarray | None = None) -> Separability:
+def separability(
+    G: np.ndarray, n_chain: int, M_repeated: np.ndarray | None = None, interest: np.ndarray | None = None
+) -> Separability:
     """Null directions of the candidates' mean information (G: (N, r, P)), the floor covariance they leave (with
-    the repeated views' information M_repeated (P, P), see the module docstring) and the observable chain basis."""
+    the repeated views' information M_repeated (P, P), see the module docstring) and the basis of the observable
+    directions among the chain unknowns of `interest` ((n_chain,) bool, default all: `criterion_interest`)."""
     P = G.shape[2]
     M_repeated = np.zeros((P, P)) if M_repeated is None else M_repeated
     info = np.einsum("nri,nrj->ij", G, G) / len(G)
@@ -187,9 +190,20 @@ def separability(G: np.ndarray, n_chain: int, M_repeated: np.ndarray | None = No
     null = V[:, lam < NULL_INFO]
     floor = null @ np.linalg.solve(null.T @ (np.eye(P) + M_repeated) @ null, null.T) if null.size else np.zeros((P, P))
     unseparable = np.diag(floor) > UNSEPARABLE_SHARE
-    mu, U = np.linalg.eigh(floor[:n_chain, :n_chain])
-    keep = mu <= 0.25  # chain directions that keep less than a quarter of their prior variance
-    return Separability(floor, np.sum(null**2, axis=1), unseparable, U[:, keep])
+    interest = np.ones(n_chain, dtype=bool) if interest is None else interest
+    idx = np.flatnonzero(interest)
+    mu, U = np.linalg.eigh(floor[np.ix_(idx, idx)])
+    keep = mu <= 0.25  # directions that keep less than a quarter of their prior variance
+    basis = np.zeros((n_chain, int(keep.sum())))
+    basis[idx] = U[:, keep]
+    return Separability(floor, np.sum(null**2, axis=1), unseparable, basis)
+
+
+def criterion_interest(params: ParameterSet, n_chain: int) -> np.ndarray:
+    """(n_chain,) bool: the chain unknowns a plan's criterion looks at, all but the tags' mounts. A tag's mount is
+    needed by the fit but is not what a calibration delivers (joint offsets, the camera's mount); the criterion
+    marginalises it (Ds-optimality) rather than spending poses on it."""
+    return np.array([p.kind != "tag" for p in params.parameters[:n_chain]], dtype=bool)
 
 
 def check_observable(params: ParameterSet, G: np.ndarray, M_repeated: np.ndarray, n_candidates: int) -> None:

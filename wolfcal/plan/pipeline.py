@@ -23,6 +23,7 @@ from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
 from wolfcal.plan.information import (
     PlanModel,
     check_observable,
+    criterion_interest,
     factors,
     predicted,
     repeated_information,
@@ -131,7 +132,7 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     problem = model.problem(candidates.q, candidates.visible, independent=True)
     G = factors(problem)
     M_repeated = repeated_information(model, problem, candidates.q, candidates.visible, options.poses)
-    sep = separability(G, problem.n_chain, M_repeated)
+    sep = separability(G, problem.n_chain, M_repeated, criterion_interest(problem.params, problem.n_chain))
     check_observable(problem.params, G, M_repeated, len(G))
     say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
     chosen, _ = select(G, options.poses, sep.basis, options.criterion, M_repeated)
