@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 import yourdfpy
 from mcap_ros2.writer import Writer as Ros2Writer
 from test_mocap_io import JOINT_STATE_DEF, MARKERS_DEF, T0, write_c3d
@@ -130,7 +131,8 @@ def write_session(folder: Path, seed: int, n_poses: int = 25) -> Session:
         T = {link: T_mocap_pelvis @ fk(q, joints, link, model) for link in links}
         for m, marker in enumerate(markers):
             T_link = T[marker.link]
-            p[frames, m] = np.einsum("nij,j->ni", T_link[:, :3, :3], np.asarray(marker.xyz) + mounts[m]) + T_link[:, :3, 3]
+            xyz = np.asarray(marker.xyz) + mounts[m]
+            p[frames, m] = np.einsum("nij,j->ni", T_link[:, :3, :3], xyz) + T_link[:, :3, 3]
     p += rng.normal(0, 0.0003, p.shape)
     pairs = rng.permutation(n_poses * len(names))
     n_occluded, n_reflected = round(0.03 * len(pairs)), max(round(0.01 * len(pairs)), 1)
@@ -170,3 +172,38 @@ def write_session(folder: Path, seed: int, n_poses: int = 25) -> Session:
         q_measured=np.round((poses - np.array([offsets[j] for j in joints])) / TICK) * TICK,
         reflections=reflections, occluded=occluded, c3d_offset_s=T0 / 1e9 + first / MARKER_HZ,
     )  # fmt: skip
+
+
+def sole_errors(session: Session, fitted: dict[str, float]) -> tuple[float, float]:
+    """Largest sole position [mm] and rotation [deg] error over the still poses and both soles."""
+    true, model = session.sole_poses(None), session.sole_poses(fitted)
+    mm, deg = 0.0, 0.0
+    for sole in true:
+        E = np.linalg.inv(true[sole]) @ model[sole]
+        mm = max(mm, float(np.max(np.linalg.norm(E[:, :3, 3], axis=1))) * 1000)
+        cos = np.clip((np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)
+        deg = max(deg, float(np.rad2deg(np.max(np.arccos(cos)))))
+    return mm, deg
+
+
+def mount_rotation(session: Session, side: str) -> float:
+    """The rotation [rad] about the ankle-roll axis (x of the foot frame, through its origin) that best explains the
+    true mount errors m_k of the foot's markers (r_k in the foot frame): sum((a x r_k) . m_k) / sum(|a x r_k|^2).
+    The ankle roll is the foot's last joint, so an offset error rotates the foot by a fixed rotation in its own
+    frame: the markers cannot tell it from this rotation of their mounts."""
+    config = load_robot_config(STRIDER)
+    a = np.array([1.0, 0.0, 0.0])
+    moves = [(np.cross(a, m.xyz), session.mounts[m.name]) for m in config.marker_config().entries
+             if m.link == f"{side}_foot"]
+    return float(sum(u @ m for u, m in moves) / sum(u @ u for u, _ in moves))
+
+
+def known_mounts_config(session: Session, folder: Path) -> Path:
+    """A copy of the strider config whose marker places are the true ones (nominal + mount)."""
+    data = yaml.safe_load((STRIDER / "robot.yaml").read_text())
+    data["urdf"] = str(STRIDER / data["urdf"])
+    for m in data["markers"]["list"]:
+        m["xyz"] = [float(v) for v in np.add(m["xyz"], session.mounts[m["name"]])]
+    path = folder / "known_mounts.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
