@@ -152,7 +152,9 @@ def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observat
     without them or when too few views measure it); a ball above a model's horizon is an infinite error."""
     if floor is None:
         return []
-    measured = measured_ground_errors(robot, floor, models, (VERDICT_DISTANCE_M,))
+    ids, samples = np.unique(np.column_stack([floor.tag_ids, floor.sample_index]), axis=0).T
+    twice = [int(t) for t, n in zip(*np.unique(ids, return_counts=True)) if n >= 2]  # a tag seen once places nothing
+    measured = measured_ground_errors(robot, floor.only_tags(twice), models, (VERDICT_DISTANCE_M,)) if twice else None
     if measured is None:
         say(f"floor: {floor.n_samples} sample(s) with floor tags, too few views to measure the ground error")
         return []
