@@ -27,7 +27,7 @@ from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor
 from wolfcal.io.truth import truth_paths
-from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.sim.simulate import SimOptions, simulate_capture

@@ -4,9 +4,12 @@ The floor is the plane of the standing soles (`evaluate.ground.floor_frames`: or
 along their mean z axis). Each floor tag lies face up on it at an unknown place: T_floor_tag = Trans(x, y, thickness)
 @ Rz(yaw), unknowns `floor.tag<id>.x|y|yaw` [m, rad] of the block (started from the nominal model's ray through the
 first view's corners). Residual per corner [px]: project(K, D, T_camera_base(q) @ T_base_floor(q) @ T_floor_tag @
-p_corner) - u_detected, divided by max(1, REFERENCE_EDGE_PX / apparent edge): the corners of small, strongly
-foreshortened far tags come out of the detector biased inward (up to ~1 px at 4 m), so a tag seen small counts as
-much as one seen REFERENCE_EDGE_PX wide, no more. Height and tilt of every tag come from the standing soles, so the
+p_corner) + inset * d_corner - u_detected, divided by max(1, REFERENCE_EDGE_PX / apparent edge). The corners of
+small, strongly foreshortened far tags come out of the detector biased inward (up to ~1 px at 4 m): so a tag seen
+small counts as much as one seen REFERENCE_EDGE_PX wide, no more, and that bias is one more unknown of the block,
+`floor.corner_inset` [px]: every edge of a tag view moved inward by it at REFERENCE_EDGE_PX apparent edge, by
+inset * REFERENCE_EDGE_PX / edge above (d_corner: `vision.corner_bias.inset_directions`), so that it does not read
+as a smaller, farther tag and a tilted floor. Height and tilt of every tag come from the standing soles, so the
 block measures the camera relative to the floor through the standing legs.
 
 `SoleClosure`: both standing soles lie on the floor. Residual per floor sample [m]: the height of each sole's origin
@@ -32,11 +35,13 @@ from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
 from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.vision.corner_bias import inset_directions
 from wolfcal.vision.tags import tag_corners
 
 REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] below which a floor tag's corners are down-weighted
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
+INSET_PRIOR_PX = 1.0  # prior of the corner detector's inward bias at REFERENCE_EDGE_PX [px]
 SOLE_LEVER_M = 0.1  # a tilt between the soles counts as the displacement it makes at this distance [m]
 
 
@@ -91,8 +96,12 @@ class FloorBlock(Block):
         views, view_of_unit = np.unique(np.stack([obs.sample_index, obs.tag_ids], axis=1), axis=0, return_inverse=True)
         self.view_of_unit = view_of_unit.ravel()
         self.view_labels = [(int(s), int(t)) for s, t in views]
-        self.weight = 1.0 / np.maximum(1.0, REFERENCE_EDGE_PX / self._apparent_edge())
-        self.nuisance = self._place_parameters()
+        edge = self._apparent_edge()
+        self.weight = 1.0 / np.maximum(1.0, REFERENCE_EDGE_PX / edge)
+        # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
+        self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.nuisance = self._place_parameters() + ParameterSet(
+            [Parameter("floor.corner_inset", "floor", "floor", 0, "px", INSET_PRIOR_PX)])
 
     def _apparent_edge(self) -> np.ndarray:
         """(M,) mean edge length of each corner's tag view in the image [px]."""
@@ -103,6 +112,12 @@ class FloorBlock(Block):
         edge = np.where(known.any(axis=1), np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1),
                         REFERENCE_EDGE_PX)
         return edge[self.view_of_unit]
+
+    def _inward(self) -> np.ndarray:
+        """(M, 2) `corner_bias.inset_directions` of each detected corner's view [px/px]."""
+        ring = np.full((len(self.view_labels), 4, 2), np.nan)
+        ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
+        return inset_directions(ring)[self.view_of_unit, self.obs.corner_index]
 
     def _place_parameters(self) -> ParameterSet:
         """x, y, yaw of each floor tag, started where the nominal model's rays through its first view meet the
@@ -133,7 +148,7 @@ class FloorBlock(Block):
 
     def _floor_points(self, place: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M, 3) corners on the floor [m] and their derivatives (M, 3, 3) by the corner's tag's x, y, yaw."""
-        x, y, yaw = place.reshape(-1, 3)[self.tag_col].T
+        x, y, yaw = place[: 3 * len(self.tag_ids)].reshape(-1, 3)[self.tag_col].T
         c, s = np.cos(yaw), np.sin(yaw)
         px, py = self.p_tag[:, 0], self.p_tag[:, 1]
         p = np.stack([x + c * px - s * py, y + s * px + c * py, self.height], axis=1)
@@ -155,13 +170,18 @@ class FloorBlock(Block):
         dp_q, dp_chain = dp[..., :n_joints], dp[..., n_joints:]
         dp_local = R_camera_root @ T_root_floor[:, :3, :3] @ dp_place
         D = pixel_jacobian(self.obs.camera, p_camera) * self.weight[:, None, None]
-        residual = (self.obs.camera.project(p_camera) - self.obs.uv) * self.weight[:, None]
+        n_places = 3 * len(self.tag_ids)
+        inset = local_values[n_places]
+        residual = (self.obs.camera.project(p_camera) + inset * self.inward - self.obs.uv) * self.weight[:, None]
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
+        jac_local = np.concatenate([D @ dp_local, (self.inward * self.weight[:, None])[:, :, None]], axis=2)
+        local_cols = np.concatenate([3 * self.tag_col[:, None] + np.arange(3), np.full((len(residual), 1), n_places)],
+                                    axis=1)  # fmt: skip
         return Linearization(
-            residual=residual, jac_chain=D @ dp_chain, jac_local=D @ dp_local,
-            local_cols=3 * self.tag_col[:, None] + np.arange(3), joint_sensitivity=D @ dp_q,
+            residual=residual, jac_chain=D @ dp_chain, jac_local=jac_local, local_cols=local_cols,
+            joint_sensitivity=D @ dp_q,
         )  # fmt: skip
 
 
