@@ -49,6 +49,7 @@ from wolfcal.vision.observe import detect_observations  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CACHE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
+PARTS = ("camera", "leg", "large", "accuracy")
 README_ACCURACY = {"2048x1536": (0.02, 0.13), "512x384": (0.04, 0.13)}  # median, p95 [px] before issue 13
 
 
@@ -152,16 +153,22 @@ def detection_accuracy(views: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=30)
+    parser.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {', '.join(PARTS)}")
     args = parser.parse_args()
-    print(f"issue 13 table, {cpu_count()} cores")
-    camera_capture = capture(24, 1, "none", seed=1)
-    leg_capture = capture(40, 1, "all", seed=2)
-    end_to_end("camera fit, 24 samples at 2048x1536", camera_capture, FitOptions(free="camera"))
-    end_to_end("leg fit, 40 samples at 2048x1536", leg_capture, FitOptions(free="leg", side="both"))
-    print("\nleg fit at 512x384, end to end, first run (no cache)")
-    large_leg_fit(400, 2.0)
-    large_leg_fit(1000, 5.0)
-    detection_accuracy(args.views)
+    parts = args.parts.split(",")
+    print(f"issue 13 table, {cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    if "camera" in parts:
+        end_to_end("camera fit, 24 samples at 2048x1536", capture(24, 1, "none", seed=1), FitOptions(free="camera"))
+    if "leg" in parts:
+        leg_capture = capture(40, 1, "all", seed=2)
+        end_to_end("leg fit, 40 samples at 2048x1536", leg_capture, FitOptions(free="leg", side="both"))
+    if "large" in parts:
+        print("\nleg fit at 512x384, end to end, first run (no cache)")
+        large_leg_fit(400, 2.0)
+        large_leg_fit(1000, 5.0)
+    if "accuracy" in parts:
+        detection_accuracy(args.views)
+    print(f"load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":
