@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
-import yaml
 
 import wolfcal
 from wolfcal.atomic import write_text_atomic
@@ -24,7 +23,7 @@ from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.yamlfile import read_yaml
+from wolfcal.yamlfile import dump_yaml, read_yaml
 
 if TYPE_CHECKING:
     from wolfcal.fit.pipeline import Fit
@@ -358,7 +357,7 @@ def plain(value):
 
 
 def write_result(path: Path, result: FitResult) -> None:
-    write_text_atomic(path, yaml.safe_dump(result.to_dict(), sort_keys=False, width=120))
+    write_text_atomic(path, dump_yaml(result.to_dict(), sort_keys=False, width=120))
 
 
 def load_result(path: str | Path) -> FitResult:
