@@ -231,7 +231,8 @@ def demo(
     root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
     force: bool = force_option(),
 ) -> None:
-    """Fit and evaluate the shipped demo capture; prints the before/after table."""
+    """The venue workflow on the shipped demo captures (feet + floor -> fit -> evaluate with the measured ground
+    error), then a camera fit refused on a robot whose legs are off."""
     from wolfcal.demo import run_demo
 
     run_demo(root, out, say=typer.echo, force=force)
