@@ -1,4 +1,4 @@
-"""`wolfcal demo` on the shipped captures: what it prints is true (against the simulator's truth beside each capture)."""
+"""`wolfcal demo` on the shipped captures: what it prints is true (the simulator's truth beside each capture)."""
 
 from pathlib import Path
 

@@ -45,7 +45,7 @@ def headline_rows(metrics: dict) -> list[list[str]]:
 
 def measured_ground_rows(metrics: dict) -> list[list[str]]:
     """Rows (quantity, before, after) of the ground error measured on held-out floor views (none without)."""
-    measured = (metrics["ground"].get("measured") or {}).get("models")
+    measured: dict = (metrics["ground"].get("measured") or {}).get("models") or {}
     return [[f"measured ground error (floor views), ball at {row['distance_m']:g} m [cm, 1 sigma]",
              *(_measured(measured[m]["rows"][k]) for m in ("before", "after"))]
             for k, row in enumerate(measured["before"]["rows"] if measured else [])]  # fmt: skip
