@@ -12,17 +12,17 @@ from __future__ import annotations
 import io
 import math
 import signal
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from conftest import WOLFGANG, wolfgang_with_other_tags
+from conftest import WOLFGANG, stop_after_sample, wolfgang_with_other_tags
 from rich.console import Console
 
 from wolfcal.capture.floor import AIM_BEARINGS_DEG, AIM_DISTANCES_M, floor_script
+from wolfcal.capture.manual import joint_groups
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import aim_joints, ball_position, camera_in_floor, standing_pose
@@ -176,25 +176,13 @@ def test_stopped_floor_capture_keeps_its_samples_and_leaves_the_torque_as_chosen
     command = [sys.executable, "-m", "wolfcal.cli", "capture", "--floor", "--robot", str(WOLFGANG), "--camera", "sim",
                "--binning", "2", "--velocity", "5", "--exit-torque", "on", "--out", str(out)]  # fmt: skip
     with emulator(robot, truth_file) as emu:
-        process = subprocess.Popen([*command, "--port", emu.port], cwd=ROOT, stderr=subprocess.PIPE,
-                                   stdout=subprocess.DEVNULL, text=True)  # fmt: skip
-        try:
-            for line in process.stderr:  # wait on the event: the second sample is on disk
-                if line.startswith("sample 2"):
-                    break
-            process.send_signal(signal.SIGTERM)
-            stderr = process.stderr.read()
-            process.wait(WAIT_S)
-        finally:
-            if process.poll() is None:
-                process.kill()
+        returncode, stderr = stop_after_sample([*command, "--port", emu.port], ROOT, signal.SIGTERM, wait_s=WAIT_S)
         with DynamixelBus(robot.config.servos, emu.port) as bus:
             torque = bus.torque_enabled()
-    assert process.returncode == 128 + signal.SIGTERM, stderr
+    assert returncode == 128 + signal.SIGTERM, stderr
     assert "Traceback" not in stderr and "stopped by SIGTERM" in stderr
-    legs_and_head = [j for j in robot.config.servos.ids if j.startswith(("Head", "R", "L")) and "Shoulder" not in j
-                     and "Elbow" not in j]  # fmt: skip
-    assert all(torque[j] for j in legs_and_head) and not torque["RElbow"]
+    groups = joint_groups(robot)  # --exit-torque on: the joints the capture touched, legs and head; no arm
+    assert all(torque[j] for j in groups["legs"] + groups["head"]) and not any(torque[j] for j in groups["arms"])
     kept = len(read_capture(out, robot.config).samples)
     assert kept >= 2 and f"{kept} sample(s) saved in" in stderr
 
