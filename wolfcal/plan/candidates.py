@@ -114,8 +114,10 @@ def tag_views(robot: Robot, camera: PlanCamera, q: np.ndarray, tag_ids: list[int
     if camera.external:
         return external_visibility(robot, camera.model, camera.pose(), q, nominal) & used
     width = camera.model.width
-    edge = IMAGE_EDGE_MARGIN * width
-    return tag_visibility(robot, camera.model, q, nominal, robot.config.tag_ids, edge, 0.02 * width) & used
+    out = np.zeros((len(q), len(used)), dtype=bool)
+    ids = [t for t in robot.config.tag_ids if t in tag_ids]  # only the used tags are projected
+    out[:, used] = tag_visibility(robot, camera.model, q, nominal, ids, IMAGE_EDGE_MARGIN * width, 0.02 * width)
+    return out
 
 
 def line_of_sight(robot: Robot, camera: PlanCamera, q: np.ndarray, collisions: CollisionModel) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Choose n of N candidate poses by the expected information: a greedy start, then exchanges (DETMAX-like).
 
-Information in the fit's prior-normalised unknowns z: M(S) = I + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
-Jacobian rows of candidate k, `wolfcal.plan.information`), covariance C = M^-1. The criterion looks at the
+Information in the fit's prior-normalised unknowns z: M(S) = I + M_0 + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
+Jacobian rows of candidate k, M_0: what every plan of n poses gets, the repeated views, `wolfcal.plan.information`),
+covariance C = M^-1. The criterion looks at the
 covariance of the observable chain unknowns, C_obs = B^T C_cc B (B: (c, k) basis without the directions no pose can
 inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs (default), A = trace
 C_obs, E = largest eigenvalue of C_obs; smaller is better. Adding candidate k is a rank-r update, evaluated for all
@@ -38,36 +39,45 @@ def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
 
 
 def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criterion: str) -> np.ndarray:
-    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates."""
+    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates (one matrix
+    product over all candidates' rows for each quadratic form)."""
+    N, r, P = G.shape
     c = basis.shape[0]
     C = np.linalg.inv(M)
     C = 0.5 * (C + C.T)
+    Y = C[:, :c] @ basis  # (P, k): C_zB
     C_obs = basis.T @ C[:c, :c] @ basis
-    GC = G @ C  # (N, r, P)
-    S = np.eye(G.shape[1]) + GC @ np.swapaxes(G, 1, 2)  # (N, r, r)
-    V = GC[:, :, :c] @ basis  # (N, r, k)
+    rows = G.reshape(N * r, P)
+    Gt = np.swapaxes(G, 1, 2)
+    S = np.eye(r) + (rows @ C).reshape(N, r, P) @ Gt  # (N, r, r)
     if criterion == "D":
-        inner = S - V @ np.linalg.solve(C_obs, np.swapaxes(V, 1, 2))
+        # S_k - V_k C_obs^-1 V_k^T = I + G_k (C - Y C_obs^-1 Y^T) G_k^T
+        D = C - Y @ np.linalg.solve(C_obs, Y.T)
+        inner = np.eye(r) + (rows @ D).reshape(N, r, P) @ Gt
         return np.linalg.slogdet(C_obs)[1] + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
+    V = (rows @ Y).reshape(N, r, -1)  # (N, r, k)
     SinvV = np.linalg.solve(S, V)  # (N, r, k)
     if criterion == "A":
         return np.trace(C_obs) - np.einsum("nrk,nrk->n", V, SinvV)
     return np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
 
 
-def information(G: np.ndarray, chosen) -> np.ndarray:
-    """M = I + sum of the chosen candidates' information (P, P)."""
+def information(G: np.ndarray, chosen, M0: np.ndarray | None = None) -> np.ndarray:
+    """M = I + M0 + sum of the chosen candidates' information (P, P)."""
     chosen = np.asarray(list(chosen), dtype=int)
-    return np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    M = np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    return M if M0 is None else M + M0
 
 
-def select(G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D") -> tuple[list[int], float]:
-    """n distinct candidate indices and their criterion value: greedy additions, then sweeps that exchange each
-    chosen pose for the best other candidate while that improves the criterion."""
+def select(
+    G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D", M0: np.ndarray | None = None
+) -> tuple[list[int], float]:
+    """n distinct candidate indices and their criterion value: greedy additions (from I + M0), then sweeps that
+    exchange each chosen pose for the best other candidate while that improves the criterion."""
     if n > len(G):
         raise WolfcalError(f"--poses {n}: only {len(G)} candidate poses were found; ask for fewer poses")
     chosen: list[int] = []
-    M = information(G, [])
+    M = information(G, [], M0)
     for _ in range(n):
         values = values_after_adding(M, G, basis, criterion)
         values[chosen] = np.inf

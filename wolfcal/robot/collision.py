@@ -1,8 +1,9 @@
 """The robot's body as capsules: self-collision and line of sight, vectorised over configurations.
 
 Geometry, in this order of preference:
-- the URDF's `<collision>` primitives, each bounded by a capsule (cylinder: its axis and radius; sphere: a point;
-  box: its longest axis, radius half the diagonal of the other two edges); mesh geometry is refused;
+- the URDF's `<collision>` geometry, each shape bounded by a capsule (cylinder: its axis and radius; sphere: a point;
+  box: its longest edge, radius half the diagonal of the other two; mesh: that of its oriented bounding box; see
+  `wolfcal.robot.collision_urdf`);
 - otherwise `collision_radii: {link: m}` of the robot config: per listed link, capsules from the link's origin to
   the origin of each of its child joints (a sphere at the origin for a link without children).
 Capsules of links joined by fixed joints form one body. Pairs never checked (as in MoveIt's allowed-collision
@@ -17,9 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.robot.collision_urdf import urdf_collision_segments
 from wolfcal.robot.robot import Robot
 
 REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other
+EXACT_BELOW_M = 0.05  # capsule pairs whose bounding spheres are further apart need no exact distance [m]
 
 
 @dataclass(frozen=True)
@@ -76,10 +79,16 @@ class CollisionModel:
         return a, b
 
     def _pair_clearance(self, q: np.ndarray) -> np.ndarray:
-        """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]."""
+        """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]: exact below EXACT_BELOW_M,
+        above it a lower bound (from the distance of the segments' midpoints), enough for every threshold used."""
         a, b = self.segments(q)
         i, j = self.pairs[:, 0], self.pairs[:, 1]
-        return segment_distance(a[:, i], b[:, i], a[:, j], b[:, j]) - self.radius[i] - self.radius[j]
+        mid, half = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2)
+        d = np.linalg.norm(mid[:, i] - mid[:, j], axis=2) - half[:, i] - half[:, j] - self.radius[i] - self.radius[j]
+        n, k = np.nonzero(d < EXACT_BELOW_M)
+        ik, jk = i[k], j[k]
+        d[n, k] = segment_distance(a[n, ik], b[n, ik], a[n, jk], b[n, jk]) - self.radius[ik] - self.radius[jk]
+        return d
 
     def clearance(self, q: np.ndarray) -> np.ndarray:
         """(N,) smallest surface distance between checked bodies [m] (negative: they overlap)."""
@@ -138,33 +147,12 @@ def rest_configuration(robot: Robot) -> np.ndarray:
 
 
 def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules bounding the URDF's <collision> primitives (empty when it has none)."""
-    import yourdfpy  # its mesh library is slow to import: only pose planning and pose checks need it
-
-    urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False,
-                              build_collision_scene_graph=False)  # fmt: skip
-    capsules = []
-    for link in urdf.robot.links:
-        for collision in link.collisions:
-            T = np.eye(4) if collision.origin is None else np.asarray(collision.origin, float)
-            g = collision.geometry
-            if g.cylinder is not None:
-                half, radius = 0.5 * g.cylinder.length * T[:3, 2], g.cylinder.radius
-            elif g.sphere is not None:
-                half, radius = np.zeros(3), g.sphere.radius
-            elif g.box is not None:
-                size = np.asarray(g.box.size, float)
-                k = int(np.argmax(size))
-                radius = 0.5 * float(np.linalg.norm(np.delete(size, k)))
-                half = max(0.5 * size[k] - radius, 0.0) * T[:3, k]
-            else:
-                raise WolfcalError(
-                    f"{robot.config.urdf}: link '{link.name}' has <collision> mesh geometry, which wolfcal cannot "
-                    "check; use boxes, cylinders or spheres there, or remove <collision> and give "
-                    "'collision_radii:' in the robot config"
-                )
-            capsules.append(Capsule(link.name, body[link.name], T[:3, 3] - half, T[:3, 3] + half, float(radius)))
-    return capsules
+    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)."""
+    segments = urdf_collision_segments(robot.config.urdf)
+    unknown = sorted({link for link, *_ in segments} - robot.model.links)
+    if unknown:
+        raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
+    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in segments]
 
 
 def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
