@@ -2,7 +2,8 @@
 MCAP file.
 
 Checks everything it can before anything moves, opens the bus, the cameras (`cameras`) and the writer, runs the
-scripted mode (`scripted`) or the manual one (`manual`) in a live view, then leaves the torque as --exit-torque says
+scripted mode (`scripted`), the manual one (`manual`) or a floor capture (`floor`: either with
+standing legs) in a live view, then leaves the torque as --exit-torque says
 (`exit_torque`). The file is written through `CaptureWriter` (each sample durable on return); Ctrl-C, a bus or
 camera failure finish the file with every sample taken so far before the error is reported.
 """
@@ -15,9 +16,17 @@ from rich.console import Console
 
 from wolfcal.capture.cameras import close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
+from wolfcal.capture.floor import (
+    check_floor_limp,
+    floor_joints,
+    floor_script,
+    stand,
+    standing_targets,
+    without_collisions,
+)
 from wolfcal.capture.manual import confirm_limp, parse_limp, run_manual
 from wolfcal.capture.options import CaptureOptions, check_options
-from wolfcal.capture.poses import check_collisions, joint_limits, load_poses
+from wolfcal.capture.poses import DEFAULT_VELOCITY, PoseScript, check_collisions, joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
@@ -26,7 +35,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
 from wolfcal.hardware.camera import CameraError
 from wolfcal.io.writer import CaptureWriter
-from wolfcal.robot.robot import load_robot
+from wolfcal.robot.robot import Robot, load_robot
 
 __all__ = ["CaptureOptions", "CaptureSummary", "run_capture"]
 
@@ -43,25 +52,27 @@ def run_capture(
             f"{robot.config.path}: no 'servos' section (port, ids): capture needs the servo bus"
         )
     limits = joint_limits(robot, robot.config.servos.ids)
-    script = load_poses(options.poses, limits) if options.poses else None  # refused before anything moves
-    limp = parse_limp(options.limp, robot) if options.manual else []
+    script, limp, standing = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
-    touched = script.joints if script else limp
-    status = Status(
-        "scripted" if script else "manual", options.samples or (len(script.poses) if script else None)
-    )
+    touched = script.joints if script else [*standing, *limp]
+    mode = ("floor " if options.floor else "") + ("scripted" if script else "manual")
+    status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
     with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
-        if script and options.poses:  # before anything moves: where the robot stands decides the joints no pose names
+        if script:  # before anything moves: where the robot stands decides the joints no pose names
             start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
-            note = check_collisions(robot, script, options.poses, start)
+            if options.floor:  # floor views the robot cannot take are left out, not refused
+                script, note = without_collisions(robot, script, start)
+                status.target = options.samples or len(script.poses)
+            else:
+                note = check_collisions(robot, script, options.poses or "", start)
             if note:
                 console.print(f"note: {note}")
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
-            confirm_limp([j for j in limp if initial[j]], options.yes, ask)
+            confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor)
         open_sources(cameras, robot, bus.port_name)
         try:
             streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
@@ -78,6 +89,8 @@ def run_capture(
                 if script:
                     run_scripted(session, script)
                 else:
+                    if standing:
+                        stand(session, standing, options.velocity or DEFAULT_VELOCITY)
                     run_manual(session, limp)
         except (BusError, CameraError, KeyboardInterrupt) as exc:  # KeyboardInterrupt: also SIGTERM, SIGHUP
             failure = exc
@@ -93,6 +106,22 @@ def run_capture(
         failure = failure or interruption(noted)
     _say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
     return session.summary
+
+
+def _plan(
+    options: CaptureOptions, robot: Robot, limits: dict[str, tuple[float, float]]
+) -> tuple[PoseScript | None, list[str], dict[str, float]]:
+    """(poses to drive through, joints to switch off for the operator, standing readings [rad] the legs hold while
+    the operator turns the head (manual floor capture)), each checked before anything moves."""
+    script = load_poses(options.poses, limits) if options.poses else None
+    limp = parse_limp(options.limp or ("head" if options.floor else "head,legs"), robot) if options.manual else []
+    standing: dict[str, float] = {}
+    if options.floor and options.manual:
+        check_floor_limp(robot, limp)
+        standing = {j: q for j, q in standing_targets(robot).items() if j in floor_joints(robot)[0]}
+    elif options.floor:
+        script = floor_script(robot, options.velocity or DEFAULT_VELOCITY)
+    return script, limp, standing
 
 
 def _say_end(
