@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from rich.console import Console
 
-from wolfcal.capture.cameras import close_sources, open_sources, plan_cameras
+from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
 from wolfcal.capture.floor import (
     check_floor_limp,
@@ -62,24 +62,11 @@ def run_capture(
         bus.ping_all()
         bus.check_hardware()
         if script:  # before anything moves: where the robot stands decides the joints no pose names
-            start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
-            if options.floor:  # floor views the robot cannot take are left out, not refused
-                script, note = without_collisions(robot, script, start)
-                status.target = options.samples or len(script.poses)
-            else:
-                note = check_collisions(robot, script, options.poses or "", start)
-            if note:
-                console.print(f"note: {note}")
+            script = _checked_script(options, robot, script, bus, status, console)
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
             confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor)
-        open_sources(cameras, robot, bus.port_name)
-        try:
-            streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
-            writer = CaptureWriter(options.out, robot.config, streams, options.image_format)
-        except WolfcalError:
-            close_sources(cameras)
-            raise
+        writer = _open_outputs(options, robot, cameras, bus.port_name)
         view = LiveView(status, coverage, console)
         sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
         session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
@@ -106,6 +93,37 @@ def run_capture(
         failure = failure or interruption(noted)
     _say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
     return session.summary
+
+
+def _checked_script(
+    options: CaptureOptions, robot: Robot, script: PoseScript, bus: DynamixelBus, status: Status, console: Console
+) -> PoseScript:
+    """The script checked against collisions from where the robot stands now, before anything moves.
+
+    Floor views the robot cannot take are left out (with a note); a colliding pose of a poses file is refused.
+    """
+    start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
+    if options.floor:
+        script, note = without_collisions(robot, script, start)
+        status.target = options.samples or len(script.poses)
+    else:
+        note = check_collisions(robot, script, options.poses or "", start)
+    if note:
+        console.print(f"note: {note}")
+    return script
+
+
+def _open_outputs(
+    options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], port_name: str
+) -> CaptureWriter:
+    """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
+    open_sources(cameras, robot, port_name)
+    try:
+        streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
+        return CaptureWriter(options.out, robot.config, streams, options.image_format)
+    except WolfcalError:
+        close_sources(cameras)
+        raise
 
 
 def _plan(
