@@ -96,8 +96,9 @@ def deploy_verdict(
     if camera_turn_rad > limits.mount_limit_rad:
         notes.append(
             f"The camera correction turns the camera by {np.rad2deg(camera_turn_rad):.1f} deg, more than a camera "
-            f"mount moves ({np.rad2deg(limits.mount_limit_rad):g} deg): it may be absorbing joint offsets; check "
-            "the ground error with floor samples before deploying."
+            f"mount moves ({np.rad2deg(limits.mount_limit_rad):g} deg): it may be absorbing joint offsets; "
+            + ("the ground error measured on the held-out floor views is the check of that." if measured_ground
+               else "check the ground error with floor samples before deploying.")  # fmt: skip
         )
     deploy = not refusals
     if deploy:

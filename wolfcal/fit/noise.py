@@ -6,7 +6,9 @@ covariance C_g = sigma^2 I + S_g, S_g = sigma_q^2 A_g A_g^T (A_g = d(rows)/d(joi
 detection error (`SharedErrors`). With S_g = U diag(l) U^T, W_g = diag(1 / sqrt(sigma^2 + l)) U^T whitens them
 (W_g^T W_g = C_g^-1). The eigen-decomposition is
 done once per linearisation, so trying another sigma (the noise-level search) costs one division. Groups of equal
-size are decomposed in one batched call.
+size are decomposed in one batched call. Rows may have their own noise level, sigma * s_i (`row_scale` s, e.g. one per
+motion-capture marker): with D = diag(s), C_g = D (sigma^2 I + D^-1 S_g D^-1) D, so the same decomposition of
+D^-1 S_g D^-1 whitens r / s.
 """
 
 from __future__ import annotations
@@ -57,16 +59,18 @@ class GroupedWhitening:
     """Whitening of residual rows split into groups (list of row-index arrays) with covariance
     sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are independent."""
 
-    def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
+    def __init__(self, groups: list[np.ndarray], shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
         self.groups, self.shared = groups, shared
         self.n_rows = len(shared.A)
+        self.row_scale = np.ones(self.n_rows) if row_scale is None else np.asarray(row_scale, dtype=float)
         sizes = np.array([len(g) for g in groups], dtype=int)
         self._classes = []  # (rows (G, n), eigenvalues (G, n), eigenvectors (G, n, n))
         for n in np.unique(sizes):
             if n == 0:
                 continue
             rows = np.stack([groups[i] for i in np.flatnonzero(sizes == n)])
-            lam, U = np.linalg.eigh(shared.covariance(rows))
+            s = self.row_scale[rows]
+            lam, U = np.linalg.eigh(shared.covariance(rows) / (s[:, :, None] * s[:, None, :]))
             self._classes.append((rows, np.clip(lam, 0.0, None), U))
         self.group_of_row = np.full(self.n_rows, -1)
         for k, g in enumerate(groups):
@@ -75,11 +79,12 @@ class GroupedWhitening:
 
     def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
         """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.groups, shared)
+        return GroupedWhitening(self.groups, shared, self.row_scale)
 
     def rotate(self, r: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per size class: U^T r of each group (G, n) and its eigenvalues (G, n)."""
-        return [np.einsum("gji,gj->gi", U, r[rows]) for rows, _, U in self._classes], [c[1] for c in self._classes]
+        scaled = r / self.row_scale
+        return [np.einsum("gji,gj->gi", U, scaled[rows]) for rows, _, U in self._classes], [c[1] for c in self._classes]
 
     def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """Whitened residuals of the grouped rows, flat, in no particular order (for scale estimates)."""
@@ -101,7 +106,7 @@ class GroupedWhitening:
         data, rr, cc = [], [], []
         for rows, lam, U in self._classes:
             n = rows.shape[1]
-            W = np.swapaxes(U, 1, 2) / np.sqrt(sigma**2 + lam)[:, :, None]  # (G, n, n)
+            W = np.swapaxes(U, 1, 2) / np.sqrt(sigma**2 + lam)[:, :, None] / self.row_scale[rows][:, None, :]
             data.append(W.ravel())
             rr.append(np.repeat(rows, n, axis=1).ravel())
             cc.append(np.tile(rows, (1, n)).ravel())

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
-import yaml
 
 import wolfcal
 from wolfcal.atomic import write_text_atomic
@@ -24,7 +23,7 @@ from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.yamlfile import read_yaml
+from wolfcal.yamlfile import dump_yaml, read_yaml
 
 if TYPE_CHECKING:
     from wolfcal.fit.pipeline import Fit
@@ -76,7 +75,12 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
 
 
 def _display(value: float, unit: str) -> str:
-    return f"{np.rad2deg(value):+.3f} deg" if unit == "rad" else f"{value * 1000:+.2f} mm"
+    """A parameter value [SI, or px] as a user reads it: degrees, millimetres or pixels."""
+    if unit == "rad":
+        return f"{np.rad2deg(value):+.3f} deg"
+    if unit == "m":
+        return f"{value * 1000:+.2f} mm"
+    return f"{value:+.3f} {unit}"
 
 
 def _measured_by(fit: Fit) -> list[list[str]]:
@@ -358,7 +362,7 @@ def plain(value):
 
 
 def write_result(path: Path, result: FitResult) -> None:
-    write_text_atomic(path, yaml.safe_dump(result.to_dict(), sort_keys=False, width=120))
+    write_text_atomic(path, dump_yaml(result.to_dict(), sort_keys=False, width=120))
 
 
 def load_result(path: str | Path) -> FitResult:
