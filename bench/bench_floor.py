@@ -89,10 +89,14 @@ def run(scenario: str, seed: int, folder: Path) -> str:
     _, held = split_floor(robot, observations(robot, [paths["held_floor"]]))
     line = f"{scenario:6s} seed {seed}: true ground error at 4.5 m {before * 100:.1f} -> {after * 100:.2f} cm"
     if held is not None:
-        measured = measured_ground_errors(robot, held, {"after": fit.corrections}, (4.5,))
+        names = fit.params.names
+        k = names.index("floor.corner_inset")
+        inset = (float(fit.solution.values[k]), float(fit.solution.uncertainty.std[k]))
+        measured = measured_ground_errors(robot, held, {"after": fit.corrections}, (4.5,), inset)
         if measured is not None:
             row = measured["models"]["after"]["rows"][0]
-            line += f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm"
+            line += (f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
+                     f"{(row['error_m'] - after) / row['std_m']:+.1f}; inset {inset[0]:.2f} px)")
     rng = np.random.default_rng(seed)
     soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
     line += (f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "

@@ -35,10 +35,9 @@ from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
 from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.corner_bias import inset_directions
+from wolfcal.vision.corner_bias import REFERENCE_EDGE_PX, apparent_edges, inset_directions, small_view_weight
 from wolfcal.vision.tags import tag_corners
 
-REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] below which a floor tag's corners are down-weighted
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
 INSET_PRIOR_PX = 1.0  # prior of the corner detector's inward bias at REFERENCE_EDGE_PX [px]
@@ -97,7 +96,7 @@ class FloorBlock(Block):
         self.view_of_unit = view_of_unit.ravel()
         self.view_labels = [(int(s), int(t)) for s, t in views]
         edge = self._apparent_edge()
-        self.weight = 1.0 / np.maximum(1.0, REFERENCE_EDGE_PX / edge)
+        self.weight = small_view_weight(edge)
         # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
         self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
         self.nuisance = self._place_parameters() + ParameterSet(
@@ -107,11 +106,7 @@ class FloorBlock(Block):
         """(M,) mean edge length of each corner's tag view in the image [px]."""
         ring = np.full((len(self.view_labels), 4, 2), np.nan)
         ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        lengths = np.linalg.norm(ring - np.roll(ring, 1, axis=1), axis=2)  # (V, 4), NaN next to a missing corner
-        known = np.isfinite(lengths)
-        edge = np.where(known.any(axis=1), np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1),
-                        REFERENCE_EDGE_PX)
-        return edge[self.view_of_unit]
+        return apparent_edges(ring)[self.view_of_unit]
 
     def _inward(self) -> np.ndarray:
         """(M, 2) `corner_bias.inset_directions` of each detected corner's view [px/px]."""

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] at which the inset is stated; smaller views count less
+
 
 def inset_directions(ring: np.ndarray) -> np.ndarray:
     """(V, 4, 2) how each corner of the tag views `ring` (V, 4, 2) [px, corners in order around the tag] moves when
@@ -25,3 +27,25 @@ def inset_directions(ring: np.ndarray) -> np.ndarray:
     A[~whole] = np.eye(2)
     move = np.linalg.solve(A, np.ones(ring.shape[:2] + (2, 1)))[..., 0]
     return np.where(whole[:, None, None], move, 0.0)
+
+
+def apparent_edges(ring: np.ndarray) -> np.ndarray:
+    """(V,) mean edge length [px] of tag views `ring` (V, 4, 2), over the edges whose two corners are known
+    (REFERENCE_EDGE_PX for a view without a known edge)."""
+    lengths = np.linalg.norm(ring - np.roll(ring, 1, axis=1), axis=2)  # (V, 4), NaN next to a missing corner
+    known = np.isfinite(lengths)
+    return np.where(known.any(axis=1), np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1),
+                    REFERENCE_EDGE_PX)  # fmt: skip
+
+
+def small_view_weight(edge: np.ndarray) -> np.ndarray:
+    """Weight of a tag view's corners by its apparent edge [px]: 1 at or above REFERENCE_EDGE_PX, edge /
+    REFERENCE_EDGE_PX below (a small view counts as much as one REFERENCE_EDGE_PX wide, no more)."""
+    return 1.0 / np.maximum(1.0, REFERENCE_EDGE_PX / edge)
+
+
+def inset_moves(ring: np.ndarray) -> np.ndarray:
+    """(V, 4, 2) how each detected corner of the views `ring` (V, 4, 2) [px] moves per pixel of inset [px/px]: the
+    inset applies in full at REFERENCE_EDGE_PX apparent edge and shrinks as 1/edge above (`inset_directions`)."""
+    scale = np.minimum(1.0, REFERENCE_EDGE_PX / apparent_edges(ring))
+    return inset_directions(ring) * scale[:, None, None]
