@@ -159,7 +159,7 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     r = fit.residuals(x, every)
     J = _jacobian(lambda u: fit.residuals(u, every), x)
     dof = max(len(r) - len(x), 1)
-    covariance = np.linalg.pinv(J.T @ J) * max(float(r @ r) / dof, 1.0)
+    covariance = np.linalg.pinv(J.T @ J) * max(float(r @ r) / dof, robot.config.priors.pixel_noise**2)
     samples, tags = np.unique(views.samples), np.unique(views.tags)
     by_sample = np.stack([fit.solve(x, views.samples != s, scale)[:7] for s in samples]) if len(samples) > 2 else None
     by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
@@ -236,7 +236,7 @@ def measured_ground_errors(
 def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
     """1-sigma [m] of a ground error: sqrt of the trace of its offset's (2,) covariance, so that it bounds how far
     the error's length can be off even when the offset is near zero. Covariance: the larger of the formal one
-    (residual scale, at least the noise the weights assume) and the delete-one-sample jackknife's (errors shared
+    (residual scale, at least the config's `priors.pixel_noise`) and the delete-one-sample jackknife's (errors shared
     within a sample: joint readings), plus the delete-one-tag jackknife's (errors shared by a tag's views: its
     corner bias); each part's sqrt-trace alongside [m]."""
     x = floor["unknowns"]
