@@ -47,7 +47,6 @@ class BlockState:
         self.groups = block.noise_groups()  # (U,) fixed: derived once
         self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.whitening: GroupedWhitening | None = None
-        self.W: scipy.sparse.csr_matrix | None = None
 
     def shared_size(self, sigma: float) -> float:
         """Size of a repeating detection error per axis [the block's unit] at the noise level `sigma`."""
@@ -105,7 +104,10 @@ class BlockState:
         shared = self.noise_model.shared
         if shared.tau != tau and np.any(shared.label >= 0):
             self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
-        self.W = self.noise_model.matrix(sigma)
+
+    def whiten(self, M):
+        """The block's rows (R,) or (R, P) whitened at its noise level (`GroupedWhitening.apply`)."""
+        return self.noise_model.apply(M, self.sigma)
 
     @property
     def noise_model(self) -> GroupedWhitening:
@@ -166,7 +168,7 @@ class Problem:
         return [lin.residual for lin in self.evaluate(z)]
 
     def _whitened(self, z: np.ndarray) -> list[np.ndarray]:
-        return [s.W @ lin.residual.ravel() for s, lin in zip(self.states, self.evaluate(z))]
+        return [s.whiten(lin.residual.ravel()) for s, lin in zip(self.states, self.evaluate(z))]
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Robust whitened data residuals of every block (zero for left-out views), then the priors z."""
@@ -194,7 +196,7 @@ class Problem:
                 vals = lin.jac_local.reshape(rows, L).ravel()
                 local = scipy.sparse.csr_matrix((vals, (r_idx, c_idx)), shape=(rows, n))
                 J = (J + local).tocsr() if sparse else J + local.toarray()
-            J = state.W @ J
+            J = state.whiten(J)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
                 J = scipy.sparse.diags(scale) @ J if sparse else J * scale[:, None]
