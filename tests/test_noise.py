@@ -2,9 +2,17 @@
 definition and whitened with its symmetric inverse square root (eigen-decomposition of the whole matrix)."""
 
 import numpy as np
+import pytest
 import scipy.sparse
 
+from wolfcal.camera.model import CameraModel
+from wolfcal.fit import problem, solver
 from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.sim.observations import synthetic_observations
+from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
+
+TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5], [0, 0, 1]]), np.zeros(5))
 
 
 def dense_covariance(shared: SharedErrors, rows: np.ndarray, sigma: float) -> np.ndarray:
@@ -78,3 +86,69 @@ def test_a_long_still_pose_is_never_a_dense_block():
             r = rng.normal(0, 1.0, 2 * units)
             W = dense_whitening([np.arange(2 * units)], shared, 0.2)
             assert np.allclose(whitening.apply(r, 0.2), W @ r, atol=1e-9)
+
+
+class DenseWhitening:
+    """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix and
+    eigen-decomposed, C_g^-1/2 = V diag(1 / sqrt(sigma^2 + l)) V^T, applied as a dense R x R matrix."""
+
+    def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
+        self.groups, self.shared = groups, shared
+        self.eigen = [np.linalg.eigh(dense_covariance(shared, rows, 0.0)) for rows in groups]
+
+    def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
+        return DenseWhitening(self.groups, shared)
+
+    def matrix(self, sigma: float) -> np.ndarray:
+        W = np.zeros((len(self.shared.A), len(self.shared.A)))
+        for rows, (lam, V) in zip(self.groups, self.eigen):
+            W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + np.clip(lam, 0, None))) @ V.T
+        return W
+
+    def apply(self, M, sigma: float):
+        W = self.matrix(sigma)
+        return scipy.sparse.csr_matrix(W @ M.toarray()) if scipy.sparse.issparse(M) else W @ M
+
+    def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
+        return (self.matrix(sigma) @ r)[np.concatenate(self.groups)] if self.groups else np.zeros(0)
+
+    def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
+        w = self.matrix(sigma) @ r
+        return np.array([np.sum(w[rows] ** 2) for rows in self.groups])
+
+
+def repeated_frames(robot, camera, frames: int):
+    """Still poses each seen in `frames` frames (independent pixel noise, the same joint readings): the corners of
+    one pose share a repeating detection error, so a noise group spans all frames of its pose."""
+    scenario = synthetic_scenario(robot, camera, n=8, seed=23, offsets="all")
+    obs = scenario.obs
+    visible = np.zeros((obs.n_samples, len(robot.config.tag_ids)), dtype=bool)
+    visible[obs.sample_index, [robot.config.tag_ids.index(t) for t in obs.tag_ids]] = True
+    q_true, visible = np.repeat(scenario.q_true, frames, axis=0), np.repeat(visible, frames, axis=0)
+    return synthetic_observations(robot, camera, scenario.truth, q_true, visible, 0.15, np.random.default_rng(24))
+
+
+@pytest.mark.parametrize("system", ["head", "head, repeated frames", "external moving"])
+def test_a_fit_is_the_same_as_with_the_dense_whitening(robot, camera, monkeypatch, system):
+    """Every noise model of the fit (per-round groups, per-view outlier groups, the noise-level search, the robust
+    loss and the reported uncertainty) through the dense reference instead: the same fit to numerical precision.
+    Head camera: leg preset, outlier samples; still poses seen in several frames (repeating detection errors);
+    external camera with a pose per sample: a sparse Jacobian (more unknowns than DENSE_LIMIT)."""
+    options = FitOptions(free="leg", side="both")
+    if system == "head":
+        obs = synthetic_scenario(robot, camera, n=20, seed=21, offsets="all", outlier_fraction=0.1).obs
+    elif system == "head, repeated frames":
+        obs = repeated_frames(robot, camera, 6)
+    else:
+        obs = synthetic_external_scenario(robot, TRIPOD, n=60, seed=22).obs
+        options = FitOptions(free="leg", external_moving=True)
+    thin = fit_observations(robot, obs, options)
+    monkeypatch.setattr(problem, "GroupedWhitening", DenseWhitening)
+    monkeypatch.setattr(solver, "GroupedWhitening", DenseWhitening)
+    dense = fit_observations(robot, obs, options)
+    assert (len(thin.params) > problem.DENSE_LIMIT) == (system == "external moving")
+    for a, b in zip(thin.solution.blocks, dense.solution.blocks):
+        assert a.outlier_views == b.outlier_views
+        assert a.sigma == pytest.approx(b.sigma, rel=1e-9)
+    assert np.all(np.abs(thin.solution.values - dense.solution.values) < 1e-6 * dense.solution.std)
+    np.testing.assert_allclose(thin.solution.std, dense.solution.std, rtol=1e-7)
