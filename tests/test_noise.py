@@ -7,7 +7,7 @@ import scipy.sparse
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.fit import problem, solver
-from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.sim.observations import synthetic_observations
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
@@ -50,8 +50,10 @@ def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covarianc
     for tau in (0.0, 0.4):
         shared, pose = shared_errors(rng, 60, tau)
         keep = rng.random(60) > 0.1  # left-out units belong to no group
-        groups = split_rows(pose, 2, keep)
-        whitening = GroupedWhitening(groups, shared)
+        groups = [np.flatnonzero(np.repeat((pose == p) & keep, 2)) for p in np.unique(pose[keep])]
+        group_of_row = row_groups(pose, 2, keep)
+        assert [np.flatnonzero(group_of_row == k).tolist() for k in range(len(groups))] == [g.tolist() for g in groups]
+        whitening = GroupedWhitening(group_of_row, shared)
         for sigma in (0.05, 0.3, 2.0):
             W = dense_whitening(groups, shared, sigma)
             r = rng.normal(0, 1.0, 120)
@@ -80,7 +82,7 @@ def test_a_long_still_pose_is_never_a_dense_block():
         label = np.tile(np.arange(40), frames)  # each corner's detection error repeats in every frame
         shared = SharedErrors(A=A, sigma_q=1.5e-3, reading=np.zeros(2 * units, dtype=int),
                               label=np.repeat(label, 2), axis=np.tile(np.arange(2), units), tau=0.1)  # fmt: skip
-        whitening = GroupedWhitening([np.arange(2 * units)], shared)
+        whitening = GroupedWhitening(np.zeros(2 * units, dtype=int), shared)
         assert whitening.Q.nnz <= 2 * units * (4 + 80)
         if units == 200:
             r = rng.normal(0, 1.0, 2 * units)
@@ -92,12 +94,13 @@ class DenseWhitening:
     """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix and
     eigen-decomposed, C_g^-1/2 = V diag(1 / sqrt(sigma^2 + l)) V^T, applied as a dense R x R matrix."""
 
-    def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
-        self.groups, self.shared = groups, shared
-        self.eigen = [np.linalg.eigh(dense_covariance(shared, rows, 0.0)) for rows in groups]
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors) -> None:
+        self.group_of_row, self.shared = group_of_row, shared
+        self.groups = [np.flatnonzero(group_of_row == k) for k in range(group_of_row.max() + 1)]
+        self.eigen = [np.linalg.eigh(dense_covariance(shared, rows, 0.0)) for rows in self.groups]
 
     def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
-        return DenseWhitening(self.groups, shared)
+        return DenseWhitening(self.group_of_row, shared)
 
     def matrix(self, sigma: float) -> np.ndarray:
         W = np.zeros((len(self.shared.A), len(self.shared.A)))

@@ -24,14 +24,13 @@ import scipy.sparse
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
 
 
-def split_rows(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> list[np.ndarray]:
-    """Row indices of each group of units: unit u (label labels[u]) owns rows u*dim .. u*dim+dim-1; units with
-    keep False are left out; groups in ascending label order, empty groups dropped."""
+def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> np.ndarray:
+    """(U * dim,) group of each row: unit u (label labels[u]) owns rows u*dim .. u*dim+dim-1; groups numbered
+    0, 1, ... in ascending label order; rows of units with keep False are in no group (-1)."""
     units = np.arange(len(labels)) if keep is None else np.flatnonzero(keep)
-    order = units[np.argsort(labels[units], kind="stable")]
-    bounds = np.flatnonzero(np.diff(labels[order])) + 1
-    rows = (order[:, None] * dim + np.arange(dim)).ravel()
-    return np.split(rows, bounds * dim) if len(order) else []
+    group = np.full(len(labels), -1)
+    group[units] = np.unique(labels[units], return_inverse=True)[1].ravel()
+    return np.repeat(group, dim)
 
 
 @dataclass
@@ -61,18 +60,17 @@ def _slots(group: np.ndarray, key: np.ndarray, on: np.ndarray, n_groups: int) ->
 
 
 class GroupedWhitening:
-    """Whitening of residual rows split into groups (list of row-index arrays) with covariance
-    sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are independent, rows in
-    no group get zero weight."""
+    """Whitening of residual rows split into groups (`group_of_row`: (R,) group 0, 1, ... of each row, -1 for none)
+    with covariance sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are
+    independent, rows in no group get zero weight."""
 
-    def __init__(self, groups: list[np.ndarray], shared: SharedErrors) -> None:
-        self.groups, self.shared = groups, shared
-        self.n_rows, self.n_groups = len(shared.A), len(groups)
-        sizes = np.array([len(g) for g in groups], dtype=int)
-        self.rows = np.concatenate(groups) if groups else np.zeros(0, dtype=int)
-        self.group_of_row = np.full(self.n_rows, -1)
-        self.group_of_row[self.rows] = np.repeat(np.arange(self.n_groups), sizes)
-        self.in_group = self.group_of_row >= 0
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors) -> None:
+        self.group_of_row, self.shared = group_of_row, shared
+        self.in_group = group_of_row >= 0
+        self.n_rows, self.n_groups = len(shared.A), int(group_of_row.max()) + 1 if self.in_group.any() else 0
+        grouped = np.flatnonzero(self.in_group)
+        self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
+        sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
         self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
         self.QT = self.Q.T.tocsr()
 
@@ -118,7 +116,7 @@ class GroupedWhitening:
 
     def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
         """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.groups, shared)
+        return GroupedWhitening(self.group_of_row, shared)
 
     def apply(self, M, sigma: float):
         """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""
@@ -133,11 +131,11 @@ class GroupedWhitening:
         return keep[:, None] * M + self.Q @ (d[:, None] * (self.QT @ M))
 
     def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        """Whitened residuals of the grouped rows, flat, in the order of `groups` (for scale estimates)."""
+        """Whitened residuals of the grouped rows, flat, group by group (for scale estimates)."""
         return self.apply(r, sigma)[self.rows]
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals, in the order of `groups`."""
+        """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals."""
         t = self.QT @ r
         independent = np.bincount(self.group_of_row[self.rows], r[self.rows] ** 2, self.n_groups) / sigma**2
         shared = np.bincount(self.group_of_column, t**2 * (1.0 / (sigma**2 + self.s2) - 1.0 / sigma**2), self.n_groups)

@@ -18,7 +18,7 @@ import scipy.sparse
 from scipy.sparse.csgraph import connected_components
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
@@ -92,7 +92,7 @@ class BlockState:
                 shape=(n_read + int(label.max()) + 1,) * 2,
             )
             group_of_unit = connected_components(graph, directed=False)[1][reading]
-        self.whitening = GroupedWhitening(split_rows(group_of_unit, self.block.dim, self.inlier_units), shared)
+        self.whitening = GroupedWhitening(row_groups(group_of_unit, self.block.dim, self.inlier_units), shared)
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:

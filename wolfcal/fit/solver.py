@@ -17,7 +17,7 @@ import numpy as np
 
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
-from wolfcal.fit.noise import GroupedWhitening, split_rows
+from wolfcal.fit.noise import GroupedWhitening, row_groups
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
@@ -64,9 +64,9 @@ class Solution:
 def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
     block, residual = state.block, lin.residual
-    views = split_rows(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
-    w = GroupedWhitening(views, state.shared_errors(lin))
-    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / np.maximum([len(v) for v in views], 1))
+    views = row_groups(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
+    rows = np.bincount(views, minlength=block.n_views)
+    return np.sqrt(GroupedWhitening(views, state.shared_errors(lin)).group_norms(residual.ravel(), state.sigma) / rows)
 
 
 def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
