@@ -86,7 +86,12 @@ class GroupedWhitening:
         labelled = (shared.label[rows] >= 0) & (shared.tau > 0)
         label_slot, labels = _slots(group, shared.label[rows] * n_axes + shared.axis[rows], labelled, self.n_groups)
         starts = np.concatenate([[0], np.cumsum(sizes)])
-        data, row_idx, col_idx, s2, group_of_column = [], [], [], [], []
+        data: list[np.ndarray] = []
+        row_idx: list[np.ndarray] = []
+        col_idx: list[np.ndarray] = []
+        s2: list[np.ndarray] = []
+        group_of_column: list[np.ndarray] = []
+        K = 0  # columns so far
         for n in np.unique(sizes[sizes > 0]):
             members = np.flatnonzero(sizes == n)
             k_reading = n_joints * int(readings[members].max())
@@ -103,12 +108,12 @@ class GroupedWhitening:
             g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
             data.append(Q[g, :, c].ravel())
             row_idx.append(rows[at].reshape(len(members), n)[g].ravel())
-            col_idx.append(np.repeat(sum(len(x) for x in s2) + np.arange(len(g)), n))
+            col_idx.append(np.repeat(K + np.arange(len(g)), n))
             s2.append(s[g, c] ** 2)
             group_of_column.append(members[g])
+            K += len(g)
         if not data:
             return scipy.sparse.csr_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
-        K = sum(len(x) for x in s2)
         Q = scipy.sparse.csr_matrix(
             (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))), shape=(self.n_rows, K)
         )
