@@ -133,7 +133,9 @@ class GroupedWhitening:
         M = np.asarray(M, dtype=float)
         if M.ndim == 1:
             return keep * M + self.Q @ (d * (self.QT @ M))
-        return keep[:, None] * M + self.Q @ (d[:, None] * (self.QT @ M))
+        out = self.Q @ (d[:, None] * (self.QT @ M))
+        out += keep[:, None] * M
+        return out
 
     def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """Whitened residuals of the grouped rows, flat, group by group (for scale estimates)."""

@@ -152,6 +152,7 @@ class Problem:
         """Each block's linearisation at z (the last one is cached)."""
         key = np.asarray(z, dtype=float).tobytes()
         if self._cache is None or self._cache[0] != key:
+            self._cache = None  # dropped before the next one is built: only one linearisation in memory
             values = self.values(z)
             chain_values = values[: self.n_chain]
             lins = [s.block.linearize(chain_values, self.local_values(values, s), self.chain) for s in self.states]
@@ -199,11 +200,13 @@ class Problem:
             J = state.whiten(J)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
-                J = scipy.sparse.diags(scale) @ J if sparse else J * scale[:, None]
+                J = scipy.sparse.diags(scale) @ J if sparse else np.multiply(J, scale[:, None], out=J)
             parts.append(J)
-        stacked = scipy.sparse.vstack(parts).tocsr() if sparse else np.vstack(parts)
         sig = self.params.prior_sigmas
-        return stacked @ scipy.sparse.diags(sig) if sparse else stacked * sig
+        if sparse:
+            return scipy.sparse.vstack(parts).tocsr() @ scipy.sparse.diags(sig)
+        stacked = parts[0] if len(parts) == 1 else np.vstack(parts)
+        return np.multiply(stacked, sig, out=stacked)
 
     def jacobian(self, z: np.ndarray) -> np.ndarray | scipy.sparse.csr_matrix:
         """d(residuals)/dz: the robust data Jacobian above the identity of the priors."""

@@ -155,24 +155,32 @@ def _update_noise(
     return settled, notes
 
 
+def _update_round(
+    problem: Problem, z: np.ndarray, rows_total: int, min_sigma: dict[str, float]
+) -> tuple[bool, bool, list[str]]:
+    """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`); the linearisations
+    live only here."""
+    lins = problem.evaluate(z)
+    changed = _update_outliers(problem, lins)
+    problem.linearize(z)
+    settled, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
+    return changed, settled, notes
+
+
 def solve(
     problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
     min_sigma: dict[str, float] = MIN_SIGMA,
 ) -> Solution:
     """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
     say = progress or (lambda _msg: None)
-    n_params = len(problem.params)
-    z = np.zeros(n_params)
+    z = np.zeros(len(problem.params))
     before = [r.copy() for r in problem.raw_residuals(z)]
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
         result = levenberg_marquardt(problem.residuals, problem.jacobian, z, cost_tol=ROUND_COST_TOL)
         z, evaluations = result.x, evaluations + result.nfev
-        lins = problem.evaluate(z)
-        changed = _update_outliers(problem, lins)
-        problem.linearize(z)
-        settled, notes = _update_noise(problem, lins, n_params, rows_total, min_sigma)
+        changed, settled, notes = _update_round(problem, z, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break
