@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
-import yaml
 
 import wolfcal
 from wolfcal.atomic import write_text_atomic
@@ -24,7 +23,7 @@ from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.yamlfile import read_yaml
+from wolfcal.yamlfile import dump_yaml, read_yaml
 
 if TYPE_CHECKING:
     from wolfcal.fit.pipeline import Fit
@@ -106,17 +105,22 @@ def _block_dict(fit: Fit, k: int) -> dict:
     views = cast(TagViewBlock, block)
     obs = views.obs
     unit = b.unit
+    labels, _ = obs.views()  # (sample, tag id) sorted: the tags of each sample, once for all samples
+    tags = np.split(labels[:, 1], np.searchsorted(labels[:, 0], np.arange(1, obs.n_samples)))
+    outlier_tags: dict[int, list[int]] = {}
+    for s, t in sorted(b.outlier_views):
+        outlier_tags.setdefault(s, []).append(t)
     samples = []
     for i in range(obs.n_samples):
         samples.append({
             "index": i,
             "source": Path(obs.sources[i]).name,
             "stamp_ns": int(obs.stamps_ns[i]),
-            "tags": obs.tags_in_sample(i),
+            "tags": [int(t) for t in tags[i]],
             f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
             "outlier": bool(b.outlier_samples[i]),
-            "outlier_tags": sorted(t for s, t in b.outlier_views if s == i),
+            "outlier_tags": outlier_tags.get(i, []),
         })  # fmt: skip
     return {
         "name": b.name,
@@ -358,7 +362,7 @@ def plain(value):
 
 
 def write_result(path: Path, result: FitResult) -> None:
-    write_text_atomic(path, yaml.safe_dump(result.to_dict(), sort_keys=False, width=120))
+    write_text_atomic(path, dump_yaml(result.to_dict(), sort_keys=False, width=120))
 
 
 def load_result(path: str | Path) -> FitResult:
