@@ -5,10 +5,11 @@ Scenarios (Wolfgang, 2048x1536 head camera / 1280x720 tripod webcam at the expec
 `external` (--free leg, tripod camera, offsets on the legs). Per seed: a random truth; 12 planned poses (2000
 candidates, D-optimal) against 30 and 12 random valid candidates. Observations are tag corners projected at the true
 kinematics with 0.15 px Gaussian noise and quantised encoder readings (no rendering; `wolfcal simulate --poses`
-renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position max
-over 500 random leg poses, or camera pose max over the head range), median over the seeds; the worst reported std
-among the parameters some pose can observe (12 planned vs 12 random); planning time.
-Run: python bench/bench_plan.py [--seeds 5] [--scenarios leg head_camera external]
+renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position
+max over 500 random leg poses, or camera position and rotation max over the head range), median over the seeds;
+the worst reported std among the parameters some pose can observe (12 planned vs 12 random); planning time.
+`--timing`: CPU and wall time of planning 20 of 2000 candidates per system and criterion, with the load average.
+Run: python bench/bench_plan.py [--seeds 5] [--scenarios leg head_camera external] [--timing]
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-from wolfcal.sim.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
 
+from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
 from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
 from wolfcal.plan.candidates import plan_camera  # noqa: E402
 from wolfcal.plan.pipeline import PlanOptions, make_plan  # noqa: E402
@@ -56,43 +57,80 @@ def run(name: str, seed: int) -> dict:
     robot = load_robot(CONFIG)
     rng = np.random.default_rng(100 + seed)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     plan = make_plan(robot, PlanOptions(free=free, system=system, poses=12, seed=seed), say=lambda _m: None)
-    planning = time.perf_counter() - start
+    planning, planning_cpu = time.perf_counter() - start, time.process_time() - cpu
     camera = plan_camera(robot, system)
     chosen = np.flatnonzero((plan.candidates.q[:, None, :] == plan.q[None]).all(axis=2).any(axis=1))
     others = rng.permutation(np.setdiff1d(np.arange(len(plan.candidates.q)), chosen))
-    out = {"planning_s": planning}
+    out = {"planning_s": planning, "planning_cpu_s": planning_cpu}
     for label, idx in (("planned12", chosen), ("random30", others[:30]), ("random12", others[:12])):
         obs = observe(robot, plan, truth, idx, camera, rng)
         fit = fit_observations(robot, obs, FitOptions(free=free, system=system))
+        rot = 0.0
         if free == "leg":
             err = max(link_position_errors(robot, s, fit.corrections, truth, 500, np.random.default_rng(seed)).max()
                       for s in ("r_sole", "l_sole"))  # fmt: skip
         else:
-            err = camera_pose_errors(robot, fit.corrections, truth)[1].max()
+            rot_errors, pos_errors = camera_pose_errors(robot, fit.corrections, truth)
+            err, rot = pos_errors.max(), rot_errors.max()
         names = fit.params.names[: len(fit.chain)]
         keep = [i for i, n in enumerate(names) if plan.observable[plan.params.names.index(n)]]
         units = np.array([p.unit for p in fit.params.parameters])[keep]
         std = fit.solution.std[keep]
-        out[label] = (err, std[units == "m"].max(), std[units == "rad"].max())
+        out[label] = (err, std[units == "m"].max(), std[units == "rad"].max(), rot)
     return out
+
+
+def timing() -> None:
+    """Planning 20 of 2000: candidates and the whole plan, CPU and wall seconds."""
+    robot = load_robot(CONFIG)
+    for system, criterion in (("head", "D"), ("head", "E"), ("external", "D")):
+        marks: list[float] = []
+
+        def mark(message: str, marks: list[float] = marks) -> None:
+            if message.startswith("choosing"):
+                marks.append(time.process_time())
+
+        start, cpu = time.perf_counter(), time.process_time()
+        make_plan(robot, PlanOptions(free="leg", system=system, poses=20, criterion=criterion), say=mark)
+        total, wall = time.process_time() - cpu, time.perf_counter() - start
+        print(f"{system:9s} {criterion}: 20 of 2000 in {total:.1f} s CPU (candidates {marks[0] - cpu:.1f} s), "
+              f"{wall:.1f} s wall; load average {os.getloadavg()[0]:.1f}", flush=True)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
+    parser.add_argument("--timing", action="store_true", help="time planning 20 of 2000 instead")
     args = parser.parse_args()
+    if args.timing:
+        timing()
+        return
     for name in args.scenarios:
-        runs = [run(name, seed) for seed in range(args.seeds)]
+        runs = []
+        for seed in range(args.seeds):
+            r = run(name, seed)
+            runs.append(r)
+            print(f"  {name} seed {seed}: true error planned12 {r['planned12'][0] * 1000:.2f} mm, random30 "
+                  f"{r['random30'][0] * 1000:.2f} mm, random12 {r['random12'][0] * 1000:.2f} mm; worst std planned12 "
+                  f"{r['planned12'][1] * 1000:.3f} mm {np.rad2deg(r['planned12'][2]):.3f} deg, random12 "
+                  f"{r['random12'][1] * 1000:.3f} mm {np.rad2deg(r['random12'][2]):.3f} deg", flush=True)
         med = {k: np.median([r[k] for r in runs], axis=0) for k in ("planned12", "random30", "random12")}
+        if name == "head_camera":
+            mdeg = {k: np.rad2deg(v[3]) * 1000 for k, v in med.items()}
+            print(f"{name:12s} camera rotation error (median of {args.seeds} seeds): 12 planned "
+                  f"{mdeg['planned12']:.1f} mdeg, 30 random {mdeg['random30']:.1f} mdeg, 12 random "
+                  f"{mdeg['random12']:.1f} mdeg", flush=True)  # fmt: skip
         ratio_m = np.median([r["random12"][1] / r["planned12"][1] for r in runs])
         ratio_rad = np.median([r["random12"][2] / r["planned12"][2] for r in runs])
         print(f"{name:12s} true error (median of {args.seeds} seeds): 12 planned {med['planned12'][0] * 1000:.2f} mm, "
               f"30 random {med['random30'][0] * 1000:.2f} mm, 12 random {med['random12'][0] * 1000:.2f} mm; "
               f"worst reported std random12/planned12: {ratio_m:.1f}x (m), {ratio_rad:.1f}x (rad); "
-              f"planning {np.median([r['planning_s'] for r in runs]):.1f} s (12 of 2000)", flush=True)
+              f"planning {np.median([r['planning_s'] for r in runs]):.1f} s wall, "
+              f"{np.median([r['planning_cpu_s'] for r in runs]):.1f} s CPU (12 of 2000; load average "
+              f"{os.getloadavg()[0]:.1f})", flush=True)
 
 
 if __name__ == "__main__":

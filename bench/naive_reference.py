@@ -48,7 +48,7 @@ def predicted(robot: Robot, obs: Observations, corrections: Corrections) -> np.n
     for row, (s, t) in enumerate(zip(obs.sample_index.tolist(), obs.tag_ids.tolist())):
         views.setdefault((s, t), []).append(row)
     camera_frame = robot.config.head_camera().frame
-    K, D = obs.camera.K, obs.camera.opencv_distortion
+    K, D = obs.camera.K, obs.camera.D
     for (s, t), rows in views.items():
         q = dict(zip(obs.joint_names, obs.q_measured[s]))
         T_root_base = link_pose(robot, q, robot.config.base_link, corrections)

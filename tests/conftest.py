@@ -1,6 +1,7 @@
 """Shared fixtures: the default Wolfgang robot and its head camera (2048x1536, strong barrel distortion)."""
 
 import os
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -48,3 +49,22 @@ def robot():
 def camera():
     """2048x1536, plumb_bob with k1 = -0.286 (the Wolfgang's Basler camera)."""
     return load_camera_info(WOLFGANG / "basler_acA2040.yaml")
+
+
+def stop_after_sample(
+    command: list[str], cwd: Path, signum: int, sample: int = 2, wait_s: float = 60.0
+) -> tuple[int, str]:
+    """Run a `wolfcal capture` command, send it `signum` once it has printed 'sample N' (that sample is on disk:
+    an event, no sleeping), and return its exit code and everything it wrote to stderr."""
+    process = subprocess.Popen(command, cwd=cwd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    try:
+        for line in process.stderr:
+            if line.startswith(f"sample {sample}"):
+                break
+        process.send_signal(signum)
+        stderr = process.stderr.read()  # until the process has closed it
+        process.wait(wait_s)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    return process.returncode, stderr

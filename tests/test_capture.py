@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from conftest import stop_after_sample
 from rich.console import Console
 
 from wolfcal.camera.camera_info import load_camera_info, save_camera_info
@@ -401,21 +402,10 @@ def test_sigterm_and_sighup_leave_the_torque_as_found_and_the_file_finished(robo
         with DynamixelBus(robot.config.servos, emu.port) as bus:
             bus.set_torque(["HeadPan"], True)  # found on: restored on; every other joint found off
             initial = bus.torque_enabled()
-        process = subprocess.Popen(capture_command(emu.port, out), cwd=ROOT, stderr=subprocess.PIPE,
-                                   stdout=subprocess.DEVNULL, text=True)  # fmt: skip
-        try:
-            for line in process.stderr:  # wait on the event: the second sample is on disk
-                if line.startswith("sample 2"):
-                    break
-            process.send_signal(signum)
-            stderr = process.stderr.read()  # until the process has closed it
-            process.wait(WAIT_S)
-        finally:
-            if process.poll() is None:
-                process.kill()
+        returncode, stderr = stop_after_sample(capture_command(emu.port, out), ROOT, signum, wait_s=WAIT_S)
         with DynamixelBus(robot.config.servos, emu.port) as bus:
             torque = bus.torque_enabled()
-    assert process.returncode == 128 + signum, stderr
+    assert returncode == 128 + signum, stderr
     assert "Traceback" not in stderr and f"stopped by {signal.Signals(signum).name}" in stderr
     assert torque == initial and sum(initial.values()) == 1
     kept = len(read_capture(out, robot.config).samples)  # finished, not left as .partial

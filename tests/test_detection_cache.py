@@ -135,6 +135,30 @@ def test_stale_entry_after_the_capture_changes_is_not_used(capture, images, tmp_
     assert_same(cached_detect(path, "head", stamps, iter(changed), settings), fresh(changed))
 
 
+def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_path, monkeypatch):
+    """The file's digest is remembered by its identity; a file changed less than RACY_NS before hashing is not
+    remembered, and a replaced file (new inode, same size and mtime) is hashed again."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
+    path, _ = capture
+    true_digest = cache.content_digest(path)
+    assert cache.file_digest(path) == true_digest
+    assert list(folder.glob("*.digest.json")) == []  # just written: too recent to remember
+    monkeypatch.setattr(cache, "RACY_NS", 0)
+    assert cache.file_digest(path) == true_digest
+    (memo,) = folder.glob("*.digest.json")
+    memo.write_text(memo.read_text().replace(true_digest, "f" * 64))
+    assert cache.file_digest(path) == "f" * 64  # remembered, not hashed again
+    info = path.stat()
+    data = bytearray(path.read_bytes())
+    data[-1] ^= 0xFF
+    replacement = tmp_path / "new.mcap"
+    replacement.write_bytes(bytes(data))
+    os.utime(replacement, ns=(info.st_atime_ns, info.st_mtime_ns))
+    replacement.replace(path)  # re-recorded: same name, size and mtime
+    assert cache.file_digest(path) == cache.content_digest(path) != true_digest
+
+
 def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
     path, stamps = capture

@@ -1,5 +1,6 @@
 """The measured ground error of held-out floor views (no truth used) against the simulator's true ground error."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from wolfcal.robot.robot import load_robot
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
+from wolfcal.vision.corner_bias import inset_moves
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 
@@ -30,3 +32,29 @@ def test_measured_ground_error_agrees_with_the_true_one(seed):
     for row, mine in zip(true, measured["models"]["before"]["rows"]):
         t, m = row["models"]["before"]["error_m"], mine["error_m"]
         assert abs(m - t) < max(0.2 * t, 0.01), (row["distance_m"], t, m)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_small_ground_error_is_measured_within_its_uncertainty(seed):
+    """A model near the truth (one ankle off by 1 deg: ~10 cm at 4.5 m) and corners biased inward by a known
+    inset, corrected with the fit's inset: the measurement lies within 2 of its 1-sigmas of the truth, and that
+    1-sigma is small enough that neither 0 nor twice the true error would pass."""
+    robot = load_robot(WOLFGANG)
+    camera = load_camera_info(robot.config.head_camera().intrinsics)
+    rng = np.random.default_rng(seed)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "all")), rng)
+    model = Corrections({**truth.offsets, "LAnkleRoll": truth.offsets.get("LAnkleRoll", 0.0) + np.deg2rad(1.0)},
+                        truth.frames, truth.tags)  # fmt: skip
+    floor = simulate_floor(robot, camera, truth, 30, rng, distance=(0.5, 5.0))
+    inset = 0.3  # [px] at REFERENCE_EDGE_PX, as the fit would find it
+    obs = floor.obs
+    ring_of = np.lexsort((obs.corner_index, obs.tag_ids, obs.sample_index))
+    ring = obs.uv[ring_of].reshape(-1, 4, 2)  # every simulated view has its 4 corners
+    biased = obs.uv.copy()
+    biased[ring_of] = (ring + inset * inset_moves(ring)).reshape(-1, 2)
+    measured = measured_ground_errors(robot, dataclasses.replace(obs, uv=biased), {"after": model}, (4.5,),
+                                      corner_inset=(inset, 0.02))["models"]["after"]["rows"][0]  # fmt: skip
+    true = ground_errors(robot, camera, truth, {"after": model}, (4.5,))[0]["models"]["after"]["error_m"]
+    assert 0.04 < true < 0.3
+    assert abs(measured["error_m"] - true) < 2 * measured["std_m"], (true, measured)
+    assert measured["std_m"] < 0.4 * true, (true, measured)

@@ -125,3 +125,26 @@ def test_result_lists_each_left_out_marker_with_its_sample(tmp_path):
         T_MOCAP_BASE[:3, 3], abs=0.005)
     assert any(p["name"] == "marker.r_foot_fl.x" for p in data["parameters"])
     assert summary_lines(result)
+
+
+def test_a_noisy_marker_gets_its_own_noise_level_and_stays_in():
+    """One marker measured with 2 mm noise per axis among 0.3 mm ones: the fit weights it by its own level (reported
+    per marker) instead of leaving it out, still flags the other markers' reflections, and keeps the offsets within
+    their std. With one level for all, every sample of it would be left out (2 mm is far beyond 3 typical sigmas)."""
+    robot = load_robot(WOLFGANG)
+    obs, truth, _, reflections = simulate(robot, 25, seed=5, noise=MocapNoise(reflections=0.02))
+    noisy = obs.marker_names.index("l_foot_fr")
+    rows = obs.marker_index == noisy
+    obs.xyz[rows] += np.random.default_rng(9).normal(0, 0.002, (int(rows.sum()), 3))
+    fit = fit_observations(robot, {}, FitOptions(free="leg", system="mocap"), markers=obs)
+    block = fit.solution.blocks[0]
+    sigma = block.class_sigma
+    assert 0.0015 < sigma[noisy] < 0.0027, sigma[noisy]
+    others = np.delete(sigma, noisy)
+    assert np.all((others > 0.0002) & (others < 0.00045)), others
+    flagged = set(block.outlier_views)
+    assert sum(k == noisy for _, k in flagged) <= 2
+    assert {(s, k) for s, k in reflections if k != noisy} <= flagged
+    n = len(fit.chain)
+    z = (fit.solution.values[:n] - fit.chain.values_from(truth)) / fit.solution.std[:n]
+    assert np.all(np.abs(z) < 3.5), dict(zip(fit.chain.names, np.round(z, 2)))

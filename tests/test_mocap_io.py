@@ -80,9 +80,9 @@ def session(n_poses: int = 4, seed: int = 0):
     return t, q, p
 
 
-def write_c3d(path: Path, labels: list[str], xyz_mm: np.ndarray, units: str = "mm") -> None:
+def write_c3d(path: Path, labels: list[str], xyz_mm: np.ndarray, units: str = "mm", rate: float = RATE) -> None:
     c = ezc3d.c3d()
-    c["parameters"]["POINT"]["RATE"]["value"] = [RATE]
+    c["parameters"]["POINT"]["RATE"]["value"] = [rate]
     c["parameters"]["POINT"]["LABELS"]["value"] = labels
     c["parameters"]["POINT"]["UNITS"]["value"] = [units]
     points = np.ones((4, len(labels), len(xyz_mm)))

@@ -15,20 +15,23 @@ from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
 TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5], [0, 0, 1]]), np.zeros(5))
 
 
-def dense_covariance(shared: SharedErrors, rows: np.ndarray, sigma: float) -> np.ndarray:
-    """C = sigma^2 I + sigma_q^2 A A^T (rows of one reading) + tau^2 (rows of one label and axis), n x n."""
+def dense_covariance(shared: SharedErrors, rows: np.ndarray, sigma: float, scale: np.ndarray) -> np.ndarray:
+    """C = sigma^2 diag(scale^2) + sigma_q^2 A A^T (rows of one reading) + tau^2 (rows of one label and axis)."""
     A, reading, label, axis = shared.A[rows], shared.reading[rows], shared.label[rows], shared.axis[rows]
     same_reading = reading[:, None] == reading[None, :]
     same_error = (label[:, None] == label[None, :]) & (label[:, None] >= 0) & (axis[:, None] == axis[None, :])
-    return sigma**2 * np.eye(len(rows)) + shared.sigma_q**2 * (A @ A.T) * same_reading + shared.tau**2 * same_error
+    own = sigma**2 * np.diag(scale[rows] ** 2)
+    return own + shared.sigma_q**2 * (A @ A.T) * same_reading + shared.tau**2 * same_error
 
 
-def dense_whitening(groups: list[np.ndarray], shared: SharedErrors, sigma: float) -> np.ndarray:
-    """W (R, R): C_g^-1/2 on each group's block, zero rows and columns for rows in no group."""
+def dense_whitening(groups: list[np.ndarray], shared: SharedErrors, sigma: float, scale: np.ndarray) -> np.ndarray:
+    """W (R, R): on each group's block (D^-1 C_g D^-1)^-1/2 D^-1 (D = diag(scale): the symmetric root when all rows
+    have the block's noise level), zero rows and columns for rows in no group."""
     W = np.zeros((len(shared.A), len(shared.A)))
     for rows in groups:
-        lam, V = np.linalg.eigh(dense_covariance(shared, rows, sigma))
-        W[np.ix_(rows, rows)] = (V / np.sqrt(lam)) @ V.T
+        s = scale[rows]
+        lam, V = np.linalg.eigh(dense_covariance(shared, rows, sigma, scale) / np.outer(s, s))
+        W[np.ix_(rows, rows)] = (V / np.sqrt(lam)) @ V.T / s
     return W
 
 
@@ -47,15 +50,18 @@ def shared_errors(rng: np.random.Generator, units: int, tau: float) -> tuple[Sha
 
 def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covariance():
     rng = np.random.default_rng(3)
-    for tau in (0.0, 0.4):
+    for tau, scale in ((0.0, np.ones(120)), (0.4, np.ones(120)), (0.4, np.repeat(rng.uniform(1, 3, 60), 2))):
         shared, pose = shared_errors(rng, 60, tau)
         keep = rng.random(60) > 0.1  # left-out units belong to no group
         groups = [np.flatnonzero(np.repeat((pose == p) & keep, 2)) for p in np.unique(pose[keep])]
         group_of_row = row_groups(pose, 2, keep)
         assert [np.flatnonzero(group_of_row == k).tolist() for k in range(len(groups))] == [g.tolist() for g in groups]
-        whitening = GroupedWhitening(group_of_row, shared)
+        whitening = GroupedWhitening(group_of_row, shared, scale)
         for sigma in (0.05, 0.3, 2.0):
-            W = dense_whitening(groups, shared, sigma)
+            W = dense_whitening(groups, shared, sigma, scale)
+            for g in groups:  # the definition: W_g^T W_g = C_g^-1
+                C = dense_covariance(shared, g, sigma, scale)
+                assert np.allclose(W[np.ix_(g, g)].T @ W[np.ix_(g, g)] @ C, np.eye(len(g)), atol=1e-8)
             r = rng.normal(0, 1.0, 120)
             M = rng.normal(0, 1.0, (120, 7))
             M_sparse = scipy.sparse.random(120, 40, density=0.1, random_state=4, format="csr")
@@ -64,7 +70,7 @@ def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covarianc
             sparse = whitening.apply(M_sparse, sigma)
             assert scipy.sparse.issparse(sparse)
             assert np.allclose(sparse.toarray(), W @ M_sparse.toarray(), atol=1e-10 * np.abs(W).max())
-            norms = [r[g] @ np.linalg.solve(dense_covariance(shared, g, sigma), r[g]) for g in groups]
+            norms = [r[g] @ np.linalg.solve(dense_covariance(shared, g, sigma, scale), r[g]) for g in groups]
             assert np.allclose(whitening.group_norms(r, sigma), norms, rtol=1e-10)
             assert np.allclose(whitening.whitened(r, sigma), (W @ r)[np.concatenate(groups)], atol=1e-10)
             left_out = np.repeat(~keep, 2)
@@ -86,28 +92,32 @@ def test_a_long_still_pose_is_never_a_dense_block():
         assert whitening.Q.nnz <= 2 * units * (4 + 80)
         if units == 200:
             r = rng.normal(0, 1.0, 2 * units)
-            W = dense_whitening([np.arange(2 * units)], shared, 0.2)
+            W = dense_whitening([np.arange(2 * units)], shared, 0.2, np.ones(2 * units))
             assert np.allclose(whitening.apply(r, 0.2), W @ r, atol=1e-9)
 
 
 class DenseWhitening:
-    """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix and
-    eigen-decomposed, C_g^-1/2 = V diag(1 / sqrt(sigma^2 + l)) V^T, applied as a dense R x R matrix."""
+    """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix, scaled by
+    the rows' own noise levels D and eigen-decomposed, W_g = V diag(1 / sqrt(sigma^2 + l)) V^T D^-1, applied as a
+    dense R x R matrix."""
 
-    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors) -> None:
-        self.group_of_row, self.shared = group_of_row, shared
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray) -> None:
+        self.group_of_row, self.shared, self.row_scale = group_of_row, shared, row_scale
         self.groups = [np.flatnonzero(group_of_row == k) for k in range(group_of_row.max() + 1)]
-        self.eigen = [np.linalg.eigh(dense_covariance(shared, rows, 0.0)) for rows in self.groups]
+        self.eigen = [
+            np.linalg.eigh(dense_covariance(shared, rows, 0.0, row_scale) / np.outer(row_scale[rows], row_scale[rows]))
+            for rows in self.groups
+        ]
         self.cache: dict[float, np.ndarray] = {}
 
     def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
-        return DenseWhitening(self.group_of_row, shared)
+        return DenseWhitening(self.group_of_row, shared, self.row_scale)
 
     def matrix(self, sigma: float) -> np.ndarray:
         if sigma not in self.cache:
             W = np.zeros((len(self.shared.A), len(self.shared.A)))
             for rows, (lam, V) in zip(self.groups, self.eigen):
-                W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + np.clip(lam, 0, None))) @ V.T
+                W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + np.clip(lam, 0, None))) @ V.T / self.row_scale[rows]
             self.cache[sigma] = W
         return self.cache[sigma]
 

@@ -102,6 +102,9 @@ def test_planned_poses_beat_random_ones(small_plan):
 def test_rank_updates_match_direct_criteria_and_exchange_improves_greedy():
     rng = np.random.default_rng(0)
     G = rng.normal(size=(40, 3, 6)) * rng.uniform(0.1, 3, size=(1, 1, 6))
+    G[::3, 2:] = 0.0  # candidates with fewer rows (padded with zeros at the end, as `factors` packs them)
+    G[1::7, 1:] = 0.0
+    G[4] = 0.0  # a candidate that tells nothing
     basis = np.linalg.qr(rng.normal(size=(4, 3)))[0]  # 4 chain unknowns, one direction left out
     M = information(G, [1, 5])
     for criterion in ("D", "A", "E"):
@@ -168,3 +171,213 @@ def test_simulate_renders_a_capture_at_the_planned_poses(robot, small_plan, tmp_
     for sample, q in zip(samples, plan.q):
         reading = sample.joint_positions(robot.joint_names)  # the readings are the commanded targets, to the tick
         np.testing.assert_allclose(reading, q, atol=RAD_PER_TICK)
+
+
+def _box_stl(path: Path, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """An ASCII STL of an axis-aligned box (written here, independently of trimesh); returns its 8 corners."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]  # fmt: skip
+    lines = ["solid box"]
+    for f in faces:
+        lines += ["facet normal 0 0 0", "outer loop", *(f"vertex {c[0]} {c[1]} {c[2]}" for c in corners[list(f)]),
+                  "endloop", "endfacet"]  # fmt: skip
+    path.write_text("\n".join(lines + ["endsolid box"]) + "\n")
+    return corners
+
+
+def test_urdf_collision_meshes_and_primitives_are_bounded_by_capsules(tmp_path):
+    from wolfcal.geometry import transform_from_xyz_rpy
+    from wolfcal.robot.collision import collision_model, segment_distance
+
+    robot0 = load_robot(WOLFGANG)
+    ankle = {side: robot0.model.joints[f"{side}AnklePitch"].T_parent_origin[:3, 3] for side in "RL"}
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    # each lower leg: a 3 x 3 cm box from the knee to the ankle joint, in the mesh's own frame along x, placed by the
+    # <collision> origin (rotated so that x runs along the shin), plus a 1.5 scale on a half-size mesh for the left
+    length = float(np.linalg.norm(ankle["R"]))
+    corners = _box_stl(meshes / "shin.stl", np.array([0.0, -0.015, -0.015]), np.array([length, 0.015, 0.015]))
+    _box_stl(meshes / "shin_half.stl", np.array([0.0, -0.015, -0.015]) / 1.5, np.array([length, 0.015, 0.015]) / 1.5)
+    collisions = {}
+    for side, mesh, scale in (("R", "shin.stl", "1 1 1"), ("L", "shin_half.stl", "1.5 1.5 1.5")):
+        d = ankle[side] / np.linalg.norm(ankle[side])
+        yaw, pitch = np.arctan2(d[1], d[0]), -np.arcsin(d[2])
+        link = f"{side.lower()}_lower_leg"
+        collisions[link] = (f'<collision><origin xyz="0 0 0" rpy="0 {pitch} {yaw}"/><geometry>'
+                            f'<mesh filename="package://wolfgang_description/meshes/{mesh}" scale="{scale}"/>'
+                            "</geometry></collision>", transform_from_xyz_rpy([0, 0, 0], [0, pitch, yaw]))  # fmt: skip
+    collisions["torso"] = ('<collision><origin xyz="0 0 0.05" rpy="0 0 0"/><geometry><box size="0.1 0.16 0.2"/>'
+                           "</geometry></collision>", None)  # fmt: skip
+    collisions["head"] = ('<collision><geometry><sphere radius="0.05"/></geometry></collision>', None)
+    text = (WOLFGANG / "wolfgang.urdf").read_text()
+    for link, (xml, _) in collisions.items():
+        text = text.replace(f'<link name="{link}"/>', f'<link name="{link}">{xml}</link>')
+    package = tmp_path / "wolfgang_description"
+    package.mkdir()
+    (meshes).rename(package / "meshes")
+    (package / "robot.urdf").write_text(text)
+    path = _config_copy(tmp_path, lambda d: d.update(urdf=str(package / "robot.urdf")))
+    robot = load_robot(path)
+    model = collision_model(robot)
+    assert "<collision>" in model.source
+    by_link = {c.link: c for c in model.capsules}
+    assert set(by_link) == set(collisions)
+    for side in "RL":  # the shin's capsule: full length, radius half the 3 x 3 cm diagonal, containing every corner
+        c = by_link[f"{side.lower()}_lower_leg"]
+        assert np.linalg.norm(c.b_link - c.a_link) == pytest.approx(length, abs=1e-6)
+        assert c.radius == pytest.approx(0.015 * np.sqrt(2), abs=1e-6)
+        T = collisions[f"{side.lower()}_lower_leg"][1]
+        world = corners @ T[:3, :3].T
+        gaps = segment_distance(world, world, c.a_link, c.b_link)
+        assert np.all(gaps <= c.radius + 1e-6)
+        np.testing.assert_allclose(sorted([np.linalg.norm(c.a_link), np.linalg.norm(c.b_link)]), [0, length],
+                                   atol=1e-6)  # fmt: skip
+    torso = by_link["torso"]  # box: along its longest edge (z), radius half the diagonal of 0.1 x 0.16
+    np.testing.assert_allclose(sorted([torso.a_link[2], torso.b_link[2]]), [-0.05, 0.15], atol=1e-9)
+    assert torso.radius == pytest.approx(0.5 * np.hypot(0.1, 0.16))
+    assert by_link["head"].radius == 0.05 and np.allclose(by_link["head"].a_link, by_link["head"].b_link)
+    # the shins (5.6 cm apart at rest) cross when the hips roll inwards
+    crossed = np.array([{"RHipRoll": 0.45, "LHipRoll": -0.45}.get(j, 0.0) for j in robot.joint_names])
+    assert set(model.colliding_pair(crossed) or ()) == {"r_lower_leg", "l_lower_leg"}
+    assert model.colliding_pair(np.zeros(len(robot.joint_names))) is None
+
+
+def test_missing_collision_mesh_is_a_clear_error(tmp_path):
+    text = (WOLFGANG / "wolfgang.urdf").read_text().replace(
+        '<link name="torso"/>', '<link name="torso"><collision><geometry><mesh filename="meshes/torso.stl"/>'
+        "</geometry></collision></link>")  # fmt: skip
+    (tmp_path / "robot.urdf").write_text(text)
+    path = _config_copy(tmp_path, lambda d: d.update(urdf=str(tmp_path / "robot.urdf")))
+    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
+    assert result.exit_code != 0 and "Traceback" not in result.output
+    assert "torso.stl" in result.output and "not found" in result.output
+
+
+def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(robot):
+    """The selection's information (per-pose rows + the repeated views) equals the fit's own on the chosen poses,
+    with the torso tag's repeating detection error: n views of it tell far less than n times one view."""
+    from wolfcal.plan.candidates import draw_candidates, plan_camera
+    from wolfcal.plan.information import PlanModel, factors, repeated_information
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+
+    options = PlanOptions(free="leg", system="external", poses=6, candidates=30)
+    camera = plan_camera(robot, "external")
+    tags = used_tags(robot, options, True)
+    cands = draw_candidates(robot, camera, tags, 30, np.random.default_rng(2), collision_model(robot))
+    model = PlanModel(robot, camera, "leg", "both", tags)
+    problem = model.problem(cands.q, cands.visible, independent=True)
+    G = factors(problem)
+    chosen = [3, 7, 11, 19, 23, 29]
+    M_rep = repeated_information(model, problem, cands.q, cands.visible, len(chosen))
+    fit = model.problem(cands.q[chosen], cands.visible[chosen])  # the fit's problem, its full noise model
+    J = np.asarray(fit.data_jacobian(np.zeros(len(fit.params)), robust=False))
+    M_fit = np.eye(len(fit.params)) + J.T @ J
+    np.testing.assert_allclose(information(G, chosen, M_rep), M_fit, atol=1e-6 * np.abs(M_fit).max())
+    # n views with noise sigma and a repeating error tau (= sigma, priors.pixel_noise) tell n / (sigma^2 + n tau^2):
+    # 6 views 6/7 of what one view tells without its repeating error, where 6 independent views would tell 6 times
+    one = repeated_information(model, problem, cands.q, cands.visible, 1)
+    np.testing.assert_allclose(M_rep, one * 6 / 7, atol=1e-9 * np.abs(one).max())
+
+
+def test_capsule_distances_are_exact_where_they_matter(robot):
+    """The midpoint prefilter of the capsule pairs changes no distance below its limit (brute force on all pairs)."""
+    from wolfcal.robot.collision import EXACT_BELOW_M, collision_model, segment_distance
+
+    model = collision_model(robot)
+    q = np.random.default_rng(1).uniform(-1, 1, size=(2000, len(robot.joint_names)))
+    a, b = model.segments(q)
+    i, j = model.pairs.T
+    exact = segment_distance(a[:, i], b[:, i], a[:, j], b[:, j]) - model.radius[i] - model.radius[j]
+    fast = model._pair_clearance(q)
+    near = exact < EXACT_BELOW_M
+    assert near.any() and (~near).any()
+    np.testing.assert_allclose(fast[near], exact[near], atol=1e-12)
+    assert np.all(fast[~near] >= EXACT_BELOW_M - 1e-12) and np.all(fast <= exact + 1e-12)
+
+
+@pytest.mark.parametrize("system", ["mocap", "floor"])
+def test_systems_not_planned_yet_are_refused_with_the_reason(tmp_path, system):
+    out = tmp_path / "p.yaml"
+    result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", system, "--out", str(out)])
+    assert result.exit_code != 0 and "Traceback" not in result.output and not out.exists()
+    assert f"--system {system}" in result.output and "not built yet" in result.output
+
+
+def test_collision_checks_split_by_the_head_joints_are_exact(robot):
+    """The candidate draw checks the pairs the head does not move once per leg configuration and the others per
+    head configuration: together (and in the early-exit order) they keep exactly the poses with clearance."""
+    from wolfcal.plan.candidates import CLEARANCE_M
+    from wolfcal.robot.collision import collision_model
+
+    model = collision_model(robot)
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-1.2, 1.2, size=(3000, len(robot.joint_names)))
+    head = ["HeadPan", "HeadTilt"]
+    moved = model.pairs_moved_by(head)
+    assert moved.any() and (~moved).any()
+    full = model.clearance(q) >= CLEARANCE_M
+    assert full.any() and (~full).any()
+    np.testing.assert_array_equal(model.collision_free(q, CLEARANCE_M), full)
+    split = model.collision_free(q, CLEARANCE_M, ~moved) & model.collision_free(q, CLEARANCE_M, moved)
+    np.testing.assert_array_equal(split, full)
+    # the pairs the head does not move keep their distance whatever the head does; the others do not
+    q2 = q.copy()
+    q2[:, [robot.joint_names.index(j) for j in head]] = rng.uniform(-1.2, 1.2, size=(len(q), 2))
+    d1, d2 = model._pair_clearance(q), model._pair_clearance(q2)
+    np.testing.assert_allclose(d1[:, ~moved], d2[:, ~moved], atol=1e-12)
+    assert np.all(np.abs(d1[:, moved] - d2[:, moved]).max(axis=0) > 1e-6)
+
+
+def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk(robot):
+    """Legs drawn once for many head configurations: every candidate passes the full checks (all capsule pairs,
+    tags in view by a full forward-kinematics pass, line of sight), and the head views from the legs' tag poses
+    equal those of a full pass."""
+    from wolfcal.plan.candidates import (
+        CLEARANCE_M,
+        base_tag_poses,
+        draw_candidates,
+        line_of_sight,
+        plan_camera,
+        pose_ok,
+        tag_views,
+    )
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+
+    model = collision_model(robot)
+    camera = plan_camera(robot, "head")
+    tags = used_tags(robot, PlanOptions(), False)
+    cands = draw_candidates(robot, camera, tags, 300, np.random.default_rng(5), model)
+    assert len(cands.q) == 300
+    assert cands.drawn >= sum(cands.rejected.values()) + len(cands.q)  # every configuration drawn is accounted for
+    assert np.all(model.clearance(cands.q) >= CLEARANCE_M)
+    views = tag_views(robot, camera, cands.q, tags) & line_of_sight(robot, camera, cands.q, model)
+    np.testing.assert_array_equal(views, cands.visible)
+    assert pose_ok(robot, camera, views).all()
+    ids = [t for t in robot.config.tag_ids if t in tags]
+    q = np.random.default_rng(6).uniform(-1.5, 1.5, size=(500, len(robot.joint_names)))
+    np.testing.assert_array_equal(tag_views(robot, camera, q, tags, base_tag_poses(robot, q, ids)),
+                                  tag_views(robot, camera, q, tags))
+    # the head is drawn uniformly: the candidates' head angles spread over the range that shows the feet
+    pan = cands.q[:, robot.joint_names.index("HeadPan")]
+    assert pan.min() < -0.3 and pan.max() > 0.3
+
+
+def test_criterion_looks_at_the_parameters_of_interest_and_marginalises_the_others():
+    """Ds-optimality: with the tags' mounts left out of the criterion, the basis has no component on them, and the
+    criterion is the covariance of the other unknowns with the tags' uncertainty marginalised (not fixed)."""
+    from wolfcal.plan.information import separability
+
+    rng = np.random.default_rng(7)
+    G = rng.normal(size=(50, 4, 6))
+    G[:, :, 5] = G[:, :, 4]  # unknowns 4 and 5 only ever move together: their difference is not observable
+    interest = np.array([True, True, False, True, False, False])
+    sep = separability(G, 6, None, interest)
+    assert sep.basis.shape == (6, 3) and np.allclose(sep.basis[~interest], 0.0)
+    M = information(G, [0, 1, 2])
+    C = np.linalg.inv(M)
+    idx = np.flatnonzero(interest)
+    expected = np.linalg.slogdet(C[np.ix_(idx, idx)])[1]  # marginal covariance of the unknowns of interest
+    assert np.isclose(criterion_value(M, sep.basis, "D"), expected)

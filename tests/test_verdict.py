@@ -47,15 +47,25 @@ STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "c
 
 
 @pytest.mark.parametrize("ground, deploy, words", [
-    ({"before_m": 0.30, "after_m": 0.40, "after_std_m": 0.01}, False, "gets worse: 30.0 cm -> 40.0 cm"),
-    ({"before_m": 0.30, "after_m": 0.08, "after_std_m": 0.01}, False, "stays above the limit: 8.0 cm > 5 cm"),
-    ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 cm"),
-])
+    ({"before_m": 0.30, "after_m": 0.40, "after_std_m": 0.01}, False, "gets worse: 30.0 +- 0.0 cm -> 40.0 +- 1.0 cm"),
+    ({"before_m": 0.30, "after_m": 0.08, "after_std_m": 0.01}, False,
+     "stays above the limit: 8.0 +- 1.0 cm (1 sigma) > 5 cm"),
+    ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 +- 1.0 cm"),
+    # above the limit, within 2 sigma of it: refused all the same, with the advice to measure it more precisely
+    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm (--ground-limit"
+     "-cm). The measurement is that uncertain: capture more floor samples"),
+    # below the limit, but its 2 sigma reaches past it: deployed, with a note that the limit is not confirmed
+    ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02}, True, "measured ground error at 4.5 m 4.0 +- 2.0 cm"),
+    # worse, but within the two measurements' uncertainty
+    ({"before_m": 0.03, "after_m": 0.04, "after_std_m": 0.01, "before_std_m": 0.01}, True, "4.0 +- 1.0 cm"),
+])  # fmt: skip
 def test_measured_ground_error_decides(ground, deploy, words):
     v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, ground, None, 0.0)
     assert v["deploy"] is deploy
     assert words in " ".join([v["message"], *v["refusals"]])
     assert not any("not measured" in n for n in v["notes"])
+    confirmed = ground["after_m"] + 2 * ground["after_std_m"] <= 0.05
+    assert any("cannot confirm" in n for n in v["notes"]) is (deploy and not confirmed)
 
 
 def test_limits_are_options():

@@ -106,8 +106,8 @@ def capture(
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
     samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
-    limp: str = typer.Option("head,legs", "--limp", help="Manual mode: groups (head, legs, arms, all) or "
-                             "joints to switch torque off."),
+    limp: str | None = typer.Option(None, "--limp", help="Manual mode: groups (head, legs, arms, all) or "
+                                    "joints to switch torque off (default: head,legs; with --floor: head)."),
     yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
     velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed (rad/s)."),
@@ -117,6 +117,9 @@ def capture(
                                            "config's; external cameras use their config 'intrinsics')."),
     settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
     min_sharpness: float = typer.Option(100.0, "--min-sharpness", help="Minimum variance of the Laplacian."),
+    floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands (legs held at the config's "
+                               "floor.standing, torque on) and the head looks at the floor tags, aimed through a "
+                               "pan/tilt grid, or turned by hand with --manual."),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
@@ -127,6 +130,7 @@ def capture(
         robot=default_robot(robot), out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples,
         limp=limp, yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
         gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external, force=force,
+        floor=floor,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -227,7 +231,8 @@ def demo(
     root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
     force: bool = force_option(),
 ) -> None:
-    """Fit and evaluate the shipped demo capture; prints the before/after table."""
+    """The venue workflow on the shipped demo captures (feet + floor -> fit -> evaluate with the measured ground
+    error), then a camera fit refused on a robot whose legs are off."""
     from wolfcal.demo import run_demo
 
     run_demo(root, out, say=typer.echo, force=force)
@@ -280,7 +285,8 @@ def plan(
     robot: Path | None = robot_option(),
     free: str = typer.Option("leg", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
-    system: str = typer.Option("head", "--system", help="Measurement system: head | external."),
+    system: str = typer.Option("head", "--system", help="Measurement system: head | external (mocap and floor: "
+                               "not yet, refused with the reason)."),
     poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
     candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
     criterion: str = typer.Option("D", "--criterion", help="D (determinant) | A (trace) | E (worst direction)."),

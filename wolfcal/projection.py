@@ -33,14 +33,12 @@ def tag_corner_pixels(camera: CameraModel, T_camera_tag: np.ndarray, corners: np
 
 
 def pixel_jacobian(camera: CameraModel, p_camera: np.ndarray) -> np.ndarray:
-    """(M, 2, 3) d(pixel)/d(point in the optical frame) by central differences [px/m]."""
+    """(M, 2, 3) d(pixel)/d(point in the optical frame) by central differences [px/m] (the six shifted copies of
+    the points projected in one call)."""
     h = 1e-6 * np.maximum(np.abs(p_camera[:, 2]), 1e-3)
-    out = np.empty((len(p_camera), 2, 3))
-    for k in range(3):
-        step = np.zeros_like(p_camera)
-        step[:, k] = h
-        out[:, :, k] = (camera.project(p_camera + step) - camera.project(p_camera - step)) / (2 * h[:, None])
-    return out
+    steps = np.einsum("m,ks->kms", h, np.concatenate([np.eye(3), -np.eye(3)]))  # (6, M, 3): +h, then -h per axis
+    uv = camera.project(p_camera[None] + steps)  # (6, M, 2)
+    return np.moveaxis((uv[:3] - uv[3:]) / (2 * h[None, :, None]), 0, 2)
 
 
 def tag_pose_from_pixels(camera: CameraModel, uv: np.ndarray, size: float) -> np.ndarray | None:

@@ -45,14 +45,14 @@ def parse_limp(text: str, robot: Robot) -> list[str]:
     return joints
 
 
-def confirm_limp(joints: list[str], yes: bool, ask: Callable[[str], bool] | None) -> None:
-    """Refuse (WolfcalError) to switch torque off on `joints` unless `yes` or the operator confirms through `ask`."""
+def confirm_limp(joints: list[str], yes: bool, ask: Callable[[str], bool] | None, legs_hold: bool = False) -> None:
+    """Refuse (WolfcalError) to switch torque off on `joints` unless `yes` or the operator confirms through `ask`;
+    `legs_hold`: the legs keep their torque (a floor capture), so the robot does not fall."""
     if yes:
         return
-    question = (
-        f"Torque goes OFF on {len(joints)} joint(s): {', '.join(joints)}. A standing robot will fall: hold "
-        "it, hang it up or sit it down. Continue?"
-    )
+    warning = ("The legs stay on, holding the standing pose." if legs_hold
+               else "A standing robot will fall: hold it, hang it up or sit it down.")  # fmt: skip
+    question = f"Torque goes OFF on {len(joints)} joint(s): {', '.join(joints)}. {warning} Continue?"
     if ask is None or not ask(question):
         raise WolfcalError(
             "manual capture needs torque off on "
@@ -60,7 +60,8 @@ def confirm_limp(joints: list[str], yes: bool, ask: Callable[[str], bool] | None
             + (
                 "; not confirmed"
                 if ask is not None
-                else "; no terminal to ask on: pass --yes once the robot is supported (hanging or sitting)"
+                else "; no terminal to ask on: pass --yes"
+                + ("" if legs_hold else " once the robot is supported (hanging or sitting)")
             )
         )
 

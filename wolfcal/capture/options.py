@@ -21,7 +21,8 @@ class CaptureOptions:
     poses: Path | None = None
     manual: bool = False
     samples: int | None = None
-    limp: str = "head,legs"  # manual mode: joints or groups (head, legs, arms, all) to switch torque off
+    limp: str | None = None  # manual mode: joints or groups (head, legs, arms, all) to switch torque off
+    #   (None: head,legs; with `floor`: head)
     yes: bool = False  # manual mode: switch torque off without asking
     exit_torque: str = "restore"  # restore (as found) | on (hold the last pose) | off
     binning: int | None = None  # default 4 for the sim camera (fast rendering), else 1
@@ -32,6 +33,7 @@ class CaptureOptions:
     gates: GateSettings = field(default_factory=GateSettings)
     external: list[str] = field(default_factory=list)  # --external NAME=SOURCE, one per external camera
     force: bool = False  # replace an existing capture file at --out
+    floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
 
 
 def parse_external(text: str) -> tuple[str, str]:
@@ -47,8 +49,14 @@ def parse_external(text: str) -> tuple[str, str]:
 
 def check_options(options: CaptureOptions) -> None:
     """Refuse contradictory or out-of-range options and an output file that exists (WolfcalError)."""
-    if options.manual == (options.poses is not None):
-        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted) or --manual")
+    if options.floor:
+        if options.poses is not None:
+            raise WolfcalError("--floor moves the head through its own grid of floor views: drop --poses (or give "
+                               "--manual to turn the head by hand)")  # fmt: skip
+        if options.camera is None:
+            raise WolfcalError("--floor records the head camera's views of the floor tags: give --camera SOURCE")
+    elif options.manual == (options.poses is not None):
+        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual or --floor")
     if options.camera is None and not options.external:
         raise WolfcalError("give at least one camera: --camera SOURCE (head camera) and/or --external NAME=SOURCE")
     names = [parse_external(text)[0] for text in options.external]

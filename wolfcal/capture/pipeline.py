@@ -2,7 +2,8 @@
 MCAP file.
 
 Checks everything it can before anything moves, opens the bus, the cameras (`cameras`) and the writer, runs the
-scripted mode (`scripted`) or the manual one (`manual`) in a live view, then leaves the torque as --exit-torque says
+scripted mode (`scripted`), the manual one (`manual`) or a floor capture (`floor`: either with
+standing legs) in a live view, then leaves the torque as --exit-torque says
 (`exit_torque`). The file is written through `CaptureWriter` (each sample durable on return); Ctrl-C, a bus or
 camera failure finish the file with every sample taken so far before the error is reported.
 """
@@ -13,11 +14,19 @@ from collections.abc import Callable
 
 from rich.console import Console
 
-from wolfcal.capture.cameras import close_sources, open_sources, plan_cameras
+from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
+from wolfcal.capture.floor import (
+    check_floor_limp,
+    floor_joints,
+    floor_script,
+    stand,
+    standing_targets,
+    without_collisions,
+)
 from wolfcal.capture.manual import confirm_limp, parse_limp, run_manual
 from wolfcal.capture.options import CaptureOptions, check_options
-from wolfcal.capture.poses import check_collisions, joint_limits, load_poses
+from wolfcal.capture.poses import DEFAULT_VELOCITY, PoseScript, check_collisions, joint_limits, load_poses
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
@@ -26,7 +35,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
 from wolfcal.hardware.camera import CameraError
 from wolfcal.io.writer import CaptureWriter
-from wolfcal.robot.robot import load_robot
+from wolfcal.robot.robot import Robot, load_robot
 
 __all__ = ["CaptureOptions", "CaptureSummary", "run_capture"]
 
@@ -43,32 +52,21 @@ def run_capture(
             f"{robot.config.path}: no 'servos' section (port, ids): capture needs the servo bus"
         )
     limits = joint_limits(robot, robot.config.servos.ids)
-    script = load_poses(options.poses, limits) if options.poses else None  # refused before anything moves
-    limp = parse_limp(options.limp, robot) if options.manual else []
+    script, limp, standing = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
-    touched = script.joints if script else limp
-    status = Status(
-        "scripted" if script else "manual", options.samples or (len(script.poses) if script else None)
-    )
+    touched = script.joints if script else [*standing, *limp]
+    mode = ("floor " if options.floor else "") + ("scripted" if script else "manual")
+    status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
     with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
-        if script and options.poses:  # before anything moves: where the robot stands decides the joints no pose names
-            start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
-            note = check_collisions(robot, script, options.poses, start)
-            if note:
-                console.print(f"note: {note}")
+        if script:  # before anything moves: where the robot stands decides the joints no pose names
+            script = _checked_script(options, robot, script, bus, status, console)
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
-            confirm_limp([j for j in limp if initial[j]], options.yes, ask)
-        open_sources(cameras, robot, bus.port_name)
-        try:
-            streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
-            writer = CaptureWriter(options.out, robot.config, streams, options.image_format)
-        except WolfcalError:
-            close_sources(cameras)
-            raise
+            confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor)
+        writer = _open_outputs(options, robot, cameras, bus.port_name)
         view = LiveView(status, coverage, console)
         sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
         session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
@@ -78,6 +76,8 @@ def run_capture(
                 if script:
                     run_scripted(session, script)
                 else:
+                    if standing:
+                        stand(session, standing, options.velocity or DEFAULT_VELOCITY)
                     run_manual(session, limp)
         except (BusError, CameraError, KeyboardInterrupt) as exc:  # KeyboardInterrupt: also SIGTERM, SIGHUP
             failure = exc
@@ -93,6 +93,53 @@ def run_capture(
         failure = failure or interruption(noted)
     _say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
     return session.summary
+
+
+def _checked_script(
+    options: CaptureOptions, robot: Robot, script: PoseScript, bus: DynamixelBus, status: Status, console: Console
+) -> PoseScript:
+    """The script checked against collisions from where the robot stands now, before anything moves.
+
+    Floor views the robot cannot take are left out (with a note); a colliding pose of a poses file is refused.
+    """
+    start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
+    if options.floor:
+        script, note = without_collisions(robot, script, start)
+        status.target = options.samples or len(script.poses)
+    else:
+        note = check_collisions(robot, script, options.poses or "", start)
+    if note:
+        console.print(f"note: {note}")
+    return script
+
+
+def _open_outputs(
+    options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], port_name: str
+) -> CaptureWriter:
+    """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
+    open_sources(cameras, robot, port_name)
+    try:
+        streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
+        return CaptureWriter(options.out, robot.config, streams, options.image_format)
+    except WolfcalError:
+        close_sources(cameras)
+        raise
+
+
+def _plan(
+    options: CaptureOptions, robot: Robot, limits: dict[str, tuple[float, float]]
+) -> tuple[PoseScript | None, list[str], dict[str, float]]:
+    """(poses to drive through, joints to switch off for the operator, standing readings [rad] the legs hold while
+    the operator turns the head (manual floor capture)), each checked before anything moves."""
+    script = load_poses(options.poses, limits) if options.poses else None
+    limp = parse_limp(options.limp or ("head" if options.floor else "head,legs"), robot) if options.manual else []
+    standing: dict[str, float] = {}
+    if options.floor and options.manual:
+        check_floor_limp(robot, limp)
+        standing = {j: q for j, q in standing_targets(robot).items() if j in floor_joints(robot)[0]}
+    elif options.floor:
+        script = floor_script(robot, options.velocity or DEFAULT_VELOCITY)
+    return script, limp, standing
 
 
 def _say_end(

@@ -108,18 +108,27 @@ def check_collisions(robot: Robot, script: PoseScript, path: str | Path, start: 
     """Refuse a script in which the robot would touch itself (`wolfcal.robot.collision`): each pose with every
     joint at its latest target, joints never named where they stand at the start (`start`: joint -> rad; others
     at the rest pose). Returns a note when the robot config has no collision geometry (nothing checked)."""
-    model = optional_collision_model(robot)
-    if model is None:
+    colliding = colliding_poses(robot, script, start)
+    if colliding is None:
         return (f"{robot.config.path} has no collision geometry ('collision_radii:'): poses not checked for "
                 "self-collision")  # fmt: skip
+    if colliding:
+        problems = [f"{name}: {' and '.join(pair)} would touch" for name, pair in colliding.items()]
+        raise WolfcalError(f"{path}: {len(problems)} pose(s) collide, nothing was moved:\n  " + "\n  ".join(problems))
+    return None
+
+
+def colliding_poses(robot: Robot, script: PoseScript, start: dict[str, float]) -> dict[str, tuple[str, str]] | None:
+    """Pose name -> the two links that would touch, of the poses of `script` in which the robot would touch itself
+    (as `check_collisions` poses it); None when the robot config has no collision geometry."""
+    model = optional_collision_model(robot)
+    if model is None:
+        return None
     targets = {**robot.config.planning.rest_pose, **start}
     q = []
     for pose in script.poses:
         targets.update(pose.joints)
         q.append([targets.get(j, 0.0) for j in robot.joint_names])
     clearance = model.clearance(np.array(q))
-    problems = [f"{pose.name}: {' and '.join(model.colliding_pair(np.array(row)) or ('?', '?'))} would touch"
-                for pose, row, c in zip(script.poses, q, clearance) if c < 0]  # fmt: skip
-    if problems:
-        raise WolfcalError(f"{path}: {len(problems)} pose(s) collide, nothing was moved:\n  " + "\n  ".join(problems))
-    return None
+    return {pose.name: model.colliding_pair(np.array(row)) or ("?", "?")
+            for pose, row, c in zip(script.poses, q, clearance) if c < 0}  # fmt: skip

@@ -16,14 +16,9 @@ ARRIVAL_MARGIN_S = 3.0  # time allowed for a move beyond distance / velocity
 def run_scripted(session: CaptureSession, script: PoseScript) -> None:
     """Drive the script's joints through its poses, sampling at each; skipped poses go to the summary."""
     bus, status = session.bus, session.status
-    joints = script.joints
-    state = session.read()
     index = {j: k for k, j in enumerate(bus.joints)}
-    goals = {j: float(state.positions[index[j]]) for j in joints}
     velocity = session.options.velocity or script.velocity
-    bus.set_goal_positions(goals)  # torque on must not jump to a stale goal
-    bus.set_profile_velocity(joints, velocity)
-    bus.set_torque(joints, True)
+    goals = torque_on(session, script.joints, velocity)
     for number, pose in enumerate(script.poses, start=1):
         if session.done():
             return
@@ -37,6 +32,18 @@ def run_scripted(session: CaptureSession, script: PoseScript) -> None:
             session.summary.skipped.append(f"{pose.name}: {reason}")
             session.view.event(f"pose {pose.name} skipped: {reason}")
         status.waiting = ""
+
+
+def torque_on(session: CaptureSession, joints: list[str], velocity: float) -> dict[str, float]:
+    """Torque on for `joints`, each holding where it stands (no jump to a stale goal), later moves at `velocity`
+    [rad/s]; returns the goals [rad] by joint."""
+    state = session.read()
+    index = {j: k for k, j in enumerate(session.bus.joints)}
+    goals = {j: float(state.positions[index[j]]) for j in joints}
+    session.bus.set_goal_positions(goals)
+    session.bus.set_profile_velocity(joints, velocity)
+    session.bus.set_torque(joints, True)
+    return goals
 
 
 def sample_until(session: CaptureSession, deadline: float) -> str | None:

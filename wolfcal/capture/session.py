@@ -54,8 +54,9 @@ class CaptureSession:
         self.options, self.view, self.coverage, self.status = options, view, coverage, status
         self.gates = options.gates
         self.window = StillnessWindow(bus.joints, self.gates)
-        self.tag_ids = set(robot.config.tag_ids)
-        self.families = sorted({t.family for t in robot.config.tags})
+        tags = list(robot.config.tags) + (list(robot.config.floor_config().tags) if options.floor else [])
+        self.tag_ids = {t.id for t in tags}  # floor capture: the floor tags too
+        self.families = sorted({t.family for t in tags})
         self.summary = CaptureSummary(None, 0)
         self.last_hw_poll = 0.0
         self.rest_since: float | None = None  # when every joint last became still

@@ -2,7 +2,8 @@
 
 The head camera at its true kinematics, or an external camera (`external=NAME`) from its placement in the emulator's
 truth file (`external_cameras.<NAME>.T_base_camera`, as `wolfcal simulate --system external` writes it), else from
-`DEFAULT_PLACEMENT`: 1.2 m in front of base_link, 0.5 m above it, looking at the legs.
+`DEFAULT_PLACEMENT`: 1.2 m in front of base_link, 0.5 m above it, looking at the legs. The head camera also sees the
+floor tags at their true places when the truth file has them (`floor_tags`, as `wolfcal simulate --floor` writes it).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.hardware.emulator import load_truth, read_true_angles
-from wolfcal.io.truth import load_external_truth
+from wolfcal.io.truth import load_external_truth, load_floor_places
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.placement import TARGET_BASE, look_at
@@ -30,11 +31,14 @@ class SimCamera:
         self._read = read_true_angles
         _, truth_path = read_true_angles(port)
         truth = load_truth(Path(truth_path)) if truth_path else Corrections()
-        T_base_camera = None
+        T_base_camera, floor_places = None, None
+        if external is None and truth_path:
+            floor_places = load_floor_places(Path(truth_path))
         if external is not None:
             placements = load_external_truth(Path(truth_path)) if truth_path else {}
             T_base_camera = placements.get(external, DEFAULT_PLACEMENT)
-        self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera)
+        self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera,
+                              floor_places=floor_places)
 
     def grab(self) -> np.ndarray:
         angles, _ = self._read(self.port)

@@ -45,3 +45,12 @@ def link_position_errors(
     """Position error [m] of `link` (e.g. a sole) in the base frame over n random calibration-range poses."""
     lo, hi = sampling_bounds(robot, "head")
     return _pose_errors(robot, rng.uniform(lo, hi, size=(n, len(lo))), link, estimate, truth)[1]
+
+
+def link_pose_errors(
+    robot: Robot, link: str, estimate: Corrections, truth: Corrections, n: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation [rad] and position [m] error of `link` (e.g. a sole) in the base frame over n random
+    calibration-range poses."""
+    lo, hi = sampling_bounds(robot, "head")
+    return _pose_errors(robot, rng.uniform(lo, hi, size=(n, len(lo))), link, estimate, truth)

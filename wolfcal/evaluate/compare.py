@@ -7,11 +7,16 @@ held-out captures can measure, each with the existing evaluation code of its sys
   (`metrics.model_errors`, on every link tag seen, floor tags apart); samples no model explains are left out for all;
 - external camera: the tag-grid distance of each foot tag relative to the torso tag [mm]
   (`external.foot_tag_grid_mm`);
-- motion capture: distance between measured and predicted marker [mm] after the base pose in the motion-capture frame
-  and the marker mounts (prior 1 mm) are re-estimated with the chain held at the judged model (`MocapBlock`);
-  markers left out as outliers under any model are left out for all.
-- ground error at 4.5 m [cm] from floor samples: not measured yet (its place: GROUND COLUMN in `run_compare`).
-Each cell: mean and standard deviation over the held-out samples (views, markers) in the column's unit.
+- motion capture: distance between measured and predicted marker [mm], markers on moving links (the torso markers
+  fix the frame): every row with the NOMINAL marker mounts of the robot config (no row gets mounts fitted, so none
+  is flattered), the base pose in the motion-capture frame per capture by a rigid registration of the torso markers
+  (per marker its median over the capture), which no leg model changes; a marker in a sample that is off by more
+  than 3 times the median distance and 1 mm under any model (a reflection) is left out for all rows;
+- ground error at 4.5 m [cm], from the head camera's held-out views of the floor tags (`floor_ground`: the real
+  floor fitted to the views under each model, the error of a ball seen 4.5 m away at the worst of three bearings);
+  one number per row with its 1-sigma, not a distribution.
+Each cell: mean and standard deviation over the held-out samples (views, markers) in the column's unit (ground:
+the error and its 1-sigma).
 Deploy: among the calibrations that make no column worse than "before" (mean above before's by more than
 `WORSE_TOLERANCE`), the one with the lowest mean ratio to "before" over all columns.
 """
@@ -33,17 +38,18 @@ from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.external import foot_tag_grid_mm
 from wolfcal.evaluate.figures import AFTER, BEFORE, histograms_png
+from wolfcal.evaluate.floor_ground import measured_ground_errors
+from wolfcal.evaluate.ground import VERDICT_DISTANCE_M
 from wolfcal.evaluate.metrics import measure_tag_views, model_errors, outlier_samples
 from wolfcal.evaluate.pipeline import load_fit, refuse_fitted_captures
 from wolfcal.evaluate.report import render_html, render_markdown
-from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.pipeline import load_captures, samples_of, split_floor
-from wolfcal.fit.problem import Problem
-from wolfcal.fit.solver import solve
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.samples import Capture
-from wolfcal.observations import HEAD_CAMERA
+from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.outliers import MOCAP_MARKER_M
 from wolfcal.outputs import check_output_folder
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
@@ -72,6 +78,7 @@ class Column:
     unit: str
     system: str  # head | external | mocap: the measurement system it is measured with
     values: dict[str, np.ndarray] = field(default_factory=dict)  # row label -> held-out values [unit]
+    sigma: dict[str, float] | None = None  # one value per row with its 1-sigma [unit] (ground), not a distribution
 
 
 def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[list[str]]]:
@@ -119,9 +126,10 @@ def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Cap
     """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen."""
     samples, _ = samples_of(loaded, robot)
     observations, _ = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
-    links_only, _ = split_floor(robot, observations)
+    links_only, floor = split_floor(robot, observations)
+    ground = _ground_column(robot, models, floor, say)
     if HEAD_CAMERA not in links_only:
-        return []
+        return ground
     obs = links_only[HEAD_CAMERA]
     say(f"head camera: {obs.n_samples} held-out sample(s), tags {', '.join(map(str, obs.observed_tag_ids))}")
     views = measure_tag_views(robot, obs)
@@ -135,7 +143,29 @@ def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Cap
         px.values[label] = e.sample_rms[keep]
         grid = e.view_grid[keep[views.sample] & np.isfinite(e.view_grid)]
         mm.values[label] = grid * 1000.0
-    return [px, mm]
+    return [px, mm, *ground]
+
+
+def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observations | None,
+                   say: Callable) -> list[Column]:  # fmt: skip
+    """The measured ground error at VERDICT_DISTANCE_M [cm] of every model, from held-out floor views (none
+    without them or when too few views measure it); a ball above a model's horizon is an infinite error."""
+    if floor is None:
+        return []
+    ids, samples = np.unique(np.column_stack([floor.tag_ids, floor.sample_index]), axis=0).T
+    twice = [int(t) for t, n in zip(*np.unique(ids, return_counts=True)) if n >= 2]  # a tag seen once places nothing
+    measured = measured_ground_errors(robot, floor.only_tags(twice), models, (VERDICT_DISTANCE_M,)) if twice else None
+    if measured is None:
+        say(f"floor: {floor.n_samples} sample(s) with floor tags, too few views to measure the ground error")
+        return []
+    say(f"floor: {measured['views']} held-out floor-tag view(s)")
+    values, sigma = {}, {}
+    for label, rows in measured["models"].items():
+        error, std = rows["rows"][0]["error_m"], rows["rows"][0]["std_m"]
+        values[label] = np.array([np.inf if error is None else error * 100.0])
+        sigma[label] = np.nan if std is None else std * 100.0
+    return [Column("ground_cm", f"ground error at {VERDICT_DISTANCE_M:g} m, measured on floor tags", "cm", "head",
+                   values, sigma)]  # fmt: skip
 
 
 def _external_columns(
@@ -160,31 +190,37 @@ def _external_columns(
 
 
 def _mocap_column(robot: Robot, models: dict[str, Corrections], captures: list[Path], say: Callable) -> list[Column]:
-    """Motion capture: marker distance [mm] after re-estimating base pose and mounts with the chain held."""
+    """Motion capture: distance [mm] of the markers on moving links, nominal mounts, base pose from the torso
+    markers (module docstring)."""
     if not captures:
         return []
     markers = load_marker_observations(robot.config, robot.joint_names, captures, [])
     say(f"motion capture: {markers.n_samples} held-out still sample(s), {len(markers.xyz)} marker positions")
-    distances, left_out = {}, set()
+    distances, left_out = {}, np.zeros(len(markers.xyz), dtype=bool)
+    moving = np.array([not robot.fixed_to_base(robot.config.marker_config().marker(n).link)
+                       for n in markers.marker_names], dtype=bool)[markers.marker_index]  # fmt: skip
     for label, model in models.items():
-        block = MocapBlock(robot, markers, fixed=model)
-        problem = Problem(ParameterSet([]), [block], [MOCAP_NOISE_START_M], robot.config.priors.encoder_noise)
-        solution = solve(problem)
-        residual = block.linearize(np.zeros(0), solution.values, ParameterSet([])).residual  # (M, 3) [m]
+        block = MocapBlock(robot, markers, fixed=model)  # its nuisance references: Kabsch poses, mounts 0
+        residual = block.linearize(np.zeros(0), block.nuisance.references, ParameterSet([])).residual  # (M, 3) [m]
         distances[label] = np.linalg.norm(residual, axis=1) * 1000.0
-        left_out |= set(solution.blocks[0].outlier_views)
-    keep = np.array([view not in left_out for view in block.view_labels], dtype=bool)
-    column = Column("mocap_mm", "motion capture: measured to predicted marker distance", "mm", "mocap")
+        d = distances[label][moving]
+        left_out[moving] |= MOCAP_MARKER_M.flags(d, d / 1000.0 / np.sqrt(3.0))  # size: per-axis RMS [m]
+    keep = moving & ~left_out
+    column = Column("mocap_mm", "motion capture: measured to predicted marker distance, markers on moving links",
+                    "mm", "mocap")  # fmt: skip
     column.values = {label: d[keep] for label, d in distances.items()}
     return [column]
 
 
-def _cell(values: np.ndarray) -> dict:
-    v = np.asarray(values, dtype=float)
+def _cell(column: Column, label: str) -> dict:
+    """Mean, standard deviation and count of a column's values of one row (a single value: its 1-sigma)."""
+    v = np.asarray(column.values[label], dtype=float)
     v = v[np.isfinite(v)]
     if not v.size:
         return {"mean": None, "std": None, "n": 0}
-    return {"mean": round(float(v.mean()), 4), "std": round(float(v.std()), 4), "n": int(v.size)}
+    std = float(v.std()) if column.sigma is None else column.sigma[label]
+    return {"mean": round(float(v.mean()), 4), "std": None if not np.isfinite(std) else round(std, 4),
+            "n": int(v.size)}  # fmt: skip
 
 
 def decide(columns: list[Column], calibrations: list[Calibration]) -> dict:
@@ -195,7 +231,7 @@ def decide(columns: list[Column], calibrations: list[Calibration]) -> dict:
     for c in calibrations:
         worse, ratios = [], []
         for col in columns:
-            before, mine = _cell(col.values[BEFORE_LABEL])["mean"], _cell(col.values[c.label])["mean"]
+            before, mine = _cell(col, BEFORE_LABEL)["mean"], _cell(col, c.label)["mean"]
             if before is None or mine is None or before <= 0:
                 continue
             ratios.append(mine / before)
@@ -226,7 +262,9 @@ def _blocks(metrics: dict, columns: list[Column], calibrations: list[Calibration
     for row in rows:
         for col in columns:
             cell = metrics["table"][row[0]][col.key]
-            row.append("n/a" if cell["mean"] is None else f"{cell['mean']:.2f} ± {cell['std']:.2f} (n={cell['n']})")
+            std = "?" if cell["std"] is None else f"{cell['std']:.2f}"
+            n = "" if col.sigma is not None else f" (n={cell['n']})"
+            row.append("n/a" if cell["mean"] is None else f"{cell['mean']:.2f} ± {std}{n}")
     marked = [i for i, row in enumerate(rows) if row[0] == metrics["decision"]["deploy"]]
     blocks = [("h1", f"wolfcal comparison {metrics['robot_name']}"),
               ("p", f"held-out captures: {', '.join(metrics['captures'])}"),
@@ -236,7 +274,8 @@ def _blocks(metrics: dict, columns: list[Column], calibrations: list[Calibration
     if metrics["not_measured"]:
         blocks.append(("p", "Not measured: " + "; ".join(metrics["not_measured"])))
     blocks.append(("h2", "Distributions"))
-    blocks += [("figure", (f"{col.key}.png", f"{col.title} [{col.unit}], every calibration")) for col in columns]
+    blocks += [("figure", (f"{col.key}.png", f"{col.title} [{col.unit}], every calibration")) for col in columns
+               if col.sigma is None]  # fmt: skip
     return blocks
 
 
@@ -266,9 +305,7 @@ def run_compare(
                            "of the head camera, an external camera or motion capture")  # fmt: skip
     models = {BEFORE_LABEL: Corrections(), **{c.label: c.corrections for c in calibrations}}
     loaded = load_captures(robot, camera_captures, None, say) if camera_captures else []
-    # One builder per measurement system. GROUND COLUMN: the measured ground error at 4.5 m [cm] from floor samples
-    # goes here (a Column with unit "cm", system "head") once `wolfcal evaluate` measures it; then drop it from
-    # metrics["not_measured"].
+    # One builder per measurement system (the head camera's includes the ground error when floor views exist).
     columns = [*_head_columns(robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say),
                *_external_columns(robot, models, loaded, say),
                *_mocap_column(robot, models, mocap_captures, say)]  # fmt: skip
@@ -285,13 +322,15 @@ def run_compare(
         "calibrations": [{"label": c.label, "fit_dir": c.fit_dir, "system": c.system, "preset": c.preset}
                          for c in calibrations],
         "columns": [{"key": col.key, "title": col.title, "unit": col.unit, "system": col.system} for col in columns],
-        "table": {label: {col.key: _cell(col.values[label]) for col in columns} for label in models},
-        "not_measured": ["ground error at 4.5 m [cm] (not yet measured by wolfcal compare)"],
+        "table": {label: {col.key: _cell(col, label) for col in columns} for label in models},
+        "not_measured": [] if any(col.key == "ground_cm" for col in columns) else [
+            f"ground error at {VERDICT_DISTANCE_M:g} m [cm] (needs held-out head-camera views of the floor tags)"],
         "decision": decision,
     }  # fmt: skip
     colours = {BEFORE_LABEL: BEFORE} | {c.label: PALETTE[i % len(PALETTE)] for i, c in enumerate(calibrations)}
     pngs = {f"{col.key}.png": histograms_png([(label, v, colours[label]) for label, v in col.values.items()],
-                                             f"{col.title} [{col.unit}]", col.title) for col in columns}  # fmt: skip
+                                             f"{col.title} [{col.unit}]", col.title) for col in columns
+            if col.sigma is None}  # fmt: skip
     blocks = _blocks(metrics, columns, calibrations)
     with output_set():
         for name, data in pngs.items():

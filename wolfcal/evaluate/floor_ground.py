@@ -16,31 +16,54 @@ change with the head angle (the plane is one for all samples).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from functools import partial
+
 import numpy as np
 from scipy.optimize import least_squares
 
+from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M, aim_head, ball_position, camera_in_floor
 from wolfcal.geometry import exp_so3, invert_transform
 from wolfcal.observations import Observations
+from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
+from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_weight
 from wolfcal.vision.tags import tag_corners
 
 MIN_VIEWS = 6  # fewer floor-tag views than this measure no ground error
+# The corner inset differs from tag to tag (the bits next to the border; 0-0.35 px at 30-50 px apparent edge in
+# rendered views): the fit's mean inset is taken as a prior of this relative 1-sigma, at least MIN_INSET_STD_PX
+INSET_SPREAD = 0.5
+MIN_INSET_STD_PX = 0.05
 
 
-def floor_view_rays(robot: Robot, obs: Observations, model: Corrections) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Views with all 4 corners: their tag ids (V,), the model's T_floor_camera (V, 4, 4) and the corner rays
-    (V, 4, 3) in the camera frame."""
+@dataclass
+class FloorViews:
+    """Held-out views (one floor tag in one sample, all 4 corners) under one model."""
+
+    tags: np.ndarray  # (V,) tag ids
+    samples: np.ndarray  # (V,) sample index
+    T_floor_camera: np.ndarray  # (V, 4, 4) the model's camera in the model's floor, at the sample's readings
+    uv: np.ndarray  # (V, 4, 2) detected corners [px]
+    inward: np.ndarray  # (V, 4, 2) `corner_bias.inset_moves` [px/px]
+    weight: np.ndarray  # (V,) `corner_bias.small_view_weight`
+
+
+def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorViews:
+    """The views with all 4 corners."""
     order = np.lexsort((obs.corner_index, obs.tag_ids, obs.sample_index))
     s, t, uv = obs.sample_index[order], obs.tag_ids[order], obs.uv[order]
     key = s.astype(np.int64) * 1_000_000 + t
     _, start, count = np.unique(key, return_index=True, return_counts=True)
     start = start[count == 4]
-    rows = start[:, None] + np.arange(4)
+    ring = uv[start[:, None] + np.arange(4)]
     T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, model)
-    T = T_floor_camera[s[start]]  # (V, 4, 4)
-    return t[start], T, obs.camera.unproject(uv[rows])
+    inward = inset_moves(ring)
+    return FloorViews(t[start], s[start], T_floor_camera[s[start]], ring, inward,
+                      small_view_weight(apparent_edges(ring)))  # fmt: skip
 
 
 def _plane(values: np.ndarray) -> np.ndarray:
@@ -70,42 +93,98 @@ def _meet(T_real_model: np.ndarray, origins: np.ndarray, rays: np.ndarray, heigh
     return o[..., :2] + s[..., None] * r[..., :2]
 
 
-def real_floor(robot: Robot, obs: Observations, model: Corrections) -> dict | None:
-    """The plane unknowns (3,) [rad, rad, m], their covariance (3, 3) and the views' count; None with fewer
-    than MIN_VIEWS views or a floor tag seen only once."""
-    tags, T_floor_camera, camera_rays = floor_view_rays(robot, obs, model)
-    ids, inverse, counts = np.unique(tags, return_inverse=True, return_counts=True)
-    if len(tags) < MIN_VIEWS or counts.min() < 2:
+class _FloorFit:
+    """The least-squares fit of the plane, the camera turn and the tags' places to the views' corner pixels."""
+
+    def __init__(self, robot: Robot, views: FloorViews, camera: CameraModel, inset: tuple[float, float]) -> None:
+        self.views, self.camera, self.inset = views, camera, inset
+        self.scale = 1.0  # [px] of the corner residuals: the inset's prior residual counts in it
+        floor = robot.config.floor_config()
+        self.ids, self.tag_of_view = np.unique(views.tags, return_inverse=True)
+        self.tag_of_view = self.tag_of_view.ravel()
+        self.printed = np.stack([tag_corners(floor.tag(int(i)).size) for i in self.ids])  # (T, 4, 3)
+        self.printed[..., 2] = np.array([floor.tag(int(i)).thickness for i in self.ids])[:, None]
+
+    def start(self) -> np.ndarray:
+        """Zero plane and turn; tag places under the model's floor: centre and yaw of each tag's first view."""
+        v = self.views
+        rays = np.einsum("vij,vcj->vci", v.T_floor_camera[:, :3, :3], self.camera.unproject(v.uv))
+        height = self.printed[self.tag_of_view, :, 2]
+        seen = _meet(np.eye(4), np.repeat(v.T_floor_camera[:, None, :3, 3], 4, axis=1), rays, height)
+        places = np.zeros((len(self.ids), 3))
+        for k in range(len(self.ids)):
+            first = seen[self.tag_of_view == k][0]
+            edge = first[1] - first[0]
+            places[k] = [*first.mean(axis=0), np.arctan2(edge[1], edge[0])]
+        return np.concatenate([np.zeros(6), [self.inset[0]], np.nan_to_num(places).ravel()])
+
+    def residuals(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """Weighted corner residuals [px] of the views `keep` (V,) bool."""
+        v = self.views
+        place = x[7:].reshape(-1, 3)[self.tag_of_view[keep]]
+        c, s = np.cos(place[:, 2:3]), np.sin(place[:, 2:3])
+        p = self.printed[self.tag_of_view[keep]]
+        p_real = np.stack([place[:, :1] + c * p[..., 0] - s * p[..., 1], place[:, 1:2] + s * p[..., 0] + c * p[..., 1],
+                           p[..., 2]], axis=-1)  # fmt: skip
+        T_camera_real = invert_transform(_real_camera(x, v.T_floor_camera[keep]))
+        p_camera = np.einsum("vij,vcj->vci", T_camera_real[:, :3, :3], p_real) + T_camera_real[:, None, :3, 3]
+        r = (self.camera.project(p_camera) + x[6] * v.inward[keep] - v.uv[keep]) * v.weight[keep, None, None]
+        prior = self.scale * (x[6] - self.inset[0]) / self.inset[1]
+        return np.append(np.nan_to_num(r, nan=BEHIND_CAMERA_PX).ravel(), prior)
+
+    def solve(self, x0: np.ndarray, keep: np.ndarray, scale: float | None = None) -> np.ndarray:
+        """The unknowns fitted to the views `keep`; with a residual `scale` [px] robustly (Huber at 2 scale)."""
+        if scale is not None:
+            self.scale = scale
+        loss = {} if scale is None else {"loss": "huber", "f_scale": 2.0 * scale}
+        return least_squares(self.residuals, x0, x_scale="jac", args=(keep,), **loss).x
+
+
+def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset: tuple[float, float] = (0.0, 0.0),
+               camera: CameraModel | None = None) -> dict | None:  # fmt: skip
+    """The plane and camera-turn unknowns (6,) [rad, rad, m, rad, rad, rad] with their spread: the formal
+    covariance (6, 6), the delete-one-sample jackknife replicates (n, 6) and the unknowns refitted with the corner
+    inset one sigma larger (6,); the views' count and the residual scale [px]. None with fewer than MIN_VIEWS views
+    or a floor tag seen only once. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
+    views = floor_views(robot, obs, model)
+    views = _subset(views, _seen_twice(views.tags))
+    if len(views.tags) < MIN_VIEWS:
         return None
-    printed = np.stack([tag_corners(robot.config.floor_config().tag(int(i)).size)[:, :2] for i in ids])  # (T, 4, 2)
-    height = np.array([robot.config.floor_config().tag(int(i)).thickness for i in ids])[inverse][:, None]
+    inset = (corner_inset[0], max(corner_inset[1], INSET_SPREAD * abs(corner_inset[0]), MIN_INSET_STD_PX))
+    fit = _FloorFit(robot, views, camera or obs.camera, inset)
+    every = np.ones(len(views.tags), dtype=bool)
+    x = fit.solve(fit.start(), every)
+    scale = 1.4826 * float(np.median(np.abs(fit.residuals(x, every)[:-1])))
+    x = fit.solve(x, every, scale)
+    r = fit.residuals(x, every)
+    J = _jacobian(lambda u: fit.residuals(u, every), x)
+    dof = max(len(r) - len(x), 1)
+    covariance = np.linalg.pinv(J.T @ J) * max(float(r @ r) / dof, 1.0)
+    samples, tags = np.unique(views.samples), np.unique(views.tags)
+    by_sample = np.stack([fit.solve(x, views.samples != s, scale)[:7] for s in samples]) if len(samples) > 2 else None
+    by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
+    return {"unknowns": x[:7], "covariance": covariance[:7, :7], "jackknife_samples": by_sample,
+            "jackknife_tags": by_tag, "views": len(views.tags), "scale_px": scale, "inset_px": float(x[6])}  # fmt: skip
 
-    def meet(x: np.ndarray) -> np.ndarray:
-        T = _real_camera(x, T_floor_camera)
-        rays = np.einsum("vij,vcj->vci", T[:, :3, :3], camera_rays)
-        return _meet(np.eye(4), np.repeat(T[:, None, :3, 3], 4, axis=1), rays, height)
 
-    start_corners = meet(np.zeros(6))
-    start = np.zeros((len(ids), 3))
-    for k in range(len(ids)):  # tag places under the model's floor: centre and yaw of the first view
-        first = start_corners[inverse == k][0]
-        edge = first[1] - first[0]
-        start[k] = [*first.mean(axis=0), np.arctan2(edge[1], edge[0])]
+def _seen_twice(tags: np.ndarray) -> np.ndarray:
+    """(V,) bool: the views of tags seen in at least two views (a tag's place is unknown: one view is no data)."""
+    ids, inverse, counts = np.unique(tags, return_inverse=True, return_counts=True)
+    return (counts >= 2)[inverse.ravel()]
 
-    def residuals(x: np.ndarray) -> np.ndarray:
-        seen = meet(x)
-        place = x[6:].reshape(-1, 3)[inverse]
-        c, s = np.cos(place[:, 2]), np.sin(place[:, 2])
-        p = printed[inverse]
-        expected = np.stack([place[:, None, 0] + c[:, None] * p[..., 0] - s[:, None] * p[..., 1],
-                             place[:, None, 1] + s[:, None] * p[..., 0] + c[:, None] * p[..., 1]], axis=-1)
-        return np.nan_to_num((seen - expected).ravel(), nan=1.0)
 
-    fit = least_squares(residuals, np.concatenate([np.zeros(6), start.ravel()]), x_scale="jac")
-    J, r = fit.jac, fit.fun
-    dof = max(len(r) - len(fit.x), 1)
-    covariance = np.linalg.pinv(J.T @ J) * float(r @ r) / dof
-    return {"unknowns": fit.x[:6], "covariance": covariance[:6, :6], "views": len(tags)}
+def _subset(views: FloorViews, keep: np.ndarray) -> FloorViews:
+    return FloorViews(*(getattr(views, f.name)[keep] for f in fields(FloorViews)))
+
+
+def _jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, step: float = 1e-7) -> np.ndarray:
+    """Central-difference Jacobian of f at x."""
+    columns = []
+    for i in range(len(x)):
+        dx = np.zeros_like(x)
+        dx[i] = step * max(1.0, abs(x[i]))
+        columns.append((f(x + dx) - f(x - dx)) / (2 * dx[i]))
+    return np.stack(columns, axis=1)
 
 
 def _aimed(robot: Robot, model: Corrections, distance: float, bearing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -114,49 +193,68 @@ def _aimed(robot: Robot, model: Corrections, distance: float, bearing: float) ->
     return camera_in_floor(robot, q[None], model)
 
 
-def _landing_error(unknowns: np.ndarray, aimed: tuple[np.ndarray, np.ndarray], distance: float,
-                   bearing: float) -> float:  # fmt: skip
-    """Ground error [m] of the model (camera aimed: `_aimed`) against the real floor and camera (`unknowns`) for
-    a ball `distance` m away at `bearing`; NaN above the model's horizon."""
+def _landing_offset(aimed: tuple[np.ndarray, np.ndarray], distance: float, bearing: float,
+                    unknowns: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(2,) where the model (camera aimed: `_aimed`) puts a ball `distance` m away at `bearing` less where it lies
+    on the real floor (real floor and camera: `unknowns`) [m]; NaN above the model's horizon."""
     T_model_real = _plane(unknowns[:3])
     T_floor_camera, T_floor_base = aimed
     below = (invert_transform(T_model_real) @ T_floor_base[0, :, 3])[:2]  # point below base, real floor coordinates
     ball = np.array([*(below + distance * np.array([np.cos(bearing), np.sin(bearing)])), 0.0, 1.0])
     ray_camera = (invert_transform(_real_camera(unknowns, T_floor_camera[0])) @ ball)[:3]
     landed = _meet(np.eye(4), T_floor_camera[0, :3, 3], T_floor_camera[0, :3, :3] @ ray_camera, np.array(0.0))
-    return float(np.linalg.norm(landed - ball[:2]))
+    return landed - ball[:2]
 
 
 def measured_ground_errors(
-    robot: Robot, obs: Observations, models: dict[str, Corrections], distances: tuple[float, ...] = DISTANCES_M
+    robot: Robot, obs: Observations, models: dict[str, Corrections], distances: tuple[float, ...] = DISTANCES_M,
+    corner_inset: tuple[float, float] = (0.0, 0.0),
 ) -> dict | None:
     """Per model: per distance the measured ground error [m] (worst bearing; None: the ball lies above the model's
-    horizon) and its 1-sigma [m]; the views' count. None when the floor views cannot measure it (too few views,
-    or a tag seen once)."""
+    horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count. None when the floor views cannot
+    measure it (fewer than MIN_VIEWS views of tags seen twice). `corner_inset`: the fit's `floor.corner_inset` and
+    its 1-sigma [px] (result.yaml; (0, 0) without one: then the inset's prior is MIN_INSET_STD_PX wide)."""
     out: dict = {"models": {}}
     for name, model in models.items():
-        floor = real_floor(robot, obs, model)
+        floor = real_floor(robot, obs, model, corner_inset)
         if floor is None:
             return None
         rows = []
         for distance in distances:
-            worst = (-1.0, 0.0)
-            for bearing in BEARINGS_RAD:
-                x, aimed = floor["unknowns"], _aimed(robot, model, distance, bearing)
-                error = _landing_error(x, aimed, distance, bearing)
-                grad = np.zeros(6)
-                for i in range(6):
-                    step = np.zeros(6)
-                    step[i] = 1e-6
-                    grad[i] = (_landing_error(x + step, aimed, distance, bearing)
-                               - _landing_error(x - step, aimed, distance, bearing)) / 2e-6
-                if not np.isfinite(error):  # the ball lies above the model's horizon
-                    worst = (np.inf, np.nan)
-                    break
-                worst = max(worst, (error, float(np.sqrt(grad @ floor["covariance"] @ grad))))
-            finite = bool(np.isfinite(worst[0]))
-            rows.append({"distance_m": distance, "error_m": worst[0] if finite else None,
-                         "std_m": worst[1] if finite else None})
+            offsets = [partial(_landing_offset, _aimed(robot, model, distance, b), distance, b) for b in BEARINGS_RAD]
+            errors = [float(np.linalg.norm(f(floor["unknowns"]))) for f in offsets]
+            if not np.all(np.isfinite(errors)):  # the ball lies above the model's horizon
+                rows.append({"distance_m": distance, "error_m": None, "std_m": None})
+                continue
+            worst = int(np.argmax(errors))
+            rows.append({"distance_m": distance, "error_m": errors[worst], **_spread(offsets[worst], floor)})
         out["models"][name] = {"rows": rows, "unknowns": [float(v) for v in floor["unknowns"]]}
         out["views"] = floor["views"]
     return out
+
+
+def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
+    """1-sigma [m] of a ground error: sqrt of the trace of its offset's (2,) covariance, so that it bounds how far
+    the error's length can be off even when the offset is near zero. Covariance: the larger of the formal one
+    (residual scale, at least the noise the weights assume) and the delete-one-sample jackknife's (errors shared
+    within a sample: joint readings), plus the delete-one-tag jackknife's (errors shared by a tag's views: its
+    corner bias); each part's sqrt-trace alongside [m]."""
+    x = floor["unknowns"]
+    G = _jacobian(offset, x, 1e-6)
+    formal = G @ floor["covariance"] @ G.T
+    by_sample, by_tag = (_jackknife_covariance(offset, floor[k]) for k in ("jackknife_samples", "jackknife_tags"))
+    total = (formal if np.trace(formal) > np.trace(by_sample) else by_sample) + by_tag
+    parts = {"std_m": total, "formal_std_m": formal, "sample_std_m": by_sample, "tag_std_m": by_tag}
+    return {k: float(np.sqrt(np.trace(c))) for k, c in parts.items()}
+
+
+def _jackknife_covariance(offset: Callable[[np.ndarray], np.ndarray], replicates: np.ndarray | None) -> np.ndarray:
+    """(2, 2) delete-one jackknife covariance [m^2] of a landing offset over `replicates` (n, 7) of the unknowns
+    (zero without replicates; inf when a replicate puts the ball above the horizon)."""
+    if replicates is None:
+        return np.zeros((2, 2))
+    values = np.array([offset(u) for u in replicates])
+    if not np.all(np.isfinite(values)):
+        return np.full((2, 2), np.inf)
+    d = values - values.mean(axis=0)
+    return (len(values) - 1) / len(values) * d.T @ d

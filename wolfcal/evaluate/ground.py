@@ -14,7 +14,6 @@ answers alike).
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import minimize
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
@@ -27,6 +26,7 @@ from wolfcal.robot.robot import Robot
 DISTANCES_M = (1.0, 2.0, 4.5, 9.0)
 BEARINGS_RAD = tuple(np.deg2rad((-30.0, 0.0, 30.0)))
 VERDICT_DISTANCE_M = 4.5  # half a field: the distance the deploy verdict judges
+AIM_REFINEMENTS = 12  # of the head aim after the coarse grid (see aim_head)
 
 
 # why `floor:` is needed, for the error that names the robot config when it is missing
@@ -87,12 +87,18 @@ def aim_head(robot: Robot, reference: Corrections, ball: np.ndarray) -> np.ndarr
         cos = np.einsum("ni,ni->n", T_floor_camera[:, :3, 2], to_ball) / np.linalg.norm(to_ball, axis=1)
         return np.arccos(np.clip(cos, -1.0, 1.0))
 
-    axes = [np.linspace(a, b, 121 if len(joints) == 2 else 721) for a, b in zip(lo, hi)]
+    points = 41 if len(joints) == 2 else 721
+    axes = [np.linspace(a, b, points) for a, b in zip(lo, hi)]
     grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
     best = grid[int(np.argmin(off_axis(grid)))]
-    found = minimize(lambda v: float(off_axis(v[None])[0]), best, method="Nelder-Mead",
-                     options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 2000})  # fmt: skip
-    q0[columns] = np.clip(found.x, lo, hi)
+    step = (hi - lo) / (points - 1)
+    ticks = np.linspace(-1.0, 1.0, 11)  # each refinement: 11 values per joint over +-1 step around the best
+    local = np.stack([g.ravel() for g in np.meshgrid(*[ticks] * len(joints), indexing="ij")], axis=1)
+    for _ in range(AIM_REFINEMENTS):  # the step shrinks 5-fold each time: 1e-9 rad in the end
+        candidates = np.clip(best + local * step, lo, hi)
+        best = candidates[int(np.argmin(off_axis(candidates)))]
+        step = step / 5
+    q0[columns] = best
     return q0
 
 

@@ -110,13 +110,19 @@ def _observe(
     return samples, obs.only_tags(tags), tags, warnings, floor
 
 
+def _corner_inset(result: FitResult) -> tuple[float, float]:
+    """The fit's `floor.corner_inset` and its 1-sigma [px] ((0, 0): the fit had no floor samples)."""
+    found = [(p.value, p.std) for p in result.parameters if p.name == "floor.corner_inset"]
+    return found[0] if found else (0.0, 0.0)
+
+
 def _measured_ground(robot: Robot, floor: Observations | None, fitted: Corrections, held_out: bool,
-                     say: Callable[[str], None]) -> dict | None:  # fmt: skip
+                     say: Callable[[str], None], corner_inset: tuple[float, float]) -> dict | None:  # fmt: skip
     """`floor_ground.measured_ground_errors` of the held-out floor views, before and after (None: not measured)."""
     if floor is None or not held_out:
         return None
     say("measuring the ground error on the held-out floor views ...")
-    return measured_ground_errors(robot, floor, {"before": Corrections(), "after": fitted}, DISTANCES_M)
+    return measured_ground_errors(robot, floor, {"before": Corrections(), "after": fitted}, DISTANCES_M, corner_inset)
 
 
 def _verdict_ground(measured: dict | None) -> dict | None:
@@ -127,7 +133,8 @@ def _verdict_ground(measured: dict | None) -> dict | None:
     before, after = (measured["models"][m]["rows"][k] for m in ("before", "after"))
     inf = float("inf")
     return {"before_m": inf if before["error_m"] is None else before["error_m"],
-            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"]}
+            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"],
+            "before_std_m": before["std_m"] or 0.0}
 
 
 def _run_external_evaluate(
@@ -339,7 +346,7 @@ def _evaluate(
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
     predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
-    measured = _measured_ground(robot, floor, fitted, held_out, say)
+    measured = _measured_ground(robot, floor, fitted, held_out, say, _corner_inset(result))
     verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, _verdict_ground(measured),
                              predicted,
                              camera_turn(robot, fitted), limits)  # fmt: skip

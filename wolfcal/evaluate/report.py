@@ -43,9 +43,24 @@ def headline_rows(metrics: dict) -> list[list[str]]:
     return rows
 
 
+def measured_ground_rows(metrics: dict) -> list[list[str]]:
+    """Rows (quantity, before, after) of the ground error measured on held-out floor views (none without)."""
+    measured: dict = (metrics["ground"].get("measured") or {}).get("models") or {}
+    return [[f"measured ground error (floor views), ball at {row['distance_m']:g} m [cm, 1 sigma]",
+             *(_measured(measured[m]["rows"][k]) for m in ("before", "after"))]
+            for k, row in enumerate(measured["before"]["rows"] if measured else [])]  # fmt: skip
+
+
+def _measured(row: dict) -> str:
+    """'error +- std' [cm] of a measured ground error row, 'n/a' where not measured (above the horizon)."""
+    if row["error_m"] is None:
+        return "n/a"
+    return f"{_num(row['error_m'], 100, 1)} +- {_num(row['std_m'], 100, 1)}"
+
+
 def before_after_table(metrics: dict) -> str:
-    """Plain-text before/after table for a terminal."""
-    rows = [["", "before (input URDF)", "after (calibrated)"]] + headline_rows(metrics)
+    """Plain-text before/after table for a terminal (with the measured ground error, a section of the report)."""
+    rows = [["", "before (input URDF)", "after (calibrated)"]] + headline_rows(metrics) + measured_ground_rows(metrics)
     widths = [max(len(r[i]) for r in rows) for i in range(3)]
     lines = [f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}}  {r[2]:>{widths[2]}}" for r in rows]
     lines.insert(1, "-" * len(lines[0]))

@@ -80,5 +80,10 @@ class Block:
         """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""
         return np.full(self.n_units, -1)
 
+    def noise_classes(self) -> np.ndarray:
+        """(U,) noise class of each unit: units of one class share a noise level, estimated apart from the other
+        classes' (e.g. one per motion-capture marker). Default: one class, the block's level."""
+        return np.zeros(self.n_units, dtype=int)
+
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         raise NotImplementedError

@@ -4,18 +4,23 @@ The floor is the plane of the standing soles (`evaluate.ground.floor_frames`: or
 along their mean z axis). Each floor tag lies face up on it at an unknown place: T_floor_tag = Trans(x, y, thickness)
 @ Rz(yaw), unknowns `floor.tag<id>.x|y|yaw` [m, rad] of the block (started from the nominal model's ray through the
 first view's corners). Residual per corner [px]: project(K, D, T_camera_base(q) @ T_base_floor(q) @ T_floor_tag @
-p_corner) - u_detected, divided by max(1, REFERENCE_EDGE_PX / apparent edge): the corners of small, strongly
-foreshortened far tags come out of the detector biased inward (up to ~1 px at 4 m), so a tag seen small counts as
-much as one seen REFERENCE_EDGE_PX wide, no more. Height and tilt of every tag come from the standing soles, so the
+p_corner) + inset * d_corner - u_detected, divided by max(1, REFERENCE_EDGE_PX / apparent edge). The corners of
+small, strongly foreshortened far tags come out of the detector biased inward (up to ~1 px at 4 m): so a tag seen
+small counts as much as one seen REFERENCE_EDGE_PX wide, no more, and that bias is one more unknown of the block,
+`floor.corner_inset` [px]: every edge of a tag view moved inward by it at REFERENCE_EDGE_PX apparent edge, by
+inset * REFERENCE_EDGE_PX / edge above (d_corner: `vision.corner_bias.inset_directions`), so that it does not read
+as a smaller, farther tag and a tilted floor. Height and tilt of every tag come from the standing soles, so the
 block measures the camera relative to the floor through the standing legs.
 
 `SoleClosure`: both standing soles lie on the floor. Residual per floor sample [m]: the height of each sole's origin
 above the other sole's plane (2 numbers) and the tilt between the soles' z axes as a displacement at SOLE_LEVER_M
-(2 numbers). Derivatives with respect to the chain and the joint readings are central differences of the forward
-kinematics (the floor frame is a normalised mean of two poses).
+(2 numbers). Derivatives are analytic: the soles' and the camera's twists (`wolfcal.robot.derivatives`) and the floor
+frame's twist through its means and normalisations (`wolfcal.robot.floor.floor_frame_twists`).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,16 +31,17 @@ from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
 from wolfcal.projection import BEHIND_CAMERA_PX, pixel_jacobian
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import floor_frames
+from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
+from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.vision.corner_bias import REFERENCE_EDGE_PX, apparent_edges, inset_directions, small_view_weight
 from wolfcal.vision.tags import tag_corners
 
-REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] below which a floor tag's corners are down-weighted
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
+INSET_PRIOR_PX = 1.0  # prior of the corner detector's inward bias at REFERENCE_EDGE_PX [px]
 SOLE_LEVER_M = 0.1  # a tilt between the soles counts as the displacement it makes at this distance [m]
-STEP = 1e-6  # central-difference step [SI]
 
 
 def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray, np.ndarray]:
@@ -46,25 +52,27 @@ def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray,
     return invert_transform(poses[frame]) @ floor_frames(sole_poses), sole_poses
 
 
-def _chain_and_joint_derivatives(f, robot: Robot, q: np.ndarray, chain: ParameterSet, values: np.ndarray,
-                                 fixed: Corrections) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """f(q, model) -> (N, D) at the values, its derivatives (N, D, P) by the chain values and (N, D, J) by q."""
-    def model(v: np.ndarray) -> Corrections:
-        return chain.corrections(v).plus(fixed)
+@dataclass
+class _StandingChain:
+    """The soles and the camera at one parameter vector, in the chain's root frame, with their twists."""
 
-    y = f(q, model(values))
-    d_chain = np.empty(y.shape + (len(values),))
-    for i in range(len(values)):
-        step = np.zeros(len(values))
-        step[i] = STEP
-        d_chain[..., i] = (f(q, model(values + step)) - f(q, model(values - step))) / (2 * STEP)
-    base = model(values)
-    d_q = np.empty(y.shape + (q.shape[1],))
-    for j in range(q.shape[1]):
-        step = np.zeros(q.shape[1])
-        step[j] = STEP
-        d_q[..., j] = (f(q + step, base) - f(q - step, base)) / (2 * STEP)
-    return y, d_chain, d_q
+    T_root_soles: np.ndarray  # (K, S, 4, 4)
+    twists_soles: np.ndarray  # (K, S, J + P, 6): joint readings first, then chain parameters
+    T_root_camera: np.ndarray  # (S, 4, 4)
+    twists_camera: np.ndarray  # (S, J + P, 6)
+
+
+def _standing_chain(robot: Robot, q: np.ndarray, chain: ParameterSet, values: np.ndarray,
+                    fixed: Corrections) -> _StandingChain:  # fmt: skip
+    """Poses and twists of the soles and the head camera for readings q (S, J) under the chain's values."""
+    frame, soles = robot.config.head_camera().frame, list(robot.config.floor_config().soles)
+    d = ChainDerivatives(robot, q, chain.corrections(values).plus(fixed), chain, [frame, *soles], [])
+
+    def twists(link: str) -> np.ndarray:
+        return np.concatenate([d.twist_q(link), d.twist_p(link)], axis=1)
+
+    return _StandingChain(np.stack([d.T_root[s] for s in soles]), np.stack([twists(s) for s in soles]),
+                          d.T_root[frame], twists(frame))  # fmt: skip
 
 
 class FloorBlock(Block):
@@ -87,18 +95,24 @@ class FloorBlock(Block):
         views, view_of_unit = np.unique(np.stack([obs.sample_index, obs.tag_ids], axis=1), axis=0, return_inverse=True)
         self.view_of_unit = view_of_unit.ravel()
         self.view_labels = [(int(s), int(t)) for s, t in views]
-        self.weight = 1.0 / np.maximum(1.0, REFERENCE_EDGE_PX / self._apparent_edge())
-        self.nuisance = self._place_parameters()
+        edge = self._apparent_edge()
+        self.weight = small_view_weight(edge)
+        # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
+        self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.nuisance = self._place_parameters() + ParameterSet(
+            [Parameter("floor.corner_inset", "floor", "floor", 0, "px", INSET_PRIOR_PX)])
 
     def _apparent_edge(self) -> np.ndarray:
         """(M,) mean edge length of each corner's tag view in the image [px]."""
         ring = np.full((len(self.view_labels), 4, 2), np.nan)
         ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        lengths = np.linalg.norm(ring - np.roll(ring, 1, axis=1), axis=2)  # (V, 4), NaN next to a missing corner
-        known = np.isfinite(lengths)
-        edge = np.where(known.any(axis=1), np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1),
-                        REFERENCE_EDGE_PX)
-        return edge[self.view_of_unit]
+        return apparent_edges(ring)[self.view_of_unit]
+
+    def _inward(self) -> np.ndarray:
+        """(M, 2) `corner_bias.inset_directions` of each detected corner's view [px/px]."""
+        ring = np.full((len(self.view_labels), 4, 2), np.nan)
+        ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
+        return inset_directions(ring)[self.view_of_unit, self.obs.corner_index]
 
     def _place_parameters(self) -> ParameterSet:
         """x, y, yaw of each floor tag, started where the nominal model's rays through its first view meet the
@@ -129,7 +143,7 @@ class FloorBlock(Block):
 
     def _floor_points(self, place: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M, 3) corners on the floor [m] and their derivatives (M, 3, 3) by the corner's tag's x, y, yaw."""
-        x, y, yaw = place.reshape(-1, 3)[self.tag_col].T
+        x, y, yaw = place[: 3 * len(self.tag_ids)].reshape(-1, 3)[self.tag_col].T
         c, s = np.cos(yaw), np.sin(yaw)
         px, py = self.p_tag[:, 0], self.p_tag[:, 1]
         p = np.stack([x + c * px - s * py, y + s * px + c * py, self.height], axis=1)
@@ -140,27 +154,29 @@ class FloorBlock(Block):
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         p_floor, dp_place = self._floor_points(local_values)
-        s = self.sample_of_unit
-
-        def per_sample(q: np.ndarray, model: Corrections) -> np.ndarray:
-            return _poses(self.robot, q, model)[0].reshape(len(q), 16)
-
-        T, dT_chain, dT_q = _chain_and_joint_derivatives(per_sample, self.robot, self.q_measured, chain,
-                                                        chain_values, self.fixed)  # fmt: skip
-        T, dT_chain, dT_q = T.reshape(-1, 4, 4)[s], dT_chain.reshape(-1, 4, 4, len(chain_values))[s], \
-            dT_q.reshape(-1, 4, 4, self.q_measured.shape[1])[s]
-        p_camera = np.einsum("mij,mj->mi", T[:, :3, :3], p_floor) + T[:, :3, 3]
-        dp_chain = np.einsum("mijp,mj->mip", dT_chain[:, :3, :3], p_floor) + dT_chain[:, :3, 3]
-        dp_q = np.einsum("mijq,mj->miq", dT_q[:, :3, :3], p_floor) + dT_q[:, :3, 3]
-        dp_local = T[:, :3, :3] @ dp_place
+        s, n_joints = self.sample_of_unit, self.q_measured.shape[1]
+        c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
+        T_root_floor = floor_frames(c.T_root_soles)[s]  # (M, 4, 4)
+        twist = floor_frame_twists(c.T_root_soles, c.twists_soles)[s] - c.twists_camera[s]  # floor against camera
+        p_root = np.einsum("mij,mj->mi", T_root_floor[:, :3, :3], p_floor) + T_root_floor[:, :3, 3]
+        R_camera_root = np.swapaxes(c.T_root_camera[s, :3, :3], 1, 2)
+        p_camera = np.einsum("mij,mj->mi", R_camera_root, p_root - c.T_root_camera[s, :3, 3])
+        dp = R_camera_root @ point_motion(twist, p_root)  # (M, 3, J + P)
+        dp_q, dp_chain = dp[..., :n_joints], dp[..., n_joints:]
+        dp_local = R_camera_root @ T_root_floor[:, :3, :3] @ dp_place
         D = pixel_jacobian(self.obs.camera, p_camera) * self.weight[:, None, None]
-        residual = (self.obs.camera.project(p_camera) - self.obs.uv) * self.weight[:, None]
+        n_places = 3 * len(self.tag_ids)
+        inset = local_values[n_places]
+        residual = (self.obs.camera.project(p_camera) + inset * self.inward - self.obs.uv) * self.weight[:, None]
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
+        jac_local = np.concatenate([D @ dp_local, (self.inward * self.weight[:, None])[:, :, None]], axis=2)
+        local_cols = np.concatenate([3 * self.tag_col[:, None] + np.arange(3), np.full((len(residual), 1), n_places)],
+                                    axis=1)  # fmt: skip
         return Linearization(
-            residual=residual, jac_chain=D @ dp_chain, jac_local=D @ dp_local,
-            local_cols=3 * self.tag_col[:, None] + np.arange(3), joint_sensitivity=D @ dp_q,
+            residual=residual, jac_chain=D @ dp_chain, jac_local=jac_local, local_cols=local_cols,
+            joint_sensitivity=D @ dp_q,
         )  # fmt: skip
 
 
@@ -169,11 +185,28 @@ def sole_disagreement(robot: Robot, q: np.ndarray, model: Corrections) -> np.nda
     plane and of the first above the second's [m], and the tilt between their z axes (x, y in the first sole's
     frame) times SOLE_LEVER_M [m]. Needs two soles."""
     _, sole_poses = _poses(robot, q, model)
+    return _disagreement(sole_poses)
+
+
+def _disagreement(sole_poses: np.ndarray) -> np.ndarray:
+    """`sole_disagreement` of two sole poses (2, S, 4, 4) in any one frame."""
     a, b = sole_poses[0], sole_poses[1]
     h_ab = np.einsum("si,si->s", a[:, :3, 2], b[:, :3, 3] - a[:, :3, 3])
     h_ba = np.einsum("si,si->s", b[:, :3, 2], a[:, :3, 3] - b[:, :3, 3])
     z_b_in_a = np.einsum("sji,sj->si", a[:, :3, :3], b[:, :3, 2])
     return np.stack([h_ab, h_ba, SOLE_LEVER_M * z_b_in_a[:, 0], SOLE_LEVER_M * z_b_in_a[:, 1]], axis=1)
+
+
+def _disagreement_derivatives(sole_poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
+    """(S, 4, C) derivatives of `_disagreement` by the columns of the soles' twists (2, S, C, 6)."""
+    (a, b), (ta, tb) = sole_poses, twists
+    o_a, o_b, z_a, z_b = a[:, None, :3, 3], b[:, None, :3, 3], a[:, None, :3, 2], b[:, None, :3, 2]
+    do_a, do_b = ta[..., :3] + cross(ta[..., 3:], o_a), tb[..., :3] + cross(tb[..., 3:], o_b)  # (S, C, 3)
+    dz_a, dz_b = cross(ta[..., 3:], z_a), cross(tb[..., 3:], z_b)
+    dh_ab = np.sum(dz_a * (o_b - o_a) + z_a * (do_b - do_a), axis=-1)
+    dh_ba = np.sum(dz_b * (o_a - o_b) + z_b * (do_a - do_b), axis=-1)
+    dz_b_in_a = np.einsum("sji,scj->sci", a[:, :3, :3], cross(tb[..., 3:] - ta[..., 3:], z_b))
+    return np.stack([dh_ab, dh_ba, SOLE_LEVER_M * dz_b_in_a[..., 0], SOLE_LEVER_M * dz_b_in_a[..., 1]], axis=1)
 
 
 class SoleClosure(Block):
@@ -193,9 +226,11 @@ class SoleClosure(Block):
         self.nuisance = ParameterSet([])
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
-        r, d_chain, d_q = _chain_and_joint_derivatives(lambda q, m: sole_disagreement(self.robot, q, m), self.robot,
-                                                       self.q_measured, chain, chain_values, self.fixed)  # fmt: skip
-        return Linearization(residual=r, jac_chain=d_chain, jac_local=None, local_cols=None, joint_sensitivity=d_q)
+        c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
+        d = _disagreement_derivatives(c.T_root_soles, c.twists_soles)
+        n_joints = self.q_measured.shape[1]
+        return Linearization(residual=_disagreement(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
+                             local_cols=None, joint_sensitivity=d[..., :n_joints])
 
 
 MAX_SOLE_TILT_RAD = float(np.deg2rad(10.0))  # standing soles further from one plane under the nominal model are

@@ -8,6 +8,7 @@ p_mocap = T_mocap_base @ T_base_link(q_s + offsets) @ (xyz_m + mount_m):
   rigid registration (Kabsch) of the torso markers (markers on links fixed to the base) under the nominal model;
 - mount_m, the marker's offset from its configured (nominal) place in its link frame, is an unknown of the block
   with a prior of `MOUNT_PRIOR_M` per axis, named `marker.<name>.x|y|z`: 3D-printed mounts differ from CAD.
+Each marker has its own noise level (`noise_classes`; the solver estimates it robustly, with a floor).
 The outlier unit is one marker in one sample: a reflection or a swapped label is left out alone. Derivatives are
 analytic (`wolfcal.robot.derivatives`).
 """
@@ -68,6 +69,11 @@ class MocapBlock(Block):
                   for n in obs.marker_names for i, c in enumerate("xyz")]  # fmt: skip
         self.nuisance = ParameterSet(pose_params + mounts)
         self.n_pose = 6 * len(self.placement_names)
+
+    def noise_classes(self) -> np.ndarray:
+        """(U,) one noise level per marker: a marker seen at a grazing angle or through a reflection-prone spot is
+        noisier than the others."""
+        return self.obs.marker_index
 
     @property
     def marker_names(self) -> list[str]:

@@ -1,5 +1,6 @@
-"""The motion-capture block's part of result.yaml: residuals in mm, noise per marker, each left-out marker with its
-sample, the base pose in the motion-capture frame and the clock offsets of motion-capture files."""
+"""The motion-capture block's part of result.yaml: residuals in mm, noise per marker (the level the fit weighted it
+with), each left-out marker with its sample, the base pose in the motion-capture frame and the clock offsets of
+motion-capture files."""
 
 from __future__ import annotations
 
@@ -32,7 +33,8 @@ def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, resi
     for k, name in enumerate(obs.marker_names):
         rows = inlier & (obs.marker_index == k)
         rms = float(np.sqrt(np.mean(residual[rows] ** 2))) if rows.any() else float("nan")
-        per_marker[name] = {"n_used": int(rows.sum()), "rms_after_mm": round(rms * 1000, 4)}
+        per_marker[name] = {"n_used": int(rows.sum()), "rms_after_mm": round(rms * 1000, 4),
+                            "noise_sigma_mm": round(float(b.class_sigma[k]) * 1000, 4)}  # fmt: skip
     poses = {}
     for p, name in enumerate(block.placement_names):
         T = transform_from_twist_params(values[6 * p : 6 * p + 6])

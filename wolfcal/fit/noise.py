@@ -11,7 +11,9 @@ rows of each joint reading in the group (A = d(rows)/d(joint readings)) and tau 
 applied as an operator: no n x n matrix is ever formed, so memory and time grow linearly with a group's length (a
 still pose held for hundreds of frames). Each whitened number belongs to one measured row. The SVD is done once per
 linearisation, so trying another sigma (the noise-level search) costs one division; groups of equal size are
-decomposed in one batched call.
+decomposed in one batched call. Rows may have their own noise level, sigma * s_i (`row_scale` s, e.g. one per
+motion-capture marker): with D = diag(s), C_g = D (sigma^2 I + D^-1 U_g U_g^T D^-1) D, so the same whitening of the
+factors D^-1 U_g whitens D^-1 r.
 """
 
 from __future__ import annotations
@@ -64,8 +66,9 @@ class GroupedWhitening:
     with covariance sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are
     independent, rows in no group get zero weight."""
 
-    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors) -> None:
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
         self.group_of_row, self.shared = group_of_row, shared
+        self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
         self.in_group = group_of_row >= 0
         self.n_rows, self.n_groups = len(shared.A), int(group_of_row.max()) + 1 if self.in_group.any() else 0
         grouped = np.flatnonzero(self.in_group)
@@ -79,6 +82,7 @@ class GroupedWhitening:
         group of each column."""
         shared, rows = self.shared, self.rows
         A = shared.sigma_q * shared.A[:, np.any(shared.A != 0, axis=0)]  # joints that move no row are left out
+        A /= self.row_scale[:, None]
         n_joints = A.shape[1]
         group = self.group_of_row[rows]
         reading_slot, readings = _slots(group, shared.reading[rows], np.any(A[rows] != 0, axis=1), self.n_groups)
@@ -103,7 +107,7 @@ class GroupedWhitening:
             has = np.flatnonzero(reading_slot[at] >= 0)
             U[has[:, None], reading_slot[at][has][:, None] * n_joints + np.arange(n_joints)] = A[rows[at][has]]
             has = np.flatnonzero(label_slot[at] >= 0)
-            U[has, k_reading + label_slot[at][has]] = shared.tau
+            U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
             Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
             g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
             data.append(Q[g, :, c].ravel())
@@ -121,18 +125,21 @@ class GroupedWhitening:
 
     def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
         """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.group_of_row, shared)
+        return GroupedWhitening(self.group_of_row, shared, self.row_scale)
 
     def apply(self, M, sigma: float):
         """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""
         d = 1.0 / np.sqrt(sigma**2 + self.s2) - 1.0 / sigma
         keep = self.in_group / sigma
         if scipy.sparse.issparse(M):
+            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
             shared = self.Q @ (scipy.sparse.diags(d) @ (self.QT @ M))
             return (scipy.sparse.diags(keep) @ M + shared).tocsr()
         M = np.asarray(M, dtype=float)
         if M.ndim == 1:
+            M = M / self.row_scale
             return keep * M + self.Q @ (d * (self.QT @ M))
+        M = M / self.row_scale[:, None]
         out = self.Q @ (d[:, None] * (self.QT @ M))
         out += keep[:, None] * M
         return out
@@ -143,6 +150,7 @@ class GroupedWhitening:
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals."""
+        r = r / self.row_scale
         t = self.QT @ r
         independent = np.bincount(self.group_of_row[self.rows], r[self.rows] ** 2, self.n_groups) / sigma**2
         shared = np.bincount(self.group_of_column, t**2 * (1.0 / (sigma**2 + self.s2) - 1.0 / sigma**2), self.n_groups)

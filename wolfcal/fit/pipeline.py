@@ -103,27 +103,12 @@ def fit_observations(
     else:
         observations = _systems(robot, observations, options)
     observations, floor = split_floor(robot, observations)
-    used: dict[str, Observations] = {}
-    for name, obs in observations.items():
-        tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
-        if name != HEAD_CAMERA:  # the external camera's pose rests on the tags fixed to the base
-            tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
-                                             if robot.fixed_to_base(robot.config.tag(t).link)})
-        if tag_ids:
-            used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
+    used = _tags_used(robot, observations, options)
     if not used and mocap is None and floor is None:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
-    camera_blocks: list[CameraBlock] = []
-    for name, obs in used.items():
-        if name == HEAD_CAMERA:
-            block = CameraBlock(robot, obs, obs.observed_tag_ids)
-        else:
-            placement, names = placements(obs, options.external_moving)
-            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
-        block.outlier_rule = options.outlier
-        camera_blocks.append(block)
+    camera_blocks = _camera_blocks(robot, used, options)
     blocks: list[Block] = [*camera_blocks]
     tags_by_camera = {b.camera_name: b.tag_ids for b in camera_blocks}
     if floor is not None:
@@ -139,16 +124,7 @@ def fit_observations(
         tuple(mocap.links) if mocap is not None else (),
     )
     blocks += [mocap] if mocap is not None else []
-    n_params = len(chain) + sum(len(b.nuisance) for b in blocks)
-    n_numbers = sum(b.n_units * b.dim for b in blocks)
-    if n_numbers < 2 * n_params:  # ask for twice as many measured numbers as unknowns
-        n_samples = sum(len(b.q_measured) for b in blocks)
-        needed = max(3, int(np.ceil(n_samples * 2 * n_params / max(n_numbers, 1))))
-        raise WolfcalError(
-            f"too few samples for the free parameters: {n_samples} sample(s) with tags or markers give {n_numbers} "
-            f"measured numbers for {n_params} unknowns (--free {options.free}); capture at least {needed}, or free "
-            "fewer parameters"
-        )
+    _check_enough_data(blocks, len(chain), options.free)
     priors = robot.config.priors
     sigmas = [
         priors.pixel_noise if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M
@@ -157,6 +133,50 @@ def fit_observations(
     problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
     solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
     return Fit(robot, used, blocks, chain, problem, solution)
+
+
+def _tags_used(
+    robot: Robot, observations: dict[str, Observations], options: FitOptions
+) -> dict[str, Observations]:
+    """Per camera, the observations of the tags the preset uses (cameras without one left out); an external camera
+    also keeps the tags fixed to the base, on which its pose rests."""
+    used: dict[str, Observations] = {}
+    for name, obs in observations.items():
+        tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
+        if name != HEAD_CAMERA:
+            tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
+                                             if robot.fixed_to_base(robot.config.tag(t).link)})
+        if tag_ids:
+            used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
+    return used
+
+
+def _camera_blocks(robot: Robot, used: dict[str, Observations], options: FitOptions) -> list[CameraBlock]:
+    """One camera block per camera: the head camera's, or an external camera's with its placement unknowns."""
+    camera_blocks: list[CameraBlock] = []
+    for name, obs in used.items():
+        if name == HEAD_CAMERA:
+            block = CameraBlock(robot, obs, obs.observed_tag_ids)
+        else:
+            placement, names = placements(obs, options.external_moving)
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
+        block.outlier_rule = options.outlier
+        camera_blocks.append(block)
+    return camera_blocks
+
+
+def _check_enough_data(blocks: list[Block], n_chain: int, preset: str) -> None:
+    """Refuse a fit with fewer than twice as many measured numbers as unknowns (chain and nuisance)."""
+    n_params = n_chain + sum(len(b.nuisance) for b in blocks)
+    n_numbers = sum(b.n_units * b.dim for b in blocks)
+    if n_numbers < 2 * n_params:
+        n_samples = sum(len(b.q_measured) for b in blocks)
+        needed = max(3, int(np.ceil(n_samples * 2 * n_params / max(n_numbers, 1))))
+        raise WolfcalError(
+            f"too few samples for the free parameters: {n_samples} sample(s) with tags or markers give {n_numbers} "
+            f"measured numbers for {n_params} unknowns (--free {preset}); capture at least {needed}, or free "
+            "fewer parameters"
+        )
 
 
 def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOptions) -> MocapBlock | None:

@@ -46,11 +46,18 @@ class BlockState:
         self.excluded = np.zeros(block.n_views, dtype=bool)
         self.groups = block.noise_groups()  # (U,) fixed: derived once
         self.labels = block.shared_labels()  # (U,) fixed: derived once
+        self.classes = block.noise_classes()  # (U,) fixed: derived once
+        self.unit_scale = np.ones(block.n_units)  # (U,) each unit's noise level relative to sigma (its class's)
         self.whitening: GroupedWhitening | None = None
 
     def shared_size(self, sigma: float) -> float:
         """Size of a repeating detection error per axis [the block's unit] at the noise level `sigma`."""
         return max(sigma, self.shared_floor)
+
+    @property
+    def row_scale(self) -> np.ndarray:
+        """(R,) each residual row's noise level relative to sigma."""
+        return np.repeat(self.unit_scale, self.block.dim)
 
     @property
     def inlier_units(self) -> np.ndarray:
@@ -92,7 +99,9 @@ class BlockState:
                 shape=(n_read + int(label.max()) + 1,) * 2,
             )
             group_of_unit = connected_components(graph, directed=False)[1][reading]
-        self.whitening = GroupedWhitening(row_groups(group_of_unit, self.block.dim, self.inlier_units), shared)
+        self.whitening = GroupedWhitening(
+            row_groups(group_of_unit, self.block.dim, self.inlier_units), shared, self.row_scale
+        )
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:

@@ -75,7 +75,12 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
 
 
 def _display(value: float, unit: str) -> str:
-    return f"{np.rad2deg(value):+.3f} deg" if unit == "rad" else f"{value * 1000:+.2f} mm"
+    """A parameter value [SI, or px] as a user reads it: degrees, millimetres or pixels."""
+    if unit == "rad":
+        return f"{np.rad2deg(value):+.3f} deg"
+    if unit == "m":
+        return f"{value * 1000:+.2f} mm"
+    return f"{value:+.3f} {unit}"
 
 
 def _measured_by(fit: Fit) -> list[list[str]]:

@@ -4,8 +4,9 @@ Rounds: robust Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag 
 image: its residuals, whitened with the covariance of that view alone so that no other view's error leaks in, far
 above the other views' and off by more than the block's floor; they get zero weight) -> per block, estimate the
 noise level from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
-fixed) -> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then a full
-solve under the final noise model, and `uncertainty` at its solution.
+fixed), and the level of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker)
+-> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then a full solve under
+the final noise model, and `uncertainty` at its solution.
 """
 
 from __future__ import annotations
@@ -31,6 +32,16 @@ MAX_SIGMA = {"px": 50.0, "m": 0.1}
 # whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
 # linear arms would otherwise take many small steps. The solve after the last round converges fully.
 ROUND_COST_TOL = 1e-3
+# A block's noise classes (e.g. its motion-capture markers) each get their own level relative to the block's: the
+# RMS of the class's standardised residuals within CLASS_CUT of their median-based spread (a reflection does not
+# count, a noisy marker's own scatter does), drawn towards the block's level as if CLASS_PRIOR_ROWS residuals had
+# it (25 samples' 75 numbers scatter by 8 % in RMS: one marker weighted up by chance pulls the fit to itself and
+# shrinks its residuals further), only from at least MIN_CLASS_UNITS units (else the block's level), and never
+# below CLASS_SCALE_FLOOR of the block's level.
+MIN_CLASS_UNITS = 8
+CLASS_CUT = 3.5
+CLASS_PRIOR_ROWS = 30
+CLASS_SCALE_FLOOR = 1.0
 
 
 @dataclass
@@ -49,6 +60,7 @@ class BlockResult:
     sample_rms_after: np.ndarray
     outlier_views: list[tuple[int, int]]  # (sample, tag or marker id) of each view left out
     outlier_samples: np.ndarray  # (S_block,) bool: every view of the sample was left out
+    class_sigma: np.ndarray  # (C,) noise per measured number of each noise class (`Block.noise_classes`) [unit]
 
 
 @dataclass
@@ -70,7 +82,8 @@ def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
     block, residual = state.block, lin.residual
     views = row_groups(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
     rows = np.bincount(views, minlength=block.n_views)
-    return np.sqrt(GroupedWhitening(views, state.shared_errors(lin)).group_norms(residual.ravel(), state.sigma) / rows)
+    w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
+    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / rows)
 
 
 def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
@@ -104,6 +117,52 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
     return residual_scale(state, residual, state.sigma, n_params)
 
 
+def estimate_class_scales(state: BlockState, lin: Linearization, problem: Problem) -> float:
+    """Set each noise class's level relative to the block's (`unit_scale`; see MIN_CLASS_UNITS ff.): the robust
+    scale of its units' residuals standardised by their current noise (own level and joint-reading error, per row)
+    and by how much of it the fit absorbs (1 - leverage), over all of its units (left-out ones too, so that a marker
+    left out for its noise comes back), normalised so the median unit keeps the block's level, floored. Returns
+    the largest relative change of a unit's level."""
+    classes = state.classes
+    if classes.max(initial=0) == 0:
+        return 0.0
+    dim = state.block.dim
+    A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
+    variance = (state.sigma * state.row_scale) ** 2 + state.sigma_q**2 * np.sum(A**2, axis=1)
+    z = np.abs(lin.residual.ravel()) / np.sqrt(variance * (1.0 - _leverages(state, lin, problem, variance)))
+    row_class = np.repeat(classes, dim)
+    factor = np.ones(int(classes.max()) + 1)
+    for c in range(len(factor)):
+        zc = z[row_class == c]
+        if zc.size >= MIN_CLASS_UNITS * dim:
+            zc = zc[zc < CLASS_CUT * MAD_TO_SIGMA * float(np.median(zc))]  # the class's own outliers apart
+            factor[c] = np.sqrt((np.sum(zc**2) + CLASS_PRIOR_ROWS) / (zc.size + CLASS_PRIOR_ROWS))
+    scale = state.unit_scale * factor[classes]
+    scale = np.maximum(scale / np.median(scale), CLASS_SCALE_FLOOR)
+    change = float(np.max(np.abs(scale / state.unit_scale - 1.0)))
+    state.unit_scale = scale
+    return change
+
+
+def _leverages(state: BlockState, lin: Linearization, problem: Problem, variance: np.ndarray) -> np.ndarray:
+    """(R,) leverage of each residual row of the block on the chain and the block's own unknowns, rows weighted by
+    1 / variance (R,) (their correlation through the joint readings left aside), priors included; left-out rows
+    carry no weight and get 0. Below 1 by the priors."""
+    rows = lin.residual.size
+    sig = problem.params.prior_sigmas
+    n_local = len(state.block.nuisance)
+    J = np.zeros((rows, problem.n_chain + n_local))
+    J[:, : problem.n_chain] = lin.jac_chain.reshape(rows, problem.n_chain)
+    if lin.jac_local is not None and lin.local_cols is not None:
+        L = lin.jac_local.shape[-1]
+        cols = problem.n_chain + np.repeat(lin.local_cols, state.block.dim, axis=0).ravel()
+        np.add.at(J, (np.repeat(np.arange(rows), L), cols), lin.jac_local.reshape(rows, L).ravel())
+    J *= np.concatenate([sig[: problem.n_chain], sig[state.start : state.start + n_local]])
+    J *= (np.repeat(state.inlier_units, state.block.dim) / np.sqrt(variance))[:, None]
+    M = J.T @ J + np.eye(J.shape[1])
+    return np.einsum("ij,ji->i", J, np.linalg.solve(M, J.T))
+
+
 def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> BlockResult:
     block = state.block
     inlier = state.inlier_units
@@ -124,7 +183,16 @@ def _block_result(state: BlockState, before: np.ndarray, after: np.ndarray) -> B
         sample_rms_before=per_sample(before), sample_rms_after=per_sample(after),
         outlier_views=[block.view_labels[v] for v in np.flatnonzero(state.excluded)],
         outlier_samples=np.bincount(view_sample[~state.excluded], minlength=n_samples) == 0,
+        class_sigma=state.sigma * _class_scale(state),
     )  # fmt: skip
+
+
+def _class_scale(state: BlockState) -> np.ndarray:
+    """(C,) each noise class's level relative to the block's (1 for a class without units)."""
+    classes = state.classes
+    out = np.ones(int(classes.max(initial=0)) + 1)
+    out[classes] = state.unit_scale
+    return out
 
 
 def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
@@ -147,7 +215,11 @@ def _update_noise(
         previous = state.sigma
         share = n_params * lin.residual.size / rows_total
         scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
-        settled &= abs(state.sigma / previous - 1.0) < 0.1
+        change = estimate_class_scales(state, lin, problem)
+        if change > 0.0:  # the noise model changed shape: decompose again, then the block's level
+            state.rebuild(lin)
+            scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
+        settled &= abs(state.sigma / previous - 1.0) < 0.1 and change < 0.1
         notes.append(
             f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"

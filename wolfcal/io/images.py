@@ -85,14 +85,15 @@ def image_damage(data: bytes) -> str | None:
     Cheap: checks the structure and checksums, does not decode."""
     if image_kind(data) == "png":
         pos = len(PNG_SIGNATURE)
+        view = memoryview(data)  # checksums over slices without copying them
         while pos + 12 <= len(data):
-            (length,) = struct.unpack(">I", data[pos : pos + 4])
-            kind = data[pos + 4 : pos + 8]
+            (length,) = struct.unpack_from(">I", data, pos)
+            kind = bytes(data[pos + 4 : pos + 8])
             end = pos + 12 + length
             if end > len(data):
                 return f"png cut short in its {kind.decode('latin-1')} chunk"
-            (crc,) = struct.unpack(">I", data[end - 4 : end])
-            if zlib.crc32(data[pos + 4 : end - 4]) & 0xFFFFFFFF != crc:
+            (crc,) = struct.unpack_from(">I", data, end - 4)
+            if zlib.crc32(view[pos + 4 : end - 4]) & 0xFFFFFFFF != crc:
                 return f"png checksum error in its {kind.decode('latin-1')} chunk"
             if kind == b"IEND":
                 return None

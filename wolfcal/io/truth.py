@@ -6,6 +6,9 @@ Here (io), not in the simulator, because evaluation and the emulated capture rea
 `external_cameras: {<name>: {T_base_camera: 4x4 list, meaning: ...}}`: the pose of the camera's optical frame
 (z forward, x right, y down) in the robot's base frame, p_base = T_base_camera @ p_camera [m]. One placement per
 capture file.
+
+`floor_tags: {<id>: {x, y, yaw}}`: the true place of each floor tag lying face up in the true floor frame (the plane of
+the standing soles, `wolfcal.robot.floor`) [m, rad], as `wolfcal simulate --floor` writes it.
 """
 
 from __future__ import annotations
@@ -50,3 +53,19 @@ def load_external_truth(path: str | Path) -> dict[str, np.ndarray]:
             raise WolfcalError(f"{path}: 'external_cameras.{name}.T_base_camera' must be a 4x4 rigid transform")
         poses[str(name)] = T
     return poses
+
+
+def load_floor_places(path: str | Path) -> dict[int, np.ndarray]:
+    """floor tag id -> true (x, y, yaw) [m, rad] from a simulation's FILE.truth.yaml (empty when it has none)."""
+    path = Path(path)
+    data = read_yaml(path, "simulation truth", "give the .truth.yaml written beside a simulated capture")
+    tags = data.get("floor_tags") if isinstance(data, dict) else None
+    if tags is None:
+        return {}
+    places = {}
+    for tag_id, entry in tags.items() if isinstance(tags, dict) else [(None, None)]:
+        place = [entry.get(k) if isinstance(entry, dict) else None for k in ("x", "y", "yaw")]
+        if not isinstance(tag_id, int) or not all(isinstance(v, (int, float)) for v in place):
+            raise WolfcalError(f"{path}: 'floor_tags' must map floor tag ids to {{x, y, yaw}} (m, rad)")
+        places[tag_id] = np.array(place, dtype=float)
+    return places

@@ -3,15 +3,21 @@
 The tag corners of each candidate are projected through the camera model at the nominal kinematics (`wolfcal.sim`,
 no image, no noise) and handed to the fit's `CameraBlock` and `Problem`, whitened with the configured pixel noise
 (priors.pixel_noise) and encoder quantisation (priors.encoder_noise), in the fit's prior-normalised unknowns z
-(prior: unit variance). Per candidate k, `factors` gives G_k (r, P): its whitened Jacobian rows, so the information
-of a pose set S is I + sum_k G_k^T G_k. For the selection each candidate is its own noise group (a detection error
-that repeats across poses, e.g. an external camera's view of the torso tag, is counted only by `predicted`, which
-is the fit's full noise model on a chosen set).
+(prior: unit variance). The information of a pose set S is I + M_rep(n) + sum_k G_k^T G_k, as the fit's noise model
+makes it:
+- G_k (`factors`, r x P): the whitened rows of candidate k that change with the pose (each candidate pose its own
+  noise group: the encoder error of one still pose);
+- M_rep(n) (`repeated_information`): the views that are the same in every pose, an external camera's view of the tags
+  fixed to the base (e.g. the torso tag). Their detection error repeats pose to pose (`CameraBlock.shared_labels`),
+  so n such views tell n / (sigma^2 + n tau^2) times what one tells, never more than 1 / tau^2: counted once, for the
+  n poses of the plan, through the fit's own grouped whitening.
 
-What no pose can separate: the directions of z in which the mean information per candidate pose is below NULL_INFO
+What no pose can improve: the directions of z in which the mean information per candidate pose is below NULL_INFO
 (the prior's is 1: a hundred such poses would add a tenth of it), e.g. an ankle roll offset against its foot tag's
-mount, or the HeadTilt offset against the camera's frame correction (exactly equivalent motions). Parameters with more
-than UNSEPARABLE_SHARE of their prior variance in those directions keep their prior whatever the poses.
+mount, or the HeadTilt offset against the camera's frame correction (exactly equivalent motions). Even with those
+directions known exactly, they keep the covariance F = N (N^T (I + M_rep) N)^-1 N^T (N: the null directions): their
+prior, or what the repeated view tells (the torso tag's mount along the camera's line of sight). Parameters whose
+floor variance F_ii exceeds UNSEPARABLE_SHARE of their prior's keep it whatever the poses and are not counted.
 """
 
 from __future__ import annotations
@@ -79,17 +85,56 @@ class PlanModel:
         return Problem(self.chain(), [block], [priors.pixel_noise], priors.encoder_noise)
 
 
+def camera_block(problem: Problem) -> CameraBlock:
+    """The plan problem's one block (`PlanModel.problem`)."""
+    block = problem.blocks[0]
+    if not isinstance(block, CameraBlock):
+        raise TypeError(f"a plan problem holds one camera block, not {type(block).__name__}")
+    return block
+
+
+def repeated_units(problem: Problem) -> np.ndarray:
+    """(U,) bool: units of the (independent) candidate block whose detection error the fit shares between poses (a
+    label of `CameraBlock.shared_labels` that spans samples): their view is the same in every pose."""
+    block = camera_block(problem)
+    labels, samples = CameraBlock.shared_labels(block), block.sample_of_unit
+    lowest = np.full(labels.max() + 1, samples.max())
+    highest = np.zeros(labels.max() + 1, dtype=samples.dtype)
+    np.minimum.at(lowest, labels, samples)
+    np.maximum.at(highest, labels, samples)
+    return (highest > lowest)[labels]
+
+
 def factors(problem: Problem) -> np.ndarray:
-    """(N, r, P) whitened Jacobian rows of each sample in z units (zero rows pad samples with fewer tags)."""
+    """(N, r, P) whitened Jacobian rows that change with the pose, per sample, in z units (zero rows at the end pad
+    samples with fewer tags; the rows of `repeated_units` are left out: `repeated_information` counts them)."""
     J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
     block = problem.blocks[0]
-    sample_of_row = np.repeat(block.sample_of_unit, block.dim)
+    keep = np.repeat(~repeated_units(problem), block.dim)  # each unit is its own noise group here
+    J, sample_of_row = J[keep], np.repeat(block.sample_of_unit, block.dim)[keep]
     order = np.argsort(sample_of_row, kind="stable")
     counts = np.bincount(sample_of_row, minlength=len(block.q_measured))
     slot = np.arange(len(order)) - np.repeat(np.cumsum(counts) - counts, counts)
     G = np.zeros((len(counts), int(counts.max()), J.shape[1]))
     G[sample_of_row[order], slot] = J[order]
     return G
+
+
+def repeated_information(model: PlanModel, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
+    """(P, P) information [z units] of the views repeated in n poses (see the module docstring), by the fit's own
+    noise model on n of the candidates q (N, J) showing only those tags; zero when no view repeats."""
+    repeated = repeated_units(problem)
+    P = len(problem.params)
+    if not repeated.any():
+        return np.zeros((P, P))
+    block = camera_block(problem)
+    tags = np.unique(np.asarray(block.tag_ids)[block.tag_col[repeated]])
+    shown = visible[:n] & np.isin(model.robot.config.tag_ids, tags)
+    shared = model.problem(q[:n], shown)
+    if shared.params.names != problem.params.names:
+        raise RuntimeError("the repeated views' problem has other unknowns than the candidates'")
+    J = np.asarray(shared.data_jacobian(np.zeros(P), robust=False))
+    return J.T @ J
 
 
 def predicted(problem: Problem) -> Uncertainty:
@@ -99,16 +144,17 @@ def predicted(problem: Problem) -> Uncertainty:
 
 @dataclass
 class Separability:
-    null: np.ndarray  # (P, m) orthonormal directions of z no candidate informs
-    unseparable: np.ndarray  # (P,) bool: parameter keeps (much of) its prior whatever the poses
+    floor: np.ndarray  # (P, P) covariance [z units] left with every informed direction known exactly
+    prior_floor: np.ndarray  # (P,) its diagonal without the repeated views (the prior's share in null directions)
+    unseparable: np.ndarray  # (P,) bool: parameter keeps (much of) its prior or repeated-view floor whatever the poses
     basis: np.ndarray  # (c, k) orthonormal basis of the chain unknowns the poses can inform
 
     def groups(self, names: list[str]) -> list[list[str]]:
-        """The parameters that no pose separates, in groups that move together (linked through the projector onto
-        the null directions), each group strongest first."""
-        P = self.null @ self.null.T
+        """The parameters that no pose separates, in groups that move together (linked through the floor
+        covariance), each group strongest first."""
+        F = self.floor
         idx = np.flatnonzero(self.unseparable)
-        linked = np.abs(P[np.ix_(idx, idx)]) > UNSEPARABLE_SHARE
+        linked = np.abs(F[np.ix_(idx, idx)]) > UNSEPARABLE_SHARE
         groups: list[list[str]] = []
         seen: set[int] = set()
         for a in range(len(idx)):
@@ -121,25 +167,48 @@ class Separability:
                     seen.add(b)
                     members.append(b)
                     stack += list(np.flatnonzero(linked[b]))
-            members.sort(key=lambda m: -P[idx[m], idx[m]])
+            members.sort(key=lambda m: -F[idx[m], idx[m]])
             groups.append([names[idx[m]] for m in members])
         return groups
 
+    def at_prior(self, i: int) -> bool:
+        """Parameter i keeps (nearly) what the prior leaves in the null directions: the repeated views do not
+        inform it either."""
+        return bool(self.floor[i, i] > 0.9 * self.prior_floor[i])
 
-def separability(G: np.ndarray, n_chain: int) -> Separability:
-    """Null directions of the candidates' mean information (G: (N, r, P)) and the observable chain basis."""
+
+def separability(
+    G: np.ndarray, n_chain: int, M_repeated: np.ndarray | None = None, interest: np.ndarray | None = None
+) -> Separability:
+    """Null directions of the candidates' mean information (G: (N, r, P)), the floor covariance they leave (with
+    the repeated views' information M_repeated (P, P), see the module docstring) and the basis of the observable
+    directions among the chain unknowns of `interest` ((n_chain,) bool, default all: `criterion_interest`)."""
+    P = G.shape[2]
+    M_repeated = np.zeros((P, P)) if M_repeated is None else M_repeated
     info = np.einsum("nri,nrj->ij", G, G) / len(G)
     lam, V = np.linalg.eigh(info)
     null = V[:, lam < NULL_INFO]
-    unseparable = np.sum(null**2, axis=1) > UNSEPARABLE_SHARE
-    U, s, _ = np.linalg.svd(null[:n_chain], full_matrices=True)
-    rank = int(np.sum(s > 0.5))  # chain directions that are (mostly) null
-    return Separability(null, unseparable, U[:, rank:])
+    floor = null @ np.linalg.solve(null.T @ (np.eye(P) + M_repeated) @ null, null.T) if null.size else np.zeros((P, P))
+    unseparable = np.diag(floor) > UNSEPARABLE_SHARE
+    interest = np.ones(n_chain, dtype=bool) if interest is None else interest
+    idx = np.flatnonzero(interest)
+    mu, U = np.linalg.eigh(floor[np.ix_(idx, idx)])
+    keep = mu <= 0.25  # directions that keep less than a quarter of their prior variance
+    basis = np.zeros((n_chain, int(keep.sum())))
+    basis[idx] = U[:, keep]
+    return Separability(floor, np.sum(null**2, axis=1), unseparable, basis)
 
 
-def check_observable(params: ParameterSet, G: np.ndarray, sep: Separability, n_candidates: int) -> None:
-    """A clear error when a free parameter gets no information from any candidate pose."""
-    column_info = np.einsum("nri,nri->i", G, G)
+def criterion_interest(params: ParameterSet, n_chain: int) -> np.ndarray:
+    """(n_chain,) bool: the chain unknowns a plan's criterion looks at, all but the tags' mounts. A tag's mount is
+    needed by the fit but is not what a calibration delivers (joint offsets, the camera's mount); the criterion
+    marginalises it (Ds-optimality) rather than spending poses on it."""
+    return np.array([p.kind != "tag" for p in params.parameters[:n_chain]], dtype=bool)
+
+
+def check_observable(params: ParameterSet, G: np.ndarray, M_repeated: np.ndarray, n_candidates: int) -> None:
+    """A clear error when a free parameter gets no information from any candidate pose (nor the repeated views)."""
+    column_info = np.einsum("nri,nri->i", G, G) + np.diag(M_repeated)
     blind = [params.names[i] for i in np.flatnonzero(column_info <= 1e-12 * max(column_info.max(), 1e-300))]
     if blind:
         raise WolfcalError(

@@ -20,7 +20,15 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.outputs import check_outputs
 from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
-from wolfcal.plan.information import PlanModel, check_observable, factors, predicted, separability
+from wolfcal.plan.information import (
+    PlanModel,
+    check_observable,
+    criterion_interest,
+    factors,
+    predicted,
+    repeated_information,
+    separability,
+)
 from wolfcal.plan.order import capture_order
 from wolfcal.plan.select import check_criterion, select
 from wolfcal.robot.collision import collision_model, rest_configuration
@@ -28,6 +36,11 @@ from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
 PLAN_SYSTEMS = ("head", "external")  # a new measurement system adds its camera or block in `plan_camera`
+NOT_PLANNED = {  # systems the fit supports but plan does not yet, and why
+    "mocap": "planning for motion capture is not built yet (it needs a rule for which markers the cameras see and "
+             "the fit's MocapBlock as the information)",
+    "floor": "planning floor samples (head pan/tilt while standing, floor tags in view) is not built yet",
+}
 
 
 @dataclass(frozen=True)
@@ -47,6 +60,10 @@ class PlanOptions:
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)
         check_criterion(self.criterion)
+        if self.system in NOT_PLANNED:
+            raise WolfcalError(f"--system {self.system}: {NOT_PLANNED[self.system]}; plan for --system "
+                               f"{' or '.join(PLAN_SYSTEMS)} meanwhile, or capture the poses of "
+                               "configs/<robot>/poses.yaml")  # fmt: skip
         if self.system not in PLAN_SYSTEMS:
             raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
         if self.poses < 1 or self.candidates < self.poses:
@@ -66,6 +83,7 @@ class Plan:
     random: Uncertainty
     observable: np.ndarray  # (P,) bool: parameters some pose can inform
     groups: list[list[str]]  # parameters no pose separates, in groups
+    at_prior: np.ndarray  # (P,) bool: unseparable and keeping its prior (else bounded by a repeated view)
     candidates: Candidates
     condition: tuple[float, float]  # planned, random: over the observable parameters
 
@@ -113,10 +131,11 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     model = PlanModel(robot, camera, options.free, options.side, seen_tags(robot, options, tags, candidates, say))
     problem = model.problem(candidates.q, candidates.visible, independent=True)
     G = factors(problem)
-    sep = separability(G, problem.n_chain)
-    check_observable(problem.params, G, sep, len(G))
+    M_repeated = repeated_information(model, problem, candidates.q, candidates.visible, options.poses)
+    sep = separability(G, problem.n_chain, M_repeated, criterion_interest(problem.params, problem.n_chain))
+    check_observable(problem.params, G, M_repeated, len(G))
     say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
-    chosen, _ = select(G, options.poses, sep.basis, options.criterion)
+    chosen, _ = select(G, options.poses, sep.basis, options.criterion, M_repeated)
     order, move_time = capture_order(candidates.q[chosen], rest_configuration(robot), options.velocity)
     chosen = np.array(chosen)[order]
     others = rng.choice(np.setdiff1d(np.arange(len(G)), chosen), size=min(options.poses, len(G) - len(chosen)),
@@ -129,6 +148,7 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
         move_time_s=move_time, params=problem.params, n_chain=problem.n_chain,
         planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
         groups=sep.groups(problem.params.names), candidates=candidates,
+        at_prior=np.array([sep.at_prior(i) for i in range(len(problem.params))], dtype=bool),
         condition=(_condition(planned_problem, observable), _condition(random_problem, observable)),
     )  # fmt: skip
 
@@ -164,7 +184,9 @@ def table_lines(plan: Plan) -> list[str]:
              f"  {'parameter':44s} {'prior':>9s} {'planned':>9s} {'random':>9s}"]  # fmt: skip
     for i, p in enumerate(plan.params.parameters[: plan.n_chain]):
         scale, unit = (1000.0, "mm") if p.unit == "m" else (np.rad2deg(1.0), "deg")
-        note = "" if plan.observable[i] else "  (no pose separates it: keeps its prior)"
+        note = "" if plan.observable[i] else (
+            "  (no pose separates it: keeps its prior)" if plan.at_prior[i]
+            else "  (no pose improves it: the view repeated in every pose bounds it)")
         lines.append(f"  {p.name:44s} {p.prior_sigma * scale:7.3f}{unit:>2s} {plan.planned.std[i] * scale:7.3f}"
                      f"{unit:>2s} {plan.random.std[i] * scale:7.3f}{unit:>2s}{note}")  # fmt: skip
     for unit, scale, shown in (("m", 1000.0, "mm"), ("rad", np.rad2deg(1.0), "deg")):
@@ -172,9 +194,13 @@ def table_lines(plan: Plan) -> list[str]:
         lines.append(f"  worst std of the observable parameters in {shown}: planned {planned:.3f}, random {random:.3f}")
     lines.append("  condition number (column-scaled Jacobian, observable parameters): "
                  f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}")
-    for group in plan.groups:
-        lines.append(f"  no pose separates {' ~ '.join(group)} (equivalent motions; they keep their prior)")
     names = plan.params.names
+    for group in plan.groups:
+        if all(plan.at_prior[names.index(g)] for g in group):
+            lines.append(f"  no pose separates {' ~ '.join(group)} (equivalent motions; they keep their prior)")
+        else:
+            lines.append(f"  no pose improves {' ~ '.join(group)} (bounded by their prior and the view repeated in "
+                         "every pose, whose detection error repeats too)")
     observable_names = [nm for nm, ok in zip(names, plan.observable) if ok]
     for a, b, r in plan.planned.correlated_pairs(names):
         if a in observable_names and b in observable_names:

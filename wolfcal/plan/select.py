@@ -1,7 +1,8 @@
 """Choose n of N candidate poses by the expected information: a greedy start, then exchanges (DETMAX-like).
 
-Information in the fit's prior-normalised unknowns z: M(S) = I + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
-Jacobian rows of candidate k, `wolfcal.plan.information`), covariance C = M^-1. The criterion looks at the
+Information in the fit's prior-normalised unknowns z: M(S) = I + M_0 + sum_{k in S} G_k^T G_k (G_k: (r, P) whitened
+Jacobian rows of candidate k, M_0: what every plan of n poses gets, the repeated views, `wolfcal.plan.information`),
+covariance C = M^-1. The criterion looks at the
 covariance of the observable chain unknowns, C_obs = B^T C_cc B (B: (c, k) basis without the directions no pose can
 inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs (default), A = trace
 C_obs, E = largest eigenvalue of C_obs; smaller is better. Adding candidate k is a rank-r update, evaluated for all
@@ -38,36 +39,54 @@ def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
 
 
 def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criterion: str) -> np.ndarray:
-    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P)), by rank-r updates."""
+    """(N,) criterion of M + G_k^T G_k for every candidate k (G: (N, r, P), zero rows padding at the end, as
+    `wolfcal.plan.information.factors` packs them), by rank-r updates: candidates with as many rows up to their last
+    nonzero one are evaluated together, with one matrix product over all their rows for each quadratic form."""
     c = basis.shape[0]
     C = np.linalg.inv(M)
     C = 0.5 * (C + C.T)
+    Y = C[:, :c] @ basis  # (P, k): C_zB
     C_obs = basis.T @ C[:c, :c] @ basis
-    GC = G @ C  # (N, r, P)
-    S = np.eye(G.shape[1]) + GC @ np.swapaxes(G, 1, 2)  # (N, r, r)
-    V = GC[:, :, :c] @ basis  # (N, r, k)
-    if criterion == "D":
-        inner = S - V @ np.linalg.solve(C_obs, np.swapaxes(V, 1, 2))
-        return np.linalg.slogdet(C_obs)[1] + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
-    SinvV = np.linalg.solve(S, V)  # (N, r, k)
-    if criterion == "A":
-        return np.trace(C_obs) - np.einsum("nrk,nrk->n", V, SinvV)
-    return np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
+    base = criterion_value(M, basis, criterion)
+    # D: S_k - V_k C_obs^-1 V_k^T = I + G_k (C - Y C_obs^-1 Y^T) G_k^T
+    D = C - Y @ np.linalg.solve(C_obs, Y.T) if criterion == "D" else None
+    nonzero = np.any(G != 0.0, axis=2)  # (N, r)
+    rows_used = np.where(nonzero.any(axis=1), G.shape[1] - np.argmax(nonzero[:, ::-1], axis=1), 0)  # to the last
+    out = np.full(len(G), base)
+    for r in np.unique(rows_used[rows_used > 0]):
+        which = np.flatnonzero(rows_used == r)
+        Gr = G[which, :r]
+        flat, Gt = Gr.reshape(-1, Gr.shape[2]), np.swapaxes(Gr, 1, 2)
+        S = np.eye(r) + (flat @ C).reshape(Gr.shape) @ Gt  # (n, r, r)
+        if D is not None:
+            inner = np.eye(r) + (flat @ D).reshape(Gr.shape) @ Gt
+            out[which] = base + np.linalg.slogdet(inner)[1] - np.linalg.slogdet(S)[1]
+            continue
+        V = (flat @ Y).reshape(len(which), r, -1)  # (n, r, k)
+        SinvV = np.linalg.solve(S, V)
+        if criterion == "A":
+            out[which] = base - np.einsum("nrk,nrk->n", V, SinvV)
+        else:
+            out[which] = np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]
+    return out
 
 
-def information(G: np.ndarray, chosen) -> np.ndarray:
-    """M = I + sum of the chosen candidates' information (P, P)."""
+def information(G: np.ndarray, chosen, M0: np.ndarray | None = None) -> np.ndarray:
+    """M = I + M0 + sum of the chosen candidates' information (P, P)."""
     chosen = np.asarray(list(chosen), dtype=int)
-    return np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    M = np.eye(G.shape[2]) + np.einsum("nri,nrj->ij", G[chosen], G[chosen])
+    return M if M0 is None else M + M0
 
 
-def select(G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D") -> tuple[list[int], float]:
-    """n distinct candidate indices and their criterion value: greedy additions, then sweeps that exchange each
-    chosen pose for the best other candidate while that improves the criterion."""
+def select(
+    G: np.ndarray, n: int, basis: np.ndarray, criterion: str = "D", M0: np.ndarray | None = None
+) -> tuple[list[int], float]:
+    """n distinct candidate indices and their criterion value: greedy additions (from I + M0), then sweeps that
+    exchange each chosen pose for the best other candidate while that improves the criterion."""
     if n > len(G):
         raise WolfcalError(f"--poses {n}: only {len(G)} candidate poses were found; ask for fewer poses")
     chosen: list[int] = []
-    M = information(G, [])
+    M = information(G, [], M0)
     for _ in range(n):
         values = values_after_adding(M, G, basis, criterion)
         values[chosen] = np.inf

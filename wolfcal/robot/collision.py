@@ -1,8 +1,9 @@
 """The robot's body as capsules: self-collision and line of sight, vectorised over configurations.
 
 Geometry, in this order of preference:
-- the URDF's `<collision>` primitives, each bounded by a capsule (cylinder: its axis and radius; sphere: a point;
-  box: its longest axis, radius half the diagonal of the other two edges); mesh geometry is refused;
+- the URDF's `<collision>` geometry, each shape bounded by a capsule (cylinder: its axis and radius; sphere: a point;
+  box: its longest edge, radius half the diagonal of the other two; mesh: that of its oriented bounding box; see
+  `wolfcal.robot.collision_urdf`);
 - otherwise `collision_radii: {link: m}` of the robot config: per listed link, capsules from the link's origin to
   the origin of each of its child joints (a sphere at the origin for a link without children).
 Capsules of links joined by fixed joints form one body. Pairs never checked (as in MoveIt's allowed-collision
@@ -17,9 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.robot.collision_urdf import urdf_collision_segments
 from wolfcal.robot.robot import Robot
 
 REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other
+PAIR_CHUNK = 16  # capsule pairs checked at a time by `CollisionModel.collision_free`
+EXACT_BELOW_M = 0.05  # capsule pairs whose bounding spheres are further apart need no exact distance [m]
 
 
 @dataclass(frozen=True)
@@ -61,8 +65,9 @@ class CollisionModel:
         adjacent = _adjacent_bodies(robot, self.body_of_link)
         keep &= ~np.array([(self.body[a], self.body[b]) in adjacent for a, b in zip(i, j)], dtype=bool)
         self.pairs = np.stack([i[keep], j[keep]], axis=1)
-        touching = self._pair_clearance(np.atleast_2d(rest))[0] < REST_CLEARANCE_M
-        self.pairs = self.pairs[~touching]
+        rest_distance = self._pair_clearance(np.atleast_2d(rest))[0]
+        touching = rest_distance < REST_CLEARANCE_M
+        self.pairs, self.rest_distance = self.pairs[~touching], rest_distance[~touching]
 
     @property
     def body_of_link(self) -> dict[str, int]:
@@ -75,16 +80,53 @@ class CollisionModel:
         b = np.stack([poses[c.link][:, :3, :3] @ c.b_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
         return a, b
 
-    def _pair_clearance(self, q: np.ndarray) -> np.ndarray:
-        """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]."""
-        a, b = self.segments(q)
-        i, j = self.pairs[:, 0], self.pairs[:, 1]
-        return segment_distance(a[:, i], b[:, i], a[:, j], b[:, j]) - self.radius[i] - self.radius[j]
+    def pairs_moved_by(self, joints: list[str]) -> np.ndarray:
+        """(pairs,) bool over the checked pairs: some of `joints` lies on the chain between the pair's two links, so
+        their distance changes with it (the other pairs keep theirs whatever these joints do)."""
+        names, model = set(joints), self.robot.model
+        return np.array([any(joint.name in names for joint in model.joints_between(self.capsules[i].link,
+                                                                                   self.capsules[j].link))
+                         for i, j in self.pairs], dtype=bool)  # fmt: skip
 
-    def clearance(self, q: np.ndarray) -> np.ndarray:
-        """(N,) smallest surface distance between checked bodies [m] (negative: they overlap)."""
-        d = self._pair_clearance(q)
+    def _pair_clearance(self, q: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+        """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]: exact below EXACT_BELOW_M,
+        above it a lower bound (from the distance of the segments' midpoints), enough for every threshold used;
+        `which` ((pairs,) bool) keeps some pairs only."""
+        a, b = self.segments(q)
+        return self._distances(a, b, self.pairs if which is None else self.pairs[which])
+
+    def _distances(self, a: np.ndarray, b: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """(N, len(pairs)) surface distances of capsule pairs (K, 2) with segment ends a, b (N, C, 3) [m]; see
+        `_pair_clearance`."""
+        i, j = pairs[:, 0], pairs[:, 1]
+        mid, half = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2)
+        d = np.linalg.norm(mid[:, i] - mid[:, j], axis=2) - half[:, i] - half[:, j] - self.radius[i] - self.radius[j]
+        n, k = np.nonzero(d < EXACT_BELOW_M)
+        ik, jk = i[k], j[k]
+        d[n, k] = segment_distance(a[n, ik], b[n, ik], a[n, jk], b[n, jk]) - self.radius[ik] - self.radius[jk]
+        return d
+
+    def clearance(self, q: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+        """(N,) smallest surface distance between checked bodies [m] (negative: they overlap), over the pairs
+        `which` ((pairs,) bool, e.g. from `pairs_moved_by`) or all."""
+        d = self._pair_clearance(q, which)
         return d.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
+
+    def collision_free(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: `clearance(q, which) >= clearance_m`, found faster: the pairs closest in the rest pose (most
+        often in contact) are checked first, PAIR_CHUNK at a time, and a configuration is dropped at its first pair
+        that is too close."""
+        a, b = self.segments(q)
+        order = np.flatnonzero(np.ones(len(self.pairs), bool) if which is None else which)
+        order = order[np.argsort(self.rest_distance[order], kind="stable")]
+        free, rows = np.ones(len(a), dtype=bool), np.arange(len(a))
+        for start in range(0, len(order), PAIR_CHUNK):
+            if not len(rows):
+                break
+            close = self._distances(a[rows], b[rows], self.pairs[order[start : start + PAIR_CHUNK]]).min(axis=1)
+            free[rows[close < clearance_m]] = False
+            rows = rows[close >= clearance_m]
+        return free
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""
@@ -138,33 +180,12 @@ def rest_configuration(robot: Robot) -> np.ndarray:
 
 
 def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules bounding the URDF's <collision> primitives (empty when it has none)."""
-    import yourdfpy  # its mesh library is slow to import: only pose planning and pose checks need it
-
-    urdf = yourdfpy.URDF.load(str(robot.config.urdf), load_meshes=False, build_scene_graph=False,
-                              build_collision_scene_graph=False)  # fmt: skip
-    capsules = []
-    for link in urdf.robot.links:
-        for collision in link.collisions:
-            T = np.eye(4) if collision.origin is None else np.asarray(collision.origin, float)
-            g = collision.geometry
-            if g.cylinder is not None:
-                half, radius = 0.5 * g.cylinder.length * T[:3, 2], g.cylinder.radius
-            elif g.sphere is not None:
-                half, radius = np.zeros(3), g.sphere.radius
-            elif g.box is not None:
-                size = np.asarray(g.box.size, float)
-                k = int(np.argmax(size))
-                radius = 0.5 * float(np.linalg.norm(np.delete(size, k)))
-                half = max(0.5 * size[k] - radius, 0.0) * T[:3, k]
-            else:
-                raise WolfcalError(
-                    f"{robot.config.urdf}: link '{link.name}' has <collision> mesh geometry, which wolfcal cannot "
-                    "check; use boxes, cylinders or spheres there, or remove <collision> and give "
-                    "'collision_radii:' in the robot config"
-                )
-            capsules.append(Capsule(link.name, body[link.name], T[:3, 3] - half, T[:3, 3] + half, float(radius)))
-    return capsules
+    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)."""
+    segments = urdf_collision_segments(robot.config.urdf)
+    unknown = sorted({link for link, *_ in segments} - robot.model.links)
+    if unknown:
+        raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
+    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in segments]
 
 
 def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:

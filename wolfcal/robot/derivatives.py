@@ -31,12 +31,16 @@ def tag_key(tag_id: int) -> str:
     return f"tag:{tag_id}"
 
 
-def _motion_twist(joint: JointModel, T_root_frame: np.ndarray) -> np.ndarray:
-    """(S, 6) spatial twist (v0, w) of one unit of a joint's motion."""
-    axis = T_root_frame[:, :3, :3] @ joint.axis
-    if joint.type == "prismatic":
-        return np.concatenate([axis, np.zeros_like(axis)], axis=1)
-    return np.concatenate([cross(T_root_frame[:, :3, 3], axis), axis], axis=1)
+def _motion_twists(joints: list[JointModel], T_root_frames: list[np.ndarray]) -> list[np.ndarray]:
+    """(S, 6) spatial twist (v0, w) of one unit of each joint's motion, from the joints' frames T_root_frame
+    (S, 4, 4); all joints in one pass."""
+    if not joints:
+        return []
+    frames = np.stack(T_root_frames)  # (K, S, 4, 4)
+    axis = np.einsum("ksij,kj->ksi", frames[:, :, :3, :3], np.stack([j.axis for j in joints]))  # (K, S, 3)
+    prismatic = np.array([j.type == "prismatic" for j in joints])[:, None, None]
+    v0 = np.where(prismatic, axis, cross(frames[:, :, :3, 3], axis))
+    return list(np.concatenate([v0, np.where(prismatic, 0.0, axis)], axis=2))
 
 
 def _frame_twists(T_root_origin: np.ndarray, T_root_frame: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -77,12 +81,16 @@ class ChainDerivatives:
         for i, p in enumerate(params.parameters):
             if p.kind == "frame":
                 frame_cols.setdefault(p.target, []).append(i)
+        moving = [model.joints[name] for name in walk.T_root_frame
+                  if model.joints[name].actuated or model.joints[name].mimic is not None]  # fmt: skip
+        unit_twists = dict(zip([j.name for j in moving],
+                               _motion_twists(moving, [walk.T_root_frame[j.name] for j in moving])))  # fmt: skip
         for name, T_root_frame in walk.T_root_frame.items():
             joint = model.joints[name]
             q_terms, p_terms = [], []
-            if joint.actuated or joint.mimic is not None:
+            if name in unit_twists:
                 master, multiplier = (joint.name, 1.0) if joint.mimic is None else (joint.mimic[0], joint.mimic[1])
-                twist = multiplier * _motion_twist(joint, T_root_frame)
+                twist = unit_twists[name] if multiplier == 1.0 else multiplier * unit_twists[name]
                 q_terms.append((model.column(master), twist))
                 if master in offset_cols:
                     p_terms.append((offset_cols[master], twist))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wolfcal.robot.derivatives import cross
+
 
 def floor_frames(sole_poses: np.ndarray) -> np.ndarray:
     """T_base_floor (N, 4, 4) from the poses of the soles (K, N, 4, 4) in the base frame: origin midway between
@@ -17,3 +19,27 @@ def floor_frames(sole_poses: np.ndarray) -> np.ndarray:
     T = np.tile(np.eye(4), (len(origin), 1, 1))
     T[:, :3, 0], T[:, :3, 1], T[:, :3, 2], T[:, :3, 3] = x, np.cross(z, x), z, origin
     return T
+
+
+def floor_frame_twists(sole_poses: np.ndarray, sole_twists: np.ndarray) -> np.ndarray:
+    """(N, C, 6) spatial twists (v0, w) of the floor frame (`floor_frames`) from the sole poses (K, N, 4, 4) and the
+    soles' twists (K, N, C, 6) per column (joint reading or parameter), all in one root frame. The floor frame is
+    rigid, so its motion is a twist: the origin moves with the mean of the soles' origins; the rotation's angular
+    velocity is w = 1/2 sum_i e_i x de_i over its axes e_i, each differentiated through the means and
+    normalisations of `floor_frames`."""
+    T = floor_frames(sole_poses)  # (N, 4, 4)
+    o_k, z_k, x_k = sole_poses[..., None, :3, 3], sole_poses[..., None, :3, 2], sole_poses[..., None, :3, 0]
+    v0_k, w_k = sole_twists[..., :3], sole_twists[..., 3:]
+    d_origin = (v0_k + cross(w_k, o_k)).mean(axis=0)  # (N, C, 3)
+    z_raw, x_raw = sole_poses[:, :, :3, 2].mean(axis=0), sole_poses[:, :, :3, 0].mean(axis=0)  # (N, 3)
+    dz_raw, dx_raw = cross(w_k, z_k).mean(axis=0), cross(w_k, x_k).mean(axis=0)  # (N, C, 3)
+    x, y, z, origin = T[:, None, :3, 0], T[:, None, :3, 1], T[:, None, :3, 2], T[:, None, :3, 3]
+    dz = (dz_raw - np.sum(dz_raw * z, axis=-1, keepdims=True) * z) / np.linalg.norm(z_raw, axis=-1)[:, None, None]
+    xz = np.sum(x_raw[:, None] * z, axis=-1, keepdims=True)  # (N, 1, 1)
+    x_perp = x_raw[:, None] - xz * z
+    dx_perp = dx_raw - (np.sum(dx_raw * z, axis=-1, keepdims=True) + np.sum(x_raw[:, None] * dz, axis=-1,
+                                                                             keepdims=True)) * z - xz * dz
+    dx = (dx_perp - np.sum(dx_perp * x, axis=-1, keepdims=True) * x) / np.linalg.norm(x_perp, axis=-1, keepdims=True)
+    dy = cross(dz, x) + cross(z, dx)
+    w = 0.5 * (cross(x, dx) + cross(y, dy) + cross(z, dz))
+    return np.concatenate([d_origin - cross(w, origin), w], axis=-1)

@@ -70,6 +70,9 @@ class KinematicModel:
         self.links = parents | children
         self.actuated_joint_names = [j.name for j in self.joints.values() if j.actuated]
         self._column = {n: i for i, n in enumerate(self.actuated_joint_names)}
+        # Per joint, the last joint values and their motion: a fit walks the same readings again at every step, and
+        # the motion changes only when the joint's offset does.
+        self._last_motion: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
     @classmethod
     def from_urdf(cls, path: str | Path) -> KinematicModel:
@@ -165,9 +168,19 @@ class KinematicModel:
                 walk.T_root_origin[joint.name] = T_root_origin
                 walk.T_root_frame[joint.name] = T_root_frame
                 if joint.actuated or joint.mimic is not None:
-                    T_root_frame = T_root_frame @ self._motion(joint, self.joint_values(joint, q, offsets))
+                    T_root_frame = T_root_frame @ self._motion_at(joint, self.joint_values(joint, q, offsets))
                 walk.T_root_link[joint.child] = T_root_frame
         return walk
+
+    def _motion_at(self, joint: JointModel, values: np.ndarray) -> np.ndarray:
+        """`_motion`, reused when the joint's values are those of the previous call (the array is not to be
+        changed in place)."""
+        last = self._last_motion.get(joint.name)
+        if last is not None and last[0].shape == values.shape and np.array_equal(last[0], values):
+            return last[1]
+        motion = self._motion(joint, values)
+        self._last_motion[joint.name] = (values.copy(), motion)
+        return motion
 
     @staticmethod
     def _motion(joint: JointModel, values: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ class Parameter:
     kind: str  # 'offset' | 'frame' | 'tag' (chain parameters) | 'pose' (a measurement block's own unknown)
     target: str  # joint name, tag id as text, or the block's name for its unknowns (e.g. 'tripod@1')
     component: int  # index in (x, y, z, rx, ry, rz); 0 for offsets
-    unit: str  # 'rad' | 'm'
+    unit: str  # 'rad' | 'm' | 'px' (a measurement block's image-space unknown)
     prior_sigma: float  # standard deviation of the Gaussian prior around `reference`, in `unit`
     reference: float = 0.0  # prior mean and starting value (0: the nominal model) [unit]
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ from wolfcal.robot.kinematics import KinematicModel
 class Robot:
     config: RobotConfig
     model: KinematicModel
+    _mounts: dict[int, np.ndarray] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def joint_names(self) -> list[str]:
@@ -49,8 +50,10 @@ class Robot:
 
     def T_link_tag(self, tag_id: int, corrections: Corrections | None = None) -> np.ndarray:
         """(4, 4) mount of a tag in its link, with its correction applied."""
-        tag = self.config.tag(tag_id)
-        T = transform_from_xyz_rpy(tag.xyz, tag.rpy)
+        if tag_id not in self._mounts:  # the nominal mount, once per tag (a fit asks for it at every step)
+            tag = self.config.tag(tag_id)
+            self._mounts[tag_id] = transform_from_xyz_rpy(tag.xyz, tag.rpy)
+        T = self._mounts[tag_id].copy()
         if corrections is not None and tag_id in corrections.tags:
             T = T @ transform_from_twist_params(corrections.tags[tag_id])
         return T

@@ -64,7 +64,8 @@ def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> 
     corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
     in_front = np.all(transform_points(T_camera_tag, corners)[..., 2] > 0, axis=-1)  # (N, T)
     uv = tag_corner_pixels(camera, T_camera_tag, corners)  # NaN behind the camera
-    lo, hi = np.nanmin(uv, axis=2), np.nanmax(uv, axis=2)  # (N, T, 2)
+    uv = np.where(in_front[:, :, None, None], uv, 0.0)  # a tag behind the camera overlaps nothing (masked below)
+    lo, hi = uv.min(axis=2), uv.max(axis=2)  # (N, T, 2)
     grow = SEPARATION * (hi - lo).max(axis=-1, keepdims=True)
     lo, hi = lo - grow, hi + grow
     overlap = np.all((lo[:, :, None] < hi[:, None, :]) & (lo[:, None, :] < hi[:, :, None]), axis=-1)  # (N, T, T)

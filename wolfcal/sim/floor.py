@@ -120,16 +120,22 @@ def simulate_floor(
     return FloorScene(obs, views.places, q_true)
 
 
-def render_floor(robot: Robot, camera: CameraModel, views: FloorViews, i: int, noise_sigma: float,
-                 rng: np.random.Generator) -> np.ndarray:  # fmt: skip
-    """Gray uint8 image of sample i: every floor tag in front of the camera, rendered at its true place."""
+def floor_targets(robot: Robot, places: dict[int, np.ndarray], T_camera_floor: np.ndarray) -> list[PlanarTarget]:
+    """The floor tags in front of a camera at T_camera_floor (4, 4), each lying at its place (x, y, yaw) [m, rad]."""
     targets = []
-    for tag_id, T_floor_tag in floor_tag_poses(robot, views.places).items():
-        T_camera_tag = views.T_camera_floor[i] @ T_floor_tag
+    for tag_id, T_floor_tag in floor_tag_poses(robot, places).items():
+        T_camera_tag = T_camera_floor @ T_floor_tag
         if T_camera_tag[2, 3] <= 0.05:
             continue
         tag = robot.config.floor_config().tag(tag_id)
         texture = tag_texture(tag.family, tag_id)
         width = tag_texture_width(tag.family, tag.size, texture)
         targets.append(PlanarTarget(T_camera_tag, texture, width, width))
+    return targets
+
+
+def render_floor(robot: Robot, camera: CameraModel, views: FloorViews, i: int, noise_sigma: float,
+                 rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+    """Gray uint8 image of sample i: every floor tag in front of the camera, rendered at its true place."""
+    targets = floor_targets(robot, views.places, views.T_camera_floor[i])
     return render_targets(camera, targets, noise_sigma=noise_sigma, rng=rng)

@@ -1,7 +1,9 @@
 """Render what a camera sees of a simulated robot: the robot's tags at the true kinematics.
 
 The head camera by default, or an external camera fixed in the base frame at `T_base_camera` (its optical frame).
-`true angle = measured + true offset`; tag and camera frames include the true corrections.
+`true angle = measured + true offset`; tag and camera frames include the true corrections. With `floor_places`
+(floor tag id -> x, y, yaw [m, rad]) the head camera also sees the config's floor tags lying there, on the floor of
+the true soles wherever they are (`wolfcal.robot.floor`: the robot is taken to stand).
 """
 
 from __future__ import annotations
@@ -9,9 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.evaluate.ground import camera_in_floor
+from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.external_poses import external_tag_poses
+from wolfcal.sim.floor import floor_targets
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_texture, tag_texture_width
 
@@ -21,11 +26,12 @@ class SimScene:
 
     def __init__(
         self, robot: Robot, truth: Corrections, camera: CameraModel, seed: int = 0, noise_sigma: float = 2.0,
-        T_base_camera: np.ndarray | None = None,
+        T_base_camera: np.ndarray | None = None, floor_places: dict[int, np.ndarray] | None = None,
     ):
         self.robot, self.truth, self.camera = robot, truth, camera
         self.T_base_camera = T_base_camera  # (4, 4) external camera; None: the head camera
         self.noise_sigma = noise_sigma
+        self.floor_places = floor_places or {}
         self.rng = np.random.default_rng(seed)
         self.textures = {t.id: tag_texture(t.family, t.id) for t in robot.config.tags}
 
@@ -46,6 +52,9 @@ class SimScene:
             tag = self.robot.config.tag(tag_id)
             width = tag_texture_width(tag.family, tag.size, self.textures[tag_id])
             targets.append(PlanarTarget(T_camera_tag[0, k], self.textures[tag_id], width, width))
+        if self.floor_places and self.T_base_camera is None:
+            T_floor_camera, _ = camera_in_floor(self.robot, np.atleast_2d(q_true), frames)
+            targets += floor_targets(self.robot, self.floor_places, invert_transform(T_floor_camera[0]))
         return render_targets(self.camera, targets, noise_sigma=self.noise_sigma, rng=self.rng)
 
     def render(self, q_measured: dict[str, float] | np.ndarray) -> np.ndarray:

@@ -62,6 +62,7 @@ class SimOptions:
     placement: str | None = None  # 'x,y,z,roll,pitch,yaw' of the external camera (default: random)
     poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
     floor: bool = False  # floor samples: the robot stands and its head camera sees the config's floor tags
+    floor_distance: tuple[float, float] = FLOOR_DISTANCE_M  # the floor tags lie this far from the robot [m]
 
 
 @dataclass
@@ -194,9 +195,9 @@ def _simulate(
             placement = options.placement
             sim_camera.T_base_camera = placement_from_text(placement) if placement else random_placement(rng)
     floor = None
-    if options.floor:  # the robot stands; the floor tags lie 0.5-5 m away
+    if options.floor:  # the robot stands; the floor tags lie 0.5-5 m away (options.floor_distance)
         head = cameras[HEAD_CAMERA].image
-        floor = floor_views(robot, head, truth, options.samples, rng, FLOOR_DISTANCE_M, 0.01 * head.width,
+        floor = floor_views(robot, head, truth, options.samples, rng, options.floor_distance, 0.01 * head.width,
                             0.01 * head.width)  # fmt: skip
         q_true = floor.q_true
     else:

@@ -1,9 +1,10 @@
 """Tag detection in many encoded images on all cores: decode once, detect, refine; bounded memory.
 
-Images go to the workers in batches, and at most two batches per worker are under way at once, so memory
-stays bounded however many images the input yields (it may be a lazy iterator over a long recording).
-Results come back in input order, each exactly what `wolfcal.vision.tags.detect_tags` returns for the decoded
-image.
+Images go to the workers one at a time (threads: a task costs microseconds against ~50 ms of decoding and detecting
+an image, and single images keep both cores busy to the last image) or in batches of BATCH (processes: each task
+pickles its images), and at most 2 * BATCH images per worker are under way at once, so memory stays bounded
+however many images the input yields (it may be a lazy iterator over a long recording). Results come back in input
+order, each exactly what `wolfcal.vision.tags.detect_tags` returns for the decoded image.
 
 Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
 held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
@@ -32,7 +33,7 @@ from wolfcal.errors import WolfcalError
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
-BATCH = 4  # images per task: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
+BATCH = 4  # images per process task: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
 _pool: ProcessPoolExecutor | None = None
@@ -105,15 +106,18 @@ def iter_detect_encoded(
     families: Families,
     refine: str = "edges",
     workers: int | None = None,
-    batch: int = BATCH,
+    batch: int | None = None,
     processes: bool = False,
 ) -> Iterator[Detections | None]:
     """Detections of each encoded image in input order (None for an image that cannot be decoded).
 
-    At most 2 * `workers` batches of `batch` images are read ahead of the results. `workers`: threads, or
-    processes if `processes` (default: one per core); 1 detects in this thread.
+    Tasks of `batch` images (default 1 for threads, BATCH for processes); at most 2 * `workers` * BATCH images are
+    read ahead of the results. `workers`: threads, or processes if `processes` (default: one per core); 1 detects
+    in this thread.
     """
     workers = max(1, workers or cpu_count())
+    batch = batch or (BATCH if processes else 1)
+    depth = 2 * workers * max(1, BATCH // batch)  # tasks under way
     names = _family_list(families)
     source = iter(images)
     head = list(islice(source, IN_PROCESS + 1))
@@ -127,7 +131,7 @@ def iter_detect_encoded(
     try:
         while chunk := list(islice(stream, batch)):
             pending.append(pool.submit(_detect_batch, chunk, names, refine))
-            if len(pending) >= 2 * workers:
+            if len(pending) >= depth:
                 yield from pending.popleft().result()
         while pending:
             yield from pending.popleft().result()

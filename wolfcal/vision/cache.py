@@ -10,7 +10,11 @@ are not enough: an edited or re-recorded file can keep both), the camera name, a
 (families and ids, refinement, wolfcal's detector version, OpenCV's version). An entry stores its full key
 and the image stamps it was made for; it is used only if both match, so a stale or foreign entry (another
 file, other settings, another reader that kept other frames) is detected again and overwritten. Entries are
-written atomically (temporary file, rename). Hashing costs about 0.15 s per 100 MB (bench/bench_detection.py).
+written atomically (temporary file, rename). Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
+so a file's digest is remembered beside the entries (`file_digest`) with the file's identity: device, inode, size,
+modification and status-change times [ns]. Any write to the file changes its status-change time (the kernel sets
+it; no tool can set it back), so the file is hashed again; and, as git does for its index, a digest taken less than
+2 s after the file's last change is not trusted (a write within the same clock tick could keep every time).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
 import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
@@ -32,6 +37,7 @@ from wolfcal.vision.batch import Detections, detect_encoded
 
 DETECTOR_VERSION = 2  # bump when detection or refinement changes its corners
 FORMAT = 1  # entry layout
+RACY_NS = 2_000_000_000  # a digest taken this soon after the file's last change is not remembered [ns]
 _enabled: ContextVar[bool] = ContextVar("wolfcal_detection_cache", default=True)
 
 
@@ -86,6 +92,28 @@ def content_digest(path: Path, chunk: int = 1 << 20) -> str:
         while block := handle.read(chunk):
             digest.update(block)
     return digest.hexdigest()
+
+
+def file_digest(path: Path) -> str:
+    """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring)."""
+    before = os.stat(path)
+    identity = [before.st_dev, before.st_ino, before.st_size, before.st_mtime_ns, before.st_ctime_ns]
+    memo = cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
+    try:
+        saved = json.loads(memo.read_text())
+        if saved["identity"] == identity and saved["hashed_ns"] - before.st_ctime_ns >= RACY_NS:
+            return str(saved["sha256"])
+    except (OSError, ValueError, KeyError, TypeError):  # none yet, torn or foreign
+        pass
+    hashed_ns = time.time_ns()
+    digest = content_digest(path)
+    if hashed_ns - before.st_ctime_ns >= RACY_NS:
+        try:
+            with atomic_output(memo) as handle:
+                handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
+        except OSError:
+            pass
+    return digest
 
 
 def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str:
@@ -151,7 +179,7 @@ def cached_detect(
     use = _enabled.get() and bool(str(path)) and Path(path).is_file()  # samples made in memory have no file
     if use:
         try:
-            key = _entry_key(content_digest(Path(path)), camera_name, settings)
+            key = _entry_key(file_digest(Path(path)), camera_name, settings)
         except OSError:
             use = False
     if use:

@@ -1,0 +1,125 @@
+"""The venue check on rendered images: feet + floor captures -> fit -> true and measured ground error.
+
+A robot config and camera the shipped demos do not use (Wolfgang's URDF, feet tags 7 and 8 of 0.1 m, torso tag 3,
+floor tags 60-65 of 0.12-0.2 m lying 1-4 m away; a 1280x960 camera with k1 = -0.12), simulated with 0.025 rad rms
+leg and head encoder offsets and the camera ~4 deg off. Per seed:
+  leg     24 feet + 20 floor samples, `--free leg --side both`: true ground error at 4.5 m (worst bearing of -30, 0,
+          +30 deg) before and after, the measured one (held-out 16 floor samples, no truth) with its 1-sigma,
+          the soles' worst pose error over 500 calibration-range poses, fit time
+  camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
+Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from wolfcal.camera.camera_info import save_camera_info
+from wolfcal.camera.model import CameraModel
+from wolfcal.evaluate.accuracy import link_pose_errors
+from wolfcal.evaluate.floor_ground import measured_ground_errors
+from wolfcal.evaluate.ground import ground_errors
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor
+from wolfcal.io.truth import truth_paths
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.sim.simulate import SimOptions, simulate_capture
+from wolfcal.vision.observe import detect_observations
+
+WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
+                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+FLOOR_DISTANCE_M = (1.0, 4.0)
+
+
+def write_config(folder: Path) -> Path:
+    """robot.yaml with other tag ids and sizes and the 1280x960 camera; returns its path."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
+    save_camera_info(CAMERA, folder / "camera.yaml")
+    data["camera"]["intrinsics"] = str(folder / "camera.yaml")
+    data.pop("external_cameras", None)
+    new_ids = {43: 7, 44: 8, 42: 3}
+    for tag in data["tags"]:
+        tag["size"] = 0.12 if tag["id"] == 42 else 0.1
+        tag["id"] = new_ids[tag["id"]]
+    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return folder / "robot.yaml"
+
+
+def observations(robot: Robot, captures: list[Path]) -> dict[str, Observations]:
+    samples, _ = load_samples(robot, captures, None)
+    return detect_observations(samples, robot)[0]
+
+
+def simulate(config: Path, folder: Path, seed: int, offsets: str) -> dict[str, Path]:
+    """feet, floor and held-out floor captures of one simulated robot (names -> paths), made once per folder."""
+    paths = {k: folder / f"{k}.mcap" for k in ("feet", "floor", "held_floor")}
+    if all(p.exists() for p in paths.values()):
+        return paths
+    quiet = lambda _m: None  # noqa: E731
+    simulate_capture(config, paths["feet"], SimOptions(samples=24, seed=seed, offsets=offsets), say=quiet)
+    truth = truth_paths(paths["feet"])[0]
+    for name, n, s in (("floor", 20, seed + 100), ("held_floor", 16, seed + 200)):
+        simulate_capture(config, paths[name], SimOptions(samples=n, seed=s, floor=True, truth_file=truth,
+                                                         floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
+    return paths
+
+
+def run(scenario: str, seed: int, folder: Path) -> str:
+    folder.mkdir(parents=True, exist_ok=True)
+    config = write_config(folder)
+    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none")
+    robot = load_robot(config)
+    truth = load_corrections(truth_paths(paths["feet"])[0], key="truth")
+    obs = observations(robot, [paths["feet"], paths["floor"]])
+    start = time.process_time()
+    fit = fit_observations(robot, obs, FitOptions(free=scenario, side="both"))
+    cpu = time.process_time() - start
+    rows = ground_errors(robot, CAMERA, truth, {"before": Corrections(), "after": fit.corrections}, (4.5,))[0]
+    before, after = (rows["models"][k]["error_m"] for k in ("before", "after"))
+    _, held = split_floor(robot, observations(robot, [paths["held_floor"]]))
+    line = f"{scenario:6s} seed {seed}: true ground error at 4.5 m {before * 100:.1f} -> {after * 100:.2f} cm"
+    if held is not None:
+        names = fit.params.names
+        k = names.index("floor.corner_inset")
+        inset = (float(fit.solution.values[k]), float(fit.solution.uncertainty.std[k]))
+        measured = measured_ground_errors(robot, held, {"after": fit.corrections}, (4.5,), inset)
+        if measured is not None:
+            row = measured["models"]["after"]["rows"][0]
+            line += (f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
+                     f"{(row['error_m'] - after) / row['std_m']:+.1f}; inset {inset[0]:.2f} px)")
+    rng = np.random.default_rng(seed)
+    soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
+    line += (f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "
+             f"{np.rad2deg(max(r.max() for r, _ in soles)):.3f} deg")
+    floor_block = [b for b in fit.solution.blocks if b.name == "floor"]
+    if floor_block:
+        line += f", floor rms {floor_block[0].rms_after:.3f} px"
+    return line + f" [fit {cpu:.1f} CPU s]"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--scenarios", nargs="*", default=["leg", "camera"])
+    parser.add_argument("--keep", type=Path, help="keep the captures in this folder and reuse them")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        for scenario in args.scenarios:
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
+                print(run(scenario, seed, root / f"{scenario}_{seed}"), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,51 @@
+"""The floor fit's corner-inset unknown: directions on known quads, and a known inward bias put into synthetic floor
+corners is found again (the other-tags robot of test_floor_fit, floor tags 0.12-0.2 m at 1-4 m)."""
+
+import numpy as np
+import pytest
+import yaml
+from conftest import wolfgang_with_other_tags
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.fit.floor_block import REFERENCE_EDGE_PX, FloorBlock
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.floor import simulate_floor
+from wolfcal.sim.simulate import offset_joints
+from wolfcal.sim.truth import TruthSpec, random_truth
+from wolfcal.vision.corner_bias import inset_directions
+
+CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
+                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+
+
+def test_inset_directions_move_both_edges_inward_by_one_pixel():
+    square = np.array([[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]])
+    assert np.allclose(inset_directions(square)[0], [[1, 1], [-1, 1], [-1, -1], [1, -1]])
+    trapezoid = np.array([[[0.0, 0.0], [40.0, 0.0], [30.0, 8.0], [10.0, 8.0]]])  # a floor tag seen at a grazing angle
+    moved = trapezoid + inset_directions(trapezoid)
+    for k in range(4):  # each edge's line moved inward by exactly 1 px
+        a, b = trapezoid[0, k], trapezoid[0, (k + 1) % 4]
+        n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
+        n *= np.sign(n @ (trapezoid[0].mean(axis=0) - a))
+        assert np.allclose([(moved[0, k] - a) @ n, (moved[0, (k + 1) % 4] - a) @ n], 1.0)
+    assert np.all(inset_directions(np.where(np.arange(4)[None, :, None] == 2, np.nan, square)) == 0.0)
+
+
+@pytest.mark.slow
+def test_fit_finds_a_known_corner_inset(tmp_path):
+    data = wolfgang_with_other_tags()
+    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
+    robot = load_robot(tmp_path / "robot.yaml")
+    rng = np.random.default_rng(2)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "head")), rng)
+    floor = simulate_floor(robot, CAMERA, truth, 30, rng).obs
+    block = FloorBlock(robot, floor)
+    inset = 0.8  # [px] at REFERENCE_EDGE_PX
+    floor.uv += inset * block.inward  # the detector's bias, shrinking as 1/edge above the reference edge
+    assert np.abs(block.inward).max() > 0.5 and REFERENCE_EDGE_PX > 0
+    fit = fit_observations(robot, floor, FitOptions(free="head_camera"))
+    found = fit.solution.values[fit.params.names.index("floor.corner_inset")]
+    std = fit.solution.std[fit.params.names.index("floor.corner_inset")]
+    assert abs(found - inset) < max(3 * std, 0.1), (found, std)

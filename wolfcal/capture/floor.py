@@ -1,0 +1,107 @@
+"""`wolfcal capture --floor`: floor samples. The robot stands on the floor among the config's floor tags (`floor:`);
+its legs hold the standing pose (`floor.standing`: encoder readings, other leg joints 0) with torque on, and its head
+looks at the floor: scripted, the head aims in turn at points on the floor `AIM_DISTANCES_M` from the robot at
+bearings `AIM_BEARINGS_DEG` (a pan/tilt grid found through the robot's own nominal model, within its URDF limits);
+manual, the head's torque is off and the operator turns it by hand.
+
+Each sample is an ordinary capture sample; the fit and evaluation tell floor samples by the floor tags they see.
+"""
+
+from __future__ import annotations
+
+import math
+
+from wolfcal.capture.manual import joint_groups
+from wolfcal.capture.poses import Pose, PoseScript, check_collisions, colliding_poses
+from wolfcal.capture.scripted import torque_on, wait_arrival
+from wolfcal.capture.session import CaptureSession
+from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.ground import aim_head, aim_joints, ball_position, standing_pose
+from wolfcal.hardware.bus import rad_to_ticks
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.robot import Robot
+
+AIM_DISTANCES_M = (1.0, 2.0, 3.5)  # floor points the head aims at, from the point below base_link [m] ...
+AIM_BEARINGS_DEG = (-30.0, 0.0, 30.0)  # ... at these bearings from the floor's x axis (left positive) [deg]
+FLOOR_NEEDED_CAPTURE = "capture --floor needs the standing soles, the standing readings and the floor tags"
+
+
+def floor_joints(robot: Robot) -> tuple[list[str], list[str]]:
+    """(standing joints, head joints) of the servo bus: the legs hold the standing pose, the head looks around."""
+    groups = joint_groups(robot)
+    return groups["legs"], groups["head"]
+
+
+def standing_targets(robot: Robot) -> dict[str, float]:
+    """Readings [rad] of the standing pose for the leg and head servo joints, checked against the URDF limits."""
+    floor = robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
+    if not floor.tags:
+        raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; {FLOOR_NEEDED_CAPTURE}")
+    q = standing_pose(robot)
+    legs, head = floor_joints(robot)
+    targets = {j: float(q[robot.model.column(j)]) for j in legs + head}
+    outside = [f"{j} = {v:.4f} rad (limits [{robot.model.joints[j].lower:.4f}, {robot.model.joints[j].upper:.4f}])"
+               for j, v in targets.items()
+               if not robot.model.joints[j].lower <= v <= robot.model.joints[j].upper]  # fmt: skip
+    if outside:
+        raise WolfcalError(f"{robot.config.path}: 'floor.standing' puts joints outside their URDF limits: "
+                           + "; ".join(outside))  # fmt: skip
+    return targets
+
+
+def floor_script(robot: Robot, velocity: float) -> PoseScript:
+    """The scripted floor capture: standing legs, the head aimed at each grid point of the floor in turn (poses
+    that round to the same ticks, where a limit stops the head, are kept once)."""
+    standing = standing_targets(robot)
+    pan_tilt = [j for j in aim_joints(robot) if j in standing]
+    if not pan_tilt:
+        raise WolfcalError(f"{robot.config.path}: the joints that aim the camera are not servos; use --manual")
+    poses, seen = [], set()
+    nominal = Corrections()
+    for row, distance in enumerate(AIM_DISTANCES_M):
+        for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]:  # to and fro: short moves
+            q = aim_head(robot, nominal, ball_position(robot, nominal, distance, math.radians(bearing)))
+            joints = {**standing, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
+            key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
+            if key not in seen:
+                seen.add(key)
+                poses.append(Pose(f"floor {distance:g} m, {bearing:+g} deg", joints))
+    return PoseScript(poses, velocity)
+
+
+def without_collisions(robot: Robot, script: PoseScript, start: dict[str, float]) -> tuple[PoseScript, str | None]:
+    """The floor script less the views in which the robot would touch itself (`capture.poses.colliding_poses`,
+    `start`: joint -> rad where the robot stands), and a note on what was left out or not checked; WolfcalError
+    when no view is left."""
+    colliding = colliding_poses(robot, script, start)
+    if colliding is None:
+        return script, check_collisions(robot, script, "--floor", start)  # the note: nothing checked
+    if not colliding:
+        return script, None
+    kept = [pose for pose in script.poses if pose.name not in colliding]
+    left_out = "; ".join(f"{name} ({' and '.join(pair)} would touch)" for name, pair in colliding.items())
+    if not kept:
+        raise WolfcalError(f"--floor: every floor view would make the robot touch itself, nothing was moved: "
+                           f"{left_out}")  # fmt: skip
+    return PoseScript(kept, script.velocity), f"--floor: {len(colliding)} view(s) left out: {left_out}"
+
+
+def check_floor_limp(robot: Robot, limp: list[str]) -> None:
+    """Refuse a manual floor capture that would switch off a joint of the standing legs."""
+    legs, _ = floor_joints(robot)
+    standing = [j for j in limp if j in legs]
+    if standing:
+        raise WolfcalError(f"--floor keeps the legs standing with torque on; --limp names {', '.join(standing)}: "
+                           "give head joints only (the default with --floor is 'head')")  # fmt: skip
+
+
+def stand(session: CaptureSession, targets: dict[str, float], velocity: float) -> None:
+    """Manual floor capture: torque on for the legs, moved to the standing readings `targets` [rad] at `velocity`
+    [rad/s] (a standing robot barely moves); WolfcalError when they do not get there."""
+    goals = torque_on(session, list(targets), velocity)
+    goals.update(targets)
+    session.bus.set_goal_positions(goals)
+    index = {j: k for k, j in enumerate(session.bus.joints)}
+    reason = wait_arrival(session, goals, index, velocity)
+    if reason is not None:
+        raise WolfcalError(f"the legs did not reach the standing pose (floor.standing): {reason}")
