@@ -54,6 +54,7 @@ from wolfcal.outputs import check_output_folder
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations
 
 COMPARE_FILES = ("report.html", "report.md", "metrics.json")
@@ -69,6 +70,7 @@ class Calibration:
     system: str  # the measurement systems the fit used (its blocks)
     preset: str  # --free (and --side)
     corrections: Corrections
+    corner_inset: tuple[float, float] | None = None  # the fit's floor.corner_inset and 1-sigma [px], if it had one
 
 
 @dataclass
@@ -98,7 +100,7 @@ def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[
         preset = result.free + ("" if result.side == "both" else f" ({result.side})")
         system = ", ".join(result.systems_used) or result.system
         calibrations.append(Calibration(Path(fit_dir).name, str(Path(fit_dir).resolve()), system, preset,
-                                        result.corrections))  # fmt: skip
+                                        result.corrections, result.estimate(CORNER_INSET)))  # fmt: skip
         used.append(result.captures)
     assert robot is not None  # fit_dirs is not empty
     labels = [c.label for c in calibrations]
@@ -122,12 +124,13 @@ def _topics(path: Path) -> set[str]:
     return {c.topic for c in summary.channels.values() if counts.get(c.id, 1)}
 
 
-def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable) -> list[Column]:
+def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable,
+                  corner_inset: tuple[float, float]) -> list[Column]:
     """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen."""
     samples, _ = samples_of(loaded, robot)
     observations, _ = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
     links_only, floor = split_floor(robot, observations)
-    ground = _ground_column(robot, models, floor, say)
+    ground = _ground_column(robot, models, floor, say, corner_inset)
     if HEAD_CAMERA not in links_only:
         return ground
     obs = links_only[HEAD_CAMERA]
@@ -147,14 +150,13 @@ def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Cap
 
 
 def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observations | None,
-                   say: Callable) -> list[Column]:  # fmt: skip
+                   say: Callable, corner_inset: tuple[float, float]) -> list[Column]:  # fmt: skip
     """The measured ground error at VERDICT_DISTANCE_M [cm] of every model, from held-out floor views (none
-    without them or when too few views measure it); a ball above a model's horizon is an infinite error."""
+    without them or when too few views measure it); a ball above a model's horizon is an infinite error.
+    corner_inset: the detector's inward corner bias on small floor tags [px] and its 1-sigma, from a fit."""
     if floor is None:
         return []
-    ids, samples = np.unique(np.column_stack([floor.tag_ids, floor.sample_index]), axis=0).T
-    twice = [int(t) for t, n in zip(*np.unique(ids, return_counts=True)) if n >= 2]  # a tag seen once places nothing
-    measured = measured_ground_errors(robot, floor.only_tags(twice), models, (VERDICT_DISTANCE_M,)) if twice else None
+    measured = measured_ground_errors(robot, floor, models, (VERDICT_DISTANCE_M,), corner_inset)
     if measured is None:
         say(f"floor: {floor.n_samples} sample(s) with floor tags, too few views to measure the ground error")
         return []
@@ -306,7 +308,9 @@ def run_compare(
     models = {BEFORE_LABEL: Corrections(), **{c.label: c.corrections for c in calibrations}}
     loaded = load_captures(robot, camera_captures, None, say) if camera_captures else []
     # One builder per measurement system (the head camera's includes the ground error when floor views exist).
-    columns = [*_head_columns(robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say),
+    # The corner inset is the detector's, the same for every model: taken from the first fit that measured it.
+    inset = next((c.corner_inset for c in calibrations if c.corner_inset is not None), (0.0, 0.0))
+    columns = [*_head_columns(robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say, inset),
                *_external_columns(robot, models, loaded, say),
                *_mocap_column(robot, models, mocap_captures, say)]  # fmt: skip
     if not columns:

@@ -56,6 +56,7 @@ from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations, observations_of
 
 
@@ -108,12 +109,6 @@ def _observe(
             f"{', '.join(str(s) for s in sources)}"
         )
     return samples, obs.only_tags(tags), tags, warnings, floor
-
-
-def _corner_inset(result: FitResult) -> tuple[float, float]:
-    """The fit's `floor.corner_inset` and its 1-sigma [px] ((0, 0): the fit had no floor samples)."""
-    found = [(p.value, p.std) for p in result.parameters if p.name == "floor.corner_inset"]
-    return found[0] if found else (0.0, 0.0)
 
 
 def _measured_ground(robot: Robot, floor: Observations | None, fitted: Corrections, held_out: bool,
@@ -346,7 +341,7 @@ def _evaluate(
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
     predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
-    measured = _measured_ground(robot, floor, fitted, held_out, say, _corner_inset(result))
+    measured = _measured_ground(robot, floor, fitted, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0))
     verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, _verdict_ground(measured),
                              predicted,
                              camera_turn(robot, fitted), limits)  # fmt: skip

@@ -35,7 +35,13 @@ from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
 from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.corner_bias import REFERENCE_EDGE_PX, apparent_edges, inset_directions, small_view_weight
+from wolfcal.vision.corner_bias import (
+    CORNER_INSET,
+    REFERENCE_EDGE_PX,
+    apparent_edges,
+    inset_directions,
+    small_view_weight,
+)
 from wolfcal.vision.tags import tag_corners
 
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
@@ -100,7 +106,7 @@ class FloorBlock(Block):
         # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
         self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
         self.nuisance = self._place_parameters() + ParameterSet(
-            [Parameter("floor.corner_inset", "floor", "floor", 0, "px", INSET_PRIOR_PX)])
+            [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)])
 
     def _apparent_edge(self) -> np.ndarray:
         """(M,) mean edge length of each corner's tag view in the image [px]."""

@@ -249,6 +249,11 @@ class FitResult:
             noise_floor_px=self.noise_floor_px,
         )  # fmt: skip
 
+    def estimate(self, name: str) -> tuple[float, float] | None:
+        """A fitted parameter's value and 1-sigma in its own unit (None: not among the fit's parameters)."""
+        found = [(p.value, p.std) for p in self.parameters if p.name == name]
+        return found[0] if found else None
+
     def to_dict(self) -> dict:
         """Plain data for YAML, keys in `KEY_ORDER`."""
         names = [f.name for f in fields(self)]

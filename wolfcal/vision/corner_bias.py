@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] at which the inset is stated; smaller views count less
+CORNER_INSET = "floor.corner_inset"  # the fit's parameter name for the inset [px] (in result.yaml)
 
 
 def inset_directions(ring: np.ndarray) -> np.ndarray:
