@@ -4,11 +4,13 @@ import os
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.robot.robot import load_robot
+from wolfcal.camera.model import CameraModel
+from wolfcal.robot.robot import Robot, load_robot
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 
@@ -38,6 +40,19 @@ def wolfgang_with_other_tags() -> dict:
         tag["size"] = 0.12 if tag["id"] == 42 else 0.1
         tag["id"] = new_ids[tag["id"]]
     return data
+
+
+# A camera the shipped data do not use: 1280x960 with k1 = -0.12 (the floor tests' and bench_floor's)
+OTHER_CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
+                           np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+
+
+def robot_with_floor_tags(folder: Path) -> Robot:
+    """`wolfgang_with_other_tags` with floor tags 60-65 of 0.12-0.2 m, written to folder/robot.yaml and loaded."""
+    data = wolfgang_with_other_tags()
+    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return load_robot(folder / "robot.yaml")
 
 
 @pytest.fixture(scope="session")

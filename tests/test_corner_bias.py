@@ -3,20 +3,16 @@ corners is found again (the other-tags robot of test_floor_fit, floor tags 0.12-
 
 import numpy as np
 import pytest
-import yaml
-from conftest import wolfgang_with_other_tags
+from conftest import OTHER_CAMERA, robot_with_floor_tags
 
-from wolfcal.camera.model import CameraModel
 from wolfcal.fit.floor_block import REFERENCE_EDGE_PX, FloorBlock
 from wolfcal.fit.pipeline import FitOptions, fit_observations
-from wolfcal.robot.robot import load_robot
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.corner_bias import inset_directions
 
-CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
-                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+CAMERA = OTHER_CAMERA
 
 
 def test_inset_directions_move_both_edges_inward_by_one_pixel():
@@ -34,10 +30,7 @@ def test_inset_directions_move_both_edges_inward_by_one_pixel():
 
 @pytest.mark.slow
 def test_fit_finds_a_known_corner_inset(tmp_path):
-    data = wolfgang_with_other_tags()
-    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
-    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
-    robot = load_robot(tmp_path / "robot.yaml")
+    robot = robot_with_floor_tags(tmp_path)
     rng = np.random.default_rng(2)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "head")), rng)
     floor = simulate_floor(robot, CAMERA, truth, 30, rng).obs

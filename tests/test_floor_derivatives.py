@@ -3,29 +3,21 @@ a model with leg, head and camera corrections (the other-tags robot, floor tags 
 
 import numpy as np
 import pytest
-import yaml
-from conftest import wolfgang_with_other_tags
+from conftest import OTHER_CAMERA, robot_with_floor_tags
 
-from wolfcal.camera.model import CameraModel
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
 from wolfcal.robot.parameters import build_parameter_set
-from wolfcal.robot.robot import load_robot
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
 
-CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
-                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+CAMERA = OTHER_CAMERA
 STEP = 1e-6
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    data = wolfgang_with_other_tags()
-    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
-    path = tmp_path_factory.mktemp("floor") / "robot.yaml"
-    path.write_text(yaml.safe_dump(data))
-    robot = load_robot(path)
+    robot = robot_with_floor_tags(tmp_path_factory.mktemp("floor"))
     rng = np.random.default_rng(5)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "all")), rng)
     floor = simulate_floor(robot, CAMERA, truth, 6, rng)

@@ -6,33 +6,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
-from conftest import wolfgang_with_other_tags
+from conftest import OTHER_CAMERA, robot_with_floor_tags
 
-from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.floor_block import check_floor_samples
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.robot import load_robot
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.scenario import synthetic_scenario
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
-CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
-                     np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
+CAMERA = OTHER_CAMERA
 
 
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory):
     """Wolfgang's URDF with other tag ids and sizes (feet 7, 8; torso 3) and floor tags 60-65 of 0.12-0.2 m."""
-    data = wolfgang_with_other_tags()
-    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
-    path = tmp_path_factory.mktemp("floor") / "robot.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return load_robot(path)
+    return robot_with_floor_tags(tmp_path_factory.mktemp("floor"))
 
 
 def joined(a: Observations, b: Observations) -> Observations:
