@@ -31,6 +31,7 @@ from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.sim.simulate import SimOptions, simulate_capture
+from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -90,7 +91,7 @@ def run(scenario: str, seed: int, folder: Path) -> str:
     line = f"{scenario:6s} seed {seed}: true ground error at 4.5 m {before * 100:.1f} -> {after * 100:.2f} cm"
     if held is not None:
         names = fit.params.names
-        k = names.index("floor.corner_inset")
+        k = names.index(CORNER_INSET)
         inset = (float(fit.solution.values[k]), float(fit.solution.uncertainty.std[k]))
         measured = measured_ground_errors(robot, held, {"after": fit.corrections}, (4.5,), inset)
         if measured is not None:
