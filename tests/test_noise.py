@@ -1,0 +1,173 @@
+"""The grouped whitening against a dense reference: each group's covariance written out as an n x n matrix from its
+definition and whitened with its symmetric inverse square root (eigen-decomposition of the whole matrix)."""
+
+import numpy as np
+import pytest
+import scipy.sparse
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.fit import problem, solver
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.sim.observations import synthetic_observations
+from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
+
+TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5], [0, 0, 1]]), np.zeros(5))
+
+
+def dense_covariance(shared: SharedErrors, rows: np.ndarray, sigma: float, scale: np.ndarray) -> np.ndarray:
+    """C = sigma^2 diag(scale^2) + sigma_q^2 A A^T (rows of one reading) + tau^2 (rows of one label and axis)."""
+    A, reading, label, axis = shared.A[rows], shared.reading[rows], shared.label[rows], shared.axis[rows]
+    same_reading = reading[:, None] == reading[None, :]
+    same_error = (label[:, None] == label[None, :]) & (label[:, None] >= 0) & (axis[:, None] == axis[None, :])
+    own = sigma**2 * np.diag(scale[rows] ** 2)
+    return own + shared.sigma_q**2 * (A @ A.T) * same_reading + shared.tau**2 * same_error
+
+
+def dense_whitening(groups: list[np.ndarray], shared: SharedErrors, sigma: float, scale: np.ndarray) -> np.ndarray:
+    """W (R, R): on each group's block (D^-1 C_g D^-1)^-1/2 D^-1 (D = diag(scale): the symmetric root when all rows
+    have the block's noise level), zero rows and columns for rows in no group."""
+    W = np.zeros((len(shared.A), len(shared.A)))
+    for rows in groups:
+        s = scale[rows]
+        lam, V = np.linalg.eigh(dense_covariance(shared, rows, sigma, scale) / np.outer(s, s))
+        W[np.ix_(rows, rows)] = (V / np.sqrt(lam)) @ V.T / s
+    return W
+
+
+def shared_errors(rng: np.random.Generator, units: int, tau: float) -> tuple[SharedErrors, np.ndarray]:
+    """A block of 2-row units: still poses of 1-9 units (a few of them seen in several frames, so that units of one
+    pose share a repeating detection error), joint sensitivities of 5 joints of which one moves nothing."""
+    pose = np.sort(rng.integers(0, units // 4, units))
+    A = rng.normal(0, 300.0, (2 * units, 5))
+    A[:, 3] = 0.0
+    A[np.repeat(pose == 0, 2)] = 0.0  # units the joints do not move (a tag fixed to the base)
+    label = np.where(rng.random(units) < 0.7, pose * 3 + rng.integers(0, 3, units), -1)
+    shared = SharedErrors(A=A, sigma_q=1.5e-3, reading=np.repeat(pose, 2), label=np.repeat(label, 2),
+                          axis=np.tile(np.arange(2), units), tau=tau)  # fmt: skip
+    return shared, pose
+
+
+def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covariance():
+    rng = np.random.default_rng(3)
+    for tau, scale in ((0.0, np.ones(120)), (0.4, np.ones(120)), (0.4, np.repeat(rng.uniform(1, 3, 60), 2))):
+        shared, pose = shared_errors(rng, 60, tau)
+        keep = rng.random(60) > 0.1  # left-out units belong to no group
+        groups = [np.flatnonzero(np.repeat((pose == p) & keep, 2)) for p in np.unique(pose[keep])]
+        group_of_row = row_groups(pose, 2, keep)
+        assert [np.flatnonzero(group_of_row == k).tolist() for k in range(len(groups))] == [g.tolist() for g in groups]
+        whitening = GroupedWhitening(group_of_row, shared, scale)
+        for sigma in (0.05, 0.3, 2.0):
+            W = dense_whitening(groups, shared, sigma, scale)
+            for g in groups:  # the definition: W_g^T W_g = C_g^-1
+                C = dense_covariance(shared, g, sigma, scale)
+                assert np.allclose(W[np.ix_(g, g)].T @ W[np.ix_(g, g)] @ C, np.eye(len(g)), atol=1e-8)
+            r = rng.normal(0, 1.0, 120)
+            M = rng.normal(0, 1.0, (120, 7))
+            M_sparse = scipy.sparse.random(120, 40, density=0.1, random_state=4, format="csr")
+            assert np.allclose(whitening.apply(r, sigma), W @ r, rtol=1e-10, atol=1e-10 * np.abs(W @ r).max())
+            assert np.allclose(whitening.apply(M, sigma), W @ M, rtol=1e-10, atol=1e-10 * np.abs(W @ M).max())
+            sparse = whitening.apply(M_sparse, sigma)
+            assert scipy.sparse.issparse(sparse)
+            assert np.allclose(sparse.toarray(), W @ M_sparse.toarray(), atol=1e-10 * np.abs(W).max())
+            norms = [r[g] @ np.linalg.solve(dense_covariance(shared, g, sigma, scale), r[g]) for g in groups]
+            assert np.allclose(whitening.group_norms(r, sigma), norms, rtol=1e-10)
+            assert np.allclose(whitening.whitened(r, sigma), (W @ r)[np.concatenate(groups)], atol=1e-10)
+            left_out = np.repeat(~keep, 2)
+            assert np.all(whitening.apply(r, sigma)[left_out] == 0.0)
+
+
+def test_a_long_still_pose_is_never_a_dense_block():
+    """A still pose of 8000 rows (4000 corners: 100 frames of 40): the factors stay thin (rows x shared errors)
+    and whitening it agrees with the definition on the part that can be checked densely (a group of the same
+    kind, 400 rows)."""
+    rng = np.random.default_rng(5)
+    for units in (200, 4000):
+        frames = units // 40
+        A = np.tile(rng.normal(0, 300.0, (80, 4)), (frames, 1))  # the same pose in every frame
+        label = np.tile(np.arange(40), frames)  # each corner's detection error repeats in every frame
+        shared = SharedErrors(A=A, sigma_q=1.5e-3, reading=np.zeros(2 * units, dtype=int),
+                              label=np.repeat(label, 2), axis=np.tile(np.arange(2), units), tau=0.1)  # fmt: skip
+        whitening = GroupedWhitening(np.zeros(2 * units, dtype=int), shared)
+        assert whitening.Q.nnz <= 2 * units * (4 + 80)
+        if units == 200:
+            r = rng.normal(0, 1.0, 2 * units)
+            W = dense_whitening([np.arange(2 * units)], shared, 0.2, np.ones(2 * units))
+            assert np.allclose(whitening.apply(r, 0.2), W @ r, atol=1e-9)
+
+
+class DenseWhitening:
+    """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix, scaled by
+    the rows' own noise levels D and eigen-decomposed, W_g = V diag(1 / sqrt(sigma^2 + l)) V^T D^-1, applied as a
+    dense R x R matrix."""
+
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray) -> None:
+        self.group_of_row, self.shared, self.row_scale = group_of_row, shared, row_scale
+        self.groups = [np.flatnonzero(group_of_row == k) for k in range(group_of_row.max() + 1)]
+        self.eigen = [
+            np.linalg.eigh(dense_covariance(shared, rows, 0.0, row_scale) / np.outer(row_scale[rows], row_scale[rows]))
+            for rows in self.groups
+        ]
+        self.cache: dict[float, np.ndarray] = {}
+
+    def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
+        return DenseWhitening(self.group_of_row, shared, self.row_scale)
+
+    def matrix(self, sigma: float) -> np.ndarray:
+        if sigma not in self.cache:
+            W = np.zeros((len(self.shared.A), len(self.shared.A)))
+            for rows, (lam, V) in zip(self.groups, self.eigen):
+                W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + np.clip(lam, 0, None))) @ V.T / self.row_scale[rows]
+            self.cache[sigma] = W
+        return self.cache[sigma]
+
+    def apply(self, M, sigma: float):
+        W = self.matrix(sigma)
+        return scipy.sparse.csr_matrix(W @ M.toarray()) if scipy.sparse.issparse(M) else W @ M
+
+    def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
+        return (self.matrix(sigma) @ r)[np.concatenate(self.groups)] if self.groups else np.zeros(0)
+
+    def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
+        w = self.matrix(sigma) @ r
+        return np.array([np.sum(w[rows] ** 2) for rows in self.groups])
+
+
+def repeated_frames(robot, camera, frames: int):
+    """Still poses each seen in `frames` frames (independent pixel noise, the same joint readings): the corners of
+    one pose share a repeating detection error, so a noise group spans all frames of its pose."""
+    scenario = synthetic_scenario(robot, camera, n=8, seed=23, offsets="all")
+    obs = scenario.obs
+    visible = np.zeros((obs.n_samples, len(robot.config.tag_ids)), dtype=bool)
+    visible[obs.sample_index, [robot.config.tag_ids.index(t) for t in obs.tag_ids]] = True
+    q_true, visible = np.repeat(scenario.q_true, frames, axis=0), np.repeat(visible, frames, axis=0)
+    return synthetic_observations(robot, camera, scenario.truth, q_true, visible, 0.15, np.random.default_rng(24))
+
+
+SLOW = pytest.mark.slow
+
+
+@pytest.mark.parametrize("system", ["head", "head, repeated frames", pytest.param("external moving", marks=SLOW)])
+def test_a_fit_is_the_same_as_with_the_dense_whitening(robot, camera, monkeypatch, system):
+    """Every noise model of the fit (per-round groups, per-view outlier groups, the noise-level search, the robust
+    loss and the reported uncertainty) through the dense reference instead: the same fit to numerical precision.
+    Head camera: leg preset, outlier samples; still poses seen in several frames (repeating detection errors);
+    external camera with a pose per sample: a sparse Jacobian (more unknowns than DENSE_LIMIT)."""
+    options = FitOptions(free="leg", side="both")
+    if system == "head":
+        obs = synthetic_scenario(robot, camera, n=20, seed=21, offsets="all", outlier_fraction=0.1).obs
+    elif system == "head, repeated frames":
+        obs = repeated_frames(robot, camera, 4)
+    else:
+        obs = synthetic_external_scenario(robot, TRIPOD, n=50, seed=22).obs
+        options = FitOptions(free="leg", external_moving=True)
+    thin = fit_observations(robot, obs, options)
+    monkeypatch.setattr(problem, "GroupedWhitening", DenseWhitening)
+    monkeypatch.setattr(solver, "GroupedWhitening", DenseWhitening)
+    dense = fit_observations(robot, obs, options)
+    assert (len(thin.params) > problem.DENSE_LIMIT) == (system == "external moving")
+    for a, b in zip(thin.solution.blocks, dense.solution.blocks):
+        assert a.outlier_views == b.outlier_views
+        assert a.sigma == pytest.approx(b.sigma, rel=1e-9)
+    assert np.all(np.abs(thin.solution.values - dense.solution.values) < 1e-6 * dense.solution.std)
+    np.testing.assert_allclose(thin.solution.std, dense.solution.std, rtol=1e-7)
