@@ -1,5 +1,6 @@
 """The grouped whitening against a dense reference: each group's covariance written out as an n x n matrix from its
-definition and whitened with its symmetric inverse square root (eigen-decomposition of the whole matrix)."""
+definition and whitened with its symmetric inverse square root, or split along the eigenvectors of its shared part
+(eigen-decomposition of the whole matrix, as the fit did before the thin factors)."""
 
 import numpy as np
 import pytest
@@ -33,6 +34,22 @@ def dense_whitening(groups: list[np.ndarray], shared: SharedErrors, sigma: float
         lam, V = np.linalg.eigh(dense_covariance(shared, rows, sigma, scale) / np.outer(s, s))
         W[np.ix_(rows, rows)] = (V / np.sqrt(lam)) @ V.T / s
     return W
+
+
+def dense_split(groups: list[np.ndarray], shared: SharedErrors, sigma: float, scale: np.ndarray):
+    """(R, R) each row's part outside its group's shared errors / sigma, and (K, R) the components along the
+    eigenvectors of each group's shared part D^-1 S_g D^-1 with a non-zero eigenvalue l, / sqrt(sigma^2 + l)."""
+    own, along = np.zeros((len(shared.A), len(shared.A))), []
+    for rows in groups:
+        s = scale[rows]
+        lam, V = np.linalg.eigh(dense_covariance(shared, rows, 0.0, scale) / np.outer(s, s))
+        on = lam > 1e-9 * max(lam.max(), 1e-300)
+        Vs = V[:, on]
+        own[np.ix_(rows, rows)] = (np.eye(len(rows)) - Vs @ Vs.T) / sigma / s
+        block = np.zeros((int(on.sum()), len(shared.A)))
+        block[:, rows] = Vs.T / np.sqrt(sigma**2 + lam[on])[:, None] / s
+        along.append(block)
+    return own, np.concatenate(along) if along else np.zeros((0, len(shared.A)))
 
 
 def shared_errors(rng: np.random.Generator, units: int, tau: float) -> tuple[SharedErrors, np.ndarray]:
@@ -72,7 +89,14 @@ def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covarianc
             assert np.allclose(sparse.toarray(), W @ M_sparse.toarray(), atol=1e-10 * np.abs(W).max())
             norms = [r[g] @ np.linalg.solve(dense_covariance(shared, g, sigma, scale), r[g]) for g in groups]
             assert np.allclose(whitening.group_norms(r, sigma), norms, rtol=1e-10)
-            assert np.allclose(whitening.whitened(r, sigma), (W @ r)[np.concatenate(groups)], atol=1e-10)
+            split = dense_split(groups, shared, sigma, scale)
+            assert np.allclose(whitening.split(r, sigma)[:120], split[0] @ r, atol=1e-10)  # each row's own part
+            shared_part = whitening.split(r, sigma)[120:]  # the shared errors' components: the eigenbasis's
+            assert np.allclose(np.sort(np.abs(shared_part)), np.sort(np.abs(split[1] @ r)), atol=1e-8)
+            assert np.allclose(np.sum(whitening.split(M, sigma) ** 2, axis=0), np.sum((W @ M) ** 2, axis=0))
+            sparse_split = whitening.split(M_sparse, sigma)
+            assert scipy.sparse.issparse(sparse_split)
+            assert np.allclose(sparse_split.toarray(), whitening.split(M_sparse.toarray(), sigma), atol=1e-12)
             left_out = np.repeat(~keep, 2)
             assert np.all(whitening.apply(r, sigma)[left_out] == 0.0)
 
@@ -98,8 +122,9 @@ def test_a_long_still_pose_is_never_a_dense_block():
 
 class DenseWhitening:
     """The reference whitening of a whole fit: each group's shared part written out as an n x n matrix, scaled by
-    the rows' own noise levels D and eigen-decomposed, W_g = V diag(1 / sqrt(sigma^2 + l)) V^T D^-1, applied as a
-    dense R x R matrix."""
+    the rows' own noise levels D and eigen-decomposed (V, l), applied as dense matrices: W_g = V diag(1 / sqrt(sigma^2
+    + l)) V^T D^-1 (`apply`), or split into each row's part outside the eigenvectors with l > 0, (I - V_s V_s^T) D^-1
+    / sigma, and the components along them, V_s^T D^-1 / sqrt(sigma^2 + l) (`split`, the robust fit's numbers)."""
 
     def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray) -> None:
         self.group_of_row, self.shared, self.row_scale = group_of_row, shared, row_scale
@@ -108,28 +133,48 @@ class DenseWhitening:
             np.linalg.eigh(dense_covariance(shared, rows, 0.0, row_scale) / np.outer(row_scale[rows], row_scale[rows]))
             for rows in self.groups
         ]
-        self.cache: dict[float, np.ndarray] = {}
+        self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
     def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
         return DenseWhitening(self.group_of_row, shared, self.row_scale)
 
-    def matrix(self, sigma: float) -> np.ndarray:
+    def matrices(self, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """W (R, R), the split's own part (R, R) and shared part (K, R), and each row's free share 1 - h (R,)."""
         if sigma not in self.cache:
-            W = np.zeros((len(self.shared.A), len(self.shared.A)))
+            R = len(self.shared.A)
+            W, own, free, along = np.zeros((R, R)), np.zeros((R, R)), np.zeros(R), [np.zeros((0, R))]
             for rows, (lam, V) in zip(self.groups, self.eigen):
-                W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + np.clip(lam, 0, None))) @ V.T / self.row_scale[rows]
-            self.cache[sigma] = W
+                lam = np.clip(lam, 0, None)
+                d = self.row_scale[rows]
+                W[np.ix_(rows, rows)] = (V / np.sqrt(sigma**2 + lam)) @ V.T / d
+                Vs = V[:, lam > 1e-9 * max(lam.max(), 1e-300)]
+                own[np.ix_(rows, rows)] = (np.eye(len(rows)) - Vs @ Vs.T) / sigma / d
+                free[rows] = 1.0 - np.sum(Vs**2, axis=1)
+                block = np.zeros((Vs.shape[1], R))
+                block[:, rows] = Vs.T / np.sqrt(sigma**2 + lam[lam > 1e-9 * max(lam.max(), 1e-300)])[:, None] / d
+                along.append(block)
+            self.cache[sigma] = (W, own, np.concatenate(along), free)
         return self.cache[sigma]
 
     def apply(self, M, sigma: float):
-        W = self.matrix(sigma)
+        W = self.matrices(sigma)[0]
         return scipy.sparse.csr_matrix(W @ M.toarray()) if scipy.sparse.issparse(M) else W @ M
 
-    def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        return (self.matrix(sigma) @ r)[np.concatenate(self.groups)] if self.groups else np.zeros(0)
+    def split(self, M, sigma: float):
+        _, own, along, _ = self.matrices(sigma)
+        S = np.concatenate([own, along])
+        return scipy.sparse.csr_matrix(S @ M.toarray()) if scipy.sparse.issparse(M) else S @ M
+
+    def standardized(self, r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        _, own, along, free = self.matrices(sigma)
+        rows = np.concatenate(self.groups) if self.groups else np.zeros(0, dtype=int)
+        rows = rows[free[rows] > 1e-6]
+        return np.concatenate([(own @ r)[rows] / np.sqrt(free[rows]), along @ r]), np.concatenate(
+            [free[rows], np.ones(len(along))]
+        )
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        w = self.matrix(sigma) @ r
+        w = self.matrices(sigma)[0] @ r
         return np.array([np.sum(w[rows] ** 2) for rows in self.groups])
 
 

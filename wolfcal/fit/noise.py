@@ -144,9 +144,38 @@ class GroupedWhitening:
         out += keep[:, None] * M
         return out
 
-    def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        """Whitened residuals of the grouped rows, flat, group by group (for scale estimates)."""
-        return self.apply(r, sigma)[self.rows]
+    def split(self, M, sigma: float):
+        """W_s M, (R + K) rows: the whitening that keeps the two kinds of error apart. Rows 0..R-1: each measured
+        row's part outside its group's shared errors, (I - Q Q^T) D^-1 M / sigma (a misdetected corner stays in its
+        own row); rows R..R+K-1: each shared error's component, Q^T D^-1 M / sqrt(sigma^2 + s^2) (a stale joint
+        reading shows in these few numbers). W_s^T W_s = C^-1 like `apply`'s W, and W_s is unique (no choice of
+        basis), so a loss applied per number (the robust fit's) does not depend on how a group was decomposed."""
+        scale = 1.0 / np.sqrt(sigma**2 + self.s2)
+        keep = self.in_group / sigma
+        if scipy.sparse.issparse(M):
+            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
+            t = self.QT @ M
+            own = scipy.sparse.diags(keep) @ (M - self.Q @ t)
+            return scipy.sparse.vstack([own, scipy.sparse.diags(scale) @ t]).tocsr()
+        M = np.asarray(M, dtype=float)
+        M = M / (self.row_scale if M.ndim == 1 else self.row_scale[:, None])
+        t = self.QT @ M
+        own = M - self.Q @ t
+        own *= keep if M.ndim == 1 else keep[:, None]
+        return np.concatenate([own, t * (scale if M.ndim == 1 else scale[:, None])])
+
+    def standardized(self, r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """The numbers of `split` for the grouped rows, each divided by its standard deviation under the noise model
+        so that each is N(0, 1) when the model fits, and the degrees of freedom each carries (for robust scale
+        estimates, `weighted_median`): a shared error's component 1, a row's own part its free share 1 - h (h =
+        Q's squared row norm, the row's share in the group's shared errors); the weights of a group sum to its
+        number of rows, as an eigenbasis of its covariance would count them. Rows the shared errors explain fully
+        (h = 1) carry no information on sigma and are dropped."""
+        w = self.split(r, sigma)
+        free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
+        informative = free > RANK_TOLERANCE**0.5
+        own = w[self.rows][informative] / np.sqrt(free[informative])
+        return np.concatenate([own, w[self.n_rows :]]), np.concatenate([free[informative], np.ones(len(self.s2))])
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals."""
@@ -155,3 +184,12 @@ class GroupedWhitening:
         independent = np.bincount(self.group_of_row[self.rows], r[self.rows] ** 2, self.n_groups) / sigma**2
         shared = np.bincount(self.group_of_column, t**2 * (1.0 / (sigma**2 + self.s2) - 1.0 / sigma**2), self.n_groups)
         return independent + shared
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    """The value below which half of the total weight lies (the lower one at a tie); NaN for no values."""
+    if values.size == 0:
+        return float("nan")
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])

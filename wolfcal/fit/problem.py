@@ -114,9 +114,10 @@ class BlockState:
         if shared.tau != tau and np.any(shared.label >= 0):
             self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
 
-    def whiten(self, M):
-        """The block's rows (R,) or (R, P) whitened at its noise level (`GroupedWhitening.apply`)."""
-        return self.noise_model.apply(M, self.sigma)
+    def whiten(self, M, split: bool = True):
+        """The block's rows (R,) or (R, P) whitened at its noise level: `GroupedWhitening.split` (R + K rows, what
+        the robust loss acts on) or, with split False, `GroupedWhitening.apply` (R rows, each on its measured row)."""
+        return self.noise_model.split(M, self.sigma) if split else self.noise_model.apply(M, self.sigma)
 
     @property
     def noise_model(self) -> GroupedWhitening:
@@ -186,7 +187,9 @@ class Problem:
         return np.concatenate(parts + [np.asarray(z, dtype=float)])
 
     def data_jacobian(self, z: np.ndarray, robust: bool = True) -> np.ndarray | scipy.sparse.csr_matrix:
-        """d(whitened data residuals)/dz, (R, P); sparse above DENSE_LIMIT unknowns."""
+        """d(whitened data residuals)/dz, sparse above DENSE_LIMIT unknowns: of the robust residuals (R + K, P) or,
+        with robust False, of the plainly whitened rows (R, P), row i of the block's measured row i (the same
+        information J^T J either way)."""
         n = len(self.params)
         sparse = n > DENSE_LIMIT
         parts = []
@@ -206,7 +209,7 @@ class Problem:
                 vals = lin.jac_local.reshape(rows, L).ravel()
                 local = scipy.sparse.csr_matrix((vals, (r_idx, c_idx)), shape=(rows, n))
                 J = (J + local).tocsr() if sparse else J + local.toarray()
-            J = state.whiten(J)
+            J = state.whiten(J, split=robust)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
                 J = scipy.sparse.diags(scale) @ J if sparse else np.multiply(J, scale[:, None], out=J)

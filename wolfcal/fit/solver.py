@@ -18,7 +18,7 @@ import numpy as np
 
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
-from wolfcal.fit.noise import GroupedWhitening, row_groups
+from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
@@ -95,12 +95,14 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
-    """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
-    freedom the free parameters take."""
-    w = state.noise_model.whitened(residual.ravel(), sigma)
-    if w.size <= n_params:
+    """Robust scale of the whitened inlier residuals (1 when the noise model fits): the median over their degrees of
+    freedom of the standardised numbers (`GroupedWhitening.standardized`: what the robust fit weighs, independent of
+    how a group is decomposed), corrected for the degrees of freedom the free parameters take."""
+    w, dof = state.noise_model.standardized(residual.ravel(), sigma)
+    n = float(np.sum(dof))
+    if n <= n_params:
         return 1.0
-    return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
+    return float(MAD_TO_SIGMA * weighted_median(np.abs(w), dof) * np.sqrt(n / (n - n_params)))
 
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
