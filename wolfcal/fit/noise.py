@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse
 
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
+EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
 
 
 def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> np.ndarray:
@@ -165,17 +166,44 @@ class GroupedWhitening:
         return np.concatenate([own, t * (scale if M.ndim == 1 else scale[:, None])])
 
     def standardized(self, r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-        """The numbers of `split` for the grouped rows, each divided by its standard deviation under the noise model
-        so that each is N(0, 1) when the model fits, and the degrees of freedom each carries (for robust scale
-        estimates, `weighted_median`): a shared error's component 1, a row's own part its free share 1 - h (h =
-        Q's squared row norm, the row's share in the group's shared errors); the weights of a group sum to its
-        number of rows, as an eigenbasis of its covariance would count them. Rows the shared errors explain fully
-        (h = 1) carry no information on sigma and are dropped."""
-        w = self.split(r, sigma)
+        """Numbers of the grouped rows that are each N(0, 1) when the model fits, and the degrees of freedom each
+        carries (for robust scale estimates, `weighted_median`), independent of how a group's covariance is
+        decomposed: per row and per eigenspace of the group's shared part (the span of its shared errors' singular
+        vectors of one size, and the rest: the row's own part), the row's projection onto it divided by its standard
+        deviation there, weighted by the row's share h of that eigenspace (a row's shares sum to 1, a group's
+        weights to its number of rows, as an eigenbasis of its covariance would count them; an eigenspace of one
+        vector gives every row the same number, its component). Rows the shared errors explain fully carry no
+        information on sigma and are dropped."""
+        r = r / self.row_scale
+        own = (r - self.Q @ (self.QT @ r))[self.rows] / sigma
         free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
         informative = free > RANK_TOLERANCE**0.5
-        own = w[self.rows][informative] / np.sqrt(free[informative])
-        return np.concatenate([own, w[self.n_rows :]]), np.concatenate([free[informative], np.ones(len(self.s2))])
+        values = [own[informative] / np.sqrt(free[informative])]
+        weights = [free[informative]]
+        if len(self.s2):
+            t = (self.QT @ r) / np.sqrt(sigma**2 + self.s2)
+            Q = self.Q.tocoo()
+            space = self._eigenspaces()[Q.col]  # each entry's eigenspace (numbered over all groups)
+            key = np.unique(Q.row.astype(np.int64) * (int(space.max()) + 1) + space, return_inverse=True)[1].ravel()
+            projection = np.bincount(key, Q.data * t[Q.col])
+            share = np.bincount(key, Q.data**2)
+            on = share > RANK_TOLERANCE
+            values.append(projection[on] / np.sqrt(share[on]))
+            weights.append(share[on])
+        return np.concatenate(values), np.concatenate(weights)
+
+    def _eigenspaces(self) -> np.ndarray:
+        """(K,) eigenspace of each shared column: columns of one group whose s^2 agree to EIGEN_TOLERANCE of the
+        group's largest share one."""
+        order = np.lexsort((self.s2, self.group_of_column))
+        s2, group = self.s2[order], self.group_of_column[order]
+        largest = np.zeros(self.n_groups)
+        np.maximum.at(largest, group, s2)
+        new = np.ones(len(order), dtype=bool)
+        new[1:] = (group[1:] != group[:-1]) | (s2[1:] - s2[:-1] > EIGEN_TOLERANCE * largest[group[1:]])
+        space = np.empty(len(order), dtype=np.int64)
+        space[order] = np.cumsum(new) - 1
+        return space
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals."""
