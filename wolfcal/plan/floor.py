@@ -23,7 +23,7 @@ import numpy as np
 
 from wolfcal.capture.floor import AIM_BEARINGS_DEG, AIM_DISTANCES_M
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import FLOOR_NEEDED, aim_joints, standing_pose
+from wolfcal.evaluate.ground import aim_joints, standing_pose
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, floor_blocks
@@ -55,7 +55,8 @@ GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0  # spreads the bearings of successive tags
 def expected_places(robot: Robot) -> dict[int, np.ndarray]:
     """(x, y, yaw) [m, rad] in the floor frame of each floor tag as a plan assumes them (see the module docstring);
     a clear error without floor tags."""
-    floor = robot.config.floor_config(FLOOR_NEEDED)
+    floor = robot.config.floor_config("--system floor plans the head's views of tags lying on the floor: add "
+                                      "floor: {soles, standing, tags}")
     if not floor.tags:
         raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; --system floor plans the head's "
                            "views of the tags lying on the floor: add them ({id, family, size})")  # fmt: skip

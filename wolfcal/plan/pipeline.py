@@ -79,6 +79,7 @@ class Plan:
     at_prior: np.ndarray  # (P,) bool: unseparable and keeping its prior (else bounded by a repeated view)
     candidates: Candidates
     condition: tuple[float, float]  # planned, random: over the observable parameters
+    planned_names: list[str] = field(default_factory=list)  # the unknowns of `planned` (chain first, as params)
     notes: list[str] = field(default_factory=list)  # what the plan assumes (e.g. where the floor tags lie)
 
     def worst_std(self, which: Uncertainty, unit: str) -> float:
@@ -128,7 +129,7 @@ def system_candidates(robot: Robot, options: PlanOptions, collisions: CollisionM
         places = expected_places(robot)
         candidates = draw_floor_candidates(robot, camera, places, options.candidates, rng, collisions, options.margin)
         model = FloorPlanModel(robot, camera, options.free, options.side, places)
-        notes.append(f"floor tags assumed lying face up (yaw 0, floor frame: x ahead) at: {places_text(places)}")
+        notes.append(f"floor tags lying face up (yaw 0, floor frame: x ahead) at: {places_text(places)}")
     else:
         camera = plan_camera(robot, options.system, options.external, options.placement)
         tags = used_tags(robot, options, camera.external)
@@ -167,14 +168,19 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
         planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
         groups=sep.groups(problem.params.names), candidates=candidates,
         at_prior=np.array([sep.at_prior(i) for i in range(len(problem.params))], dtype=bool),
-        condition=(_condition(planned_problem, observable), _condition(random_problem, observable)), notes=notes,
+        condition=(_condition(planned_problem, problem.params.names, observable),
+                   _condition(random_problem, problem.params.names, observable)),
+        planned_names=planned_problem.params.names, notes=notes,
     )  # fmt: skip
 
 
-def _condition(problem, observable: np.ndarray) -> float:
-    """Condition number of the column-scaled Jacobian over the observable parameters (the others at their prior)."""
+def _condition(problem, names: list[str], observable: np.ndarray) -> float:
+    """Condition number of the column-scaled Jacobian over the observable parameters (the others at their prior;
+    observable (P,) over `names`, which hold the problem's: a pose set may show fewer floor tags than the
+    candidates)."""
+    keep = np.array([observable[names.index(n)] for n in problem.params.names], dtype=bool)
     J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
-    return uncertainty(J[:, observable], problem.params.prior_sigmas[observable]).condition_number
+    return uncertainty(J[:, keep], problem.params.prior_sigmas[keep]).condition_number
 
 
 def poses_text(robot: Robot, plan: Plan, options: PlanOptions) -> str:
@@ -222,8 +228,9 @@ def table_lines(plan: Plan) -> list[str]:
             lines.append(f"  no pose improves {' ~ '.join(group)} (bounded by their prior and the view repeated in "
                          "every pose, whose detection error repeats too)")
     observable_names = [nm for nm, ok in zip(names, plan.observable) if ok]
-    for a, b, r in plan.planned.correlated_pairs(names):
-        if a in observable_names and b in observable_names:
+    chain_names = set(names[: plan.n_chain])
+    for a, b, r in plan.planned.correlated_pairs(plan.planned_names):
+        if a in observable_names and b in observable_names and chain_names & {a, b}:
             lines.append(f"  correlated in the plan: {a} ~ {b} ({r:+.2f})")
     return lines
 
