@@ -152,7 +152,8 @@ def main() -> None:
                   f"{mdeg['random12']:.1f} mdeg", flush=True)  # fmt: skip
         if name != "head_camera":
             obs = {k: v[4] * 1000 for k, v in med.items()}
-            print(f"{name:12s} sole error with the prior-held ankle rolls at their truth (median of {args.seeds} seeds): "
+            print(f"{name:12s} sole error with the prior-held ankle rolls at their truth "
+                  f"(median of {args.seeds} seeds): "
                   f"12 planned {obs['planned12']:.2f} mm, 30 random {obs['random30']:.2f} mm, 12 random "
                   f"{obs['random12']:.2f} mm", flush=True)  # fmt: skip
         ratio_m = np.median([r["random12"][1] / r["planned12"][1] for r in runs])
