@@ -87,17 +87,23 @@ class JointStates:
 
     @classmethod
     def from_log(cls, log: JointLog, keep: list[np.ndarray] | None = None) -> JointStates:
-        """From a JointLog; `keep`: per group of `log.groups()`, a (N,) mask of the messages to use."""
+        """From a JointLog; `keep`: per group of `log.groups()`, a (N,) mask of the messages to use. A joint
+        of one group whose messages are all kept and in time order (the usual recording) gets views of the log's
+        arrays, not copies (memory on long recordings)."""
         columns: dict[str, tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]] = {}
         for k, (names, stamps, qs, vs) in enumerate(log.groups()):
-            rows = slice(None) if keep is None else keep[k]
+            if keep is not None and not keep[k].all():
+                stamps, qs, vs = stamps[keep[k]], qs[keep[k]], vs[keep[k]]
             for j, name in enumerate(names):
                 times, positions, velocities = columns.setdefault(name, ([], [], []))
-                times.append(stamps[rows])
-                positions.append(qs[rows, j])
-                velocities.append(vs[rows, j])
+                times.append(stamps)
+                positions.append(qs[:, j])
+                velocities.append(vs[:, j])
         series = {}
         for name, (times, positions, velocities) in columns.items():
+            if len(times) == 1 and np.all(times[0][1:] >= times[0][:-1]):
+                series[name] = JointSeries(times[0], positions[0], velocities[0])
+                continue
             t = np.concatenate(times)
             order = np.argsort(t, kind="stable")
             series[name] = JointSeries(t[order], np.concatenate(positions)[order], np.concatenate(velocities)[order])
