@@ -11,6 +11,8 @@ the camera model per corner.
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from wolfcal.errors import WolfcalError
@@ -32,6 +34,9 @@ from wolfcal.robot.robot import Robot
 
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
+# Samples linearised at a time: bounds the per-sample poses and twists and the per-corner twists (about 6 KB per
+# corner) of a long recording; a few hundred keep numpy's per-call overhead small.
+CHUNK_SAMPLES = 512
 
 
 class CameraBlock(Block):
@@ -93,12 +98,37 @@ class CameraBlock(Block):
 
     # --- predictions and derivatives ---------------------------------------------------------------------------
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
+        """Residuals and derivatives of every corner, computed over at most CHUNK_SAMPLES samples at a time (the
+        per-sample poses and twists, and the per-corner twists, of a long recording are never in memory at once;
+        each corner's numbers are the same as in one pass)."""
         corrections: Corrections = chain.corrections(chain_values).plus(self.fixed)
-        d = ChainDerivatives(self.robot, self.q_measured, corrections, chain, [self.viewer], self.tag_ids)
-        s, t = self.sample_of_unit, self.tag_col
+        n_samples = len(self.q_measured)
+        if n_samples <= CHUNK_SAMPLES:
+            return self._linearize_samples(corrections, chain, local_values, 0, n_samples)
+        m, d, n_joints = self.n_units, self.dim, self.q_measured.shape[1]
+        local = self.external  # an external camera's pose: 6 unknowns per corner
+        out = Linearization(np.empty((m, d)), np.empty((m, d, len(chain))), np.empty((m, d, 6)) if local else None,
+                            np.empty((m, 6), dtype=int) if local else None, np.empty((m, d, n_joints)))  # fmt: skip
+        for first in range(0, n_samples, CHUNK_SAMPLES):
+            end = min(first + CHUNK_SAMPLES, n_samples)
+            part = self._linearize_samples(corrections, chain, local_values, first, end)
+            units = (self.sample_of_unit >= first) & (self.sample_of_unit < end)
+            for f in fields(Linearization):
+                if getattr(part, f.name) is not None:
+                    getattr(out, f.name)[units] = getattr(part, f.name)
+        return out
+
+    def _linearize_samples(
+        self, corrections: Corrections, chain: ParameterSet, local_values: np.ndarray, first: int, end: int
+    ) -> Linearization:
+        """`linearize` for the corners of samples first..end-1 (in the order of the block's units)."""
+        units = slice(None) if (first, end) == (0, len(self.q_measured)) else (
+            (self.sample_of_unit >= first) & (self.sample_of_unit < end))  # fmt: skip
+        d = ChainDerivatives(self.robot, self.q_measured[first:end], corrections, chain, [self.viewer], self.tag_ids)
+        s, t = self.sample_of_unit[units] - first, self.tag_col[units]
         keys = [tag_key(tag) for tag in self.tag_ids]
         T_root_tag = np.stack([d.T_root[k] for k in keys])[t, s]  # (M, 4, 4)
-        p_root = np.einsum("mij,mj->mi", T_root_tag[:, :3, :3], self.p_tag) + T_root_tag[:, :3, 3]
+        p_root = np.einsum("mij,mj->mi", T_root_tag[:, :3, :3], self.p_tag[units]) + T_root_tag[:, :3, 3]
         # twists relative to the viewer per (tag, sample) before they are spread over the corners: one (M, K, 6)
         # array per kind instead of three (memory on long recordings)
         dp_p = point_motion((np.stack([d.twist_p(k) for k in keys]) - d.twist_p(self.viewer))[t, s], p_root)
@@ -109,11 +139,12 @@ class CameraBlock(Block):
         dp_p, dp_q = R_viewer_root @ dp_p, R_viewer_root @ dp_q
         jac_local = local_cols = None
         if self.external:
-            p_view, dp_p, dp_q, jac_local, local_cols = self._through_camera_pose(local_values, p_view, dp_p, dp_q)
+            k = self.placement_of_sample[self.sample_of_unit[units]]
+            p_view, dp_p, dp_q, jac_local, local_cols = self._through_camera_pose(local_values, k, p_view, dp_p, dp_q)
         camera = self.obs.camera
         uv = camera.project(p_view)
         D = pixel_jacobian(camera, p_view)
-        residual = uv - self.obs.uv
+        residual = uv - self.obs.uv[units]
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
@@ -125,9 +156,9 @@ class CameraBlock(Block):
             joint_sensitivity=D @ dp_q,
         )
 
-    def _through_camera_pose(self, pose_values: np.ndarray, p_base, dp_p, dp_q):
-        """Points, derivatives and pose derivatives in the external camera's frame from those in the base frame."""
-        k = self.placement_of_sample[self.sample_of_unit]  # (M,) placement of each corner
+    def _through_camera_pose(self, pose_values: np.ndarray, k: np.ndarray, p_base, dp_p, dp_q):
+        """Points, derivatives and pose derivatives in the external camera's frame from those in the base frame;
+        `k` (M,): the placement of each corner."""
         pose = pose_values.reshape(-1, 6)[k]  # (M, 6) T_base_camera as (x, y, z, rx, ry, rz)
         R_camera_base = np.swapaxes(exp_so3(pose[:, 3:]), 1, 2)
         p_camera = np.einsum("mij,mj->mi", R_camera_base, p_base - pose[:, :3])

@@ -25,6 +25,7 @@ from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.markers import MarkerObservations
+from wolfcal.memory import release_freed_memory
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
@@ -314,6 +315,7 @@ def run_fit(
     if options.system != "mocap":
         required = (HEAD_CAMERA,) if options.system == "head" else ()
         samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        release_freed_memory()  # the joint-state log of a long recording is gone: detection starts from the samples
         warnings += read_warnings
         say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
         names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
@@ -322,6 +324,7 @@ def run_fit(
             samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
         )
         warnings += detect_warnings
+        release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
