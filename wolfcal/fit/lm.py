@@ -19,7 +19,8 @@ class LMResult:
     x: np.ndarray
     cost: float  # 0.5 * sum of squared residuals at x
     nfev: int
-    status: int  # > 0 converged (1: small step, 2: small cost change, 3: small gradient), 0: iteration limit
+    status: int  # > 0 converged (1: small step, 2: small cost change, 3: small gradient, 4: step within the
+    # noise), 0: iteration limit
 
 
 def levenberg_marquardt(
@@ -31,10 +32,15 @@ def levenberg_marquardt(
     ftol: float = 1e-8,
     gtol: float = 1e-8,
     cost_tol: float = 0.0,
+    std_tol: float = 0.0,
 ) -> LMResult:
     """Minimise 0.5 * |fun(x)|^2 with a Jacobian jac(x) (R, P), dense or sparse (the normal equations are
     solved densely: P up to a few thousand). Stops when a step lowers the cost by less than ftol * cost or
-    cost_tol (absolute, the cost's unit)."""
+    cost_tol (absolute, the cost's unit), or (std_tol > 0, residuals whitened: J^T J is the inverse covariance of
+    x) once an accepted step moves every unknown by at most std_tol times its standard deviation,
+    sqrt(diag((J^T J)^-1)) at the step's start: the steps left are below what the data can tell,
+    e.g. a robust loss's linear arms, along which steps of one size zigzag for a hundred evaluations while the
+    solution moves by hundredths of its standard deviation."""
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost, nfev = float(r @ r), 1
@@ -59,6 +65,7 @@ def levenberg_marquardt(
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if rho > 0 and np.isfinite(cost_new):
             small_change = cost - cost_new < max(ftol * cost, 2.0 * cost_tol, 1e-300)
+            within_noise = std_tol > 0 and bool(np.all(np.abs(dx) <= std_tol * _marginal_std(H)))
             x, r, cost = x_new, r_new, cost_new
             H, g = _normal_equations(jac(x), r)
             scale = np.maximum(scale, np.diag(H))
@@ -66,6 +73,8 @@ def levenberg_marquardt(
             nu = 2.0
             if small_change:
                 return LMResult(x, 0.5 * cost, nfev, 2)
+            if within_noise:
+                return LMResult(x, 0.5 * cost, nfev, 4)
         else:
             mu, nu = mu * nu, nu * 2.0
     return LMResult(x, 0.5 * cost, nfev, 0)
@@ -75,3 +84,11 @@ def _normal_equations(J, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """J^T J (dense) and J^T r."""
     H = J.T @ J
     return (H.toarray() if scipy.sparse.issparse(H) else H), np.asarray(J.T @ r).ravel()
+
+
+def _marginal_std(H: np.ndarray) -> np.ndarray:
+    """sqrt(diag(H^-1)) of the normal matrix (0 where H is singular: no step counts as within the noise)."""
+    try:
+        return np.sqrt(np.maximum(np.diag(np.linalg.inv(H)), 0.0))
+    except np.linalg.LinAlgError:
+        return np.zeros(len(H))
