@@ -38,6 +38,7 @@ from wolfcal.plan.candidates import (
     PlanCamera,
     joint_bounds,
 )
+from wolfcal.plan.information import plan_problem
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_joints
 from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.floor import floor_frames, standing_pose
@@ -179,7 +180,8 @@ class FloorPlanModel:
         obs = self.observations(q, visible)
         options = FitOptions(free=self.preset, side=self.side)
         blocks = [FloorBlock(self.robot, obs)] if independent else floor_blocks(self.robot, obs, options)
-        return Problem(self.chain(), blocks, block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise)
+        sigmas, encoder = block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise
+        return plan_problem(self.chain(), blocks, sigmas, encoder)
 
     def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
         """(P, P) the sole closure's information [z units] in n floor samples (the standing legs, the same in every
@@ -191,7 +193,7 @@ class FloorPlanModel:
         obs = self.observations(q[:n], visible[:n])
         blocks = [SoleClosure(self.robot, obs)]
         sigmas, encoder = block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise
-        closure = Problem(self.chain(), blocks, sigmas, encoder)
+        closure = plan_problem(self.chain(), blocks, sigmas, encoder)
         c = len(closure.params)
         if closure.params.names != problem.params.names[:c]:
             raise RuntimeError("the sole closure's problem has other chain unknowns than the candidates'")
