@@ -489,3 +489,46 @@ def test_mocap_plan_for_the_head_camera_is_refused(tmp_path):
     result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", "mocap", "--free", "head_camera",
                                       "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code != 0 and "motion capture cannot see" in result.output
+
+
+def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
+    """The plan whitens with the configured pixel noise (not the quantisation spread of its noise-free readings), and
+    at the fit's noise level it predicts the std the fit reports at a true kinematics, once the unseparable direction
+    (HeadTilt.offset ~ the camera's rotation about the tilt axis) is known exactly: at the truth the camera's rotation
+    correction turns that direction so that camera.ry and camera.rz share the prior held along it."""
+    from wolfcal.fit.pipeline import FitOptions, fit_observations
+    from wolfcal.plan.candidates import draw_candidates, plan_camera
+    from wolfcal.plan.information import PlanModel, fit_separated_std, predicted
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.corrections import Corrections
+    from wolfcal.sim.observations import observations_from_poses
+
+    options = PlanOptions(free="head_camera", system="head")
+    camera = plan_camera(robot, "head")
+    tags = used_tags(robot, options, False)
+    cands = draw_candidates(robot, camera, tags, 40, np.random.default_rng(5), collision_model(robot))
+    seen = [t for t in tags if cands.visible[:, robot.config.tag_ids.index(t)].any()]
+    model = PlanModel(robot, camera, "head_camera", "both", seen)
+    idx = np.arange(10)
+    plan_problem = model.problem(cands.q[idx], cands.visible[idx])
+    assert [s.sigma for s in plan_problem.states] == [robot.config.priors.pixel_noise]
+
+    rng = np.random.default_rng(7)
+    head = {"HeadPan": 0.02, "HeadTilt": -0.015}
+    truth = Corrections(offsets=head, frames={robot.camera_joint: np.array([0.002, -0.001, 0.002, -0.06, 0.02, 0.08])},
+                        tags={t: np.array([0.001, 0.0, -0.001, 0.005, -0.004, 0.006]) for t in seen})
+    q_true = cands.q[idx] + truth.offset_vector(robot.joint_names)
+    T = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, Corrections(frames=truth.frames, tags=truth.tags))[1]
+    obs = observations_from_poses(robot, camera.model, truth, q_true, T, cands.visible[idx], 0.2, rng, camera.name)
+    fit = fit_observations(robot, obs, FitOptions(free="head_camera", system="head"))
+    assert fit.params.names == plan_problem.params.names
+    for state, fitted in zip(plan_problem.states, fit.problem.states):
+        state.set_sigma(fitted.sigma)
+    expected = predicted(plan_problem).std
+    separated, reported = fit_separated_std(fit), fit.solution.std
+    for name in ("camera.x", "camera.ry", "camera.rz", "HeadPan.offset"):
+        i = fit.params.names.index(name)
+        assert separated[i] == pytest.approx(expected[i], rel=0.05), name
+    ry = fit.params.names.index("camera.ry")
+    assert reported[ry] > 1.5 * separated[ry], "the turned unseparable direction lends camera.ry its prior"

@@ -1,7 +1,7 @@
 """Planning floor samples (`--system floor`): head pan/tilt while the robot stands, and the fit's floor blocks.
 
 The robot stands at the config's `floor.standing` readings (other joints 0, as `capture --floor` and the ground error
-take it) and only the joints that aim the head camera move (`wolfcal.evaluate.ground.aim_joints`: pan and tilt),
+take it) and only the joints that aim the head camera move (`wolfcal.robot.aim.aim_joints`: pan and tilt),
 drawn uniform within their URDF limits shrunk by the margin. The floor tags' places are unknowns of the fit, so a
 plan assumes a layout and prints it: tag k of `floor.tags` lies face up (yaw 0) at the k-th of K distances evenly
 from the nearest to the farthest point `capture --floor` aims at, at bearings spread over its bearing range
@@ -21,9 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.capture.floor import AIM_BEARINGS_DEG, AIM_DISTANCES_M
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import aim_joints, standing_pose
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, floor_blocks
@@ -40,8 +38,10 @@ from wolfcal.plan.candidates import (
     PlanCamera,
     joint_bounds,
 )
+from wolfcal.plan.information import plan_problem
+from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_joints
 from wolfcal.robot.collision import CollisionModel
-from wolfcal.robot.floor import floor_frames
+from wolfcal.robot.floor import floor_frames, standing_pose
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.floor import floor_tag_poses
@@ -180,7 +180,8 @@ class FloorPlanModel:
         obs = self.observations(q, visible)
         options = FitOptions(free=self.preset, side=self.side)
         blocks = [FloorBlock(self.robot, obs)] if independent else floor_blocks(self.robot, obs, options)
-        return Problem(self.chain(), blocks, block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise)
+        sigmas, encoder = block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise
+        return plan_problem(self.chain(), blocks, sigmas, encoder)
 
     def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
         """(P, P) the sole closure's information [z units] in n floor samples (the standing legs, the same in every
@@ -192,7 +193,7 @@ class FloorPlanModel:
         obs = self.observations(q[:n], visible[:n])
         blocks = [SoleClosure(self.robot, obs)]
         sigmas, encoder = block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise
-        closure = Problem(self.chain(), blocks, sigmas, encoder)
+        closure = plan_problem(self.chain(), blocks, sigmas, encoder)
         c = len(closure.params)
         if closure.params.names != problem.params.names[:c]:
             raise RuntimeError("the sole closure's problem has other chain unknowns than the candidates'")

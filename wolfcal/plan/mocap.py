@@ -24,6 +24,7 @@ from wolfcal.fit.pipeline import block_sigmas, mocap_block
 from wolfcal.fit.problem import Problem
 from wolfcal.markers import MarkerObservations
 from wolfcal.plan.candidates import BATCH, CLEARANCE_M, HOPELESS_DRAWN, MAX_DRAWN, Candidates, joint_bounds
+from wolfcal.plan.information import plan_problem
 from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
@@ -106,8 +107,8 @@ class MocapPlanModel:
         block = mocap_block(self.robot, self.observations(q, visible), options)
         if block is None:
             raise RuntimeError("the fit took no motion-capture block")
-        return Problem(self.chain(tuple(block.links)), [block], block_sigmas(self.robot, [block]),
-                       self.robot.config.priors.encoder_noise)  # fmt: skip
+        return plan_problem(self.chain(tuple(block.links)), [block], block_sigmas(self.robot, [block]),
+                            self.robot.config.priors.encoder_noise)  # fmt: skip
 
     def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
         """Motion capture repeats no measurement from pose to pose (the base pose and mounts are unknowns)."""
