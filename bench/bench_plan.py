@@ -58,13 +58,13 @@ def observe(robot, plan, truth: Corrections, idx: np.ndarray, camera, rng):
                                    rng, camera.name)  # fmt: skip
 
 
-def run(name: str, seed: int) -> dict:
+def run(name: str, seed: int, criterion: str = "D") -> dict:
     system, free, offsets = SCENARIOS[name]
     robot = load_robot(CONFIG)
     rng = np.random.default_rng(100 + seed)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
     start, cpu = time.perf_counter(), time.process_time()
-    plan = make_plan(robot, PlanOptions(free=free, system=system, poses=12, seed=seed), say=lambda _m: None)
+    plan = make_plan(robot, PlanOptions(free=free, system=system, poses=12, seed=seed, criterion=criterion), say=lambda _m: None)
     planning, planning_cpu = time.perf_counter() - start, time.process_time() - cpu
     camera = plan_camera(robot, system)
     chosen = np.flatnonzero((plan.candidates.q[:, None, :] == plan.q[None]).all(axis=2).any(axis=1))
