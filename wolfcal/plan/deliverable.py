@@ -95,8 +95,9 @@ def deliverable_basis(robot: Robot, chain: ParameterSet, preset: str) -> np.ndar
 
 
 def delivered_std(robot: Robot, chain: ParameterSet, preset: str, covariance: np.ndarray) -> tuple[float, float]:
-    """Root mean square over the evaluation configurations and delivered frames of the predicted std of the
-    delivered rotation [rad] and position [m], from the chain parameters' covariance (c, c) [SI]."""
+    """Predicted rms length of the delivered rotation error [rad] and position error [m] (root of the mean over
+    the evaluation configurations and delivered frames of the trace of their 3x3 covariance), from the chain
+    parameters' covariance (c, c) [SI]."""
     J = delivered_jacobian(robot, chain, preset).reshape(-1, 2, 3, len(chain))
     variance = np.einsum("nkic,cd,nkid->k", J, covariance, J) / len(J)
     return (float(np.sqrt(variance[0])) * ROTATION_TOLERANCE, float(np.sqrt(variance[1])) * POSITION_TOLERANCE)
