@@ -39,6 +39,10 @@ from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
 PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
+# --criterion when none is given, per (system, preset): the one that planned the more accurate calibration in
+# bench/bench_plan.py; D for the others
+DEFAULT_CRITERION = {("head", "head_camera"): "I", ("head", "camera"): "I", ("head", "leg"): "I",
+                     ("external", "leg"): "I"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -48,7 +52,7 @@ class PlanOptions:
     system: str = "head"
     poses: int = 12
     candidates: int = 2000
-    criterion: str = "D"
+    criterion: str | None = None  # D | A | E | I; None: DEFAULT_CRITERION of the system and preset
     velocity: float = 0.5  # profile velocity of the capture [rad/s]
     margin: float = 0.1  # kept from each URDF joint limit [rad]
     seed: int = 0
@@ -57,7 +61,8 @@ class PlanOptions:
 
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)
-        check_criterion(self.criterion)
+        criterion = DEFAULT_CRITERION.get((self.system, self.free), "D") if self.criterion is None else self.criterion
+        object.__setattr__(self, "criterion", check_criterion(criterion))
         if self.system not in PLAN_SYSTEMS:
             raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
         if self.poses < 1 or self.candidates < self.poses:
@@ -239,10 +244,10 @@ def table_lines(plan: Plan) -> list[str]:
         lines.append(f"  worst std of the observable parameters in {shown}: planned {planned:.3f}, random {random:.3f}")
     if plan.delivered is not None:
         (rot_p, pos_p), (rot_r, pos_r) = plan.delivered
-        lines.append("  predicted std of the delivered pose (head camera or soles in the base frame, rms over the "
-                     "evaluation configurations of `--criterion I`): planned "
-                     f"{np.rad2deg(rot_p) * 1000:.1f} mdeg {pos_p * 1000:.3f} mm, random {np.rad2deg(rot_r) * 1000:.1f} "
-                     f"mdeg {pos_r * 1000:.3f} mm")  # fmt: skip
+        lines.append("  predicted rms error of the delivered pose (head camera or soles in the base frame over the "
+                     "evaluation configurations of `--criterion I`, with what no pose separates at its prior): "
+                     f"planned {np.rad2deg(rot_p):.4f} deg {pos_p * 1000:.3f} mm, random {np.rad2deg(rot_r):.4f} deg "
+                     f"{pos_r * 1000:.3f} mm")  # fmt: skip
     lines.append("  condition number (column-scaled Jacobian, observable parameters): "
                  f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}")
     names = plan.params.names
