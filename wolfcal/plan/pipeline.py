@@ -41,8 +41,7 @@ from wolfcal.robot.robot import Robot, load_robot
 PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
 # --criterion when none is given, per (system, preset): the one that planned the more accurate calibration in
 # bench/bench_plan.py; D for the others
-DEFAULT_CRITERION = {("head", "head_camera"): "I", ("head", "camera"): "I", ("head", "leg"): "I",
-                     ("external", "leg"): "I"}  # fmt: skip
+DEFAULT_CRITERION = {("head", "head_camera"): "I", ("external", "leg"): "I"}
 
 
 @dataclass(frozen=True)
