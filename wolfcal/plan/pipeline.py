@@ -159,13 +159,14 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     sep = separability(G, problem.n_chain, M_repeated, criterion_interest(problem.params, problem.n_chain))
     check_observable(problem.params, G, M_repeated, len(G))
     chain = ParameterSet(problem.params.parameters[: problem.n_chain])
-    basis = deliverable_basis(robot, chain, options.free) if options.criterion == "I" else sep.basis
-    say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
-    chosen, value = select(G, options.poses, basis, options.criterion, M_repeated)
+    criterion = check_criterion(str(options.criterion))  # set in __post_init__
+    basis = deliverable_basis(robot, chain, options.free) if criterion == "I" else sep.basis
+    say(f"choosing {options.poses} poses ({criterion}-optimal) ...")
+    chosen, value = select(G, options.poses, basis, criterion, M_repeated)
     if options.system == "floor":  # the fit refuses a floor tag seen once
         labels = [f"floor tag {t}" for t in robot.config.floor_config().tag_ids]
-        chosen = cover_twice(G, chosen, candidates.visible, labels, basis, options.criterion, M_repeated)
-        value = criterion_value(information(G, chosen, M_repeated), basis, options.criterion)
+        chosen = cover_twice(G, chosen, candidates.visible, labels, basis, criterion, M_repeated)
+        value = criterion_value(information(G, chosen, M_repeated), basis, criterion)
     order, move_time = capture_order(candidates.q[chosen], rest_configuration(robot), options.velocity)
     chosen = np.array(chosen)[order]
     others = rng.choice(np.setdiff1d(np.arange(len(G)), chosen), size=min(options.poses, len(G) - len(chosen)),
