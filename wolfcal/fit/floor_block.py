@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
@@ -107,6 +107,10 @@ class FloorBlock(Block):
         self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
         self.nuisance = self._place_parameters() + ParameterSet(
             [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)])
+
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
 
     def _apparent_edge(self) -> np.ndarray:
         """(M,) mean edge length of each corner's tag view in the image [px]."""
@@ -230,6 +234,10 @@ class SoleClosure(Block):
         self.view_of_unit = np.arange(obs.n_samples)
         self.view_labels = [(s, -1) for s in range(obs.n_samples)]
         self.nuisance = ParameterSet([])
+
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)

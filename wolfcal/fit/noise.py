@@ -32,21 +32,28 @@ def split_rows(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> 
 @dataclass
 class SharedErrors:
     """Errors that rows share besides their own noise: the joint readings of a still pose (rows with the same
-    `reading` share sigma_q^2 A A^T) and a detection error that repeats (rows with the same `label` >= 0 and the same
-    `axis` share tau^2: a tag that a fixed camera sees in the same place in every frame)."""
+    `reading` share sigma_q^2 A A^T; with a reading group per joint, rows with the same group of joint j share
+    sigma_q^2 A_j A_j^T: legs that held still while the head moved) and a detection error that repeats (rows with
+    the same `label` >= 0 and the same `axis` share tau^2: a tag that a fixed camera sees in the same place in every
+    frame)."""
 
     A: np.ndarray  # (R, J) d(row)/d(joint readings)
     sigma_q: float  # joint reading noise [rad]
-    reading: np.ndarray  # (R,) reading group of each row
+    reading: np.ndarray  # (R,) reading group of each row, or (R, J) of each row's reading of each joint
     label: np.ndarray  # (R,) shared detection error of each row, -1 for none
     axis: np.ndarray  # (R,) measured axis of each row (u, v, ...)
     tau: float = 0.0  # shared detection error per axis [the block's unit]
 
     def covariance(self, rows: np.ndarray) -> np.ndarray:
         """(G, n, n) shared part of the covariance of groups of rows (G, n)."""
-        A = self.A[rows]
-        same_reading = self.reading[rows][:, :, None] == self.reading[rows][:, None, :]
-        C = self.sigma_q**2 * (A @ np.swapaxes(A, 1, 2)) * same_reading
+        A, reading = self.A[rows], self.reading[rows]
+        if self.reading.ndim == 2:
+            C = np.zeros(rows.shape + rows.shape[-1:])
+            for j in range(A.shape[-1]):
+                same = reading[:, :, None, j] == reading[:, None, :, j]
+                C += self.sigma_q**2 * (A[:, :, j, None] * A[:, None, :, j]) * same
+        else:
+            C = self.sigma_q**2 * (A @ np.swapaxes(A, 1, 2)) * (reading[:, :, None] == reading[:, None, :])
         if self.tau > 0:
             label, axis = self.label[rows], self.axis[rows]
             shared = (label[:, :, None] == label[:, None, :]) & (label[:, :, None] >= 0)
