@@ -98,5 +98,5 @@ def held_joint_groups(q_measured: np.ndarray, sample_of_unit: np.ndarray) -> np.
     """(U, J) reading groups (`Block.joint_reading_groups`) of samples in which joints held still: per joint, the
     units whose sample read the same encoder tick share that reading's error (the standing legs of floor samples,
     which keep one pose while the head looks around)."""
-    ticks = np.round(q_measured / RAD_PER_TICK).astype(np.int64)
-    return ticks[sample_of_unit]
+    ticks = np.round(q_measured / RAD_PER_TICK).astype(np.int64)[sample_of_unit]
+    return ticks - ticks.min(axis=0, initial=0)  # groups 0, 1, ...

@@ -110,17 +110,22 @@ def _block_dict(fit: Fit, k: int) -> dict:
     views = cast(TagViewBlock, block)
     obs = views.obs
     unit = b.unit
+    labels, _ = obs.views()  # (sample, tag id) sorted: the tags of each sample, once for all samples
+    tags = np.split(labels[:, 1], np.searchsorted(labels[:, 0], np.arange(1, obs.n_samples)))
+    outlier_tags: dict[int, list[int]] = {}
+    for s, t in sorted(b.outlier_views):
+        outlier_tags.setdefault(s, []).append(t)
     samples = []
     for i in range(obs.n_samples):
         samples.append({
             "index": i,
             "source": Path(obs.sources[i]).name,
             "stamp_ns": int(obs.stamps_ns[i]),
-            "tags": obs.tags_in_sample(i),
+            "tags": [int(t) for t in tags[i]],
             f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
             "outlier": bool(b.outlier_samples[i]),
-            "outlier_tags": sorted(t for s, t in b.outlier_views if s == i),
+            "outlier_tags": outlier_tags.get(i, []),
         })  # fmt: skip
     return {
         "name": b.name,

@@ -23,6 +23,7 @@ floor variance F_ii exceeds UNSEPARABLE_SHARE of their prior's keep it whatever 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -49,6 +50,19 @@ class _IndependentCameraBlock(CameraBlock):
         return np.full(self.n_units, -1)
 
 
+class PlanModelLike(Protocol):
+    """The fit a plan is made for, one per measurement system (camera: `PlanModel`; `plan.mocap`, `plan.floor`)."""
+
+    def problem(self, q: np.ndarray, visible: np.ndarray, independent: bool = False) -> Problem:
+        """The fit's problem on poses q (N, J) with what each shows (N, ...); `independent`: every pose its own noise
+        group and no view repeated (the candidates' block, whose repeated views `repeated_information` counts)."""
+        ...
+
+    def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
+        """(P, P) [z units] what every plan of n poses gets whatever the poses (over the candidates' unknowns)."""
+        ...
+
+
 @dataclass
 class PlanModel:
     """The fit a plan is made for: robot, camera, preset and the tags used."""
@@ -71,6 +85,10 @@ class PlanModel:
             T_camera_tag = robot.camera_and_tag_poses(q, robot.config.tag_ids)[1]
         return observations_from_poses(robot, self.camera.model, nominal, q, T_camera_tag, visible, 0.0,
                                        np.random.default_rng(0), self.camera.name)  # fmt: skip
+
+    def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
+        """(P, P) information of the views repeated in n poses (module function `repeated_information`)."""
+        return repeated_information(self, problem, q, visible, n)
 
     def problem(self, q: np.ndarray, visible: np.ndarray, independent: bool = False) -> Problem:
         """The fit's problem on simulated observations of poses q (N, J)."""
@@ -96,7 +114,9 @@ def camera_block(problem: Problem) -> CameraBlock:
 def repeated_units(problem: Problem) -> np.ndarray:
     """(U,) bool: units of the (independent) candidate block whose detection error the fit shares between poses (a
     label of `CameraBlock.shared_labels` that spans samples): their view is the same in every pose."""
-    block = camera_block(problem)
+    block = problem.blocks[0]
+    if not isinstance(block, CameraBlock):
+        return np.zeros(block.n_units, dtype=bool)  # motion capture, floor: no view repeats (`repeated_information`)
     labels, samples = CameraBlock.shared_labels(block), block.sample_of_unit
     lowest = np.full(labels.max() + 1, samples.max())
     highest = np.zeros(labels.max() + 1, dtype=samples.dtype)
