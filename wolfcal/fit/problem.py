@@ -238,8 +238,8 @@ def _one_group(reading: np.ndarray) -> np.ndarray:
     if not np.any(reading != reading[:, :1]):
         return reading[:, 0] if reading.size else np.zeros(len(reading), dtype=int)
     n_units, n_joints = reading.shape
-    _, node = np.unique(np.stack([np.broadcast_to(np.arange(n_joints), reading.shape), reading], axis=-1).reshape(-1, 2),
-                        axis=0, return_inverse=True)  # fmt: skip
+    joint = np.broadcast_to(np.arange(n_joints), reading.shape)
+    _, node = np.unique(np.stack([joint, reading], axis=-1).reshape(-1, 2), axis=0, return_inverse=True)
     node = node.ravel() + n_units
     unit = np.repeat(np.arange(n_units), n_joints)
     n = int(node.max()) + 1
