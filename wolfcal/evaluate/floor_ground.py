@@ -30,7 +30,7 @@ from wolfcal.observations import Observations
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.corner_bias import apparent_edges, edge_normals, inset_moves, small_view_weight
+from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_weight
 from wolfcal.vision.tags import tag_corners
 
 MIN_VIEWS = 6  # fewer floor-tag views than this measure no ground error
@@ -50,7 +50,6 @@ class FloorViews:
     uv: np.ndarray  # (V, 4, 2) detected corners [px]
     inward: np.ndarray  # (V, 4, 2) `corner_bias.inset_moves` [px/px]
     weight: np.ndarray  # (V,) `corner_bias.small_view_weight`
-    normals: np.ndarray  # (V, 4, 2, 2) `corner_bias.edge_normals`: a corner's residual is measured along them
 
 
 def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorViews:
@@ -64,7 +63,7 @@ def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorVie
     T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, model)
     inward = inset_moves(ring)
     return FloorViews(t[start], s[start], T_floor_camera[s[start]], ring, inward,
-                      small_view_weight(apparent_edges(ring)), edge_normals(ring))  # fmt: skip
+                      small_view_weight(apparent_edges(ring)))  # fmt: skip
 
 
 def _plane(values: np.ndarray) -> np.ndarray:
@@ -129,8 +128,7 @@ class _FloorFit:
                            p[..., 2]], axis=-1)  # fmt: skip
         T_camera_real = invert_transform(_real_camera(x, v.T_floor_camera[keep]))
         p_camera = np.einsum("vij,vcj->vci", T_camera_real[:, :3, :3], p_real) + T_camera_real[:, None, :3, 3]
-        r = np.einsum("vcij,vcj->vci", v.normals[keep], self.camera.project(p_camera) + x[6] * v.inward[keep]
-                      - v.uv[keep]) * v.weight[keep, None, None]  # fmt: skip
+        r = (self.camera.project(p_camera) + x[6] * v.inward[keep] - v.uv[keep]) * v.weight[keep, None, None]
         prior = self.scale * (x[6] - self.inset[0]) / self.inset[1]
         return np.append(np.nan_to_num(r, nan=BEHIND_CAMERA_PX).ravel(), prior)
 
