@@ -36,7 +36,8 @@ def test_fit_finds_a_known_corner_inset(tmp_path):
     floor = simulate_floor(robot, CAMERA, truth, 30, rng).obs
     block = FloorBlock(robot, floor)
     inset = 0.8  # [px] at REFERENCE_EDGE_PX
-    floor.uv += inset * block.inward  # the detector's bias, shrinking as 1/edge above the reference edge
+    pixels = np.linalg.solve(block.normals, block.inward[..., None])[..., 0]  # block.inward: along the edge normals
+    floor.uv += inset * pixels  # the detector's bias, shrinking as 1/edge above the reference edge
     assert np.abs(block.inward).max() > 0.5 and REFERENCE_EDGE_PX > 0
     fit = fit_observations(robot, floor, FitOptions(free="head_camera"))
     found = fit.solution.values[fit.params.names.index("floor.corner_inset")]
@@ -53,7 +54,7 @@ def test_edge_normals_measure_a_corner_by_its_distance_from_the_two_edges():
     slide = 3.0 * along / np.linalg.norm(along)  # corner 1 along the edge from corner 0
     assert abs(N[1, 1] @ slide) < 1e-12
     other = ring[0, 2] - ring[0, 1]
-    sine = abs(np.cross(along, other)) / np.linalg.norm(along) / np.linalg.norm(other)
+    sine = abs(along[0] * other[1] - along[1] * other[0]) / np.linalg.norm(along) / np.linalg.norm(other)
     assert np.isclose(abs(N[1, 0] @ slide), 3.0 * sine)
     assert np.allclose(np.einsum("cij,cj->ci", N, inset_directions(ring)[0]), 1.0)
     square = np.array([[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]])
