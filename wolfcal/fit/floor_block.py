@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
@@ -39,6 +39,7 @@ from wolfcal.vision.corner_bias import (
     CORNER_INSET,
     REFERENCE_EDGE_PX,
     apparent_edges,
+    edge_normals,
     inset_directions,
     small_view_weight,
 )
@@ -103,22 +104,31 @@ class FloorBlock(Block):
         self.view_labels = [(int(s), int(t)) for s, t in views]
         edge = self._apparent_edge()
         self.weight = small_view_weight(edge)
-        # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
-        self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.normals = edge_normals(self._rings())[self.view_of_unit, obs.corner_index]  # (M, 2, 2)
+        # (M, 2) d(detected corner)/d(inset) [px/px] along the corner's edge normals: the inset at REFERENCE_EDGE_PX,
+        # shrinking as 1/edge above
+        inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.inward = np.einsum("mij,mj->mi", self.normals, inward)
         self.nuisance = self._place_parameters() + ParameterSet(
             [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)])
 
-    def _apparent_edge(self) -> np.ndarray:
-        """(M,) mean edge length of each corner's tag view in the image [px]."""
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
+
+    def _rings(self) -> np.ndarray:
+        """(V, 4, 2) the detected corners of each view [px], NaN where one is missing."""
         ring = np.full((len(self.view_labels), 4, 2), np.nan)
         ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        return apparent_edges(ring)[self.view_of_unit]
+        return ring
+
+    def _apparent_edge(self) -> np.ndarray:
+        """(M,) mean edge length of each corner's tag view in the image [px]."""
+        return apparent_edges(self._rings())[self.view_of_unit]
 
     def _inward(self) -> np.ndarray:
         """(M, 2) `corner_bias.inset_directions` of each detected corner's view [px/px]."""
-        ring = np.full((len(self.view_labels), 4, 2), np.nan)
-        ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        return inset_directions(ring)[self.view_of_unit, self.obs.corner_index]
+        return inset_directions(self._rings())[self.view_of_unit, self.obs.corner_index]
 
     def _place_parameters(self) -> ParameterSet:
         """x, y, yaw of each floor tag, started where the nominal model's rays through its first view meet the
@@ -170,10 +180,12 @@ class FloorBlock(Block):
         dp = R_camera_root @ point_motion(twist, p_root)  # (M, 3, J + P)
         dp_q, dp_chain = dp[..., :n_joints], dp[..., n_joints:]
         dp_local = R_camera_root @ T_root_floor[:, :3, :3] @ dp_place
-        D = pixel_jacobian(self.obs.camera, p_camera) * self.weight[:, None, None]
+        N = self.normals * self.weight[:, None, None]  # pixels to weighted distances from the edges' lines
+        D = N @ pixel_jacobian(self.obs.camera, p_camera)
         n_places = 3 * len(self.tag_ids)
         inset = local_values[n_places]
-        residual = (self.obs.camera.project(p_camera) + inset * self.inward - self.obs.uv) * self.weight[:, None]
+        offset = self.obs.camera.project(p_camera) - self.obs.uv
+        residual = np.einsum("mij,mj->mi", N, offset) + inset * self.inward * self.weight[:, None]
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
@@ -230,6 +242,10 @@ class SoleClosure(Block):
         self.view_of_unit = np.arange(obs.n_samples)
         self.view_labels = [(s, -1) for s in range(obs.n_samples)]
         self.nuisance = ParameterSet([])
+
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
