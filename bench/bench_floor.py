@@ -22,6 +22,7 @@ import yaml
 
 from wolfcal.camera.camera_info import save_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.accuracy import link_pose_errors
 from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground import ground_errors
@@ -134,7 +135,10 @@ def main() -> None:
         root = args.keep or Path(tmp)
         for scenario in args.scenarios:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                print(run(scenario, seed, root / f"{scenario}_{seed}"), flush=True)
+                try:
+                    print(run(scenario, seed, root / f"{scenario}_{seed}"), flush=True)
+                except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
+                    print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """Synthetic floor samples without images: the robot stands, turns its head, and sees tags lying on the floor.
 
 The robot stands at the true joint angles of its config's stances (`floor.stances`, default `floor.standing`; the
-samples spread evenly over them, in turn); in each the soles of the true model lie on one plane, the floor, with
-the feet where they were; its encoders report those angles minus the true offsets. Floor tags lie face up at random places
-`distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt (the two joints before the
-camera) are drawn so that each sample sees at least one floor tag whole, at least `min_edge_px` wide.
+samples spread evenly over them, one stance after the other); in each the soles of the true model lie on one plane,
+the floor, with the feet where they were; its encoders report those angles minus the true offsets. Floor tags lie
+face up at random places `distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt
+(the two joints before the camera) are drawn so that each sample sees at least one floor tag whole, at least
+`min_edge_px` wide.
 """
 
 from __future__ import annotations
@@ -68,8 +69,8 @@ def floor_views(
     robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
     distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
 ) -> FloorViews:
-    """Places of the floor tags and n standing poses (the stances one after the other) with head pan/tilt that see at least one
-    of them whole."""
+    """Places of the floor tags and n standing poses (the stances one after the other) with head pan/tilt that see
+    at least one of them whole."""
     ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
