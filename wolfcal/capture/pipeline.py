@@ -77,7 +77,7 @@ def run_capture(
                 if script:
                     run_scripted(session, script)
                 elif stances:
-                    _manual_stances(session, stances, limp, options, view)
+                    _manual_stances(session, robot, stances, limp, options, view)
                 else:
                     run_manual(session, limp)
         except (BusError, CameraError, KeyboardInterrupt) as exc:  # KeyboardInterrupt: also SIGTERM, SIGHUP
@@ -127,7 +127,7 @@ def _open_outputs(
         raise
 
 
-def _manual_stances(session: CaptureSession, stances: list[dict[str, float]], limp: list[str],
+def _manual_stances(session: CaptureSession, robot: Robot, stances: list[dict[str, float]], limp: list[str],
                     options: CaptureOptions, view: LiveView) -> None:  # fmt: skip
     """Manual floor capture: the legs moved to each stance in turn (torque on), the operator turning the head
     until the stance's share of --samples is taken."""
@@ -135,7 +135,7 @@ def _manual_stances(session: CaptureSession, stances: list[dict[str, float]], li
     for k, targets in enumerate(stances):
         stand(session, targets, options.velocity or DEFAULT_VELOCITY)
         if len(stances) > 1:
-            view.event(f"stance {k + 1} of {len(stances)} ({stance_name(session.robot, k)}): the legs hold it; "
+            view.event(f"stance {k + 1} of {len(stances)} ({stance_name(robot, k)}): the legs hold it; "
                        "turn the head to show the floor tags")  # fmt: skip
         run_manual(session, limp, until=shares[k] if len(stances) > 1 else None)
 

@@ -63,7 +63,8 @@ def check_stances(config: RobotConfig, model: KinematicModel) -> None:
             q[i, model.column(joint)] = value
     poses = model.link_poses(q, floor.soles[:2], base=config.base_link)
     tilt, gap, bad = off_plane(sole_gaps(np.stack([poses[s] for s in floor.soles[:2]])))
-    for i in np.flatnonzero(bad):
+    if bad.any():
+        i = int(np.argmax(bad))
         raise WolfcalError(
             f"{config.path}: '{named[i][0]}' is not a standing pose: the soles {floor.soles[0]} and "
             f"{floor.soles[1]} are {np.rad2deg(tilt[i]):.1f} deg and {gap[i] * 100:.1f} cm from one plane under the "

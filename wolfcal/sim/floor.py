@@ -93,15 +93,15 @@ def floor_views(
     inside &= (uv[..., 1] > margin_px) & (uv[..., 1] < camera.height - margin_px) & (p[..., 2] > 0.1)
     edge = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=3).min(axis=2)
     visible = inside.all(axis=2) & np.nan_to_num(edge > min_edge_px)  # (S, T)
-    chosen = []
+    picked = []
     for k, m in enumerate(np.diff(np.linspace(0, n, len(stances) + 1).round().astype(int))):  # n spread evenly
         candidates = np.flatnonzero(visible.any(axis=1) & (stance_of == k))
         if len(candidates) < m:
             raise WolfcalError(f"{robot.config.path}: only {len(candidates)} of {np.sum(stance_of == k)} head "
                                f"pan/tilt poses in stance {k} see a floor tag whole and at least {min_edge_px:.0f} "
                                f"px wide; asked for {m} floor samples in it")  # fmt: skip
-        chosen.append(rng.choice(candidates, size=m, replace=False))
-    chosen = np.concatenate(chosen)
+        picked.append(rng.choice(candidates, size=m, replace=False))
+    chosen = np.concatenate(picked)
     return FloorViews(places, q[chosen], visible[chosen], uv[chosen], T_camera_floor[chosen])
 
 
