@@ -36,6 +36,7 @@ def floor_joints(robot: Robot) -> tuple[list[str], list[str]]:
 
 def stance_targets(robot: Robot) -> list[dict[str, float]]:
     """`standing_targets` of each stance (`floor.stances`, default `floor.standing`)."""
+    robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
     return [standing_targets(robot, q, k) for k, q in enumerate(stance_poses(robot))]
 
 
@@ -65,9 +66,10 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0) -> d
 def floor_script(robot: Robot, velocity: float) -> PoseScript:
     """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
     the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance)."""
+    all_targets = stance_targets(robot)
     stances = stance_poses(robot)
     poses = []
-    for k, targets in enumerate(stance_targets(robot)):
+    for k, targets in enumerate(all_targets):
         pan_tilt = [j for j in aim_joints(robot) if j in targets]
         if not pan_tilt:
             raise WolfcalError(f"{robot.config.path}: the joints that aim the camera are not servos; use --manual")
