@@ -35,6 +35,7 @@ from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
 from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.robot.stances import SOLE_LEVER_M, STANDING_RULE, off_plane, sole_gaps
 from wolfcal.vision.corner_bias import (
     CORNER_INSET,
     REFERENCE_EDGE_PX,
@@ -48,7 +49,6 @@ from wolfcal.vision.tags import tag_corners
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
 INSET_PRIOR_PX = 1.0  # prior of the corner detector's inward bias at REFERENCE_EDGE_PX [px]
-SOLE_LEVER_M = 0.1  # a tilt between the soles counts as the displacement it makes at this distance [m]
 
 
 def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray, np.ndarray]:
@@ -203,20 +203,11 @@ def sole_disagreement(robot: Robot, q: np.ndarray, model: Corrections) -> np.nda
     plane and of the first above the second's [m], and the tilt between their z axes (x, y in the first sole's
     frame) times SOLE_LEVER_M [m]. Needs two soles."""
     _, sole_poses = _poses(robot, q, model)
-    return _disagreement(sole_poses)
-
-
-def _disagreement(sole_poses: np.ndarray) -> np.ndarray:
-    """`sole_disagreement` of two sole poses (2, S, 4, 4) in any one frame."""
-    a, b = sole_poses[0], sole_poses[1]
-    h_ab = np.einsum("si,si->s", a[:, :3, 2], b[:, :3, 3] - a[:, :3, 3])
-    h_ba = np.einsum("si,si->s", b[:, :3, 2], a[:, :3, 3] - b[:, :3, 3])
-    z_b_in_a = np.einsum("sji,sj->si", a[:, :3, :3], b[:, :3, 2])
-    return np.stack([h_ab, h_ba, SOLE_LEVER_M * z_b_in_a[:, 0], SOLE_LEVER_M * z_b_in_a[:, 1]], axis=1)
+    return sole_gaps(sole_poses)
 
 
 def _disagreement_derivatives(sole_poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
-    """(S, 4, C) derivatives of `_disagreement` by the columns of the soles' twists (2, S, C, 6)."""
+    """(S, 4, C) derivatives of `sole_gaps` by the columns of the soles' twists (2, S, C, 6)."""
     (a, b), (ta, tb) = sole_poses, twists
     o_a, o_b, z_a, z_b = a[:, None, :3, 3], b[:, None, :3, 3], a[:, None, :3, 2], b[:, None, :3, 2]
     do_a, do_b = ta[..., :3] + cross(ta[..., 3:], o_a), tb[..., :3] + cross(tb[..., 3:], o_b)  # (S, C, 3)
@@ -251,12 +242,8 @@ class SoleClosure(Block):
         c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
         d = _disagreement_derivatives(c.T_root_soles, c.twists_soles)
         n_joints = self.q_measured.shape[1]
-        return Linearization(residual=_disagreement(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
+        return Linearization(residual=sole_gaps(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
                              local_cols=None, joint_sensitivity=d[..., :n_joints])
-
-
-MAX_SOLE_TILT_RAD = float(np.deg2rad(10.0))  # standing soles further from one plane under the nominal model are
-MAX_SOLE_GAP_M = 0.03  # not a standing pose (bad input)
 
 
 def check_floor_samples(robot: Robot, obs: Observations) -> None:
@@ -273,13 +260,12 @@ def check_floor_samples(robot: Robot, obs: Observations) -> None:
         )
     if len(robot.config.floor_config().soles) < 2:
         return
-    gap = sole_disagreement(robot, obs.q_measured, Corrections())
-    tilt = np.arcsin(np.clip(np.linalg.norm(gap[:, 2:], axis=1) / SOLE_LEVER_M, 0.0, 1.0))
-    bad = np.flatnonzero((tilt > MAX_SOLE_TILT_RAD) | (np.abs(gap[:, :2]).max(axis=1) > MAX_SOLE_GAP_M))
+    tilt, gap, not_standing = off_plane(sole_disagreement(robot, obs.q_measured, Corrections()))
+    bad = np.flatnonzero(not_standing)
     if bad.size:
         s = int(bad[0])
         raise WolfcalError(
             f"{obs.sources[s]}: {bad.size} floor sample(s) not in a standing pose (sample {s}: soles "
-            f"{np.rad2deg(tilt[s]):.1f} deg and {np.abs(gap[s, :2]).max() * 100:.1f} cm from one plane under the "
-            "nominal model; at most 10 deg and 3 cm): floor samples need both soles flat on the floor"
+            f"{np.rad2deg(tilt[s]):.1f} deg and {gap[s] * 100:.1f} cm from one plane under the nominal model; "
+            f"{STANDING_RULE}): floor samples need both soles flat on the floor"
         )
