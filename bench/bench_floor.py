@@ -7,7 +7,7 @@ leg and head encoder offsets and the camera ~4 deg off. Per seed:
           +30 deg) before and after, the measured one (held-out 16 floor samples, no truth) with its 1-sigma,
           the soles' worst pose error over 500 calibration-range poses, fit time
   camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
-Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR]
+Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR] [--stances]
 """
 
 from __future__ import annotations
@@ -91,9 +91,9 @@ def simulate(config: Path, folder: Path, seed: int, offsets: str) -> dict[str, P
     return paths
 
 
-def run(scenario: str, seed: int, folder: Path) -> str:
+def run(scenario: str, seed: int, folder: Path, stances: bool) -> str:
     folder.mkdir(parents=True, exist_ok=True)
-    config = write_config(folder)
+    config = write_config(folder, stances)
     paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none")
     robot = load_robot(config)
     truth = load_corrections(truth_paths(paths["feet"])[0], key="truth")
@@ -130,13 +130,15 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--scenarios", nargs="*", default=["leg", "camera"])
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder and reuse them")
+    parser.add_argument("--stances", action="store_true", help="floor samples spread over STANCES too (default: "
+                        "all standing at floor.standing)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         for scenario in args.scenarios:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
-                    print(run(scenario, seed, root / f"{scenario}_{seed}"), flush=True)
+                    print(run(scenario, seed, root / f"{scenario}_{seed}", args.stances), flush=True)
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
                     print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 
