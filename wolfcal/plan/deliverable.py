@@ -18,25 +18,13 @@ from wolfcal.errors import WolfcalError
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, cross
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.robot.ranges import sampling_bounds
+from wolfcal.robot.ranges import range_grid, sampling_bounds
 from wolfcal.robot.robot import Robot
 
 ROTATION_TOLERANCE = 1e-3  # [rad] rotation error that counts as much as POSITION_TOLERANCE
 POSITION_TOLERANCE = 1e-3  # [m]
 CAMERA_GRID = 5  # evaluation configurations per joint between base and camera
 LEG_CONFIGURATIONS = 32  # random evaluation configurations for the soles (fixed seed)
-
-
-def camera_range_grid(robot: Robot, frame: str, grid: int) -> np.ndarray:
-    """(grid^K, J) readings [rad] spanning the whole range of each of the K actuated joints between base and
-    `frame` (limits wider than +-pi taken as +-pi), the others 0."""
-    joints = [j for j in robot.model.joints_between(robot.config.base_link, frame) if j.actuated]
-    axes = [np.linspace(max(j.lower, -np.pi), min(j.upper, np.pi), grid) for j in joints]
-    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(joints))
-    q = np.zeros((len(mesh), len(robot.joint_names)))
-    for k, joint in enumerate(joints):
-        q[:, robot.model.column(joint.name)] = mesh[:, k]
-    return q
 
 
 def delivered_frames(robot: Robot, preset: str) -> list[str]:
@@ -56,7 +44,7 @@ def evaluation_configurations(robot: Robot, preset: str) -> np.ndarray:
     """(E, J) readings [rad] at which the delivered poses count: a grid over the head's range (camera presets) or
     LEG_CONFIGURATIONS draws within the calibration ranges (`sampling_bounds`, system head; seed 0)."""
     if preset in ("camera", "head_camera"):
-        return camera_range_grid(robot, delivered_frames(robot, preset)[0], CAMERA_GRID)
+        return range_grid(robot, delivered_frames(robot, preset)[0], CAMERA_GRID)
     lo, hi = sampling_bounds(robot, "head")
     return np.random.default_rng(0).uniform(lo, hi, size=(LEG_CONFIGURATIONS, len(lo)))
 
