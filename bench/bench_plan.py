@@ -3,10 +3,11 @@
 Scenarios (Wolfgang, 2048x1536 head camera / 1280x720 tripod webcam at the expected placement): `leg` (--free leg
 --side both, head camera, 0.025 rad rms offsets on head and legs), `head_camera` (head camera, offsets on the head),
 `external` (--free leg, tripod camera, offsets on the legs). Per seed: a random truth; 12 planned poses (2000
-candidates, D-optimal) against 30 and 12 random valid candidates. Observations are tag corners projected at the true
-kinematics with 0.15 px Gaussian noise and quantised encoder readings (no rendering; `wolfcal simulate --poses`
-renders a plan, see tests/test_plan.py), fitted by `fit_observations`. Reported: true error (sole position
-max over 500 random leg poses, or camera position and rotation max over the head range), median over the seeds;
+candidates, `--criterion`, default the plan's) against 30 and 12 random valid candidates. Observations are tag
+corners projected at the true kinematics with 0.15 px Gaussian noise and quantised encoder readings (no
+rendering; `wolfcal simulate --poses` renders a plan, see tests/test_plan.py), fitted by `fit_observations`.
+Reported: true error (sole position max over 500 random leg poses, or camera position and rotation max over the
+head range), median over the seeds;
 the worst reported std among the parameters some pose can observe (12 planned vs 12 random), also without the tags'
 mounts (what a calibration delivers; the criterion marginalises the mounts), and that again with the directions no
 pose informs known exactly (`separated_std` on the fit's own Jacobian at its solution: there the truth's camera
@@ -58,13 +59,14 @@ def observe(robot, plan, truth: Corrections, idx: np.ndarray, camera, rng):
                                    rng, camera.name)  # fmt: skip
 
 
-def run(name: str, seed: int) -> dict:
+def run(name: str, seed: int, criterion: str | None = None) -> dict:
     system, free, offsets = SCENARIOS[name]
     robot = load_robot(CONFIG)
     rng = np.random.default_rng(100 + seed)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
     start, cpu = time.perf_counter(), time.process_time()
-    plan = make_plan(robot, PlanOptions(free=free, system=system, poses=12, seed=seed), say=lambda _m: None)
+    options = PlanOptions(free=free, system=system, poses=12, seed=seed, criterion=criterion)
+    plan = make_plan(robot, options, say=lambda _m: None)
     planning, planning_cpu = time.perf_counter() - start, time.process_time() - cpu
     camera = plan_camera(robot, system)
     chosen = np.flatnonzero((plan.candidates.q[:, None, :] == plan.q[None]).all(axis=2).any(axis=1))
@@ -117,7 +119,7 @@ def prior_held_at_truth(fit, plan, truth: Corrections) -> Corrections:
 def timing() -> None:
     """Planning 20 of 2000: candidates and the whole plan, CPU and wall seconds."""
     robot = load_robot(CONFIG)
-    for system, criterion in (("head", "D"), ("head", "E"), ("external", "D")):
+    for system, criterion in (("head", "D"), ("head", "I"), ("head", "E"), ("external", "D"), ("external", "I")):
         marks: list[float] = []
 
         def mark(message: str, marks: list[float] = marks) -> None:
@@ -136,6 +138,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
     parser.add_argument("--timing", action="store_true", help="time planning 20 of 2000 instead")
+    parser.add_argument("--criterion", default=None, help="D | A | E | I (default: the plan's default per preset)")
     args = parser.parse_args()
     if args.timing:
         timing()
@@ -143,7 +146,7 @@ def main() -> None:
     for name in args.scenarios:
         runs = []
         for seed in range(args.seeds):
-            r = run(name, seed)
+            r = run(name, seed, args.criterion)
             runs.append(r)
             print(f"  {name} seed {seed}: true error planned12 {r['planned12'][0] * 1000:.2f} mm, random30 "
                   f"{r['random30'][0] * 1000:.2f} mm, random12 {r['random12'][0] * 1000:.2f} mm; worst std planned12 "

@@ -10,7 +10,7 @@ from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
-from wolfcal.vision.corner_bias import inset_directions
+from wolfcal.vision.corner_bias import edge_normals, inset_directions
 
 CAMERA = OTHER_CAMERA
 
@@ -36,9 +36,28 @@ def test_fit_finds_a_known_corner_inset(tmp_path):
     floor = simulate_floor(robot, CAMERA, truth, 30, rng).obs
     block = FloorBlock(robot, floor)
     inset = 0.8  # [px] at REFERENCE_EDGE_PX
-    floor.uv += inset * block.inward  # the detector's bias, shrinking as 1/edge above the reference edge
+    pixels = np.linalg.solve(block.normals, block.inward[..., None])[..., 0]  # block.inward: along the edge normals
+    floor.uv += inset * pixels  # the detector's bias, shrinking as 1/edge above the reference edge
     assert np.abs(block.inward).max() > 0.5 and REFERENCE_EDGE_PX > 0
     fit = fit_observations(robot, floor, FitOptions(free="head_camera"))
     found = fit.solution.values[fit.params.names.index("floor.corner_inset")]
     std = fit.solution.std[fit.params.names.index("floor.corner_inset")]
     assert abs(found - inset) < max(3 * std, 0.1), (found, std)
+
+
+def test_edge_normals_measure_a_corner_by_its_distance_from_the_two_edges():
+    """A flat, sheared view (a far floor tag): a corner slid 3 px along one edge is 0 px from that edge's line and
+    3 sin(angle) px from the other's; the inset's directions read as 1 px from both lines."""
+    ring = np.array([[[100.0, 100.0], [140.0, 104.0], [150.0, 112.0], [110.0, 108.0]]])
+    N = edge_normals(ring)[0]  # (4, 2, 2): next edge, previous edge
+    along = ring[0, 1] - ring[0, 0]
+    slide = 3.0 * along / np.linalg.norm(along)  # corner 1 along the edge from corner 0
+    assert abs(N[1, 1] @ slide) < 1e-12
+    other = ring[0, 2] - ring[0, 1]
+    sine = abs(along[0] * other[1] - along[1] * other[0]) / np.linalg.norm(along) / np.linalg.norm(other)
+    assert np.isclose(abs(N[1, 0] @ slide), 3.0 * sine)
+    assert np.allclose(np.einsum("cij,cj->ci", N, inset_directions(ring)[0]), 1.0)
+    square = np.array([[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]])
+    normals = edge_normals(square)[0]
+    assert np.allclose(np.abs(normals), np.round(np.abs(normals)))  # the image axes: pixels unchanged in size
+    assert np.allclose(np.linalg.norm(normals, axis=-1), 1.0)

@@ -19,10 +19,12 @@ TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5
 def dense_covariance(shared: SharedErrors, rows: np.ndarray, sigma: float, scale: np.ndarray) -> np.ndarray:
     """C = sigma^2 diag(scale^2) + sigma_q^2 A A^T (rows of one reading) + tau^2 (rows of one label and axis)."""
     A, reading, label, axis = shared.A[rows], shared.reading[rows], shared.label[rows], shared.axis[rows]
-    same_reading = reading[:, None] == reading[None, :]
+    if reading.ndim == 1:  # one reading of every joint per row
+        reading = np.repeat(reading[:, None], A.shape[1], axis=1)
+    joints = sum(np.outer(A[:, j], A[:, j]) * (reading[:, None, j] == reading[None, :, j]) for j in range(A.shape[1]))
     same_error = (label[:, None] == label[None, :]) & (label[:, None] >= 0) & (axis[:, None] == axis[None, :])
     own = sigma**2 * np.diag(scale[rows] ** 2)
-    return own + shared.sigma_q**2 * (A @ A.T) * same_reading + shared.tau**2 * same_error
+    return own + shared.sigma_q**2 * joints + shared.tau**2 * same_error
 
 
 def dense_whitening(groups: list[np.ndarray], shared: SharedErrors, sigma: float, scale: np.ndarray) -> np.ndarray:
@@ -118,6 +120,25 @@ def test_a_long_still_pose_is_never_a_dense_block():
             r = rng.normal(0, 1.0, 2 * units)
             W = dense_whitening([np.arange(2 * units)], shared, 0.2, np.ones(2 * units))
             assert np.allclose(whitening.apply(r, 0.2), W @ r, atol=1e-9)
+
+
+def test_a_reading_per_joint_is_shared_by_the_rows_that_read_that_joint_alike():
+    """Floor samples: the legs (joints 0-2) hold one reading in all 10 samples, the head (joints 3, 4) reads anew in
+    each; 4 corners (8 rows) per sample, one group. The whitening is the definition's."""
+    rng = np.random.default_rng(7)
+    sample = np.repeat(np.arange(10), 8)
+    reading = np.stack([np.zeros(80, int)] * 3 + [sample] * 2, axis=1)
+    shared = SharedErrors(A=rng.normal(0, 300.0, (80, 5)), sigma_q=1.5e-3, reading=reading,
+                          label=np.full(80, -1), axis=np.tile(np.arange(2), 40))  # fmt: skip
+    whitening = GroupedWhitening(np.zeros(80, dtype=int), shared)
+    r = rng.normal(0, 1.0, 80)
+    for sigma in (0.1, 1.0):
+        W = dense_whitening([np.arange(80)], shared, sigma, np.ones(80))
+        assert np.allclose(whitening.apply(r, sigma), W @ r, atol=1e-9 * np.abs(W @ r).max())
+        C = dense_covariance(shared, np.arange(80), sigma, np.ones(80))
+        assert np.isclose(whitening.group_norms(r, sigma)[0], r @ np.linalg.solve(C, r), rtol=1e-9)
+    # the legs' error is one for all samples: 3 shared columns for them, 2 per sample for the head
+    assert len(whitening.s2) == 3 + 2 * 10
 
 
 class DenseWhitening:

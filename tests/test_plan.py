@@ -419,10 +419,10 @@ def test_floor_plan_information_is_the_fits_and_every_planned_tag_is_seen_twice(
     """--system floor: the candidates' floor-block rows plus the sole closure of n samples equal the fit's floor
     blocks (`fit.pipeline.floor_blocks`) on those n poses; the legs stand still at floor.standing in every pose, only
     the head moves, every floor tag in view lies whole in the image, and no tag is seen once (the fit refuses it)."""
-    from wolfcal.fit.floor_block import SoleClosure
+    from wolfcal.fit.floor_block import FloorBlock, SoleClosure
     from wolfcal.plan.candidates import plan_camera
-    from wolfcal.plan.floor import FloorPlanModel, draw_floor_candidates, expected_places
-    from wolfcal.plan.information import factors
+    from wolfcal.plan.floor import FloorPlanModel, PosewiseFloorBlock, draw_floor_candidates, expected_places
+    from wolfcal.plan.information import factors, plan_problem
     from wolfcal.robot.collision import collision_model
 
     camera, places = plan_camera(robot, "head"), expected_places(robot)
@@ -441,8 +441,11 @@ def test_floor_plan_information_is_the_fits_and_every_planned_tag_is_seen_twice(
     problem = model.problem(cands.q, cands.visible, independent=True)
     M_rep = model.repeated_information(problem, cands.q[chosen], cands.visible[chosen], len(chosen))
     fit = model.problem(cands.q[chosen], cands.visible[chosen])
-    assert [type(b) for b in fit.blocks][1] is SoleClosure and fit.params.names == problem.params.names
-    M_fit = _fit_information(fit)
+    assert [type(b) for b in fit.blocks] == [FloorBlock, SoleClosure] and fit.params.names == problem.params.names
+    # the selection adds up the poses: the fit's blocks with each pose's leg readings its own error
+    posewise = plan_problem(model.chain(), [PosewiseFloorBlock(robot, fit.blocks[0].obs), fit.blocks[1]],
+                            [s.sigma for s in fit.states], robot.config.priors.encoder_noise)  # fmt: skip
+    M_fit = _fit_information(posewise)
     np.testing.assert_allclose(information(factors(problem), chosen, M_rep), M_fit, atol=1e-6 * np.abs(M_fit).max())
 
     options = PlanOptions(free="head_camera", system="floor", poses=5, candidates=200, seed=1)

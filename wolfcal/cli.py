@@ -289,7 +289,9 @@ def plan(
                                "config's markers) | floor (head pan/tilt while standing, the config's floor tags)."),
     poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
     candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
-    criterion: str = typer.Option("D", "--criterion", help="D (determinant) | A (trace) | E (worst direction)."),
+    criterion: str | None = typer.Option(None, "--criterion", help="I (average variance of the delivered poses: "
+                                         "camera or soles) | D (determinant) | A (trace) | E (worst direction); "
+                                         "default: the preset's (README)."),
     velocity: float = typer.Option(0.5, "--velocity", help="Capture move speed [rad/s] (for the order and time)."),
     margin: float = typer.Option(0.1, "--margin", help="Kept from each joint limit [rad]."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the candidates."),
@@ -302,7 +304,7 @@ def plan(
     from wolfcal.plan.pipeline import PlanOptions, run_plan
 
     options = PlanOptions(free=free, side=side, system=system, poses=poses, candidates=candidates,
-                          criterion=criterion.upper(), velocity=velocity, margin=margin, seed=seed,
+                          criterion=criterion, velocity=velocity, margin=margin, seed=seed,
                           external=external, placement=placement)  # fmt: skip
     run_plan(default_robot(robot), out, options, say=typer.echo, force=force)
 

@@ -499,6 +499,12 @@ class FloorConfig:
     soles: tuple[str, ...]  # links whose frames lie on the floor (z up) when the robot stands
     standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
     tags: tuple[FloorTagConfig, ...] = ()
+    stances: tuple[dict[str, float], ...] = ()  # standing poses of the floor samples (`floor.stances`); () = standing
+
+    @property
+    def floor_stances(self) -> tuple[dict[str, float], ...]:
+        """The standing poses floor samples are taken in: `floor.stances`, else just `floor.standing`."""
+        return self.stances or (self.standing,)
 
     def tag(self, tag_id: int) -> FloorTagConfig:
         return _by_id(self.tags, tag_id)
@@ -511,16 +517,15 @@ class FloorConfig:
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
     r = _Reader(path, data, "floor")
-    r.check_keys(("soles", "standing"), ("tags",))
+    r.check_keys(("soles", "standing"), ("tags", "stances"))
     soles = r.data["soles"]
     if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
         r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
-    standing = r.data["standing"] or {}
-    if not isinstance(standing, dict):
-        r.fail("'standing' must map joint names to readings [rad] (joints not named are 0)")
-    for joint, value in standing.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            r.fail(f"'standing.{joint}' must be a number [rad], found {value!r}")
+    standing = _readings(r, r.data["standing"], "standing")
+    stances_data = r.data.get("stances") or []
+    if not isinstance(stances_data, list):
+        r.fail("'stances' must be a list of standing poses, each like 'standing' (joint -> reading [rad])")
+    stances = tuple(_readings(r, item, f"stances[{i}]") for i, item in enumerate(stances_data))
     tags_data = r.data.get("tags") or []
     if not isinstance(tags_data, list):
         r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
@@ -544,7 +549,18 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
         if thickness < 0:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
-    return FloorConfig(tuple(soles), {str(k): float(v) for k, v in standing.items()}, tuple(tags))
+    return FloorConfig(tuple(soles), standing, tuple(tags), stances)
+
+
+def _readings(r: _Reader, data, key: str) -> dict[str, float]:
+    """`floor.<key>`: joint name -> encoder reading [rad] (joints not named are 0)."""
+    data = data or {}
+    if not isinstance(data, dict):
+        r.fail(f"'{key}' must map joint names to readings [rad] (joints not named are 0)")
+    for joint, value in data.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            r.fail(f"'{key}.{joint}' must be a number [rad], found {value!r}")
+    return {str(k): float(v) for k, v in data.items()}
 
 
 # --- pose planning: `rest_pose:` and `collision_radii:` (both optional) ------------------------------------------

@@ -1,8 +1,9 @@
 """`wolfcal capture --floor`: floor samples. The robot stands on the floor among the config's floor tags (`floor:`);
-its legs hold the standing pose (`floor.standing`: encoder readings, other leg joints 0) with torque on, and its head
-looks at the floor: scripted, the head aims in turn at points on the floor `AIM_DISTANCES_M` from the robot at
-bearings `AIM_BEARINGS_DEG` (a pan/tilt grid found through the robot's own nominal model, within its URDF limits);
-manual, the head's torque is off and the operator turns it by hand.
+its legs hold a standing pose (`floor.stances`, default `floor.standing`: encoder readings, other leg joints 0) with
+torque on, and its head looks at the floor: scripted, in each stance in turn (the legs moved there at the capture
+velocity) the head aims at points on the floor `AIM_DISTANCES_M` from the robot at bearings `AIM_BEARINGS_DEG` (a
+pan/tilt grid found through the robot's own nominal model in that stance, within its URDF limits); manual, the legs
+hold the stances in turn while the operator turns the head by hand (its torque off).
 
 Each sample is an ordinary capture sample; the fit and evaluation tell floor samples by the floor tags they see.
 """
@@ -10,6 +11,8 @@ Each sample is an ordinary capture sample; the fit and evaluation tell floor sam
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from wolfcal.capture.manual import joint_groups
 from wolfcal.capture.poses import Pose, PoseScript, check_collisions, colliding_poses
@@ -19,7 +22,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import rad_to_ticks
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_head, aim_joints, ball_position
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import standing_pose
+from wolfcal.robot.floor import stance_poses, standing_pose
 from wolfcal.robot.robot import Robot
 
 FLOOR_NEEDED_CAPTURE = "capture --floor needs the standing soles, the standing readings and the floor tags"
@@ -31,40 +34,57 @@ def floor_joints(robot: Robot) -> tuple[list[str], list[str]]:
     return groups["legs"], groups["head"]
 
 
-def standing_targets(robot: Robot) -> dict[str, float]:
-    """Readings [rad] of the standing pose for the leg and head servo joints, checked against the URDF limits."""
+def stance_targets(robot: Robot) -> list[dict[str, float]]:
+    """`standing_targets` of each stance (`floor.stances`, default `floor.standing`)."""
+    robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
+    return [standing_targets(robot, q, k) for k, q in enumerate(stance_poses(robot))]
+
+
+def stance_name(robot: Robot, k: int) -> str:
+    """How the config names stance k: 'floor.standing' or 'floor.stances[k]'."""
+    return f"floor.stances[{k}]" if robot.config.floor_config().stances else "floor.standing"
+
+
+def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0) -> dict[str, float]:
+    """Readings [rad] of a standing pose q (J,) (default `floor.standing`; stance k for messages) for the leg and
+    head servo joints, checked against the URDF limits."""
     floor = robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
     if not floor.tags:
         raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; {FLOOR_NEEDED_CAPTURE}")
-    q = standing_pose(robot)
+    q = standing_pose(robot) if q is None else q
     legs, head = floor_joints(robot)
     targets = {j: float(q[robot.model.column(j)]) for j in legs + head}
     outside = [f"{j} = {v:.4f} rad (limits [{robot.model.joints[j].lower:.4f}, {robot.model.joints[j].upper:.4f}])"
                for j, v in targets.items()
                if not robot.model.joints[j].lower <= v <= robot.model.joints[j].upper]  # fmt: skip
     if outside:
-        raise WolfcalError(f"{robot.config.path}: 'floor.standing' puts joints outside their URDF limits: "
+        raise WolfcalError(f"{robot.config.path}: '{stance_name(robot, k)}' puts joints outside their URDF limits: "
                            + "; ".join(outside))  # fmt: skip
     return targets
 
 
 def floor_script(robot: Robot, velocity: float) -> PoseScript:
-    """The scripted floor capture: standing legs, the head aimed at each grid point of the floor in turn (poses
-    that round to the same ticks, where a limit stops the head, are kept once)."""
-    standing = standing_targets(robot)
-    pan_tilt = [j for j in aim_joints(robot) if j in standing]
-    if not pan_tilt:
-        raise WolfcalError(f"{robot.config.path}: the joints that aim the camera are not servos; use --manual")
-    poses, seen = [], set()
-    nominal = Corrections()
-    for row, distance in enumerate(AIM_DISTANCES_M):
-        for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]:  # to and fro: short moves
-            q = aim_head(robot, nominal, ball_position(robot, nominal, distance, math.radians(bearing)))
-            joints = {**standing, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
-            key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
-            if key not in seen:
-                seen.add(key)
-                poses.append(Pose(f"floor {distance:g} m, {bearing:+g} deg", joints))
+    """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
+    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance)."""
+    all_targets = stance_targets(robot)
+    stances = stance_poses(robot)
+    poses = []
+    for k, targets in enumerate(all_targets):
+        pan_tilt = [j for j in aim_joints(robot) if j in targets]
+        if not pan_tilt:
+            raise WolfcalError(f"{robot.config.path}: the joints that aim the camera are not servos; use --manual")
+        prefix = f"stance {k}, " if len(stances) > 1 else ""
+        seen: set[tuple[int, ...]] = set()
+        nominal = Corrections()
+        for row, distance in enumerate(AIM_DISTANCES_M):
+            for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]:  # to and fro: short moves
+                ball = ball_position(robot, nominal, distance, math.radians(bearing))
+                q = aim_head(robot, nominal, ball, stances[k])
+                joints = {**targets, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
+                key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
+                if key not in seen:
+                    seen.add(key)
+                    poses.append(Pose(f"{prefix}floor {distance:g} m, {bearing:+g} deg", joints))
     return PoseScript(poses, velocity)
 
 

@@ -79,15 +79,16 @@ class EnterKey:
             self.pressed.set()
 
 
-def run_manual(session: CaptureSession, limp: list[str]) -> None:
-    """Switch torque off on `limp` and take samples as the operator poses the robot, until enough are taken."""
+def run_manual(session: CaptureSession, limp: list[str], until: int | None = None) -> None:
+    """Switch torque off on `limp` and take samples as the operator poses the robot, until enough are taken (or
+    the file holds `until` samples)."""
     session.bus.set_torque(limp, False)
     status = session.status
     enter = EnterKey()
     reference = session.read().ticks  # readings at the last sample
     moved = False
     threshold = session.gates.moved_rad / RAD_PER_TICK  # [ticks]
-    while not session.done():
+    while not session.done() and (until is None or session.summary.samples < until):
         state = session.read()
         moved = moved or bool(np.max(np.abs(state.ticks - reference)) >= threshold)
         forced = enter.pressed.is_set()

@@ -20,8 +20,9 @@ from wolfcal.capture.floor import (
     check_floor_limp,
     floor_joints,
     floor_script,
+    stance_name,
+    stance_targets,
     stand,
-    standing_targets,
     without_collisions,
 )
 from wolfcal.capture.manual import confirm_limp, parse_limp, run_manual
@@ -52,9 +53,9 @@ def run_capture(
             f"{robot.config.path}: no 'servos' section (port, ids): capture needs the servo bus"
         )
     limits = joint_limits(robot, robot.config.servos.ids)
-    script, limp, standing = _plan(options, robot, limits)  # refused before anything moves
+    script, limp, stances = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
-    touched = script.joints if script else [*standing, *limp]
+    touched = script.joints if script else [*(stances[0] if stances else {}), *limp]
     mode = ("floor " if options.floor else "") + ("scripted" if script else "manual")
     status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
@@ -75,9 +76,9 @@ def run_capture(
             with view:
                 if script:
                     run_scripted(session, script)
+                elif stances:
+                    _manual_stances(session, robot, stances, limp, options, view)
                 else:
-                    if standing:
-                        stand(session, standing, options.velocity or DEFAULT_VELOCITY)
                     run_manual(session, limp)
         except (BusError, CameraError, KeyboardInterrupt) as exc:  # KeyboardInterrupt: also SIGTERM, SIGHUP
             failure = exc
@@ -126,20 +127,37 @@ def _open_outputs(
         raise
 
 
+def _manual_stances(session: CaptureSession, robot: Robot, stances: list[dict[str, float]], limp: list[str],
+                    options: CaptureOptions, view: LiveView) -> None:  # fmt: skip
+    """Manual floor capture: the legs moved to each stance in turn (torque on), the operator turning the head
+    until the stance's share of --samples is taken."""
+    shares = [round((k + 1) * (options.samples or 0) / len(stances)) for k in range(len(stances))]
+    for k, targets in enumerate(stances):
+        stand(session, targets, options.velocity or DEFAULT_VELOCITY)
+        if len(stances) > 1:
+            view.event(f"stance {k + 1} of {len(stances)} ({stance_name(robot, k)}): the legs hold it; "
+                       "turn the head to show the floor tags")  # fmt: skip
+        run_manual(session, limp, until=shares[k] if len(stances) > 1 else None)
+
+
 def _plan(
     options: CaptureOptions, robot: Robot, limits: dict[str, tuple[float, float]]
-) -> tuple[PoseScript | None, list[str], dict[str, float]]:
-    """(poses to drive through, joints to switch off for the operator, standing readings [rad] the legs hold while
-    the operator turns the head (manual floor capture)), each checked before anything moves."""
+) -> tuple[PoseScript | None, list[str], list[dict[str, float]]]:
+    """(poses to drive through, joints to switch off for the operator, the stances' readings [rad] the legs hold
+    in turn while the operator turns the head (manual floor capture)), each checked before anything moves."""
     script = load_poses(options.poses, limits) if options.poses else None
     limp = parse_limp(options.limp or ("head" if options.floor else "head,legs"), robot) if options.manual else []
-    standing: dict[str, float] = {}
+    stances: list[dict[str, float]] = []
     if options.floor and options.manual:
         check_floor_limp(robot, limp)
-        standing = {j: q for j, q in standing_targets(robot).items() if j in floor_joints(robot)[0]}
+        legs = floor_joints(robot)[0]
+        stances = [{j: q for j, q in t.items() if j in legs} for t in stance_targets(robot)]
+        if len(stances) > 1 and options.samples is None:
+            raise WolfcalError(f"{robot.config.path}: 'floor.stances' lists {len(stances)} stances; a manual floor "
+                               "capture takes an equal share of --samples in each: give --samples")  # fmt: skip
     elif options.floor:
         script = floor_script(robot, options.velocity or DEFAULT_VELOCITY)
-    return script, limp, standing
+    return script, limp, stances
 
 
 def _say_end(

@@ -9,7 +9,7 @@ import numpy as np
 
 from wolfcal.geometry import invert_transform, rotation_angle
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.ranges import sampling_bounds
+from wolfcal.robot.ranges import range_grid, sampling_bounds
 from wolfcal.robot.robot import Robot
 
 
@@ -30,12 +30,7 @@ def camera_pose_errors(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Camera pose error (rad, m) over a grid spanning the whole range of every joint between base and camera."""
     frame = robot.config.head_camera().frame
-    joints = [j for j in robot.model.joints_between(robot.config.base_link, frame) if j.actuated]
-    axes = [np.linspace(max(j.lower, -np.pi), min(j.upper, np.pi), grid) for j in joints]
-    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(joints))
-    q = np.zeros((len(mesh), len(robot.joint_names)))
-    for k, joint in enumerate(joints):
-        q[:, robot.model.column(joint.name)] = mesh[:, k]
+    q = range_grid(robot, frame, grid)
     return _pose_errors(robot, q, frame, estimate, truth)
 
 

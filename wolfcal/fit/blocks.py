@@ -76,6 +76,11 @@ class Block:
         group_of_sample = connected_components(graph, directed=False)[1][n:]
         return group_of_sample[self.sample_of_unit]
 
+    def joint_reading_groups(self) -> np.ndarray:
+        """(U, J) group of each unit's reading of each joint: units with the same group of joint j share that
+        reading's error. Default: the still pose (`noise_groups`) for every joint."""
+        return np.repeat(self.noise_groups()[:, None], self.q_measured.shape[1], axis=1)
+
     def shared_labels(self) -> np.ndarray:
         """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""
         return np.full(self.n_units, -1)
@@ -87,3 +92,11 @@ class Block:
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         raise NotImplementedError
+
+
+def held_joint_groups(q_measured: np.ndarray, sample_of_unit: np.ndarray) -> np.ndarray:
+    """(U, J) reading groups (`Block.joint_reading_groups`) of samples in which joints held still: per joint, the
+    units whose sample read the same encoder tick share that reading's error (the standing legs of floor samples,
+    which keep one pose while the head looks around)."""
+    ticks = np.round(q_measured / RAD_PER_TICK).astype(np.int64)[sample_of_unit]
+    return ticks - ticks.min(axis=0, initial=0)  # groups 0, 1, ...

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
@@ -35,10 +35,12 @@ from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
 from wolfcal.robot.floor import floor_frame_twists, floor_frames
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.robot.stances import SOLE_LEVER_M, STANDING_RULE, off_plane, sole_gaps
 from wolfcal.vision.corner_bias import (
     CORNER_INSET,
     REFERENCE_EDGE_PX,
     apparent_edges,
+    edge_normals,
     inset_directions,
     small_view_weight,
 )
@@ -47,7 +49,6 @@ from wolfcal.vision.tags import tag_corners
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]
 INSET_PRIOR_PX = 1.0  # prior of the corner detector's inward bias at REFERENCE_EDGE_PX [px]
-SOLE_LEVER_M = 0.1  # a tilt between the soles counts as the displacement it makes at this distance [m]
 
 
 def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray, np.ndarray]:
@@ -103,22 +104,31 @@ class FloorBlock(Block):
         self.view_labels = [(int(s), int(t)) for s, t in views]
         edge = self._apparent_edge()
         self.weight = small_view_weight(edge)
-        # (M, 2) d(detected corner)/d(inset) [px/px]: the inset at REFERENCE_EDGE_PX, shrinking as 1/edge above
-        self.inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.normals = edge_normals(self._rings())[self.view_of_unit, obs.corner_index]  # (M, 2, 2)
+        # (M, 2) d(detected corner)/d(inset) [px/px] along the corner's edge normals: the inset at REFERENCE_EDGE_PX,
+        # shrinking as 1/edge above
+        inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
+        self.inward = np.einsum("mij,mj->mi", self.normals, inward)
         self.nuisance = self._place_parameters() + ParameterSet(
             [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)])
 
-    def _apparent_edge(self) -> np.ndarray:
-        """(M,) mean edge length of each corner's tag view in the image [px]."""
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
+
+    def _rings(self) -> np.ndarray:
+        """(V, 4, 2) the detected corners of each view [px], NaN where one is missing."""
         ring = np.full((len(self.view_labels), 4, 2), np.nan)
         ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        return apparent_edges(ring)[self.view_of_unit]
+        return ring
+
+    def _apparent_edge(self) -> np.ndarray:
+        """(M,) mean edge length of each corner's tag view in the image [px]."""
+        return apparent_edges(self._rings())[self.view_of_unit]
 
     def _inward(self) -> np.ndarray:
         """(M, 2) `corner_bias.inset_directions` of each detected corner's view [px/px]."""
-        ring = np.full((len(self.view_labels), 4, 2), np.nan)
-        ring[self.view_of_unit, self.obs.corner_index] = self.obs.uv
-        return inset_directions(ring)[self.view_of_unit, self.obs.corner_index]
+        return inset_directions(self._rings())[self.view_of_unit, self.obs.corner_index]
 
     def _place_parameters(self) -> ParameterSet:
         """x, y, yaw of each floor tag, started where the nominal model's rays through its first view meet the
@@ -170,10 +180,12 @@ class FloorBlock(Block):
         dp = R_camera_root @ point_motion(twist, p_root)  # (M, 3, J + P)
         dp_q, dp_chain = dp[..., :n_joints], dp[..., n_joints:]
         dp_local = R_camera_root @ T_root_floor[:, :3, :3] @ dp_place
-        D = pixel_jacobian(self.obs.camera, p_camera) * self.weight[:, None, None]
+        N = self.normals * self.weight[:, None, None]  # pixels to weighted distances from the edges' lines
+        D = N @ pixel_jacobian(self.obs.camera, p_camera)
         n_places = 3 * len(self.tag_ids)
         inset = local_values[n_places]
-        residual = (self.obs.camera.project(p_camera) + inset * self.inward - self.obs.uv) * self.weight[:, None]
+        offset = self.obs.camera.project(p_camera) - self.obs.uv
+        residual = np.einsum("mij,mj->mi", N, offset) + inset * self.inward * self.weight[:, None]
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
@@ -191,20 +203,11 @@ def sole_disagreement(robot: Robot, q: np.ndarray, model: Corrections) -> np.nda
     plane and of the first above the second's [m], and the tilt between their z axes (x, y in the first sole's
     frame) times SOLE_LEVER_M [m]. Needs two soles."""
     _, sole_poses = _poses(robot, q, model)
-    return _disagreement(sole_poses)
-
-
-def _disagreement(sole_poses: np.ndarray) -> np.ndarray:
-    """`sole_disagreement` of two sole poses (2, S, 4, 4) in any one frame."""
-    a, b = sole_poses[0], sole_poses[1]
-    h_ab = np.einsum("si,si->s", a[:, :3, 2], b[:, :3, 3] - a[:, :3, 3])
-    h_ba = np.einsum("si,si->s", b[:, :3, 2], a[:, :3, 3] - b[:, :3, 3])
-    z_b_in_a = np.einsum("sji,sj->si", a[:, :3, :3], b[:, :3, 2])
-    return np.stack([h_ab, h_ba, SOLE_LEVER_M * z_b_in_a[:, 0], SOLE_LEVER_M * z_b_in_a[:, 1]], axis=1)
+    return sole_gaps(sole_poses)
 
 
 def _disagreement_derivatives(sole_poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
-    """(S, 4, C) derivatives of `_disagreement` by the columns of the soles' twists (2, S, C, 6)."""
+    """(S, 4, C) derivatives of `sole_gaps` by the columns of the soles' twists (2, S, C, 6)."""
     (a, b), (ta, tb) = sole_poses, twists
     o_a, o_b, z_a, z_b = a[:, None, :3, 3], b[:, None, :3, 3], a[:, None, :3, 2], b[:, None, :3, 2]
     do_a, do_b = ta[..., :3] + cross(ta[..., 3:], o_a), tb[..., :3] + cross(tb[..., 3:], o_b)  # (S, C, 3)
@@ -231,16 +234,16 @@ class SoleClosure(Block):
         self.view_labels = [(s, -1) for s in range(obs.n_samples)]
         self.nuisance = ParameterSet([])
 
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
+
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
         d = _disagreement_derivatives(c.T_root_soles, c.twists_soles)
         n_joints = self.q_measured.shape[1]
-        return Linearization(residual=_disagreement(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
+        return Linearization(residual=sole_gaps(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
                              local_cols=None, joint_sensitivity=d[..., :n_joints])
-
-
-MAX_SOLE_TILT_RAD = float(np.deg2rad(10.0))  # standing soles further from one plane under the nominal model are
-MAX_SOLE_GAP_M = 0.03  # not a standing pose (bad input)
 
 
 def check_floor_samples(robot: Robot, obs: Observations) -> None:
@@ -257,13 +260,12 @@ def check_floor_samples(robot: Robot, obs: Observations) -> None:
         )
     if len(robot.config.floor_config().soles) < 2:
         return
-    gap = sole_disagreement(robot, obs.q_measured, Corrections())
-    tilt = np.arcsin(np.clip(np.linalg.norm(gap[:, 2:], axis=1) / SOLE_LEVER_M, 0.0, 1.0))
-    bad = np.flatnonzero((tilt > MAX_SOLE_TILT_RAD) | (np.abs(gap[:, :2]).max(axis=1) > MAX_SOLE_GAP_M))
+    tilt, gap, not_standing = off_plane(sole_disagreement(robot, obs.q_measured, Corrections()))
+    bad = np.flatnonzero(not_standing)
     if bad.size:
         s = int(bad[0])
         raise WolfcalError(
             f"{obs.sources[s]}: {bad.size} floor sample(s) not in a standing pose (sample {s}: soles "
-            f"{np.rad2deg(tilt[s]):.1f} deg and {np.abs(gap[s, :2]).max() * 100:.1f} cm from one plane under the "
-            "nominal model; at most 10 deg and 3 cm): floor samples need both soles flat on the floor"
+            f"{np.rad2deg(tilt[s]):.1f} deg and {gap[s] * 100:.1f} cm from one plane under the nominal model; "
+            f"{STANDING_RULE}): floor samples need both soles flat on the floor"
         )

@@ -39,12 +39,14 @@ def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> 
 @dataclass
 class SharedErrors:
     """Errors that rows share besides their own noise: the joint readings of a still pose (rows with the same
-    `reading` share sigma_q^2 A A^T) and a detection error that repeats (rows with the same `label` >= 0 and the same
-    `axis` share tau^2: a tag that a fixed camera sees in the same place in every frame)."""
+    `reading` share sigma_q^2 A A^T; with a reading group per joint, rows with the same group of joint j share
+    sigma_q^2 A_j A_j^T: legs that held still while the head moved) and a detection error that repeats (rows with
+    the same `label` >= 0 and the same `axis` share tau^2: a tag that a fixed camera sees in the same place in every
+    frame)."""
 
     A: np.ndarray  # (R, J) d(row)/d(joint readings)
     sigma_q: float  # joint reading noise [rad]
-    reading: np.ndarray  # (R,) reading group of each row
+    reading: np.ndarray  # (R,) reading group of each row, or (R, J) of each row's reading of each joint
     label: np.ndarray  # (R,) shared detection error of each row, -1 for none
     axis: np.ndarray  # (R,) measured axis of each row (u, v, ...)
     tau: float = 0.0  # shared detection error per axis [the block's unit]
@@ -82,11 +84,16 @@ class GroupedWhitening:
         """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
         group of each column."""
         shared, rows = self.shared, self.rows
-        A = shared.sigma_q * shared.A[:, np.any(shared.A != 0, axis=0)]  # joints that move no row are left out
-        A /= self.row_scale[:, None]
-        n_joints = A.shape[1]
+        moving = np.any(shared.A != 0, axis=0)  # joints that move no row are left out
+        A = shared.sigma_q * shared.A[:, moving] / self.row_scale[:, None]
+        reading = shared.reading[:, None] if shared.reading.ndim == 1 else shared.reading[:, moving]
         group = self.group_of_row[rows]
-        reading_slot, readings = _slots(group, shared.reading[rows], np.any(A[rows] != 0, axis=1), self.n_groups)
+        if reading.shape[1] == 1:  # one reading per row: all its joints' columns follow that reading's slot
+            slot, count = _slots(group, reading[rows, 0], np.any(A[rows] != 0, axis=1), self.n_groups)
+            slots, counts = [slot] * A.shape[1], [count] * A.shape[1]
+        else:
+            pairs = [_slots(group, reading[rows, j], A[rows, j] != 0, self.n_groups) for j in range(A.shape[1])]
+            slots, counts = [p[0] for p in pairs], [p[1] for p in pairs]
         n_axes = int(shared.axis.max()) + 1 if len(shared.axis) else 1
         labelled = (shared.label[rows] >= 0) & (shared.tau > 0)
         label_slot, labels = _slots(group, shared.label[rows] * n_axes + shared.axis[rows], labelled, self.n_groups)
@@ -99,14 +106,16 @@ class GroupedWhitening:
         K = 0  # columns so far
         for n in np.unique(sizes[sizes > 0]):
             members = np.flatnonzero(sizes == n)
-            k_reading = n_joints * int(readings[members].max())
+            widths = [int(c[members].max(initial=0)) for c in counts]  # columns per joint: its distinct readings
+            k_reading = int(np.sum(widths))
             k = k_reading + int(labels[members].max())
             if k == 0:
                 continue
             at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
             U = np.zeros((len(members) * n, k))
-            has = np.flatnonzero(reading_slot[at] >= 0)
-            U[has[:, None], reading_slot[at][has][:, None] * n_joints + np.arange(n_joints)] = A[rows[at][has]]
+            for j, (slot, first) in enumerate(zip(slots, np.cumsum([0, *widths[:-1]]))):
+                has = np.flatnonzero(slot[at] >= 0)
+                U[has, first + slot[at][has]] = A[rows[at][has], j]
             has = np.flatnonzero(label_slot[at] >= 0)
             U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
             Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)

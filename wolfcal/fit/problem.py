@@ -44,7 +44,7 @@ class BlockState:
         # or the estimated noise level when that is larger (`shared_size`).
         self.shared_floor = sigma
         self.excluded = np.zeros(block.n_views, dtype=bool)
-        self.groups = block.noise_groups()  # (U,) fixed: derived once
+        self.groups = block.joint_reading_groups()  # (U, J) fixed: derived once
         self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.classes = block.noise_classes()  # (U,) fixed: derived once
         self.unit_scale = np.ones(block.n_units)  # (U,) each unit's noise level relative to sigma (its class's)
@@ -71,14 +71,18 @@ class BlockState:
         # Units the joint readings do not move (a tag fixed to the base seen by an external camera) share no
         # reading error: each is its own reading group, so only a shared detection error links them.
         moved = np.any(lin.joint_sensitivity != 0, axis=(1, 2))
-        self.reading_of_unit = np.where(moved, self.groups, self.groups.max() + 1 + np.arange(block.n_units))
+        alone = self.groups.max(initial=0) + 1 + np.arange(block.n_units)
+        reading = np.where(moved[:, None], self.groups, alone[:, None])  # (U, J)
+        # one group per unit when every joint's groups agree (a still pose), else the unit of the joint's groups
+        self.reading_of_unit = _one_group(reading)
+        per_joint = np.any(reading != reading[:, :1], axis=1).any()
         label = np.where(self.inlier_units, self.labels, -1)
         counts = np.bincount(label[label >= 0]) if np.any(label >= 0) else np.zeros(0, int)
         label = np.where((label >= 0) & (counts[np.maximum(label, 0)] >= 2) if len(counts) else False, label, -1)
         return SharedErrors(
             A=A,
             sigma_q=self.sigma_q,
-            reading=np.repeat(self.reading_of_unit, d),
+            reading=np.repeat(reading, d, axis=0) if per_joint else np.repeat(self.reading_of_unit, d),
             label=np.repeat(label, d),
             axis=np.tile(np.arange(d), block.n_units),
             tau=self.shared_size(self.sigma),
@@ -227,3 +231,17 @@ class Problem:
         if scipy.sparse.issparse(J):
             return scipy.sparse.vstack([J, scipy.sparse.identity(n, format="csr")]).tocsr()
         return np.vstack([J, np.eye(n)])
+
+
+def _one_group(reading: np.ndarray) -> np.ndarray:
+    """(U,) units linked by any shared joint reading (U, J) into one group (connected components)."""
+    if not np.any(reading != reading[:, :1]):
+        return reading[:, 0] if reading.size else np.zeros(len(reading), dtype=int)
+    n_units, n_joints = reading.shape
+    joint = np.broadcast_to(np.arange(n_joints), reading.shape)
+    _, node = np.unique(np.stack([joint, reading], axis=-1).reshape(-1, 2), axis=0, return_inverse=True)
+    node = node.ravel() + n_units
+    unit = np.repeat(np.arange(n_units), n_joints)
+    n = int(node.max()) + 1
+    graph = scipy.sparse.coo_matrix((np.ones(len(unit)), (unit, node)), shape=(n, n))
+    return connected_components(graph, directed=False)[1][:n_units]

@@ -12,7 +12,9 @@ fit weights small views by their apparent size), the line from the camera to eve
 Information: noise-free corners of the floor tags under the nominal model handed to the fit's own `FloorBlock`
 (each pose its own noise group, the tags' places and the corner inset its nuisance unknowns) and, for the chosen n
 poses, the fit's `SoleClosure` (the same standing legs in every sample, counted as the fit counts it: once per
-sample).
+sample). The fit shares the standing legs' reading error between all floor samples (`FloorBlock.
+joint_reading_groups`); the selection counts it per pose (`PosewiseFloorBlock`), so that a pose's information adds
+up, while the std the plan reports comes from the fit's own floor blocks on the chosen poses.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.blocks import Block
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, floor_blocks
@@ -143,6 +146,13 @@ def draw_floor_candidates(robot: Robot, camera: PlanCamera, places: dict[int, np
     return Candidates(q, visible, [j for j in robot.joint_names if j in written], drawn, rejected)
 
 
+class PosewiseFloorBlock(FloorBlock):
+    """The fit's floor block with each pose's joint readings its own error (the selection's additive model)."""
+
+    def joint_reading_groups(self) -> np.ndarray:
+        return Block.joint_reading_groups(self)  # the still pose's, as every other block
+
+
 @dataclass
 class FloorPlanModel:
     """The floor fit a plan is made for (same interface as `wolfcal.plan.information.PlanModel`)."""
@@ -179,7 +189,7 @@ class FloorPlanModel:
             visible = visible & (visible.sum(axis=0) >= 2)
         obs = self.observations(q, visible)
         options = FitOptions(free=self.preset, side=self.side)
-        blocks = [FloorBlock(self.robot, obs)] if independent else floor_blocks(self.robot, obs, options)
+        blocks = [PosewiseFloorBlock(self.robot, obs)] if independent else floor_blocks(self.robot, obs, options)
         sigmas, encoder = block_sigmas(self.robot, blocks), self.robot.config.priors.encoder_noise
         return plan_problem(self.chain(), blocks, sigmas, encoder)
 

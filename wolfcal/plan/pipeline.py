@@ -20,6 +20,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.outputs import check_outputs
 from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
+from wolfcal.plan.deliverable import deliverable_basis, delivered_std
 from wolfcal.plan.floor import FloorPlanModel, draw_floor_candidates, expected_places, places_text
 from wolfcal.plan.information import (
     PlanModel,
@@ -32,12 +33,15 @@ from wolfcal.plan.information import (
 )
 from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
 from wolfcal.plan.order import capture_order
-from wolfcal.plan.select import check_criterion, cover_twice, select
+from wolfcal.plan.select import check_criterion, cover_twice, criterion_value, information, select
 from wolfcal.robot.collision import CollisionModel, collision_model, rest_configuration
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
 PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
+# --criterion when none is given, per (system, preset): the one that planned the more accurate calibration in
+# bench/bench_plan.py; D for the others
+DEFAULT_CRITERION = {("head", "head_camera"): "I", ("external", "leg"): "I"}
 
 
 @dataclass(frozen=True)
@@ -47,7 +51,7 @@ class PlanOptions:
     system: str = "head"
     poses: int = 12
     candidates: int = 2000
-    criterion: str = "D"
+    criterion: str | None = None  # D | A | E | I; None: DEFAULT_CRITERION of the system and preset
     velocity: float = 0.5  # profile velocity of the capture [rad/s]
     margin: float = 0.1  # kept from each URDF joint limit [rad]
     seed: int = 0
@@ -56,7 +60,8 @@ class PlanOptions:
 
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)
-        check_criterion(self.criterion)
+        criterion = DEFAULT_CRITERION.get((self.system, self.free), "D") if self.criterion is None else self.criterion
+        object.__setattr__(self, "criterion", check_criterion(criterion))
         if self.system not in PLAN_SYSTEMS:
             raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
         if self.poses < 1 or self.candidates < self.poses:
@@ -81,6 +86,9 @@ class Plan:
     condition: tuple[float, float]  # planned, random: over the observable parameters
     planned_names: list[str] = field(default_factory=list)  # the unknowns of `planned` (chain first, as params)
     notes: list[str] = field(default_factory=list)  # what the plan assumes (e.g. where the floor tags lie)
+    criterion_value: float = 0.0  # of the planned poses (`plan.select`; I: mean scaled variance of the delivered)
+    # planned, random: rms predicted std of the delivered rotation [rad] and position [m] (`plan.deliverable`)
+    delivered: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def worst_std(self, which: Uncertainty, unit: str) -> float:
         """Largest std among the observable chain parameters of a unit ('m' | 'rad') [unit]."""
@@ -150,11 +158,15 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     M_repeated = model.repeated_information(problem, candidates.q, candidates.visible, options.poses)
     sep = separability(G, problem.n_chain, M_repeated, criterion_interest(problem.params, problem.n_chain))
     check_observable(problem.params, G, M_repeated, len(G))
-    say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
-    chosen, _ = select(G, options.poses, sep.basis, options.criterion, M_repeated)
+    chain = ParameterSet(problem.params.parameters[: problem.n_chain])
+    criterion = check_criterion(str(options.criterion))  # set in __post_init__
+    basis = deliverable_basis(robot, chain, options.free) if criterion == "I" else sep.basis
+    say(f"choosing {options.poses} poses ({criterion}-optimal) ...")
+    chosen, value = select(G, options.poses, basis, criterion, M_repeated)
     if options.system == "floor":  # the fit refuses a floor tag seen once
         labels = [f"floor tag {t}" for t in robot.config.floor_config().tag_ids]
-        chosen = cover_twice(G, chosen, candidates.visible, labels, sep.basis, options.criterion, M_repeated)
+        chosen = cover_twice(G, chosen, candidates.visible, labels, basis, criterion, M_repeated)
+        value = criterion_value(information(G, chosen, M_repeated), basis, criterion)
     order, move_time = capture_order(candidates.q[chosen], rest_configuration(robot), options.velocity)
     chosen = np.array(chosen)[order]
     others = rng.choice(np.setdiff1d(np.arange(len(G)), chosen), size=min(options.poses, len(G) - len(chosen)),
@@ -162,16 +174,28 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
     planned_problem = model.problem(candidates.q[chosen], candidates.visible[chosen])
     random_problem = model.problem(candidates.q[others], candidates.visible[others])
     observable = ~sep.unseparable
+    planned, random = predicted(planned_problem), predicted(random_problem)
     return Plan(
         q=candidates.q[chosen], joints=candidates.joints,
         move_time_s=move_time, params=problem.params, n_chain=problem.n_chain,
-        planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
+        planned=planned, random=random, observable=observable,
         groups=sep.groups(problem.params.names), candidates=candidates,
         at_prior=np.array([sep.at_prior(i) for i in range(len(problem.params))], dtype=bool),
         condition=(_condition(planned_problem, problem.params.names, observable),
                    _condition(random_problem, problem.params.names, observable)),
-        planned_names=planned_problem.params.names, notes=notes,
+        planned_names=planned_problem.params.names, notes=notes, criterion_value=value,
+        delivered=_delivered(robot, chain, options.free, planned, random),
     )  # fmt: skip
+
+
+def _delivered(robot: Robot, chain: ParameterSet, preset: str, planned: Uncertainty, random: Uncertainty):
+    """(planned, random) rms predicted std of the delivered rotation [rad] and position [m]; None when the free
+    parameters move nothing the preset delivers (e.g. `camera` with an external camera: only the tags' mounts)."""
+    c = len(chain)
+    try:
+        return tuple(delivered_std(robot, chain, preset, u.covariance[:c, :c]) for u in (planned, random))
+    except WolfcalError:
+        return None
 
 
 def _condition(problem, names: list[str], observable: np.ndarray) -> float:
@@ -218,6 +242,12 @@ def table_lines(plan: Plan) -> list[str]:
     for unit, scale, shown in (("m", 1000.0, "mm"), ("rad", np.rad2deg(1.0), "deg")):
         planned, random = plan.worst_std(plan.planned, unit) * scale, plan.worst_std(plan.random, unit) * scale
         lines.append(f"  worst std of the observable parameters in {shown}: planned {planned:.3f}, random {random:.3f}")
+    if plan.delivered is not None:
+        (rot_p, pos_p), (rot_r, pos_r) = plan.delivered
+        lines.append("  predicted rms error of the delivered pose (head camera or soles in the base frame over the "
+                     "evaluation configurations of `--criterion I`, with what no pose separates at its prior): "
+                     f"planned {np.rad2deg(rot_p):.4f} deg {pos_p * 1000:.3f} mm, random {np.rad2deg(rot_r):.4f} deg "
+                     f"{pos_r * 1000:.3f} mm")  # fmt: skip
     lines.append("  condition number (column-scaled Jacobian, observable parameters): "
                  f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}")
     names = plan.params.names

@@ -4,8 +4,10 @@ Information in the fit's prior-normalised unknowns z: M(S) = I + M_0 + sum_{k in
 Jacobian rows of candidate k, M_0: what every plan of n poses gets, the repeated views, `wolfcal.plan.information`),
 covariance C = M^-1. The criterion looks at the
 covariance of the observable chain unknowns, C_obs = B^T C_cc B (B: (c, k) basis without the directions no pose can
-inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs (default), A = trace
-C_obs, E = largest eigenvalue of C_obs; smaller is better. Adding candidate k is a rank-r update, evaluated for all
+inform, nuisance unknowns such as an external camera's pose marginalised): D = log det C_obs, A = trace
+C_obs, E = largest eigenvalue of C_obs; smaller is better. I (I-optimal, "deliverable") is A on the basis of what
+the calibration delivers (`plan.deliverable.deliverable_basis`: B B^T = D^T D / m), so trace C_obs is the average
+predicted variance of the delivered poses. Adding candidate k is a rank-r update, evaluated for all
 candidates at once: with S_k = I + G_k C G_k^T and V_k = G_k C_cB,
 C_obs' = C_obs - V_k^T S_k^-1 V_k, log det C_obs' = log det C_obs + log det(S_k - V_k C_obs^-1 V_k^T) - log det S_k.
 """
@@ -16,7 +18,7 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 
-CRITERIA = ("D", "A", "E")
+CRITERIA = ("D", "A", "E", "I")
 MAX_SWEEPS = 20
 TOLERANCE = 1e-9  # relative improvement an exchange must bring
 
@@ -33,7 +35,7 @@ def criterion_value(M: np.ndarray, basis: np.ndarray, criterion: str) -> float:
     C_obs = basis.T @ np.linalg.inv(M)[:c, :c] @ basis
     if criterion == "D":
         return float(np.linalg.slogdet(C_obs)[1])
-    if criterion == "A":
+    if criterion in ("A", "I"):
         return float(np.trace(C_obs))
     return float(np.linalg.eigvalsh(C_obs)[-1])
 
@@ -64,7 +66,7 @@ def values_after_adding(M: np.ndarray, G: np.ndarray, basis: np.ndarray, criteri
             continue
         V = (flat @ Y).reshape(len(which), r, -1)  # (n, r, k)
         SinvV = np.linalg.solve(S, V)
-        if criterion == "A":
+        if criterion in ("A", "I"):
             out[which] = base - np.einsum("nrk,nrk->n", V, SinvV)
         else:
             out[which] = np.linalg.eigvalsh(C_obs - np.swapaxes(V, 1, 2) @ SinvV)[:, -1]

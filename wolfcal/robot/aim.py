@@ -38,9 +38,10 @@ def ball_position(robot: Robot, reference: Corrections, distance: float, bearing
     return np.array([origin[0] + distance * np.cos(bearing), origin[1] + distance * np.sin(bearing), 0.0])
 
 
-def aim_head(robot: Robot, reference: Corrections, ball: np.ndarray) -> np.ndarray:
-    """(J,) standing readings with pan/tilt set so that the reference model's optical axis points at the ball."""
-    q0 = standing_pose(robot)
+def aim_head(robot: Robot, reference: Corrections, ball: np.ndarray, stance: np.ndarray | None = None) -> np.ndarray:
+    """(J,) standing readings (`stance` (J,), default `floor.standing`) with pan/tilt set so that the reference
+    model's optical axis points at the ball."""
+    q0 = standing_pose(robot) if stance is None else stance.copy()
     joints = [robot.model.joints[name] for name in aim_joints(robot)]
     columns = [robot.model.column(j.name) for j in joints]
     lo = np.array([max(j.lower, -np.pi) for j in joints])

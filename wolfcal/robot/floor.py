@@ -9,6 +9,7 @@ from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import cross
 from wolfcal.robot.robot import Robot
+from wolfcal.robot.stances import stance_readings
 
 # why `floor:` is needed, for the error that names the robot config when it is missing
 FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
@@ -58,6 +59,13 @@ def standing_pose(robot: Robot) -> np.ndarray:
     for name, value in robot.config.floor_config(FLOOR_NEEDED).standing.items():
         q[robot.model.column(name)] = value
     return q
+
+
+def stance_poses(robot: Robot) -> np.ndarray:
+    """(K, J) encoder readings of the stances floor samples are taken in: the config's `floor.stances`, else
+    `floor.standing` alone; other joints 0 [rad]."""
+    robot.config.floor_config(FLOOR_NEEDED)
+    return stance_readings(robot.config, robot.joint_names)
 
 
 def camera_in_floor(

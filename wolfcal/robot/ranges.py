@@ -36,3 +36,15 @@ def sampling_bounds(robot: Robot, system: str = "head") -> tuple[np.ndarray, np.
         lo.append(a)
         hi.append(b)
     return np.array(lo), np.array(hi)
+
+
+def range_grid(robot: Robot, frame: str, grid: int) -> np.ndarray:
+    """(grid^K, J) readings [rad] spanning the whole range of each of the K actuated joints between base and
+    `frame` (limits wider than +-pi taken as +-pi), the others 0."""
+    joints = [j for j in robot.model.joints_between(robot.config.base_link, frame) if j.actuated]
+    axes = [np.linspace(max(j.lower, -np.pi), min(j.upper, np.pi), grid) for j in joints]
+    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(joints))
+    q = np.zeros((len(mesh), len(robot.joint_names)))
+    for k, joint in enumerate(joints):
+        q[:, robot.model.column(joint.name)] = mesh[:, k]
+    return q

@@ -12,6 +12,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform, transform_from_twist_params, transform_from_xyz_rpy
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.kinematics import KinematicModel
+from wolfcal.robot.stances import check_stances
 
 
 @dataclass
@@ -118,15 +119,20 @@ def load_robot(config_path: str | Path) -> Robot:
 
 
 def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
-    """The floor's soles must be links and its standing readings movable joints of the URDF."""
+    """The floor's soles must be links, its standing readings and stances movable joints of the URDF that keep the
+    soles on one plane (`robot.stances.check_stances`)."""
     if config.floor is None:
         return
     for i, sole in enumerate(config.floor.soles):
         if sole not in model.links:
             raise WolfcalError(f"{config.path}: 'floor.soles[{i}]' {sole!r} is not a link of {config.urdf}")
-    unknown = [j for j in config.floor.standing if j not in model.actuated_joint_names]
-    if unknown:
-        raise WolfcalError(
-            f"{config.path}: 'floor.standing' names joint(s) {', '.join(unknown)} that are not movable joints of "
-            f"{config.urdf}"
-        )
+    named = [("floor.standing", config.floor.standing)]
+    named += [(f"floor.stances[{i}]", s) for i, s in enumerate(config.floor.stances)]
+    for key, stance in named:
+        unknown = [j for j in stance if j not in model.actuated_joint_names]
+        if unknown:
+            raise WolfcalError(
+                f"{config.path}: '{key}' names joint(s) {', '.join(unknown)} that are not movable joints of "
+                f"{config.urdf}"
+            )
+    check_stances(config, model)

@@ -1,9 +1,11 @@
 """Synthetic floor samples without images: the robot stands, turns its head, and sees tags lying on the floor.
 
-The robot stands at the true joint angles of its config's standing pose (the soles of the true model lie on one
-plane, the floor); its encoders report those angles minus the true offsets. Floor tags lie face up at random places
-`distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt (the two joints before the
-camera) are drawn so that each sample sees at least one floor tag whole, at least `min_edge_px` wide.
+The robot stands at the true joint angles of its config's stances (`floor.stances`, default `floor.standing`; the
+samples spread evenly over them, one stance after the other); in each the soles of the true model lie on one plane,
+the floor, with the feet where they were; its encoders report those angles minus the true offsets. Floor tags lie
+face up at random places `distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt
+(the two joints before the camera) are drawn so that each sample sees at least one floor tag whole, at least
+`min_edge_px` wide.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.observations import Observations
 from wolfcal.robot.aim import aim_joints
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import camera_in_floor, standing_pose
+from wolfcal.robot.floor import camera_in_floor, stance_poses
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_corners, tag_texture, tag_texture_width
@@ -67,7 +69,8 @@ def floor_views(
     robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
     distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
 ) -> FloorViews:
-    """Places of the floor tags and n standing poses with head pan/tilt that see at least one of them whole."""
+    """Places of the floor tags and n standing poses (the stances one after the other) with head pan/tilt that see
+    at least one of them whole."""
     ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
@@ -76,7 +79,9 @@ def floor_views(
     corners = floor_corners(robot, places)
     joints = [robot.model.joints[j] for j in aim_joints(robot)]
     columns = [robot.model.column(j.name) for j in joints]
-    q = np.repeat(standing_pose(robot)[None], 4000, axis=0)
+    stances = stance_poses(robot)
+    stance_of = np.arange(4000) % len(stances)
+    q = stances[stance_of]
     for j, col in zip(joints, columns):
         q[:, col] = rng.uniform(max(j.lower, -1.2), min(j.upper, 1.2), len(q))
     T_floor_camera, _ = camera_in_floor(robot, q, Corrections(frames=truth.frames, tags=truth.tags))  # true angles
@@ -88,11 +93,15 @@ def floor_views(
     inside &= (uv[..., 1] > margin_px) & (uv[..., 1] < camera.height - margin_px) & (p[..., 2] > 0.1)
     edge = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=3).min(axis=2)
     visible = inside.all(axis=2) & np.nan_to_num(edge > min_edge_px)  # (S, T)
-    candidates = np.flatnonzero(visible.any(axis=1))
-    if len(candidates) < n:
-        raise WolfcalError(f"{robot.config.path}: only {len(candidates)} of 4000 head pan/tilt poses see a floor "
-                           f"tag whole and at least {min_edge_px:.0f} px wide; asked for {n} floor samples")
-    chosen = rng.choice(candidates, size=n, replace=False)
+    picked = []
+    for k, m in enumerate(np.diff(np.linspace(0, n, len(stances) + 1).round().astype(int))):  # n spread evenly
+        candidates = np.flatnonzero(visible.any(axis=1) & (stance_of == k))
+        if len(candidates) < m:
+            raise WolfcalError(f"{robot.config.path}: only {len(candidates)} of {np.sum(stance_of == k)} head "
+                               f"pan/tilt poses in stance {k} see a floor tag whole and at least {min_edge_px:.0f} "
+                               f"px wide; asked for {m} floor samples in it")  # fmt: skip
+        picked.append(rng.choice(candidates, size=m, replace=False))
+    chosen = np.concatenate(picked)
     return FloorViews(places, q[chosen], visible[chosen], uv[chosen], T_camera_floor[chosen])
 
 

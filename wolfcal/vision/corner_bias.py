@@ -11,10 +11,12 @@ REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] at which the inset is stated;
 CORNER_INSET = "floor.corner_inset"  # the fit's parameter name for the inset [px] (in result.yaml)
 
 
-def inset_directions(ring: np.ndarray) -> np.ndarray:
-    """(V, 4, 2) how each corner of the tag views `ring` (V, 4, 2) [px, corners in order around the tag] moves when
-    both edges that meet in it move inward by one pixel along their normals [px/px]. Zero for a view with a
-    missing (NaN) corner."""
+def edge_normals(ring: np.ndarray) -> np.ndarray:
+    """(V, 4, 2, 2) the inward unit normals (rows: the edge to the next corner, the edge from the previous one) of
+    the two edges that meet in each corner of the tag views `ring` (V, 4, 2) [px, corners in order around the tag];
+    the identity for a view with a missing (NaN) corner. A corner's offset along them is its distance from the two
+    edges' lines: a detector finds edges, and where two meet at a sharp angle (a strongly foreshortened far tag)
+    the corner slides along them by pixels while its distance from each stays within tenths of a pixel."""
     centre = np.nanmean(ring, axis=1, keepdims=True)
     e_next, e_prev = np.roll(ring, -1, axis=1) - ring, ring - np.roll(ring, 1, axis=1)  # the edges at each corner
 
@@ -24,9 +26,17 @@ def inset_directions(ring: np.ndarray) -> np.ndarray:
         return n * np.sign(np.sum(n * (centre - ring), axis=-1, keepdims=True))
 
     whole = np.isfinite(ring).all(axis=(1, 2))
-    A = np.nan_to_num(np.stack([inward_normal(e_next), inward_normal(e_prev)], axis=-2))  # (V, 4, 2, 2)
-    A[~whole] = np.eye(2)
-    move = np.linalg.solve(A, np.ones(ring.shape[:2] + (2, 1)))[..., 0]
+    N = np.nan_to_num(np.stack([inward_normal(e_next), inward_normal(e_prev)], axis=-2))
+    N[~whole] = np.eye(2)
+    return N
+
+
+def inset_directions(ring: np.ndarray) -> np.ndarray:
+    """(V, 4, 2) how each corner of the tag views `ring` (V, 4, 2) [px, corners in order around the tag] moves when
+    both edges that meet in it move inward by one pixel along their normals (`edge_normals`) [px/px]. Zero for a
+    view with a missing (NaN) corner."""
+    whole = np.isfinite(ring).all(axis=(1, 2))
+    move = np.linalg.solve(edge_normals(ring), np.ones(ring.shape[:2] + (2, 1)))[..., 0]
     return np.where(whole[:, None, None], move, 0.0)
 
 

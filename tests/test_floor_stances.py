@@ -1,0 +1,109 @@
+"""Floor samples in a few stances (`floor.stances`): read and checked against the standing rule, simulated spread
+over the stances, captured in each, and modelled with one shared reading error per joint and stance."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+import yaml
+from conftest import OTHER_CAMERA, wolfgang_with_other_tags
+from rich.console import Console
+from typer.testing import CliRunner
+
+from wolfcal.capture.floor import floor_script
+from wolfcal.capture.pipeline import CaptureOptions, run_capture
+from wolfcal.cli import app
+from wolfcal.errors import WolfcalError
+from wolfcal.fit.floor_block import FloorBlock, SoleClosure
+from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import stance_poses
+from wolfcal.robot.robot import load_robot
+from wolfcal.robot.stances import off_plane, sole_gaps
+from wolfcal.sim.floor import simulate_floor
+
+# knees bent deeper, hips and ankles solved (nominal model) so that each sole keeps the standing orientation
+DEEP = [{"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.6, "LHipPitch": 0.1695,
+         "LAnklePitch": -0.1687},
+        {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
+         "LAnklePitch": -0.3186}]  # fmt: skip
+
+
+def write_config(folder, stances) -> object:
+    data = wolfgang_with_other_tags()
+    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    if stances is not None:
+        data["floor"]["stances"] = stances
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return folder / "robot.yaml"
+
+
+def test_stances_are_read_in_order_and_default_to_standing(tmp_path):
+    robot = load_robot(write_config(tmp_path, [{"RKnee": -0.2618, "LKnee": 0.2618}, *DEEP]))
+    q = stance_poses(robot)
+    assert q.shape == (3, len(robot.joint_names))
+    assert q[1, robot.model.column("RHipPitch")] == -0.1694 and q[2, robot.model.column("LKnee")] == 0.9
+    assert q[0, robot.model.column("RHipPitch")] == 0.0  # joints not named: 0
+    _, gap, bad = off_plane(sole_gaps(np.stack(list(robot.model.link_poses(q, ["l_sole", "r_sole"]).values()))))
+    assert not bad.any() and gap.max() < 1e-3  # the deep stances keep the nominal soles on one plane
+    (tmp_path / "one").mkdir()
+    robot = load_robot(write_config(tmp_path / "one", None))
+    assert stance_poses(robot).shape[0] == 1
+    assert stance_poses(robot)[0, robot.model.column("RKnee")] == robot.config.floor.standing["RKnee"]
+
+
+@pytest.mark.parametrize("stances, words", [
+    ([DEEP[0], {"RKnee": -0.6}], "'floor.stances[1]' is not a standing pose: the soles l_sole and r_sole are"),
+    ([{"RKnee": -0.6, "LKnee": 0.6, "RAnkleRoll": 0.3}], "'floor.stances[0]' is not a standing pose"),
+    ([{"NoJoint": 0.1}], "'floor.stances[0]' names joint(s) NoJoint"),
+    ([{"RKnee": "deep"}], "'stances[0].RKnee' must be a number [rad]"),
+    ({"RKnee": 0.1}, "'stances' must be a list of standing poses"),
+])
+def test_a_bad_stance_is_named(tmp_path, stances, words):
+    path = write_config(tmp_path, stances)
+    with pytest.raises(WolfcalError, match="robot.yaml") as info:
+        load_robot(path)
+    assert words in str(info.value)
+    result = CliRunner().invoke(app, ["simulate", "--floor", "--robot", str(path), "--out", str(tmp_path / "x.mcap")])
+    assert result.exit_code != 0 and words in " ".join(result.output.split()) and "Traceback" not in result.output
+
+
+def test_simulated_floor_samples_spread_over_the_stances_and_share_a_reading_per_stance(tmp_path):
+    robot = load_robot(write_config(tmp_path, [{"RKnee": -0.2618, "LKnee": 0.2618}, *DEEP]))
+    truth = Corrections(offsets={"RKnee": 0.02, "LHipPitch": -0.015, "HeadPan": 0.01})
+    scene = simulate_floor(robot, OTHER_CAMERA, truth, 20, np.random.default_rng(3))
+    knee = robot.model.column("RKnee")
+    assert sorted(np.unique(scene.q_true[:, knee], return_counts=True)[1]) == [6, 7, 7]  # 20 spread evenly
+    assert set(scene.q_true[:, knee]) == {-0.2618, -0.6, -0.9}  # the true angles of each stance
+    np.testing.assert_allclose(scene.obs.q_measured[:, knee], scene.q_true[:, knee] - 0.02, atol=1e-3)
+    for block in (FloorBlock(robot, scene.obs), SoleClosure(robot, scene.obs)):
+        groups = block.joint_reading_groups()  # (units, joints): one reading error per joint and stance
+        units_stance = {k: np.unique(scene.q_true[block.sample_of_unit, knee] == v)
+                        for k, v in enumerate((-0.2618, -0.6, -0.9))}  # fmt: skip
+        assert all(len(u) for u in units_stance.values())
+        for j in ("RKnee", "LHipPitch", "RAnklePitch"):
+            assert len(np.unique(groups[:, robot.model.column(j)])) == 3, j
+        assert len(np.unique(groups[:, robot.model.column("RHipRoll")])) == 1  # the same reading in every stance
+
+
+def test_scripted_floor_capture_goes_through_the_stances(tmp_path):
+    stances = [{"RKnee": -0.2618, "LKnee": 0.2618}, *DEEP]
+    robot = load_robot(write_config(tmp_path, stances))
+    poses = floor_script(robot, 0.5).poses
+    grid = len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
+    assert len(poses) == 3 * grid
+    for k, stance in enumerate(stances):
+        for pose in poses[k * grid:(k + 1) * grid]:  # each stance in turn, legs at its readings
+            assert pose.name.startswith(f"stance {k}, floor ")
+            assert all(pose.joints[j] == v for j, v in stance.items()) and pose.joints["RHipRoll"] == 0.0
+
+
+def test_manual_floor_capture_in_several_stances_needs_a_sample_count(tmp_path):
+    path = write_config(tmp_path, [{"RKnee": -0.2618, "LKnee": 0.2618}, *DEEP])
+    options = CaptureOptions(robot=path, out=tmp_path / "x.mcap", port="/dev/null", camera="sim", floor=True,
+                             manual=True)  # fmt: skip
+    with pytest.raises(WolfcalError, match=r"'floor.stances' lists 3 stances; .* give --samples"):
+        run_capture(options, Console(file=io.StringIO()))
+    assert not list(tmp_path.glob("x.mcap*"))
