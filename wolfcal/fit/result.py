@@ -111,16 +111,20 @@ def _block_dict(fit: Fit, k: int) -> dict:
     obs = views.obs
     unit = b.unit
     samples = []
+    tags = obs.tags_by_sample()
+    outlier_tags: dict[int, list[int]] = {}
+    for s, t in sorted(b.outlier_views):
+        outlier_tags.setdefault(s, []).append(t)
     for i in range(obs.n_samples):
         samples.append({
             "index": i,
             "source": Path(obs.sources[i]).name,
             "stamp_ns": int(obs.stamps_ns[i]),
-            "tags": obs.tags_in_sample(i),
+            "tags": tags[i],
             f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
             "outlier": bool(b.outlier_samples[i]),
-            "outlier_tags": sorted(t for s, t in b.outlier_views if s == i),
+            "outlier_tags": outlier_tags.get(i, []),
         })  # fmt: skip
     return {
         "name": b.name,
