@@ -138,15 +138,16 @@ def detect_tags(
     if found is None:
         return {}
     found_ids = [int(i) for i in np.asarray(found).ravel()]
-    result: dict[int, np.ndarray] = {}
-    cells = tag_cells(family)
+    kept: dict[int, np.ndarray] = {}
     h, w = gray.shape
-    img = gray.astype(np.float32)
     for tag_id, c in zip(found_ids, corners, strict=True):
         if found_ids.count(tag_id) > 1 or (ids is not None and tag_id not in ids):
             continue
         c = np.asarray(c, dtype=np.float64).reshape(4, 2)
         if (c < 1.0).any() or (c[:, 0] > w - 2).any() or (c[:, 1] > h - 2).any():
             continue  # cut by the image border
-        result[tag_id] = refine_edges(img, c, cells) if refine == "edges" else c
-    return result
+        kept[tag_id] = c
+    if refine != "edges" or not kept:
+        return kept
+    refined = refine_edges(gray.astype(np.float32), np.stack(list(kept.values())), tag_cells(family))
+    return dict(zip(kept, refined))
