@@ -13,6 +13,8 @@ Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points a
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import cv2
 import numpy as np
 
@@ -138,8 +140,18 @@ def _grid(first: np.ndarray, stop: np.ndarray, step: float) -> tuple[np.ndarray,
 
 def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
     """Refine (4, 2) corners [px] of one tag, or (T, 4, 2) of T tags, in a float32 image by fitting the two
-    black-square edges next to each corner, near that corner (all tags of an image in one pass: the per-call
-    cost is numpy's, not the pixels').
+    black-square edges next to each corner, near that corner (see `refine_tags`)."""
+    refined = refine_tags([img], np.zeros(len(np.reshape(corners, (-1, 4, 2))), int), corners, cells, iterations)
+    return refined[0] if np.ndim(corners) == 2 else refined
+
+
+def refine_tags(
+    images: Sequence[np.ndarray], image_of_tag: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2
+) -> np.ndarray:
+    """Refine (T, 4, 2) corners [px] of T tags, tag k seen in the float32 image images[image_of_tag[k]], by fitting
+    the two black-square edges next to each corner, near that corner. All tags in one pass (one remap per image
+    and iteration): the per-call cost is numpy's, not the pixels', so the tags of several images are refined
+    together.
 
     Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off),
     reach along the edge for 2.5 cells and across it for one cell (2-6 px) each way; the edge is measured
@@ -147,12 +159,13 @@ def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: i
     whose edges cannot be measured (image border, low contrast) keeps its previous estimate. Tags of other
     sizes get other grids: rows are padded to the longest and the padding is never used.
     """
-    single = np.ndim(corners) == 2
     corners = np.array(corners, dtype=float).reshape(-1, 4, 2)
-    h, w = img.shape
     start = np.repeat(np.arange(4), 2)  # edge 2k + j starts at corner k ...
     end = (start + np.tile([1, -1], 4)) % 4  # ... and runs towards corner k + 1 (j = 0) or k - 1 (j = 1)
     tag = np.repeat(np.arange(len(corners)), 8)  # the tag of each edge
+    image_of_edge = np.asarray(image_of_tag)[tag]
+    far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]  # (E, 2)
+    edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
     for _ in range(iterations):
         cell = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1) / cells  # (T,)
         half = np.clip(cell, 2.0, 6.0)
@@ -170,10 +183,13 @@ def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: i
         base = c[:, None] + d[:, :, None] * e[:, None]  # (E, M, 2) on the edge
         t_ends = np.stack([t[:, 0], t[np.arange(E), n_t - 1]], axis=1)  # (E, 2)
         ends = base[:, :, None] + t_ends[:, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
-        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= [w - 1, h - 1]).all(axis=(2, 3))  # the box is convex
+        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= far[:, None, None]).all(axis=(2, 3))  # the box is convex
         keep = inside & (d < 0.45 * length[:, None]) & (np.arange(M) < n_d[:, None])  # (E, M): near the corner
-        pts = (base[:, :, None] + t[:, None, :, None] * n[:, None, None]).astype(np.float32).reshape(E * M, S, 2)
-        profiles = cv2.remap(img, pts[..., 0], pts[..., 1], cv2.INTER_LINEAR).reshape(E, M, S)
+        pts = (base[:, :, None] + t[:, None, :, None] * n[:, None, None]).astype(np.float32)  # (E, M, S, 2)
+        profiles = np.empty((E, M, S), np.float32)
+        for i, rows in edges_of_image:
+            at = pts[rows].reshape(-1, S, 2)
+            profiles[rows] = cv2.remap(images[i], at[..., 0], at[..., 1], cv2.INTER_LINEAR).reshape(-1, M, S)
         dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :])
         profiles = profiles.astype(float)
         usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
@@ -190,7 +206,7 @@ def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: i
         direction = e + tangent[:, 1:] * n
         T = len(corners)
         corners = _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), 0.5 * cell + 1.0)
-    return corners[0] if single else corners
+    return corners
 
 
 def _intersect_pairs(corners: np.ndarray, point: np.ndarray, direction: np.ndarray, reach: np.ndarray) -> np.ndarray:
