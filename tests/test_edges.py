@@ -8,6 +8,7 @@ from edge_reference import _refine_edges as reference_refine
 from test_vision import CAMERA, FACING, random_view, tag_target, truth
 
 from wolfcal.geometry import make_transform
+from wolfcal.vision import edges
 from wolfcal.vision.edges import edge_offsets, refine_edges
 from wolfcal.vision.render import render_targets
 from wolfcal.vision.tags import _detector, _to_gray, tag_cells
@@ -32,7 +33,7 @@ def test_vectorised_refinement_equals_the_reference(camera):
     assert compared >= 5
 
 
-def test_tags_refined_together_get_the_corners_they_get_alone():
+def test_tags_refined_together_get_the_corners_they_get_alone(monkeypatch):
     """Three tags of different sizes (cells of 27, 15 and 5 px) in one image, refined in one call (padded grids):
     each tag's corners are those of refining it alone."""
     rng = np.random.default_rng(11)
@@ -46,6 +47,8 @@ def test_tags_refined_together_get_the_corners_they_get_alone():
     together = refine_edges(img, start, tag_cells("tag36h11"))
     alone = np.stack([refine_edges(img, c, tag_cells("tag36h11")) for c in start])
     np.testing.assert_allclose(together, alone, atol=1e-9)
+    monkeypatch.setattr(edges, "TAGS_PER_PASS", 2)  # in passes of tags of similar size
+    np.testing.assert_allclose(refine_edges(img, start, tag_cells("tag36h11")), alone, atol=1e-9)
     for tag_id, found in zip(ids.ravel(), together):
         assert np.linalg.norm(found - truth(CAMERA, views[tag_id]), axis=1).max() < 0.3
 
