@@ -21,17 +21,18 @@ import yaml
 from conftest import WOLFGANG, stop_after_sample, wolfgang_with_other_tags
 from rich.console import Console
 
-from wolfcal.capture.floor import AIM_BEARINGS_DEG, AIM_DISTANCES_M, floor_script
+from wolfcal.capture.floor import floor_script
 from wolfcal.capture.manual import joint_groups
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import aim_joints, ball_position, camera_in_floor, standing_pose
 from wolfcal.fit.pipeline import FitOptions, run_fit, split_floor
 from wolfcal.hardware.bus import DynamixelBus, rad_to_ticks, ticks_to_rad
 from wolfcal.hardware.emulator import EmulatorProcess, spec_from_config
 from wolfcal.io.reader import read_capture
 from wolfcal.observations import HEAD_CAMERA
+from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_joints, ball_position
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor, standing_pose
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.floor import floor_corners
 from wolfcal.sim.simulate import SimOptions, simulate_capture

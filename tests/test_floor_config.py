@@ -8,8 +8,9 @@ from typer.testing import CliRunner
 
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import camera_in_floor, ground_errors, standing_pose
+from wolfcal.evaluate.ground import ground_errors
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor, standing_pose
 from wolfcal.robot.robot import load_robot
 
 FLOOR = "floor: {soles: [base], standing: {arm: 0.2}, tags: [{id: 30, size: 0.15}, {id: 31, size: 0.12}]}\n"
@@ -30,7 +31,7 @@ def test_other_robot_gets_ground_errors_from_its_config(tmp_path):
     for d in (1.0, 2.0, 4.5):
         assert rows[d]["models"]["truth"]["error_m"] < 1e-6
     # Straight ahead, closed form: the nominal model sees the ray 0.06 rad less steep from the same camera position.
-    from wolfcal.evaluate.ground import aim_head, ball_position
+    from wolfcal.robot.aim import aim_head, ball_position
 
     ball = ball_position(robot, truth, 2.0, 0.0)
     T_floor_camera, _ = camera_in_floor(robot, aim_head(robot, truth, ball)[None], truth)

@@ -297,14 +297,6 @@ def test_capsule_distances_are_exact_where_they_matter(robot):
     assert np.all(fast[~near] >= EXACT_BELOW_M - 1e-12) and np.all(fast <= exact + 1e-12)
 
 
-@pytest.mark.parametrize("system", ["mocap", "floor"])
-def test_systems_not_planned_yet_are_refused_with_the_reason(tmp_path, system):
-    out = tmp_path / "p.yaml"
-    result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", system, "--out", str(out)])
-    assert result.exit_code != 0 and "Traceback" not in result.output and not out.exists()
-    assert f"--system {system}" in result.output and "not built yet" in result.output
-
-
 def test_collision_checks_split_by_the_head_joints_are_exact(robot):
     """The candidate draw checks the pairs the head does not move once per leg configuration and the others per
     head configuration: together (and in the early-exit order) they keep exactly the poses with clearance."""
@@ -381,3 +373,162 @@ def test_criterion_looks_at_the_parameters_of_interest_and_marginalises_the_othe
     idx = np.flatnonzero(interest)
     expected = np.linalg.slogdet(C[np.ix_(idx, idx)])[1]  # marginal covariance of the unknowns of interest
     assert np.isclose(criterion_value(M, sep.basis, "D"), expected)
+
+
+def _fit_information(problem) -> np.ndarray:
+    J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
+    return np.eye(len(problem.params)) + J.T @ J
+
+
+def test_mocap_plan_information_is_the_fits_and_its_poses_are_valid(robot, tmp_path):
+    """--system mocap: the selection's information on chosen poses equals the fit's MocapBlock problem (base pose and
+    marker mounts its nuisance); the written poses move the leg joints only, inside the limits, apart; each ankle
+    roll is named with its foot markers' mounts (a rotation about the ankle-roll axis moves the foot's markers as
+    their mounts can)."""
+    from wolfcal.plan.information import factors
+    from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
+    from wolfcal.robot.collision import collision_model
+
+    markers = used_markers(robot, "leg", "right")
+    assert markers and all(robot.config.marker_config().marker(m).side in ("right", None) for m in markers)
+    cands = draw_mocap_candidates(robot, markers, 40, np.random.default_rng(1), collision_model(robot))
+    model = MocapPlanModel(robot, "leg", "right", markers)
+    problem = model.problem(cands.q, cands.visible, independent=True)
+    chosen = [2, 5, 11, 17, 23, 31]
+    M_rep = model.repeated_information(problem, cands.q, cands.visible, len(chosen))
+    M_fit = _fit_information(model.problem(cands.q[chosen], cands.visible[chosen]))
+    np.testing.assert_allclose(information(factors(problem), chosen, M_rep), M_fit, atol=1e-6 * np.abs(M_fit).max())
+    assert any(n.startswith("marker.") for n in problem.params.names) and "mocap.x" in problem.params.names
+
+    options = PlanOptions(free="leg", side="both", system="mocap", poses=6, candidates=150, seed=2)
+    plan = make_plan(robot, options, say=lambda _m: None)
+    path = tmp_path / "mocap.yaml"
+    path.write_text(poses_text(robot, plan, options))
+    script = load_poses(path, joint_limits(robot, robot.config.servos.ids))
+    assert len(script.poses) == 6 and not {"HeadPan", "RElbow"} & set(plan.joints)
+    rest_gaps = _min_gaps(robot, np.zeros(len(robot.joint_names)))
+    for pose in script.poses:
+        gaps = _min_gaps(robot, np.array([pose.joints.get(j, 0.0) for j in robot.joint_names]))
+        assert not {k: v for k, v in gaps.items() if v < 0 and rest_gaps[k] >= 0.005}, pose.name
+    groups = [g for g in plan.groups if "RAnkleRoll.offset" in g]
+    assert groups and any(n.startswith("marker.r_foot") for n in groups[0]), plan.groups
+    assert plan.worst_std(plan.planned, "rad") <= plan.worst_std(plan.random, "rad")
+
+
+def test_floor_plan_information_is_the_fits_and_every_planned_tag_is_seen_twice(robot, tmp_path):
+    """--system floor: the candidates' floor-block rows plus the sole closure of n samples equal the fit's floor
+    blocks (`fit.pipeline.floor_blocks`) on those n poses; the legs stand still at floor.standing in every pose, only
+    the head moves, every floor tag in view lies whole in the image, and no tag is seen once (the fit refuses it)."""
+    from wolfcal.fit.floor_block import SoleClosure
+    from wolfcal.plan.candidates import plan_camera
+    from wolfcal.plan.floor import FloorPlanModel, draw_floor_candidates, expected_places
+    from wolfcal.plan.information import factors
+    from wolfcal.robot.collision import collision_model
+
+    camera, places = plan_camera(robot, "head"), expected_places(robot)
+    cands = draw_floor_candidates(robot, camera, places, 60, np.random.default_rng(4), collision_model(robot))
+    standing = {"RKnee": -0.2618, "LKnee": 0.2618}
+    legs = [j for j in cands.joints if not j.startswith("Head")]
+    for j in legs:
+        np.testing.assert_allclose(cands.q[:, robot.model.column(j)], standing.get(j, 0.0))
+    assert np.ptp(cands.q[:, robot.model.column("HeadPan")]) > 0.3
+    # the corners the plan counts lie inside the image (independently: project and compare with the frame)
+    model = FloorPlanModel(robot, camera, "head_camera", "both", places)
+    obs = model.observations(cands.q, cands.visible)
+    assert np.all((obs.uv > 0) & (obs.uv < [camera.model.width, camera.model.height]))
+    chosen = list(range(40))
+    assert np.all(cands.visible[chosen].sum(axis=0) >= 2) and cands.visible.any(axis=0).all()
+    problem = model.problem(cands.q, cands.visible, independent=True)
+    M_rep = model.repeated_information(problem, cands.q[chosen], cands.visible[chosen], len(chosen))
+    fit = model.problem(cands.q[chosen], cands.visible[chosen])
+    assert [type(b) for b in fit.blocks][1] is SoleClosure and fit.params.names == problem.params.names
+    M_fit = _fit_information(fit)
+    np.testing.assert_allclose(information(factors(problem), chosen, M_rep), M_fit, atol=1e-6 * np.abs(M_fit).max())
+
+    options = PlanOptions(free="head_camera", system="floor", poses=5, candidates=200, seed=1)
+    plan = make_plan(robot, options, say=lambda _m: None)
+    views = plan.candidates.visible[[int(np.flatnonzero((plan.candidates.q == q).all(axis=1))[0]) for q in plan.q]]
+    assert not np.any(views.sum(axis=0) == 1), views.sum(axis=0)
+    text = poses_text(robot, plan, options)
+    assert "floor tags lying face up" in text and "tag 50 at x" in text
+    named = {name for group in plan.groups for name in group}
+    assert "HeadPan.offset" in named, "the floor tags' unknown places take any yaw of the head"
+
+
+def test_cover_twice_exchanges_a_pose_so_no_column_is_seen_once():
+    from wolfcal.plan.select import cover_twice
+
+    rng = np.random.default_rng(3)
+    G = rng.normal(size=(30, 2, 5))
+    shows = np.zeros((30, 3), dtype=bool)
+    shows[:, 0] = True
+    shows[7, 1] = True  # column 1 only in candidates 7 and 19
+    shows[19, 1] = True
+    shows[[3, 4], 2] = True
+    basis = np.eye(5)
+    fixed = cover_twice(G, [7, 0, 1, 2], shows, ["a", "b", "c"], basis)
+    assert len(set(fixed)) == 4 and not np.any(shows[fixed].sum(axis=0) == 1)
+    with pytest.raises(WolfcalError, match="b seen once"):
+        cover_twice(G, [7], shows[:, :2], ["a", "b"], basis)  # one pose: column a is seen once whatever it is
+
+
+@pytest.mark.parametrize("system,edit,message", [
+    ("mocap", lambda d: d.pop("markers"), "add 'markers:'"),
+    ("floor", lambda d: d["floor"].update(tags=[]), "lists no floor tag"),
+    ("floor", lambda d: d.pop("floor"), "has no 'floor:'"),
+])
+def test_mocap_and_floor_plans_without_markers_or_floor_tags_are_refused(tmp_path, system, edit, message):
+    out = tmp_path / "p.yaml"
+    path = _config_copy(tmp_path, edit)
+    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--system", system, "--out", str(out)])
+    assert result.exit_code != 0 and "Traceback" not in result.output and not out.exists()
+    assert message in result.output, result.output
+
+
+def test_mocap_plan_for_the_head_camera_is_refused(tmp_path):
+    result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", "mocap", "--free", "head_camera",
+                                      "--out", str(tmp_path / "p.yaml")])
+    assert result.exit_code != 0 and "motion capture cannot see" in result.output
+
+
+def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
+    """The plan whitens with the configured pixel noise (not the quantisation spread of its noise-free readings), and
+    at the fit's noise level it predicts the std the fit reports at a true kinematics, once the unseparable direction
+    (HeadTilt.offset ~ the camera's rotation about the tilt axis) is known exactly: at the truth the camera's rotation
+    correction turns that direction so that camera.ry and camera.rz share the prior held along it."""
+    from wolfcal.fit.pipeline import FitOptions, fit_observations
+    from wolfcal.plan.candidates import draw_candidates, plan_camera
+    from wolfcal.plan.information import PlanModel, fit_separated_std, predicted
+    from wolfcal.plan.pipeline import used_tags
+    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.corrections import Corrections
+    from wolfcal.sim.observations import observations_from_poses
+
+    options = PlanOptions(free="head_camera", system="head")
+    camera = plan_camera(robot, "head")
+    tags = used_tags(robot, options, False)
+    cands = draw_candidates(robot, camera, tags, 40, np.random.default_rng(5), collision_model(robot))
+    seen = [t for t in tags if cands.visible[:, robot.config.tag_ids.index(t)].any()]
+    model = PlanModel(robot, camera, "head_camera", "both", seen)
+    idx = np.arange(10)
+    plan_problem = model.problem(cands.q[idx], cands.visible[idx])
+    assert [s.sigma for s in plan_problem.states] == [robot.config.priors.pixel_noise]
+
+    rng = np.random.default_rng(7)
+    head = {"HeadPan": 0.02, "HeadTilt": -0.015}
+    truth = Corrections(offsets=head, frames={robot.camera_joint: np.array([0.002, -0.001, 0.002, -0.06, 0.02, 0.08])},
+                        tags={t: np.array([0.001, 0.0, -0.001, 0.005, -0.004, 0.006]) for t in seen})
+    q_true = cands.q[idx] + truth.offset_vector(robot.joint_names)
+    T = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, Corrections(frames=truth.frames, tags=truth.tags))[1]
+    obs = observations_from_poses(robot, camera.model, truth, q_true, T, cands.visible[idx], 0.2, rng, camera.name)
+    fit = fit_observations(robot, obs, FitOptions(free="head_camera", system="head"))
+    assert fit.params.names == plan_problem.params.names
+    for state, fitted in zip(plan_problem.states, fit.problem.states):
+        state.set_sigma(fitted.sigma)
+    expected = predicted(plan_problem).std
+    separated, reported = fit_separated_std(fit), fit.solution.std
+    for name in ("camera.x", "camera.ry", "camera.rz", "HeadPan.offset"):
+        i = fit.params.names.index(name)
+        assert separated[i] == pytest.approx(expected[i], rel=0.05), name
+    ry = fit.params.names.index("camera.ry")
+    assert reported[ry] > 1.5 * separated[ry], "the turned unseparable direction lends camera.ry its prior"

@@ -285,8 +285,8 @@ def plan(
     robot: Path | None = robot_option(),
     free: str = typer.Option("leg", "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
-    system: str = typer.Option("head", "--system", help="Measurement system: head | external (mocap and floor: "
-                               "not yet, refused with the reason)."),
+    system: str = typer.Option("head", "--system", help="Measurement system: head | external | mocap (the "
+                               "config's markers) | floor (head pan/tilt while standing, the config's floor tags)."),
     poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
     candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
     criterion: str = typer.Option("D", "--criterion", help="D (determinant) | A (trace) | E (worst direction)."),

@@ -16,13 +16,12 @@ from wolfcal.capture.poses import Pose, PoseScript, check_collisions, colliding_
 from wolfcal.capture.scripted import torque_on, wait_arrival
 from wolfcal.capture.session import CaptureSession
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import aim_head, aim_joints, ball_position, standing_pose
 from wolfcal.hardware.bus import rad_to_ticks
+from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_head, aim_joints, ball_position
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import standing_pose
 from wolfcal.robot.robot import Robot
 
-AIM_DISTANCES_M = (1.0, 2.0, 3.5)  # floor points the head aims at, from the point below base_link [m] ...
-AIM_BEARINGS_DEG = (-30.0, 0.0, 30.0)  # ... at these bearings from the floor's x axis (left positive) [deg]
 FLOOR_NEEDED_CAPTURE = "capture --floor needs the standing soles, the standing readings and the floor tags"
 
 

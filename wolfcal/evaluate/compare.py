@@ -281,6 +281,36 @@ def _blocks(metrics: dict, columns: list[Column], calibrations: list[Calibration
     return blocks
 
 
+def _split_by_system(robot: Robot, captures: list[Path]) -> tuple[list[Path], list[Path]]:
+    """(camera captures, motion-capture captures) by the topics each capture holds; a capture with neither the
+    configured camera images nor the marker topic is refused."""
+    marker_topic = robot.config.markers.topic if robot.config.markers else None
+    image_topics = {robot.config.camera_topics(n)[0] for n in robot.config.camera_names}
+    topics = {Path(c): _topics(Path(c)) for c in captures}
+    unusable = [str(c) for c, t in topics.items() if not (t & image_topics) and marker_topic not in t]
+    if unusable:
+        raise WolfcalError(f"{', '.join(unusable)}: neither camera images ({', '.join(sorted(image_topics))}) nor "
+                           f"markers ({marker_topic or 'no markers: in the robot config'}); give held-out captures "
+                           "of the head camera, an external camera or motion capture")  # fmt: skip
+    return ([c for c, t in topics.items() if t & image_topics], [c for c, t in topics.items() if marker_topic in t])
+
+
+def _write_report(out_dir: Path, metrics: dict, columns: list[Column], calibrations: list[Calibration]) -> None:
+    """report.html, report.md, metrics.json and one histogram per sample column, written as one set."""
+    colours = {BEFORE_LABEL: BEFORE} | {c.label: PALETTE[i % len(PALETTE)] for i, c in enumerate(calibrations)}
+    pngs = {f"{col.key}.png": histograms_png([(label, v, colours[label]) for label, v in col.values.items()],
+                                             f"{col.title} [{col.unit}]", col.title) for col in columns
+            if col.sigma is None}  # fmt: skip
+    blocks = _blocks(metrics, columns, calibrations)
+    title = f"wolfcal comparison {metrics['robot_name']}"
+    with output_set():
+        for name, data in pngs.items():
+            write_bytes_atomic(out_dir / "figures" / name, data)
+        write_text_atomic(out_dir / "report.html", render_html(blocks, pngs, title))
+        write_text_atomic(out_dir / "report.md", render_markdown(blocks, "figures"))
+        write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
+
+
 def run_compare(
     fit_dirs: list[Path], captures: list[Path], out_dir: Path, say: Callable[[str], None] = print,
     force: bool = False,
@@ -295,16 +325,7 @@ def run_compare(
         refuse_fitted_captures(captures, fitted_on)
     inputs = [*captures, robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, COMPARE_FILES, force, inputs)
-    marker_topic = robot.config.markers.topic if robot.config.markers else None
-    image_topics = {robot.config.camera_topics(n)[0] for n in robot.config.camera_names}
-    topics = {Path(c): _topics(Path(c)) for c in captures}
-    mocap_captures = [c for c, t in topics.items() if marker_topic in t]
-    camera_captures = [c for c, t in topics.items() if t & image_topics]
-    unusable = [str(c) for c, t in topics.items() if not (t & image_topics) and marker_topic not in t]
-    if unusable:
-        raise WolfcalError(f"{', '.join(unusable)}: neither camera images ({', '.join(sorted(image_topics))}) nor "
-                           f"markers ({marker_topic or 'no markers: in the robot config'}); give held-out captures "
-                           "of the head camera, an external camera or motion capture")  # fmt: skip
+    camera_captures, mocap_captures = _split_by_system(robot, captures)
     models = {BEFORE_LABEL: Corrections(), **{c.label: c.corrections for c in calibrations}}
     loaded = load_captures(robot, camera_captures, None, say) if camera_captures else []
     # One builder per measurement system (the head camera's includes the ground error when floor views exist).
@@ -331,17 +352,7 @@ def run_compare(
             f"ground error at {VERDICT_DISTANCE_M:g} m [cm] (needs held-out head-camera views of the floor tags)"],
         "decision": decision,
     }  # fmt: skip
-    colours = {BEFORE_LABEL: BEFORE} | {c.label: PALETTE[i % len(PALETTE)] for i, c in enumerate(calibrations)}
-    pngs = {f"{col.key}.png": histograms_png([(label, v, colours[label]) for label, v in col.values.items()],
-                                             f"{col.title} [{col.unit}]", col.title) for col in columns
-            if col.sigma is None}  # fmt: skip
-    blocks = _blocks(metrics, columns, calibrations)
-    with output_set():
-        for name, data in pngs.items():
-            write_bytes_atomic(out_dir / "figures" / name, data)
-        write_text_atomic(out_dir / "report.html", render_html(blocks, pngs, f"wolfcal comparison {robot.config.name}"))
-        write_text_atomic(out_dir / "report.md", render_markdown(blocks, "figures"))
-        write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
+    _write_report(out_dir, metrics, columns, calibrations)
     for label in models:
         say(f"{label}: " + "; ".join(f"{col.key} {metrics['table'][label][col.key]['mean']} ± "
                                      f"{metrics['table'][label][col.key]['std']} {col.unit}" for col in columns))

@@ -1,7 +1,7 @@
 """The measured ground error: held-out views of the floor tags, without truth.
 
 Each view (one floor tag in one sample) gives the rays through its four corner pixels, in the model's floor frame
-(`ground.camera_in_floor`, at the sample's joint readings). The real floor is the model's floor tilted and lifted:
+(`robot.floor.camera_in_floor`, at the sample's joint readings). The real floor is the model's floor tilted and lifted:
 T_model_real = Trans(0, 0, dz) @ Rx(rx) @ Ry(ry) about the model floor's origin (midway between the soles). The
 three plane unknowns and each tag's place (x, y, yaw) are fitted by least squares so that the rays meet the real
 floor (at the tag's thickness) in the tag's printed corners: a model whose floor is tilted against the camera
@@ -24,11 +24,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from wolfcal.camera.model import CameraModel
-from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M, aim_head, ball_position, camera_in_floor
+from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
 from wolfcal.geometry import exp_so3, invert_transform
 from wolfcal.observations import Observations
 from wolfcal.projection import BEHIND_CAMERA_PX
+from wolfcal.robot.aim import aim_head, ball_position
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_weight
 from wolfcal.vision.tags import tag_corners

@@ -16,90 +16,16 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
-from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
+from wolfcal.robot.aim import aim_head, ball_position
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import floor_frames
+from wolfcal.robot.floor import FLOOR_NEEDED, camera_in_floor
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
 
 DISTANCES_M = (1.0, 2.0, 4.5, 9.0)
 BEARINGS_RAD = tuple(np.deg2rad((-30.0, 0.0, 30.0)))
 VERDICT_DISTANCE_M = 4.5  # half a field: the distance the deploy verdict judges
-AIM_REFINEMENTS = 12  # of the head aim after the coarse grid (see aim_head)
-
-
-# why `floor:` is needed, for the error that names the robot config when it is missing
-FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
-
-
-def standing_pose(robot: Robot) -> np.ndarray:
-    """(J,) encoder readings of the standing robot: the config's `floor.standing`, other joints 0 [rad]."""
-    q = np.zeros(len(robot.joint_names))
-    for name, value in robot.config.floor_config(FLOOR_NEEDED).standing.items():
-        q[robot.model.column(name)] = value
-    return q
-
-
-def camera_in_floor(
-    robot: Robot, q: np.ndarray, corrections: Corrections, camera_frame: str | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """T_floor_camera (N, 4, 4) and T_floor_base (N, 4, 4) for readings q (N, J) under a model."""
-    frame = camera_frame or robot.config.head_camera("the ground error needs the head camera").frame
-    soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
-    poses = robot.model.link_poses(q, [frame, *soles], corrections, base=robot.config.base_link)
-    T_floor_base = invert_transform(floor_frames(np.stack([poses[s] for s in soles])))
-    return T_floor_base @ poses[frame], T_floor_base
-
-
-def aim_joints(robot: Robot) -> list[str]:
-    """The joints that aim the camera: the last two movable joints between base and camera (pan, tilt), or one."""
-    joints = [
-        j.name
-        for j in robot.model.joints_between(robot.config.base_link, robot.config.head_camera().frame)
-        if j.actuated
-    ]
-    if not joints:
-        raise WolfcalError(f"{robot.config.path}: no movable joint between base and camera; cannot aim the head")
-    return joints[-2:]
-
-
-def ball_position(robot: Robot, reference: Corrections, distance: float, bearing: float) -> np.ndarray:
-    """(3,) ball on the floor `distance` m from the point below base_link at `bearing` rad, floor frame [m]."""
-    _, T_floor_base = camera_in_floor(robot, standing_pose(robot)[None], reference)
-    origin = T_floor_base[0, :3, 3]
-    return np.array([origin[0] + distance * np.cos(bearing), origin[1] + distance * np.sin(bearing), 0.0])
-
-
-def aim_head(robot: Robot, reference: Corrections, ball: np.ndarray) -> np.ndarray:
-    """(J,) standing readings with pan/tilt set so that the reference model's optical axis points at the ball."""
-    q0 = standing_pose(robot)
-    joints = [robot.model.joints[name] for name in aim_joints(robot)]
-    columns = [robot.model.column(j.name) for j in joints]
-    lo = np.array([max(j.lower, -np.pi) for j in joints])
-    hi = np.array([min(j.upper, np.pi) for j in joints])
-
-    def off_axis(values: np.ndarray) -> np.ndarray:
-        q = np.repeat(q0[None], len(values), axis=0)
-        q[:, columns] = np.clip(values, lo, hi)
-        T_floor_camera, _ = camera_in_floor(robot, q, reference)
-        to_ball = ball - T_floor_camera[:, :3, 3]
-        cos = np.einsum("ni,ni->n", T_floor_camera[:, :3, 2], to_ball) / np.linalg.norm(to_ball, axis=1)
-        return np.arccos(np.clip(cos, -1.0, 1.0))
-
-    points = 41 if len(joints) == 2 else 721
-    axes = [np.linspace(a, b, points) for a, b in zip(lo, hi)]
-    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-    best = grid[int(np.argmin(off_axis(grid)))]
-    step = (hi - lo) / (points - 1)
-    ticks = np.linspace(-1.0, 1.0, 11)  # each refinement: 11 values per joint over +-1 step around the best
-    local = np.stack([g.ravel() for g in np.meshgrid(*[ticks] * len(joints), indexing="ij")], axis=1)
-    for _ in range(AIM_REFINEMENTS):  # the step shrinks 5-fold each time: 1e-9 rad in the end
-        candidates = np.clip(best + local * step, lo, hi)
-        best = candidates[int(np.argmin(off_axis(candidates)))]
-        step = step / 5
-    q0[columns] = best
-    return q0
 
 
 def ground_point(

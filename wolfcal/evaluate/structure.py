@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.fit.camera_block import CameraBlock
-from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.observations import Observations, rms_by
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
@@ -48,8 +48,9 @@ def unexplained(
         label=np.full(2 * block.n_units, -1),
         axis=np.tile(np.arange(2), block.n_units),
     )
-    whitened = GroupedWhitening(split_rows(groups, 2, keep), shared).whitened(np.nan_to_num(residuals).ravel(), sigma)
-    scale = float(np.sqrt(np.mean(whitened**2))) if whitened.size else 0.0
+    whitening = GroupedWhitening(row_groups(groups, 2, keep), shared)
+    norms = whitening.group_norms(np.nan_to_num(residuals).ravel(), sigma)  # squared Mahalanobis norm per group
+    scale = float(np.sqrt(np.sum(norms) / len(whitening.rows))) if len(whitening.rows) else 0.0
     used = count > 0
     shift = float(np.sqrt(np.mean(rms_by(np.arange(n_views), mean, n_views)[used] ** 2))) if used.any() else 0.0
     return {

@@ -99,8 +99,10 @@ class CameraBlock(Block):
         keys = [tag_key(tag) for tag in self.tag_ids]
         T_root_tag = np.stack([d.T_root[k] for k in keys])[t, s]  # (M, 4, 4)
         p_root = np.einsum("mij,mj->mi", T_root_tag[:, :3, :3], self.p_tag) + T_root_tag[:, :3, 3]
-        dp_p = point_motion(np.stack([d.twist_p(k) for k in keys])[t, s] - d.twist_p(self.viewer)[s], p_root)
-        dp_q = point_motion(np.stack([d.twist_q(k) for k in keys])[t, s] - d.twist_q(self.viewer)[s], p_root)
+        # twists relative to the viewer per (tag, sample) before they are spread over the corners: one (M, K, 6)
+        # array per kind instead of three (memory on long recordings)
+        dp_p = point_motion((np.stack([d.twist_p(k) for k in keys]) - d.twist_p(self.viewer))[t, s], p_root)
+        dp_q = point_motion((np.stack([d.twist_q(k) for k in keys]) - d.twist_q(self.viewer))[t, s], p_root)
         T_root_viewer = d.T_root[self.viewer][s]
         R_viewer_root = np.swapaxes(T_root_viewer[:, :3, :3], 1, 2)
         p_view = np.einsum("mij,mj->mi", R_viewer_root, p_root - T_root_viewer[:, :3, 3])

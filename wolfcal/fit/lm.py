@@ -30,9 +30,11 @@ def levenberg_marquardt(
     xtol: float = 1e-8,
     ftol: float = 1e-8,
     gtol: float = 1e-8,
+    cost_tol: float = 0.0,
 ) -> LMResult:
     """Minimise 0.5 * |fun(x)|^2 with a Jacobian jac(x) (R, P), dense or sparse (the normal equations are
-    solved densely: P up to a few thousand)."""
+    solved densely: P up to a few thousand). Stops when a step lowers the cost by less than ftol * cost or
+    cost_tol (absolute, the cost's unit)."""
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost, nfev = float(r @ r), 1
@@ -56,7 +58,7 @@ def levenberg_marquardt(
         predicted = -(2.0 * g @ dx + dx @ H @ dx)
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if rho > 0 and np.isfinite(cost_new):
-            small_change = cost - cost_new < ftol * max(cost, 1e-300)
+            small_change = cost - cost_new < max(ftol * cost, 2.0 * cost_tol, 1e-300)
             x, r, cost = x_new, r_new, cost_new
             H, g = _normal_equations(jac(x), r)
             scale = np.maximum(scale, np.diag(H))

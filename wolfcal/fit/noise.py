@@ -2,13 +2,18 @@
 measurements share.
 
 Residual rows of one group (e.g. every corner seen at one still pose: they share its encoder quantisation) have
-covariance C_g = sigma^2 I + S_g, S_g = sigma_q^2 A_g A_g^T (A_g = d(rows)/d(joint readings)) plus any repeating
-detection error (`SharedErrors`). With S_g = U diag(l) U^T, W_g = diag(1 / sqrt(sigma^2 + l)) U^T whitens them
-(W_g^T W_g = C_g^-1). The eigen-decomposition is
-done once per linearisation, so trying another sigma (the noise-level search) costs one division. Groups of equal
-size are decomposed in one batched call. Rows may have their own noise level, sigma * s_i (`row_scale` s, e.g. one per
-motion-capture marker): with D = diag(s), C_g = D (sigma^2 I + D^-1 S_g D^-1) D, so the same decomposition of
-D^-1 S_g D^-1 whitens r / s.
+covariance C_g = sigma^2 I + U_g U_g^T. U_g is thin (n rows, k columns, k does not grow with n): sigma_q * A for the
+rows of each joint reading in the group (A = d(rows)/d(joint readings)) and tau per repeating detection error
+(`SharedErrors`). Its thin SVD U_g = Q_g diag(s_g) V_g^T gives the symmetric whitening
+
+    C_g^-1/2 = I / sigma + Q_g diag(1 / sqrt(sigma^2 + s_g^2) - 1 / sigma) Q_g^T,
+
+applied as an operator: no n x n matrix is ever formed, so memory and time grow linearly with a group's length (a
+still pose held for hundreds of frames). Each whitened number belongs to one measured row. The SVD is done once per
+linearisation, so trying another sigma (the noise-level search) costs one division; groups of equal size are
+decomposed in one batched call. Rows may have their own noise level, sigma * s_i (`row_scale` s, e.g. one per
+motion-capture marker): with D = diag(s), C_g = D (sigma^2 I + D^-1 U_g U_g^T D^-1) D, so the same whitening of the
+factors D^-1 U_g whitens D^-1 r.
 """
 
 from __future__ import annotations
@@ -18,15 +23,17 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 
+RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
+EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
 
-def split_rows(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> list[np.ndarray]:
-    """Row indices of each group of units: unit u (label labels[u]) owns rows u*dim .. u*dim+dim-1; units with
-    keep False are left out; groups in ascending label order, empty groups dropped."""
+
+def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> np.ndarray:
+    """(U * dim,) group of each row: unit u (label labels[u]) owns rows u*dim .. u*dim+dim-1; groups numbered
+    0, 1, ... in ascending label order; rows of units with keep False are in no group (-1)."""
     units = np.arange(len(labels)) if keep is None else np.flatnonzero(keep)
-    order = units[np.argsort(labels[units], kind="stable")]
-    bounds = np.flatnonzero(np.diff(labels[order])) + 1
-    rows = (order[:, None] * dim + np.arange(dim)).ravel()
-    return np.split(rows, bounds * dim) if len(order) else []
+    group = np.full(len(labels), -1)
+    group[units] = np.unique(labels[units], return_inverse=True)[1].ravel()
+    return np.repeat(group, dim)
 
 
 @dataclass
@@ -42,76 +49,175 @@ class SharedErrors:
     axis: np.ndarray  # (R,) measured axis of each row (u, v, ...)
     tau: float = 0.0  # shared detection error per axis [the block's unit]
 
-    def covariance(self, rows: np.ndarray) -> np.ndarray:
-        """(G, n, n) shared part of the covariance of groups of rows (G, n)."""
-        A = self.A[rows]
-        same_reading = self.reading[rows][:, :, None] == self.reading[rows][:, None, :]
-        C = self.sigma_q**2 * (A @ np.swapaxes(A, 1, 2)) * same_reading
-        if self.tau > 0:
-            label, axis = self.label[rows], self.axis[rows]
-            shared = (label[:, :, None] == label[:, None, :]) & (label[:, :, None] >= 0)
-            shared &= axis[:, :, None] == axis[:, None, :]
-            C = C + self.tau**2 * shared
-        return C
+
+def _slots(group: np.ndarray, key: np.ndarray, on: np.ndarray, n_groups: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index of each row's key among the distinct keys of its group (-1 where `on` is False), and the number of
+    distinct keys per group."""
+    slot = np.full(len(group), -1)
+    if not on.any():
+        return slot, np.zeros(n_groups, dtype=int)
+    pairs, inverse = np.unique(group[on] * (int(key[on].max()) + 1) + key[on], return_inverse=True)
+    pair_group = pairs // (int(key[on].max()) + 1)
+    slot[on] = (np.arange(len(pairs)) - np.searchsorted(pair_group, pair_group))[inverse.ravel()]
+    return slot, np.bincount(pair_group, minlength=n_groups)
 
 
 class GroupedWhitening:
-    """Whitening of residual rows split into groups (list of row-index arrays) with covariance
-    sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are independent."""
+    """Whitening of residual rows split into groups (`group_of_row`: (R,) group 0, 1, ... of each row, -1 for none)
+    with covariance sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are
+    independent, rows in no group get zero weight."""
 
-    def __init__(self, groups: list[np.ndarray], shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
-        self.groups, self.shared = groups, shared
-        self.n_rows = len(shared.A)
-        self.row_scale = np.ones(self.n_rows) if row_scale is None else np.asarray(row_scale, dtype=float)
-        sizes = np.array([len(g) for g in groups], dtype=int)
-        self._classes = []  # (rows (G, n), eigenvalues (G, n), eigenvectors (G, n, n))
-        for n in np.unique(sizes):
-            if n == 0:
+    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
+        self.group_of_row, self.shared = group_of_row, shared
+        self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
+        self.in_group = group_of_row >= 0
+        self.n_rows, self.n_groups = len(shared.A), int(group_of_row.max()) + 1 if self.in_group.any() else 0
+        grouped = np.flatnonzero(self.in_group)
+        self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
+        sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
+        self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
+        self.QT = self.Q.T.tocsr()
+
+    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
+        """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
+        group of each column."""
+        shared, rows = self.shared, self.rows
+        A = shared.sigma_q * shared.A[:, np.any(shared.A != 0, axis=0)]  # joints that move no row are left out
+        A /= self.row_scale[:, None]
+        n_joints = A.shape[1]
+        group = self.group_of_row[rows]
+        reading_slot, readings = _slots(group, shared.reading[rows], np.any(A[rows] != 0, axis=1), self.n_groups)
+        n_axes = int(shared.axis.max()) + 1 if len(shared.axis) else 1
+        labelled = (shared.label[rows] >= 0) & (shared.tau > 0)
+        label_slot, labels = _slots(group, shared.label[rows] * n_axes + shared.axis[rows], labelled, self.n_groups)
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        data: list[np.ndarray] = []
+        row_idx: list[np.ndarray] = []
+        col_idx: list[np.ndarray] = []
+        s2: list[np.ndarray] = []
+        group_of_column: list[np.ndarray] = []
+        K = 0  # columns so far
+        for n in np.unique(sizes[sizes > 0]):
+            members = np.flatnonzero(sizes == n)
+            k_reading = n_joints * int(readings[members].max())
+            k = k_reading + int(labels[members].max())
+            if k == 0:
                 continue
-            rows = np.stack([groups[i] for i in np.flatnonzero(sizes == n)])
-            s = self.row_scale[rows]
-            lam, U = np.linalg.eigh(shared.covariance(rows) / (s[:, :, None] * s[:, None, :]))
-            self._classes.append((rows, np.clip(lam, 0.0, None), U))
-        self.group_of_row = np.full(self.n_rows, -1)
-        for k, g in enumerate(groups):
-            self.group_of_row[g] = k
-        self.n_groups = len(groups)
+            at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
+            U = np.zeros((len(members) * n, k))
+            has = np.flatnonzero(reading_slot[at] >= 0)
+            U[has[:, None], reading_slot[at][has][:, None] * n_joints + np.arange(n_joints)] = A[rows[at][has]]
+            has = np.flatnonzero(label_slot[at] >= 0)
+            U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
+            Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
+            g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
+            data.append(Q[g, :, c].ravel())
+            row_idx.append(rows[at].reshape(len(members), n)[g].ravel())
+            col_idx.append(np.repeat(K + np.arange(len(g)), n))
+            s2.append(s[g, c] ** 2)
+            group_of_column.append(members[g])
+            K += len(g)
+        if not data:
+            return scipy.sparse.csr_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
+        Q = scipy.sparse.csr_matrix(
+            (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))), shape=(self.n_rows, K)
+        )
+        return Q, np.concatenate(s2), np.concatenate(group_of_column)
 
     def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
         """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.groups, shared, self.row_scale)
+        return GroupedWhitening(self.group_of_row, shared, self.row_scale)
 
-    def rotate(self, r: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Per size class: U^T r of each group (G, n) and its eigenvalues (G, n)."""
-        scaled = r / self.row_scale
-        return [np.einsum("gji,gj->gi", U, scaled[rows]) for rows, _, U in self._classes], [c[1] for c in self._classes]
-
-    def whitened(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        """Whitened residuals of the grouped rows, flat, in no particular order (for scale estimates)."""
-        y, lam = self.rotate(r)
-        if not y:
-            return np.zeros(0)
-        return np.concatenate([(yc / np.sqrt(sigma**2 + lc)).ravel() for yc, lc in zip(y, lam)])
-
-    def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
-        """(n_groups,) squared whitened norm of each group's residuals, in the order of `groups`."""
-        out = np.zeros(self.n_groups)
-        y, lam = self.rotate(r)
-        for (rows, _, _), yc, lc in zip(self._classes, y, lam):
-            out[self.group_of_row[rows[:, 0]]] = np.sum(yc**2 / (sigma**2 + lc), axis=1)
+    def apply(self, M, sigma: float):
+        """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""
+        d = 1.0 / np.sqrt(sigma**2 + self.s2) - 1.0 / sigma
+        keep = self.in_group / sigma
+        if scipy.sparse.issparse(M):
+            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
+            shared = self.Q @ (scipy.sparse.diags(d) @ (self.QT @ M))
+            return (scipy.sparse.diags(keep) @ M + shared).tocsr()
+        M = np.asarray(M, dtype=float)
+        if M.ndim == 1:
+            M = M / self.row_scale
+            return keep * M + self.Q @ (d * (self.QT @ M))
+        M = M / self.row_scale[:, None]
+        out = self.Q @ (d[:, None] * (self.QT @ M))
+        out += keep[:, None] * M
         return out
 
-    def matrix(self, sigma: float) -> scipy.sparse.csr_matrix:
-        """W (R, R), block diagonal over the groups; rows in no group get zero weight."""
-        data, rr, cc = [], [], []
-        for rows, lam, U in self._classes:
-            n = rows.shape[1]
-            W = np.swapaxes(U, 1, 2) / np.sqrt(sigma**2 + lam)[:, :, None] / self.row_scale[rows][:, None, :]
-            data.append(W.ravel())
-            rr.append(np.repeat(rows, n, axis=1).ravel())
-            cc.append(np.tile(rows, (1, n)).ravel())
-        if not data:
-            return scipy.sparse.csr_matrix((self.n_rows, self.n_rows))
-        return scipy.sparse.csr_matrix(
-            (np.concatenate(data), (np.concatenate(rr), np.concatenate(cc))), shape=(self.n_rows, self.n_rows)
-        )
+    def split(self, M, sigma: float):
+        """W_s M, (R + K) rows: the whitening that keeps the two kinds of error apart. Rows 0..R-1: each measured
+        row's part outside its group's shared errors, (I - Q Q^T) D^-1 M / sigma (a misdetected corner stays in its
+        own row); rows R..R+K-1: each shared error's component, Q^T D^-1 M / sqrt(sigma^2 + s^2) (a stale joint
+        reading shows in these few numbers). W_s^T W_s = C^-1 like `apply`'s W, and W_s is unique (no choice of
+        basis), so a loss applied per number (the robust fit's) does not depend on how a group was decomposed."""
+        scale = 1.0 / np.sqrt(sigma**2 + self.s2)
+        keep = self.in_group / sigma
+        if scipy.sparse.issparse(M):
+            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
+            t = self.QT @ M
+            own = scipy.sparse.diags(keep) @ (M - self.Q @ t)
+            return scipy.sparse.vstack([own, scipy.sparse.diags(scale) @ t]).tocsr()
+        M = np.asarray(M, dtype=float)
+        M = M / (self.row_scale if M.ndim == 1 else self.row_scale[:, None])
+        t = self.QT @ M
+        own = M - self.Q @ t
+        own *= keep if M.ndim == 1 else keep[:, None]
+        return np.concatenate([own, t * (scale if M.ndim == 1 else scale[:, None])])
+
+    def standardized(self, r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """Numbers of the grouped rows that are each N(0, 1) when the model fits, and the degrees of freedom each
+        carries (for robust scale estimates, `weighted_median`), independent of how a group's covariance is
+        decomposed: per row and per eigenspace of the group's shared part (the span of its shared errors' singular
+        vectors of one size, and the rest: the row's own part), the row's projection onto it divided by its standard
+        deviation there, weighted by the row's share h of that eigenspace (a row's shares sum to 1, a group's
+        weights to its number of rows, as an eigenbasis of its covariance would count them; an eigenspace of one
+        vector gives every row the same number, its component). Rows the shared errors explain fully carry no
+        information on sigma and are dropped."""
+        r = r / self.row_scale
+        own = (r - self.Q @ (self.QT @ r))[self.rows] / sigma
+        free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
+        informative = free > RANK_TOLERANCE**0.5
+        values = [own[informative] / np.sqrt(free[informative])]
+        weights = [free[informative]]
+        if len(self.s2):
+            t = (self.QT @ r) / np.sqrt(sigma**2 + self.s2)
+            Q = self.Q.tocoo()
+            space = self._eigenspaces()[Q.col]  # each entry's eigenspace (numbered over all groups)
+            key = np.unique(Q.row.astype(np.int64) * (int(space.max()) + 1) + space, return_inverse=True)[1].ravel()
+            projection = np.bincount(key, Q.data * t[Q.col])
+            share = np.bincount(key, Q.data**2)
+            on = share > RANK_TOLERANCE
+            values.append(projection[on] / np.sqrt(share[on]))
+            weights.append(share[on])
+        return np.concatenate(values), np.concatenate(weights)
+
+    def _eigenspaces(self) -> np.ndarray:
+        """(K,) eigenspace of each shared column: columns of one group whose s^2 agree to EIGEN_TOLERANCE of the
+        group's largest share one."""
+        order = np.lexsort((self.s2, self.group_of_column))
+        s2, group = self.s2[order], self.group_of_column[order]
+        largest = np.zeros(self.n_groups)
+        np.maximum.at(largest, group, s2)
+        new = np.ones(len(order), dtype=bool)
+        new[1:] = (group[1:] != group[:-1]) | (s2[1:] - s2[:-1] > EIGEN_TOLERANCE * largest[group[1:]])
+        space = np.empty(len(order), dtype=np.int64)
+        space[order] = np.cumsum(new) - 1
+        return space
+
+    def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
+        """(n_groups,) squared whitened norm r_g^T C_g^-1 r_g of each group's residuals."""
+        r = r / self.row_scale
+        t = self.QT @ r
+        independent = np.bincount(self.group_of_row[self.rows], r[self.rows] ** 2, self.n_groups) / sigma**2
+        shared = np.bincount(self.group_of_column, t**2 * (1.0 / (sigma**2 + self.s2) - 1.0 / sigma**2), self.n_groups)
+        return independent + shared
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    """The value below which half of the total weight lies (the lower one at a tie); NaN for no values."""
+    if values.size == 0:
+        return float("nan")
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])

@@ -112,27 +112,33 @@ def fit_observations(
     blocks: list[Block] = [*camera_blocks]
     tags_by_camera = {b.camera_name: b.tag_ids for b in camera_blocks}
     if floor is not None:
-        check_floor_samples(robot, floor)
         tags_by_camera.setdefault(HEAD_CAMERA, [])
-        floor_block = FloorBlock(robot, floor)
-        floor_block.outlier_rule = options.outlier
-        blocks.append(floor_block)
-        if len(robot.config.floor_config().soles) == 2:
-            blocks.append(SoleClosure(robot, floor))
+        blocks += floor_blocks(robot, floor, options)
     chain = build_parameter_set(
         robot, options.free, tags_by_camera, options.side, options.fix_tags,
         tuple(mocap.links) if mocap is not None else (),
     )
     blocks += [mocap] if mocap is not None else []
     _check_enough_data(blocks, len(chain), options.free)
-    priors = robot.config.priors
-    sigmas = [
-        priors.pixel_noise if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M
-        for b in blocks
-    ]
-    problem = Problem(chain, blocks, sigmas, priors.encoder_noise, options.huber_k)
+    problem = Problem(chain, blocks, block_sigmas(robot, blocks), robot.config.priors.encoder_noise, options.huber_k)
     solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
     return Fit(robot, used, blocks, chain, problem, solution)
+
+
+def floor_blocks(robot: Robot, floor: Observations, options: FitOptions) -> list[Block]:
+    """The blocks of the floor samples, checked (`check_floor_samples`): the floor tags' corners and, with two
+    soles, the sole closure."""
+    check_floor_samples(robot, floor)
+    floor_block = FloorBlock(robot, floor)
+    floor_block.outlier_rule = options.outlier
+    return [floor_block, SoleClosure(robot, floor)] if len(robot.config.floor_config().soles) == 2 else [floor_block]
+
+
+def block_sigmas(robot: Robot, blocks: Sequence[Block]) -> list[float]:
+    """The noise level each block starts from before the solver estimates it (px: the config's pixel noise; motion
+    capture and the sole closure [m]): the fit's and pose planning's whitening."""
+    pixel = robot.config.priors.pixel_noise
+    return [pixel if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M for b in blocks]
 
 
 def _tags_used(

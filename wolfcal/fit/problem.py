@@ -18,7 +18,7 @@ import scipy.sparse
 from scipy.sparse.csgraph import connected_components
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.noise import GroupedWhitening, SharedErrors, split_rows
+from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
@@ -49,7 +49,6 @@ class BlockState:
         self.classes = block.noise_classes()  # (U,) fixed: derived once
         self.unit_scale = np.ones(block.n_units)  # (U,) each unit's noise level relative to sigma (its class's)
         self.whitening: GroupedWhitening | None = None
-        self.W: scipy.sparse.csr_matrix | None = None
 
     def shared_size(self, sigma: float) -> float:
         """Size of a repeating detection error per axis [the block's unit] at the noise level `sigma`."""
@@ -100,8 +99,9 @@ class BlockState:
                 shape=(n_read + int(label.max()) + 1,) * 2,
             )
             group_of_unit = connected_components(graph, directed=False)[1][reading]
-        self.whitening = GroupedWhitening(split_rows(group_of_unit, self.block.dim, self.inlier_units), shared,
-                                          self.row_scale)
+        self.whitening = GroupedWhitening(
+            row_groups(group_of_unit, self.block.dim, self.inlier_units), shared, self.row_scale
+        )
         self.set_sigma(self.sigma)
 
     def set_sigma(self, sigma: float) -> None:
@@ -113,7 +113,11 @@ class BlockState:
         shared = self.noise_model.shared
         if shared.tau != tau and np.any(shared.label >= 0):
             self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
-        self.W = self.noise_model.matrix(sigma)
+
+    def whiten(self, M, split: bool = True):
+        """The block's rows (R,) or (R, P) whitened at its noise level: `GroupedWhitening.split` (R + K rows, what
+        the robust loss acts on) or, with split False, `GroupedWhitening.apply` (R rows, each on its measured row)."""
+        return self.noise_model.split(M, self.sigma) if split else self.noise_model.apply(M, self.sigma)
 
     @property
     def noise_model(self) -> GroupedWhitening:
@@ -158,6 +162,7 @@ class Problem:
         """Each block's linearisation at z (the last one is cached)."""
         key = np.asarray(z, dtype=float).tobytes()
         if self._cache is None or self._cache[0] != key:
+            self._cache = None  # dropped before the next one is built: only one linearisation in memory
             values = self.values(z)
             chain_values = values[: self.n_chain]
             lins = [s.block.linearize(chain_values, self.local_values(values, s), self.chain) for s in self.states]
@@ -174,7 +179,7 @@ class Problem:
         return [lin.residual for lin in self.evaluate(z)]
 
     def _whitened(self, z: np.ndarray) -> list[np.ndarray]:
-        return [s.W @ lin.residual.ravel() for s, lin in zip(self.states, self.evaluate(z))]
+        return [s.whiten(lin.residual.ravel()) for s, lin in zip(self.states, self.evaluate(z))]
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Robust whitened data residuals of every block (zero for left-out views), then the priors z."""
@@ -182,7 +187,9 @@ class Problem:
         return np.concatenate(parts + [np.asarray(z, dtype=float)])
 
     def data_jacobian(self, z: np.ndarray, robust: bool = True) -> np.ndarray | scipy.sparse.csr_matrix:
-        """d(whitened data residuals)/dz, (R, P); sparse above DENSE_LIMIT unknowns."""
+        """d(whitened data residuals)/dz, sparse above DENSE_LIMIT unknowns: of the robust residuals (R + K, P) or,
+        with robust False, of the plainly whitened rows (R, P), row i of the block's measured row i (the same
+        information J^T J either way)."""
         n = len(self.params)
         sparse = n > DENSE_LIMIT
         parts = []
@@ -202,14 +209,16 @@ class Problem:
                 vals = lin.jac_local.reshape(rows, L).ravel()
                 local = scipy.sparse.csr_matrix((vals, (r_idx, c_idx)), shape=(rows, n))
                 J = (J + local).tocsr() if sparse else J + local.toarray()
-            J = state.W @ J
+            J = state.whiten(J, split=robust)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
-                J = scipy.sparse.diags(scale) @ J if sparse else J * scale[:, None]
+                J = scipy.sparse.diags(scale) @ J if sparse else np.multiply(J, scale[:, None], out=J)
             parts.append(J)
-        stacked = scipy.sparse.vstack(parts).tocsr() if sparse else np.vstack(parts)
         sig = self.params.prior_sigmas
-        return stacked @ scipy.sparse.diags(sig) if sparse else stacked * sig
+        if sparse:
+            return scipy.sparse.vstack(parts).tocsr() @ scipy.sparse.diags(sig)
+        stacked = parts[0] if len(parts) == 1 else np.vstack(parts)
+        return np.multiply(stacked, sig, out=stacked)
 
     def jacobian(self, z: np.ndarray) -> np.ndarray | scipy.sparse.csr_matrix:
         """d(residuals)/dz: the robust data Jacobian above the identity of the priors."""

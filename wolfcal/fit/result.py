@@ -110,11 +110,11 @@ def _block_dict(fit: Fit, k: int) -> dict:
     views = cast(TagViewBlock, block)
     obs = views.obs
     unit = b.unit
-    samples = []
-    tags = obs.tags_by_sample()
+    tags = obs.tags_by_sample()  # once for all samples
     outlier_tags: dict[int, list[int]] = {}
     for s, t in sorted(b.outlier_views):
         outlier_tags.setdefault(s, []).append(t)
+    samples = []
     for i in range(obs.n_samples):
         samples.append({
             "index": i,

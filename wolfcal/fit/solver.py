@@ -1,12 +1,12 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust trf solve (analytic Jacobian) -> per block, flag outlier views (one tag in one image: its residuals,
-whitened with the covariance of that view alone so that no other view's error leaks in, far above the other
-views' and off by more than the block's floor; they get zero weight) -> per block, estimate the noise level from
-the whitened inlier residuals (the encoder noise is a known property of the servos and stays fixed), and the level
-of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker) -> rebuild
-the weights at the new estimate; until the outlier sets and noise levels settle. Then `uncertainty` at the
-solution.
+Rounds: robust Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
+image: its residuals, whitened with the covariance of that view alone so that no other view's error leaks in, far
+above the other views' and off by more than the block's floor; they get zero weight) -> per block, estimate the
+noise level from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
+fixed), and the level of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker)
+-> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then a full solve under
+the final noise model, and `uncertainty` at its solution.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
-from wolfcal.fit.noise import GroupedWhitening, split_rows
+from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
@@ -28,6 +28,10 @@ from wolfcal.observations import rms_by
 # see there why).
 MIN_SIGMA = {"px": NOISE_FLOOR_PX, "m": 1e-5}
 MAX_SIGMA = {"px": 50.0, "m": 0.1}
+# A round's solve (before its outlier and noise update) stops once a step gains less than this in cost (half the
+# whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
+# linear arms would otherwise take many small steps. The solve after the last round converges fully.
+ROUND_COST_TOL = 1e-3
 # A block's noise classes (e.g. its motion-capture markers) each get their own level relative to the block's: the
 # RMS of the class's standardised residuals within CLASS_CUT of their median-based spread (a reflection does not
 # count, a noisy marker's own scatter does), drawn towards the block's level as if CLASS_PRIOR_ROWS residuals had
@@ -76,9 +80,10 @@ class Solution:
 def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
     block, residual = state.block, lin.residual
-    views = split_rows(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
+    views = row_groups(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
+    rows = np.bincount(views, minlength=block.n_views)
     w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
-    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / np.maximum([len(v) for v in views], 1))
+    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / rows)
 
 
 def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
@@ -90,12 +95,14 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
-    """Robust scale of the whitened inlier residuals (1 when the noise model fits), corrected for the degrees of
-    freedom the free parameters take."""
-    w = state.noise_model.whitened(residual.ravel(), sigma)
-    if w.size <= n_params:
+    """Robust scale of the whitened inlier residuals (1 when the noise model fits): the median over their degrees of
+    freedom of the standardised numbers (`GroupedWhitening.standardized`: what the robust fit weighs, independent of
+    how a group is decomposed), corrected for the degrees of freedom the free parameters take."""
+    w, dof = state.noise_model.standardized(residual.ravel(), sigma)
+    n = float(np.sum(dof))
+    if n <= n_params:
         return 1.0
-    return float(MAD_TO_SIGMA * np.median(np.abs(w)) * np.sqrt(w.size / (w.size - n_params)))
+    return float(MAD_TO_SIGMA * weighted_median(np.abs(w), dof) * np.sqrt(n / (n - n_params)))
 
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
@@ -222,30 +229,37 @@ def _update_noise(
     return settled, notes
 
 
+def _update_round(
+    problem: Problem, z: np.ndarray, rows_total: int, min_sigma: dict[str, float]
+) -> tuple[bool, bool, list[str]]:
+    """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`); the linearisations
+    live only here."""
+    lins = problem.evaluate(z)
+    changed = _update_outliers(problem, lins)
+    problem.linearize(z)
+    settled, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
+    return changed, settled, notes
+
+
 def solve(
     problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
     min_sigma: dict[str, float] = MIN_SIGMA,
 ) -> Solution:
     """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
     say = progress or (lambda _msg: None)
-    n_params = len(problem.params)
-    z = np.zeros(n_params)
+    z = np.zeros(len(problem.params))
     before = [r.copy() for r in problem.raw_residuals(z)]
     rows_total = sum(r.size for r in before)
-    evaluations, converged = 0, False
+    evaluations = 0
     for round_index in range(max_rounds):
-        result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
-        z, evaluations, converged = result.x, evaluations + result.nfev, result.status > 0
-        lins = problem.evaluate(z)
-        changed = _update_outliers(problem, lins)
-        problem.linearize(z)
-        settled, notes = _update_noise(problem, lins, n_params, rows_total, min_sigma)
+        result = levenberg_marquardt(problem.residuals, problem.jacobian, z, cost_tol=ROUND_COST_TOL)
+        z, evaluations = result.x, evaluations + result.nfev
+        changed, settled, notes = _update_round(problem, z, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break
-    else:
-        result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
-        z, evaluations = result.x, evaluations + result.nfev
+    result = levenberg_marquardt(problem.residuals, problem.jacobian, z)
+    z, evaluations = result.x, evaluations + result.nfev
     after = problem.raw_residuals(z)
     return Solution(
         values=problem.values(z),
@@ -253,5 +267,5 @@ def solve(
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,
-        converged=converged and result.status > 0,
+        converged=result.status > 0,
     )

@@ -22,12 +22,17 @@ floor variance F_ii exceeds UNSEPARABLE_SHARE of their prior's keep it whatever 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+import scipy.sparse
 
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock
+from wolfcal.fit.pipeline import Fit
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import Observations
@@ -47,6 +52,19 @@ class _IndependentCameraBlock(CameraBlock):
 
     def shared_labels(self) -> np.ndarray:
         return np.full(self.n_units, -1)
+
+
+class PlanModelLike(Protocol):
+    """The fit a plan is made for, one per measurement system (camera: `PlanModel`; `plan.mocap`, `plan.floor`)."""
+
+    def problem(self, q: np.ndarray, visible: np.ndarray, independent: bool = False) -> Problem:
+        """The fit's problem on poses q (N, J) with what each shows (N, ...); `independent`: every pose its own noise
+        group and no view repeated (the candidates' block, whose repeated views `repeated_information` counts)."""
+        ...
+
+    def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
+        """(P, P) [z units] what every plan of n poses gets whatever the poses (over the candidates' unknowns)."""
+        ...
 
 
 @dataclass
@@ -72,6 +90,10 @@ class PlanModel:
         return observations_from_poses(robot, self.camera.model, nominal, q, T_camera_tag, visible, 0.0,
                                        np.random.default_rng(0), self.camera.name)  # fmt: skip
 
+    def repeated_information(self, problem: Problem, q: np.ndarray, visible: np.ndarray, n: int) -> np.ndarray:
+        """(P, P) information of the views repeated in n poses (module function `repeated_information`)."""
+        return repeated_information(self, problem, q, visible, n)
+
     def problem(self, q: np.ndarray, visible: np.ndarray, independent: bool = False) -> Problem:
         """The fit's problem on simulated observations of poses q (N, J)."""
         obs = self.observations(q, visible)
@@ -82,7 +104,19 @@ class PlanModel:
         else:
             block = kind(self.robot, obs, tags)
         priors = self.robot.config.priors
-        return Problem(self.chain(), [block], [priors.pixel_noise], priors.encoder_noise)
+        return plan_problem(self.chain(), [block], [priors.pixel_noise], priors.encoder_noise)
+
+
+def plan_problem(chain: ParameterSet, blocks: Sequence[Block], sigmas: list[float], sigma_q: float) -> Problem:
+    """The fit's problem over blocks of noise-free simulated observations, whitened at the noise levels `sigmas`
+    (one per block, `fit.pipeline.block_sigmas`: the configured pixel noise) and joint reading noise sigma_q [rad].
+    The fit raises a block's starting level to the spread of its residuals under the nominal model; here that spread
+    is only the encoder quantisation of the simulated readings (0.7-0.9 px for the head camera), already counted by
+    sigma_q, so the levels are set back to those assumed."""
+    problem = Problem(chain, blocks, sigmas, sigma_q)
+    for state, sigma in zip(problem.states, sigmas):
+        state.set_sigma(sigma)
+    return problem
 
 
 def camera_block(problem: Problem) -> CameraBlock:
@@ -96,7 +130,9 @@ def camera_block(problem: Problem) -> CameraBlock:
 def repeated_units(problem: Problem) -> np.ndarray:
     """(U,) bool: units of the (independent) candidate block whose detection error the fit shares between poses (a
     label of `CameraBlock.shared_labels` that spans samples): their view is the same in every pose."""
-    block = camera_block(problem)
+    block = problem.blocks[0]
+    if not isinstance(block, CameraBlock):
+        return np.zeros(block.n_units, dtype=bool)  # motion capture, floor: no view repeats (`repeated_information`)
     labels, samples = CameraBlock.shared_labels(block), block.sample_of_unit
     lowest = np.full(labels.max() + 1, samples.max())
     highest = np.zeros(labels.max() + 1, dtype=samples.dtype)
@@ -140,6 +176,29 @@ def repeated_information(model: PlanModel, problem: Problem, q: np.ndarray, visi
 def predicted(problem: Problem) -> Uncertainty:
     """The uncertainty the fit would report on this problem's poses at the configured noise (fit.uncertainty)."""
     return uncertainty(problem.data_jacobian(np.zeros(len(problem.params)), robust=False), problem.params.prior_sigmas)
+
+
+def separated_std(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.ndarray, n_samples: int) -> np.ndarray:
+    """(P,) std [SI] of each unknown with the directions that no pose informs known exactly: the fit's covariance
+    conditioned on the directions of z whose information per sample (whitened data Jacobian J_data (R, P), z units)
+    is below NULL_INFO. What the poses decide: at the fit's solution an unseparable group (HeadTilt.offset against
+    the camera's rotation about the tilt axis) is turned by the camera's rotation correction and lends its prior to
+    the camera's other rotations (`fit.uncertainty` reports that share too), whatever the poses."""
+    information = J_data.T @ J_data
+    information = information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
+    lam, V = np.linalg.eigh(information / max(n_samples, 1))
+    B = V[:, lam >= NULL_INFO]
+    cov_z = B @ np.linalg.solve(B.T @ (information + np.eye(len(lam))) @ B, B.T)
+    return np.sqrt(np.clip(np.diag(cov_z), 0.0, None)) * prior_sigmas
+
+
+def fit_separated_std(fit: Fit) -> np.ndarray:
+    """(P,) a fit's std [SI] with the directions no pose informs known exactly (`separated_std`), from the same
+    whitened Jacobian at its solution as the std it reports."""
+    problem = fit.problem
+    z = (fit.solution.values - problem.params.references) / problem.params.prior_sigmas
+    n_samples = sum(len(b.q_measured) for b in fit.blocks)
+    return separated_std(problem.data_jacobian(z), problem.params.prior_sigmas, n_samples)
 
 
 @dataclass

@@ -10,7 +10,7 @@ random candidate poses.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,27 +20,24 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.outputs import check_outputs
 from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
+from wolfcal.plan.floor import FloorPlanModel, draw_floor_candidates, expected_places, places_text
 from wolfcal.plan.information import (
     PlanModel,
+    PlanModelLike,
     check_observable,
     criterion_interest,
     factors,
     predicted,
-    repeated_information,
     separability,
 )
+from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
 from wolfcal.plan.order import capture_order
-from wolfcal.plan.select import check_criterion, select
-from wolfcal.robot.collision import collision_model, rest_configuration
+from wolfcal.plan.select import check_criterion, cover_twice, select
+from wolfcal.robot.collision import CollisionModel, collision_model, rest_configuration
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
-PLAN_SYSTEMS = ("head", "external")  # a new measurement system adds its camera or block in `plan_camera`
-NOT_PLANNED = {  # systems the fit supports but plan does not yet, and why
-    "mocap": "planning for motion capture is not built yet (it needs a rule for which markers the cameras see and "
-             "the fit's MocapBlock as the information)",
-    "floor": "planning floor samples (head pan/tilt while standing, floor tags in view) is not built yet",
-}
+PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
 
 
 @dataclass(frozen=True)
@@ -60,10 +57,6 @@ class PlanOptions:
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)
         check_criterion(self.criterion)
-        if self.system in NOT_PLANNED:
-            raise WolfcalError(f"--system {self.system}: {NOT_PLANNED[self.system]}; plan for --system "
-                               f"{' or '.join(PLAN_SYSTEMS)} meanwhile, or capture the poses of "
-                               "configs/<robot>/poses.yaml")  # fmt: skip
         if self.system not in PLAN_SYSTEMS:
             raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
         if self.poses < 1 or self.candidates < self.poses:
@@ -86,6 +79,8 @@ class Plan:
     at_prior: np.ndarray  # (P,) bool: unseparable and keeping its prior (else bounded by a repeated view)
     candidates: Candidates
     condition: tuple[float, float]  # planned, random: over the observable parameters
+    planned_names: list[str] = field(default_factory=list)  # the unknowns of `planned` (chain first, as params)
+    notes: list[str] = field(default_factory=list)  # what the plan assumes (e.g. where the floor tags lie)
 
     def worst_std(self, which: Uncertainty, unit: str) -> float:
         """Largest std among the observable chain parameters of a unit ('m' | 'rad') [unit]."""
@@ -118,24 +113,48 @@ def seen_tags(robot: Robot, options: PlanOptions, tags: list[int], candidates: C
     return seen
 
 
+def system_candidates(robot: Robot, options: PlanOptions, collisions: CollisionModel, rng: np.random.Generator,
+                      say: Callable[[str], None]) -> tuple[PlanModelLike, Candidates, list[str]]:  # fmt: skip
+    """The fit a plan is made for, its candidate poses and what the plan assumes, per measurement system."""
+    say(f"drawing {options.candidates} candidate poses (collisions: capsules from {collisions.source}) ...")
+    notes: list[str] = []
+    model: PlanModelLike
+    if options.system == "mocap":
+        markers = used_markers(robot, options.free, options.side)
+        candidates = draw_mocap_candidates(robot, markers, options.candidates, rng, collisions, options.margin)
+        model = MocapPlanModel(robot, options.free, options.side, markers)
+        notes.append(f"every one of the {len(markers)} markers counts as measured in every pose (cameras all around)")
+    elif options.system == "floor":
+        camera = plan_camera(robot, "head")
+        places = expected_places(robot)
+        candidates = draw_floor_candidates(robot, camera, places, options.candidates, rng, collisions, options.margin)
+        model = FloorPlanModel(robot, camera, options.free, options.side, places)
+        notes.append(f"floor tags lying face up (yaw 0, floor frame: x ahead) at: {places_text(places)}")
+    else:
+        camera = plan_camera(robot, options.system, options.external, options.placement)
+        tags = used_tags(robot, options, camera.external)
+        candidates = draw_candidates(robot, camera, tags, options.candidates, rng, collisions, options.margin)
+        model = PlanModel(robot, camera, options.free, options.side, seen_tags(robot, options, tags, candidates, say))
+    say(f"{len(candidates.q)} candidates from {candidates.drawn} random poses; left out: "
+        + ", ".join(f"{k} {v}" for k, v in candidates.rejected.items()))  # fmt: skip
+    return model, candidates, notes
+
+
 def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = print) -> Plan:
     """Candidates, selection and order (no file written)."""
     rng = np.random.default_rng(options.seed)
     collisions = collision_model(robot)
-    camera = plan_camera(robot, options.system, options.external, options.placement)
-    tags = used_tags(robot, options, camera.external)
-    say(f"drawing {options.candidates} candidate poses (collisions: capsules from {collisions.source}) ...")
-    candidates = draw_candidates(robot, camera, tags, options.candidates, rng, collisions, options.margin)
-    say(f"{len(candidates.q)} candidates from {candidates.drawn} random poses; left out: "
-        + ", ".join(f"{k} {v}" for k, v in candidates.rejected.items()))  # fmt: skip
-    model = PlanModel(robot, camera, options.free, options.side, seen_tags(robot, options, tags, candidates, say))
+    model, candidates, notes = system_candidates(robot, options, collisions, rng, say)
     problem = model.problem(candidates.q, candidates.visible, independent=True)
     G = factors(problem)
-    M_repeated = repeated_information(model, problem, candidates.q, candidates.visible, options.poses)
+    M_repeated = model.repeated_information(problem, candidates.q, candidates.visible, options.poses)
     sep = separability(G, problem.n_chain, M_repeated, criterion_interest(problem.params, problem.n_chain))
     check_observable(problem.params, G, M_repeated, len(G))
     say(f"choosing {options.poses} poses ({options.criterion}-optimal) ...")
     chosen, _ = select(G, options.poses, sep.basis, options.criterion, M_repeated)
+    if options.system == "floor":  # the fit refuses a floor tag seen once
+        labels = [f"floor tag {t}" for t in robot.config.floor_config().tag_ids]
+        chosen = cover_twice(G, chosen, candidates.visible, labels, sep.basis, options.criterion, M_repeated)
     order, move_time = capture_order(candidates.q[chosen], rest_configuration(robot), options.velocity)
     chosen = np.array(chosen)[order]
     others = rng.choice(np.setdiff1d(np.arange(len(G)), chosen), size=min(options.poses, len(G) - len(chosen)),
@@ -149,14 +168,19 @@ def make_plan(robot: Robot, options: PlanOptions, say: Callable[[str], None] = p
         planned=predicted(planned_problem), random=predicted(random_problem), observable=observable,
         groups=sep.groups(problem.params.names), candidates=candidates,
         at_prior=np.array([sep.at_prior(i) for i in range(len(problem.params))], dtype=bool),
-        condition=(_condition(planned_problem, observable), _condition(random_problem, observable)),
+        condition=(_condition(planned_problem, problem.params.names, observable),
+                   _condition(random_problem, problem.params.names, observable)),
+        planned_names=planned_problem.params.names, notes=notes,
     )  # fmt: skip
 
 
-def _condition(problem, observable: np.ndarray) -> float:
-    """Condition number of the column-scaled Jacobian over the observable parameters (the others at their prior)."""
+def _condition(problem, names: list[str], observable: np.ndarray) -> float:
+    """Condition number of the column-scaled Jacobian over the observable parameters (the others at their prior;
+    observable (P,) over `names`, which hold the problem's: a pose set may show fewer floor tags than the
+    candidates)."""
+    keep = np.array([observable[names.index(n)] for n in problem.params.names], dtype=bool)
     J = np.asarray(problem.data_jacobian(np.zeros(len(problem.params)), robust=False))
-    return uncertainty(J[:, observable], problem.params.prior_sigmas[observable]).condition_number
+    return uncertainty(J[:, keep], problem.params.prior_sigmas[keep]).condition_number
 
 
 def poses_text(robot: Robot, plan: Plan, options: PlanOptions) -> str:
@@ -168,6 +192,7 @@ def poses_text(robot: Robot, plan: Plan, options: PlanOptions) -> str:
         f"{len(plan.candidates.q)} candidates,",
         f"# ordered for short moves (about {plan.move_time_s:.0f} s of moves at {options.velocity:.2g} rad/s). "
         "Joint readings [rad]; every joint the plan moves is named.",
+        *[f"# Assumed: {note}." for note in plan.notes],
         f"velocity: {options.velocity}",
         "poses:",
     ]
@@ -189,6 +214,7 @@ def table_lines(plan: Plan) -> list[str]:
             else "  (no pose improves it: the view repeated in every pose bounds it)")
         lines.append(f"  {p.name:44s} {p.prior_sigma * scale:7.3f}{unit:>2s} {plan.planned.std[i] * scale:7.3f}"
                      f"{unit:>2s} {plan.random.std[i] * scale:7.3f}{unit:>2s}{note}")  # fmt: skip
+    lines += [f"  assumed: {note}" for note in plan.notes]
     for unit, scale, shown in (("m", 1000.0, "mm"), ("rad", np.rad2deg(1.0), "deg")):
         planned, random = plan.worst_std(plan.planned, unit) * scale, plan.worst_std(plan.random, unit) * scale
         lines.append(f"  worst std of the observable parameters in {shown}: planned {planned:.3f}, random {random:.3f}")
@@ -202,8 +228,9 @@ def table_lines(plan: Plan) -> list[str]:
             lines.append(f"  no pose improves {' ~ '.join(group)} (bounded by their prior and the view repeated in "
                          "every pose, whose detection error repeats too)")
     observable_names = [nm for nm, ok in zip(names, plan.observable) if ok]
-    for a, b, r in plan.planned.correlated_pairs(names):
-        if a in observable_names and b in observable_names:
+    chain_names = set(names[: plan.n_chain])
+    for a, b, r in plan.planned.correlated_pairs(plan.planned_names):
+        if a in observable_names and b in observable_names and chain_names & {a, b}:
             lines.append(f"  correlated in the plan: {a} ~ {b} ({r:+.2f})")
     return lines
 

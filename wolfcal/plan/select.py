@@ -110,3 +110,34 @@ def select(
         if not improved:
             break
     return chosen, value
+
+
+def cover_twice(
+    G: np.ndarray, chosen: list[int], shows: np.ndarray, labels: list[str], basis: np.ndarray, criterion: str = "D",
+    M0: np.ndarray | None = None,
+) -> list[int]:
+    """`chosen` with no column of shows (N, T) bool (a floor tag in view; `labels` name them) shown by exactly one
+    chosen pose: the
+    fit finds a floor tag's place from its views and refuses a tag seen once. When some is, the one exchange (a
+    chosen pose out, a candidate in) that leaves none so and the best criterion is made; a clear error when none
+    does."""
+    counts = shows[chosen].sum(axis=0)
+    if not np.any(counts == 1):
+        return chosen
+    M = information(G, chosen, M0)
+    best: tuple[float, int, int] = (np.inf, -1, -1)
+    for position, out in enumerate(chosen):
+        values = values_after_adding(M - G[out].T @ G[out], G, basis, criterion)
+        values[chosen] = np.inf
+        after = (counts - shows[out])[None] + shows  # (N, T) views of each column with candidate k in
+        values[np.any(after == 1, axis=1)] = np.inf
+        k = int(np.argmin(values))
+        if values[k] < best[0]:
+            best = (float(values[k]), position, k)
+    if best[1] < 0:
+        lonely = ", ".join(labels[t] for t in np.flatnonzero(counts == 1))
+        raise WolfcalError(f"no exchange of one planned pose leaves every tag in view at least twice ({lonely} seen "
+                           "once, and the fit needs two views of a floor tag); ask for more --poses")  # fmt: skip
+    chosen = list(chosen)
+    chosen[best[1]] = best[2]
+    return chosen

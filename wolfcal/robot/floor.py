@@ -1,10 +1,17 @@
-"""The floor a robot stands on: the plane of its standing soles (config `floor.soles`)."""
+"""The floor a robot stands on: the plane of its standing soles (config `floor.soles`), and the standing robot
+(config `floor.standing`) in it."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from wolfcal.geometry import invert_transform
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import cross
+from wolfcal.robot.robot import Robot
+
+# why `floor:` is needed, for the error that names the robot config when it is missing
+FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
 
 
 def floor_frames(sole_poses: np.ndarray) -> np.ndarray:
@@ -43,3 +50,22 @@ def floor_frame_twists(sole_poses: np.ndarray, sole_twists: np.ndarray) -> np.nd
     dy = cross(dz, x) + cross(z, dx)
     w = 0.5 * (cross(x, dx) + cross(y, dy) + cross(z, dz))
     return np.concatenate([d_origin - cross(w, origin), w], axis=-1)
+
+
+def standing_pose(robot: Robot) -> np.ndarray:
+    """(J,) encoder readings of the standing robot: the config's `floor.standing`, other joints 0 [rad]."""
+    q = np.zeros(len(robot.joint_names))
+    for name, value in robot.config.floor_config(FLOOR_NEEDED).standing.items():
+        q[robot.model.column(name)] = value
+    return q
+
+
+def camera_in_floor(
+    robot: Robot, q: np.ndarray, corrections: Corrections, camera_frame: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """T_floor_camera (N, 4, 4) and T_floor_base (N, 4, 4) for readings q (N, J) under a model."""
+    frame = camera_frame or robot.config.head_camera("the ground error needs the head camera").frame
+    soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
+    poses = robot.model.link_poses(q, [frame, *soles], corrections, base=robot.config.base_link)
+    T_floor_base = invert_transform(floor_frames(np.stack([poses[s] for s in soles])))
+    return T_floor_base @ poses[frame], T_floor_base

@@ -15,9 +15,10 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import aim_joints, camera_in_floor, standing_pose
 from wolfcal.observations import Observations
+from wolfcal.robot.aim import aim_joints
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor, standing_pose
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_corners, tag_texture, tag_texture_width

@@ -22,12 +22,12 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.ground import FLOOR_NEEDED
 from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.floor import FLOOR_NEEDED
 from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
