@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from edge_reference import _refine_edges as reference_refine
-from test_vision import CAMERA, random_view, tag_target, truth
+from test_vision import CAMERA, FACING, random_view, tag_target, truth
 
+from wolfcal.geometry import make_transform
+from wolfcal.vision import edges
 from wolfcal.vision.edges import edge_offsets, refine_edges
 from wolfcal.vision.render import render_targets
 from wolfcal.vision.tags import _detector, _to_gray, tag_cells
@@ -29,6 +31,26 @@ def test_vectorised_refinement_equals_the_reference(camera):
             assert np.linalg.norm(expected - truth(camera, T), axis=1).max() < 1.0  # a real refinement
             compared += 1
     assert compared >= 5
+
+
+def test_tags_refined_together_get_the_corners_they_get_alone(monkeypatch):
+    """Three tags of different sizes (cells of 27, 15 and 5 px) in one image, refined in one call (padded grids):
+    each tag's corners are those of refining it alone."""
+    rng = np.random.default_rng(11)
+    views = [make_transform(FACING, [x, y, z]) for x, y, z in ((-0.25, -0.1, 0.5), (0.0, 0.1, 0.9), (0.5, 0.0, 2.6))]
+    image = render_targets(CAMERA, [tag_target("tag36h11", i, T) for i, T in enumerate(views)], noise_sigma=2.0,
+                           rng=rng)  # fmt: skip
+    corners, ids, _ = _detector("tag36h11", "edges").detectMarkers(_to_gray(image))
+    assert sorted(ids.ravel()) == [0, 1, 2]
+    img = image.astype(np.float32)
+    start = np.stack([np.asarray(c, float).reshape(4, 2) for c in corners])
+    together = refine_edges(img, start, tag_cells("tag36h11"))
+    alone = np.stack([refine_edges(img, c, tag_cells("tag36h11")) for c in start])
+    np.testing.assert_allclose(together, alone, atol=1e-9)
+    monkeypatch.setattr(edges, "TAGS_PER_PASS", 2)  # in passes of tags of similar size
+    np.testing.assert_allclose(refine_edges(img, start, tag_cells("tag36h11")), alone, atol=1e-9)
+    for tag_id, found in zip(ids.ravel(), together):
+        assert np.linalg.norm(found - truth(CAMERA, views[tag_id]), axis=1).max() < 0.3
 
 
 def test_corner_by_the_image_border_keeps_its_estimate():

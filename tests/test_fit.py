@@ -81,6 +81,14 @@ def test_a_misdetected_tag_is_left_out_but_not_its_sample(robot, camera):
     assert np.rad2deg(rot.max()) < 0.05
 
 
+def test_tags_by_sample_lists_each_samples_tags_as_tags_in_sample_does(robot, camera):
+    obs = synthetic_scenario(robot, camera, n=12, seed=16).obs
+    one_tag = obs.subset(np.arange(obs.n_samples), tag_ids=[44])  # samples that saw only tag 43 keep no view
+    for o in (obs, one_tag):
+        assert o.tags_by_sample() == [o.tags_in_sample(s) for s in range(o.n_samples)]
+    assert [] in one_tag.tags_by_sample() and [43, 44] in obs.tags_by_sample()
+
+
 def test_the_outlier_rule_and_noise_floor_are_the_fits_settings(robot, camera):
     """FitOptions' outlier rule and noise floor decide the fit: a floor above the misdetection keeps the view, a
     noise floor above the real noise holds the estimated noise there."""

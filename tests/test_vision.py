@@ -131,6 +131,20 @@ def test_ids_filter_duplicates_and_empty():
     assert detect_tags(render_targets(PINHOLE, [tag_target("tag36h11", 1, cut)], rng=rng)) == {}
 
 
+def test_small_tags_above_the_outline_limit_are_found():
+    """Frontal tags of 14 and 20 px side (outline 56 and 80 px, above MIN_TAG_PERIMETER_PX) in a 320x240 image."""
+    from wolfcal.vision.tags import MIN_TAG_PERIMETER_PX
+
+    rng = np.random.default_rng(5)
+    for side in (14.0, 20.0):
+        assert 4 * side > MIN_TAG_PERIMETER_PX
+        T = make_transform(FACING, [0.01, -0.02, PINHOLE.fx * SIZE / side])
+        image = render_targets(PINHOLE, [tag_target("tag36h11", 3, T)], noise_sigma=1.0, rng=rng)
+        found = detect_tags(image)
+        assert set(found) == {3}
+        assert np.abs(found[3] - truth(PINHOLE, T)).max() < 0.5
+
+
 def half_plane(edge_u: float, z: float = 1.0) -> PlanarTarget:
     """A frontal target, black for x < 0 and white for x > 0, whose boundary projects onto column `edge_u`."""
     x = (edge_u - PINHOLE.cx) / PINHOLE.fx * z

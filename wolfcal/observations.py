@@ -56,6 +56,13 @@ class Observations:
         labels, _ = self.views()
         return [int(t) for t in labels[labels[:, 0] == sample, 1]]
 
+    def tags_by_sample(self) -> list[list[int]]:
+        """`tags_in_sample` of every sample at once (one sort of the views, not one per sample)."""
+        labels, _ = self.views()
+        ends = np.searchsorted(labels[:, 0], np.arange(self.n_samples + 1))
+        tags = labels[:, 1].tolist()
+        return [tags[a:b] for a, b in zip(ends[:-1], ends[1:])]
+
     def per_sample_rms(self, values: np.ndarray) -> np.ndarray:
         """(S,) per-axis RMS of per-corner 2-vectors (M, 2) (e.g. pixel residuals), NaN for samples without
         corners."""

@@ -74,13 +74,14 @@ def sample_rows(
         return round(float(v) * 1000, 3) if np.isfinite(v) else None
 
     rows = []
+    tags = obs.tags_by_sample()
     for s in range(obs.n_samples):
         rows.append(
             {
                 "index": s,
                 "source": Path(obs.sources[s]).name,
                 "stamp_ns": int(obs.stamps_ns[s]),
-                "tags": obs.tags_in_sample(s),
+                "tags": tags[s],
                 "fold": None if fold_of is None else int(fold_of[s]),
                 "rms_before_px": round(float(before.sample_rms[s]), 4),
                 "rms_after_px": round(float(after.sample_rms[s]), 4),

@@ -110,8 +110,7 @@ def _block_dict(fit: Fit, k: int) -> dict:
     views = cast(TagViewBlock, block)
     obs = views.obs
     unit = b.unit
-    labels, _ = obs.views()  # (sample, tag id) sorted: the tags of each sample, once for all samples
-    tags = np.split(labels[:, 1], np.searchsorted(labels[:, 0], np.arange(1, obs.n_samples)))
+    tags = obs.tags_by_sample()  # once for all samples
     outlier_tags: dict[int, list[int]] = {}
     for s, t in sorted(b.outlier_views):
         outlier_tags.setdefault(s, []).append(t)
@@ -121,7 +120,7 @@ def _block_dict(fit: Fit, k: int) -> dict:
             "index": i,
             "source": Path(obs.sources[i]).name,
             "stamp_ns": int(obs.stamps_ns[i]),
-            "tags": [int(t) for t in tags[i]],
+            "tags": tags[i],
             f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
             "outlier": bool(b.outlier_samples[i]),

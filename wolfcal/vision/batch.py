@@ -1,10 +1,12 @@
 """Tag detection in many encoded images on all cores: decode once, detect, refine; bounded memory.
 
-Images go to the workers one at a time (threads: a task costs microseconds against ~50 ms of decoding and detecting
-an image, and single images keep both cores busy to the last image) or in batches of BATCH (processes: each task
-pickles its images), and at most 2 * BATCH images per worker are under way at once, so memory stays bounded
-however many images the input yields (it may be a lazy iterator over a long recording). Results come back in input
-order, each exactly what `wolfcal.vision.tags.detect_tags` returns for the decoded image.
+Images go to the workers in tasks of about PIXELS_PER_TASK (one image at 1280x960 and above, six at 512x384:
+the tags of a task's images are refined in one pass, `wolfcal.vision.tags.detect_tags_many`; single large images
+keep both cores busy to the last image), of at least BATCH images for processes (each task pickles its
+images), and at most 2 tasks per worker are under way at once, so memory stays bounded however many images the
+input yields (it may be a lazy iterator over a long recording). Results come back in input order, each what
+`wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px: refined together, the sums run
+over padded arrays).
 
 Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
 held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
@@ -33,7 +35,11 @@ from wolfcal.errors import WolfcalError
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
-BATCH = 4  # images per process task: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
+BATCH = 4  # images per process task at least: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
+# Pixels per task: one image at 1280x960 and above, six at 512x384. The corner refinement costs ~1.5 ms per call
+# and ~0.5 ms per tag at 512x384 (numpy's per-operation cost dominates), so the tags of small images are refined
+# together; beyond ~8 tags a call gains nothing.
+PIXELS_PER_TASK = 1_200_000
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
 _pool: ProcessPoolExecutor | None = None
@@ -54,27 +60,42 @@ def _family_list(families: Families) -> FamilyList:
 
 def detect_encoded_one(data: bytes, families: FamilyList, refine: str) -> Detections | None:
     """Decode one encoded image (png, jpeg, ...) and detect the tags of every family; None if undecodable."""
+    return _detect_batch([data], families, refine)[0]
+
+
+def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
+    """`detect_encoded_one` of each image, the corners of all of them refined together (one pass per family)."""
     import cv2
 
-    from wolfcal.vision.tags import detect_tags
+    from wolfcal.vision.tags import detect_tags_many
 
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if len(data) else None
-    if image is None:
-        return None
-    found: Detections = {}
+    # straight to 8-bit gray: a colour jpeg decodes only its luma (2048x1536: 15 -> 9 ms), within 1 grey level
+    # of decoding the colours and converting them
+    images = [cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if len(data) else None
+              for data in batch]  # fmt: skip
+    decoded = [image for image in images if image is not None]
+    found: list[Detections] = [{} for _ in decoded]
     for family, ids in families:
-        found.update(detect_tags(image, family, None if ids is None else set(ids), refine))
-    return found
+        for tags, more in zip(found, detect_tags_many(decoded, family, None if ids is None else set(ids), refine)):
+            tags.update(more)
+    results = iter(found)
+    return [None if image is None else next(results) for image in images]
+
+
+def task_size(data: bytes, processes: bool) -> int:
+    """Images per task: as many as make PIXELS_PER_TASK (by the first image's size; at least BATCH for
+    processes, whose tasks pickle their images)."""
+    from wolfcal.io.images import image_size
+
+    size = image_size(data)
+    by_pixels = max(1, PIXELS_PER_TASK // (size[0] * size[1])) if size else 1
+    return max(by_pixels, BATCH if processes else 1)
 
 
 def _worker_start() -> None:
     import cv2
 
     cv2.setNumThreads(1)  # one process per core: OpenCV's own threads would only compete
-
-
-def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
-    return [detect_encoded_one(data, families, refine) for data in batch]
 
 
 def _get_pool(workers: int) -> ProcessPoolExecutor:
@@ -111,22 +132,23 @@ def iter_detect_encoded(
 ) -> Iterator[Detections | None]:
     """Detections of each encoded image in input order (None for an image that cannot be decoded).
 
-    Tasks of `batch` images (default 1 for threads, BATCH for processes); at most 2 * `workers` * BATCH images are
-    read ahead of the results. `workers`: threads, or processes if `processes` (default: one per core); 1 detects
-    in this thread.
+    Tasks of `batch` images (default `task_size`); at most 2 * `workers` tasks are read ahead of the results.
+    `workers`: threads, or processes if `processes` (default: one per core); 1 detects in this thread.
     """
     workers = max(1, workers or cpu_count())
-    batch = batch or (BATCH if processes else 1)
-    depth = 2 * workers * max(1, BATCH // batch)  # tasks under way
     names = _family_list(families)
     source = iter(images)
     head = list(islice(source, IN_PROCESS + 1))
+    if not head:
+        return
+    batch = batch or task_size(head[0], processes)
+    depth = 2 * workers  # tasks under way
+    stream = chain(head, source)
     if workers == 1 or len(head) <= IN_PROCESS:
-        for data in [*head, *source]:
-            yield detect_encoded_one(data, names, refine)
+        while chunk := list(islice(stream, batch)):
+            yield from _detect_batch(chunk, names, refine)
         return
     pool = _get_pool(workers) if processes else ThreadPoolExecutor(workers, thread_name_prefix="wolfcal-detect")
-    stream = chain(head, source)
     pending: deque[Future] = deque()
     try:
         while chunk := list(islice(stream, batch)):

@@ -1,11 +1,13 @@
-"""Sub-pixel tag corners from the two black-square edges next to each corner, vectorised over the 8 edges.
+"""Sub-pixel tag corners from the two black-square edges next to each corner, vectorised over the edges of
+all the tags given (of one image or several).
 
 For each corner, sub-pixel points of the two edges next to it (area method on intensity profiles across the
 edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the
 corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected. All
 8 edges of a tag are sampled with one `cv2.remap` and fitted with batched normal equations (no per-edge
 Python loop): about 1 ms per tag instead of 7-15 ms for the per-edge loop it replaces, same corners to
-~1e-6 px (tests/test_vision.py compares the two).
+~1e-6 px (tests/test_edges.py compares the two). At 512x384 a call costs ~1.5 ms whatever the number of tags
+(numpy's per-operation cost) and ~0.5 ms per tag, so `refine_tags` takes the tags of several images at once.
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points along an edge at distances
 `d` [px] from the corner, S samples across it at offsets `t` [px] (positive out of the tag).
@@ -13,53 +15,74 @@ Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points a
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import cv2
 import numpy as np
 
 MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
+# Tags refined in one pass at most: more gain nothing (the per-call cost is shared by 8 already) and hold larger
+# arrays (~2 MB per tag of 100 px at 512x384)
+TAGS_PER_PASS = 8
 
 
-def edge_offsets(profiles: np.ndarray, t: np.ndarray, dark: np.ndarray, light: np.ndarray, window: float) -> np.ndarray:
+def edge_offsets(
+    profiles: np.ndarray,
+    t: np.ndarray,
+    dark: np.ndarray,
+    light: np.ndarray,
+    window: float | np.ndarray,
+    length: np.ndarray | None = None,
+) -> np.ndarray:
     """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
 
-    `dark`, `light`: (N,) or scalar grey levels. Area method: within `window` px (less near the profile's ends,
-    at least 0.75 px) of the mid-grey crossing nearest the profile centre, the edge lies where the dark area
-    ends: edge = t_start + sum((light - I) / (light - dark)) * dt.
+    `t`: (S,) offsets shared by all profiles, or (N, S) one row per profile; `length` (N,): how many samples of
+    each row are the profile (the rest is padding; default all S). `dark`, `light`, `window`: (N,) or scalar.
+    Area method: within `window` px (less near the profile's ends, at least 0.75 px) of the mid-grey crossing
+    nearest the profile centre, the edge lies where the dark area ends: edge = t_start + sum((light - I) /
+    (light - dark)) * dt.
     """
+    N, S = profiles.shape
+    t = np.broadcast_to(t, (N, S))
+    length = np.full(N, S) if length is None else np.asarray(length)
     dark = np.reshape(dark, (-1, 1))
     light = np.reshape(light, (-1, 1))
-    step = t[1] - t[0]
+    rows = np.arange(N)
+    step = t[:, 1] - t[:, 0]
     above = profiles >= 0.5 * (dark + light)
-    change = above[:, 1:] & ~above[:, :-1]  # dark -> light between samples k and k + 1
-    centre = (len(t) - 1) / 2
-    dist = np.where(change, np.abs(np.arange(len(t) - 1) + 0.5 - centre), np.inf)
+    gaps = np.arange(S - 1)
+    change = above[:, 1:] & ~above[:, :-1] & (gaps < length[:, None] - 1)  # dark -> light between k and k + 1
+    centre = (length - 1) / 2
+    dist = np.where(change, np.abs(gaps + 0.5 - centre[:, None]), np.inf)
     k = np.argmin(dist, axis=1)
-    ok = np.isfinite(dist[np.arange(len(k)), k])
-    cross = t[k] + step / 2
-    reach = np.minimum(window, np.minimum(cross - t[0], t[-1] - cross) - step)  # stay inside the profile
+    ok = np.isfinite(dist[rows, k])
+    cross = t[rows, k] + step / 2
+    reach = np.minimum(window, np.minimum(cross - t[:, 0], t[rows, length - 1] - cross) - step)  # inside the profile
     ok &= reach >= 0.75
-    inside = np.abs(t[None, :] - cross[:, None]) <= reach[:, None]
-    start = np.where(inside, t[None, :], np.inf).min(axis=1) - step / 2
+    inside = np.abs(t - cross[:, None]) <= reach[:, None]
+    start = np.where(inside, t, np.inf).min(axis=1) - step / 2
     dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
     edge = start + (dark_part * inside).sum(axis=1) * step
     return np.where(ok, edge, np.nan)
 
 
 def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(E,) 10th and 90th percentile grey level of each edge's kept profiles (E, M, S) [rows `keep` (E, M)],
-    as np.percentile (linear interpolation) gives them; NaN for an edge without kept rows. One sort for both."""
-    E, M, S = profiles.shape
-    ordered = np.sort(np.where(keep[..., None], profiles, np.inf).reshape(E, M * S), axis=1)
-    last = np.maximum(keep.sum(axis=1) * S - 1, 0)
+    """(E,) 10th and 90th percentile grey level of each edge's kept samples of profiles (E, M, S) [`keep`
+    (E, M, S)], as np.percentile (linear interpolation) gives them; NaN for an edge without kept samples. One
+    sort for both."""
+    E = len(profiles)
+    ordered = np.sort(np.where(keep, profiles, np.inf).reshape(E, -1), axis=1)
+    last = np.maximum(keep.sum(axis=(1, 2)) - 1, 0)
     rows = np.arange(E)
+    seen = keep.any(axis=(1, 2))
     out = []
     for q in (0.10, 0.90):
         pos = q * last
         lo = np.floor(pos).astype(int)
         a, b = ordered[rows, lo], ordered[rows, np.minimum(lo + 1, last)]
         with np.errstate(invalid="ignore"):
-            out.append(np.where(keep.any(axis=1), a + (b - a) * (pos - lo), np.nan))
+            out.append(np.where(seen, a + (b - a) * (pos - lo), np.nan))
     return out[0], out[1]
 
 
@@ -112,65 +135,100 @@ def _tangents(d: np.ndarray, off: np.ndarray, good: np.ndarray) -> np.ndarray:
     return coeffs[:, :2]
 
 
+def _grid(first: np.ndarray, stop: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, np.arange(first, stop, step) padded (continued) to the longest row -> (values (T, N), lengths
+    (T,)). The values are computed as np.arange computes them (first + i * ((first + step) - first))."""
+    count = np.ceil((stop - first) / step).astype(int)
+    delta = (first + step) - first
+    return first[:, None] + np.arange(count.max()) * delta[:, None], count
+
+
 def refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2) -> np.ndarray:
-    """Refine (4, 2) corners [px] of one tag in a float32 image by fitting the two black-square edges next to
-    each corner, near that corner.
+    """Refine (4, 2) corners [px] of one tag, or (T, 4, 2) of T tags, in a float32 image by fitting the two
+    black-square edges next to each corner, near that corner (see `refine_tags`)."""
+    refined = refine_tags([img], np.zeros(len(np.reshape(corners, (-1, 4, 2))), int), corners, cells, iterations)
+    return refined[0] if np.ndim(corners) == 2 else refined
+
+
+def refine_tags(
+    images: Sequence[np.ndarray], image_of_tag: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2
+) -> np.ndarray:
+    """Refine (T, 4, 2) corners [px] of T tags, tag k seen in the float32 image images[image_of_tag[k]], by fitting
+    the two black-square edges next to each corner, near that corner. All tags in one pass (one remap per image
+    and iteration): the per-call cost is numpy's, not the pixels', so the tags of several images are refined
+    together.
 
     Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off),
     reach along the edge for 2.5 cells and across it for one cell (2-6 px) each way; the edge is measured
     within half a cell (1-2.5 px) of it, so it sees the black border and the white quiet zone only. A corner
-    whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
+    whose edges cannot be measured (image border, low contrast) keeps its previous estimate. Tags of other
+    sizes get other grids: rows are padded to the longest and the padding is never used.
     """
-    corners = corners.astype(float).copy()
-    h, w = img.shape
+    corners = np.array(corners, dtype=float).reshape(-1, 4, 2)
+    if len(corners) > TAGS_PER_PASS:  # tags of similar size together, so that little of the arrays is padding
+        size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1)
+        refined = np.empty_like(corners)
+        for part in np.array_split(np.argsort(size), -(-len(corners) // TAGS_PER_PASS)):
+            refined[part] = refine_tags(images, np.asarray(image_of_tag)[part], corners[part], cells, iterations)
+        return refined
     start = np.repeat(np.arange(4), 2)  # edge 2k + j starts at corner k ...
     end = (start + np.tile([1, -1], 4)) % 4  # ... and runs towards corner k + 1 (j = 0) or k - 1 (j = 1)
+    tag = np.repeat(np.arange(len(corners)), 8)  # the tag of each edge
+    image_of_edge = np.asarray(image_of_tag)[tag]
+    far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]  # (E, 2)
+    edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
     for _ in range(iterations):
-        cell = np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)) / cells
-        half = float(np.clip(cell, 2.0, 6.0))
-        t = np.arange(-half, half + 1e-9, 0.25)
-        d = np.arange(max(2.0, 0.3 * cell), max(2.5 * cell, 4.0) + 1e-9, 0.5)
-        window = float(np.clip(0.5 * cell, 1.0, 2.5))  # small tags: keep clear of data bits and background
-        c = corners[start]  # (E, 2)
-        e = corners[end] - c
+        cell = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1) / cells  # (T,)
+        half = np.clip(cell, 2.0, 6.0)
+        t, n_t = _grid(-half, half + 1e-9, 0.25)
+        d, n_d = _grid(np.maximum(2.0, 0.3 * cell), np.maximum(2.5 * cell, 4.0) + 1e-9, 0.5)
+        window = np.clip(0.5 * cell, 1.0, 2.5)  # small tags: keep clear of data bits and background
+        t, n_t, d, n_d, window = t[tag], n_t[tag], d[tag], n_d[tag], window[tag]  # per edge
+        E, M, S = len(tag), d.shape[1], t.shape[1]
+        c = corners[:, start].reshape(E, 2)
+        e = corners[:, end].reshape(E, 2) - c
         length = np.linalg.norm(e, axis=1)
         e /= length[:, None]
         n = np.stack([-e[:, 1], e[:, 0]], axis=1)
-        n *= np.where(np.einsum("ei,ei->e", n, c - corners.mean(axis=0)) >= 0, 1.0, -1.0)[:, None]  # outwards
-        base = c[:, None] + d[None, :, None] * e[:, None]  # (E, M, 2) on the edge
-        ends = base[:, :, None] + t[[0, -1]][None, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
-        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= [w - 1, h - 1]).all(axis=(2, 3))  # the box is convex
-        keep = inside & (d[None, :] < 0.45 * length[:, None])  # (E, M): whole profile in the image, near corner
-        E, M, S = len(c), len(d), len(t)
-        pts = (base[:, :, None] + t[None, None, :, None] * n[:, None, None]).astype(np.float32).reshape(E * M, S, 2)
-        profiles = cv2.remap(img, pts[..., 0], pts[..., 1], cv2.INTER_LINEAR).reshape(E, M, S)
-        dark, light = _dark_light(profiles, keep)
+        n *= np.where(np.einsum("ei,ei->e", n, c - corners.mean(axis=1)[tag]) >= 0, 1.0, -1.0)[:, None]  # outwards
+        base = c[:, None] + d[:, :, None] * e[:, None]  # (E, M, 2) on the edge
+        t_ends = np.stack([t[:, 0], t[np.arange(E), n_t - 1]], axis=1)  # (E, 2)
+        ends = base[:, :, None] + t_ends[:, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
+        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= far[:, None, None]).all(axis=(2, 3))  # the box is convex
+        keep = inside & (d < 0.45 * length[:, None]) & (np.arange(M) < n_d[:, None])  # (E, M): near the corner
+        pts = (base[:, :, None] + t[:, None, :, None] * n[:, None, None]).astype(np.float32)  # (E, M, S, 2)
+        profiles = np.empty((E, M, S), np.float32)
+        for i, rows in edges_of_image:
+            at = pts[rows].reshape(-1, S, 2)
+            profiles[rows] = cv2.remap(images[i], at[..., 0], at[..., 1], cv2.INTER_LINEAR).reshape(-1, M, S)
+        dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :])
         profiles = profiles.astype(float)
         usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
         dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
-        off = edge_offsets(profiles.reshape(E * M, S), t, np.repeat(dark, M), np.repeat(light, M), window)
+        off = edge_offsets(profiles.reshape(E * M, S), np.repeat(t, M, axis=0), np.repeat(dark, M),
+                           np.repeat(light, M), np.repeat(window, M), np.repeat(n_t, M))  # fmt: skip
         off = off.reshape(E, M)
         good = keep & np.isfinite(off) & usable[:, None]
         usable &= good.sum(axis=1) >= MIN_POINTS
-        dd = np.broadcast_to(d, (E, M))
         tangent = np.full((E, 2), np.nan)
         if usable.any():
-            tangent[usable] = _tangents(dd[usable], off[usable], good[usable])
+            tangent[usable] = _tangents(d[usable], off[usable], good[usable])
         point = c + tangent[:, :1] * n  # (E, 2) on the edge at the corner
         direction = e + tangent[:, 1:] * n
-        corners = _intersect_pairs(corners, point, direction, 0.5 * cell + 1.0)
+        T = len(corners)
+        corners = _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), 0.5 * cell + 1.0)
     return corners
 
 
-def _intersect_pairs(corners: np.ndarray, point: np.ndarray, direction: np.ndarray, reach: float) -> np.ndarray:
-    """New corners: intersection of edges 2k and 2k + 1 where both are measured, not nearly parallel and
-    within `reach` px of the old corner; the old corner otherwise."""
-    p1, d1, p2, d2 = point[0::2], direction[0::2], point[1::2], direction[1::2]
-    det = -d1[:, 0] * d2[:, 1] + d2[:, 0] * d1[:, 1]  # det [d1, -d2]
+def _intersect_pairs(corners: np.ndarray, point: np.ndarray, direction: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """New corners (T, 4, 2): intersection of edges 2k and 2k + 1 (points and directions (T, 8, 2)) where both
+    are measured, not nearly parallel and within `reach` (T,) px of the old corner; the old corner otherwise."""
+    p1, d1, p2, d2 = point[:, 0::2], direction[:, 0::2], point[:, 1::2], direction[:, 1::2]
+    det = -d1[..., 0] * d2[..., 1] + d2[..., 0] * d1[..., 1]  # det [d1, -d2]
     rhs = p2 - p1
     with np.errstate(invalid="ignore", divide="ignore"):
-        s = (-rhs[:, 0] * d2[:, 1] + d2[:, 0] * rhs[:, 1]) / det  # Cramer's rule for the first unknown
-        new = p1 + s[:, None] * d1
-        ok = np.isfinite(new).all(axis=1) & (np.abs(det) >= 1e-6)
-        ok &= np.linalg.norm(np.where(ok[:, None], new, corners) - corners, axis=1) < reach
-    return np.where(ok[:, None], new, corners)
+        s = (-rhs[..., 0] * d2[..., 1] + d2[..., 0] * rhs[..., 1]) / det  # Cramer's rule for the first unknown
+        new = p1 + s[..., None] * d1
+        ok = np.isfinite(new).all(axis=2) & (np.abs(det) >= 1e-6)
+        ok &= np.linalg.norm(np.where(ok[..., None], new, corners) - corners, axis=2) < reach[:, None]
+    return np.where(ok[..., None], new, corners)
