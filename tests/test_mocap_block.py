@@ -124,7 +124,8 @@ def test_result_lists_each_left_out_marker_with_its_sample(tmp_path):
     assert 0.2 < block["rms_after_mm"] < 0.45 and block["base_poses"]["mocap"]["xyz"] == pytest.approx(
         T_MOCAP_BASE[:3, 3], abs=0.005)
     assert any(p["name"] == "marker.r_foot_fl.x" for p in data["parameters"])
-    assert summary_lines(result)
+    rms = f"{block['rms_before_mm']:.3f} mm before -> {block['rms_after_mm']:.3f} mm"
+    assert f"residual RMS (per axis, inliers): {rms}" in "\n".join(summary_lines(result))
 
 
 def test_a_noisy_marker_gets_its_own_noise_level_and_stays_in():

@@ -390,11 +390,14 @@ def summary_lines(result: FitResult) -> list[str]:
     lines = []
     for b in result.blocks:
         u = b["unit"]
+        # pixels: tag corners; lengths (motion capture in mm, the sole closure in m): residuals shown in mm
+        what, used = ("reprojection", "corners") if u == "px" else ("residual", "residuals")
+        scale, shown = (1000.0, "mm") if u == "m" else (1.0, u)
         lines += [
             f"{b['name']}: {b['n_samples']} samples ({b['n_outlier_samples']} left out as outliers, "
-            f"{b['n_outlier_views']} outlier tag view(s) in all), corners used: {b['n_units_used']}",
-            f"  reprojection RMS (per axis, inliers): {b[f'rms_before_{u}']:.3f} {u} before -> "
-            f"{b[f'rms_after_{u}']:.3f} {u} after (max {b[f'max_after_{u}']:.2f} {u})",
+            f"{b['n_outlier_views']} outlier view(s) in all), {used} used: {b['n_units_used']}",
+            f"  {what} RMS (per axis, inliers): {b[f'rms_before_{u}'] * scale:.3f} {shown} before -> "
+            f"{b[f'rms_after_{u}'] * scale:.3f} {shown} after (max {b[f'max_after_{u}'] * scale:.3f} {shown})",
         ]
     lines += [
         f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.1f}",
