@@ -55,17 +55,13 @@ def floor_frame_twists(sole_poses: np.ndarray, sole_twists: np.ndarray) -> np.nd
 
 def standing_pose(robot: Robot) -> np.ndarray:
     """(J,) encoder readings of the standing robot: the config's `floor.standing`, other joints 0 [rad]."""
-    q = np.zeros(len(robot.joint_names))
-    for name, value in robot.config.floor_config(FLOOR_NEEDED).standing.items():
-        q[robot.model.column(name)] = value
-    return q
+    return stance_readings([robot.config.floor_config(FLOOR_NEEDED).standing], robot.model)[0]
 
 
 def stance_poses(robot: Robot) -> np.ndarray:
     """(K, J) encoder readings of the stances floor samples are taken in: the config's `floor.stances`, else
     `floor.standing` alone; other joints 0 [rad]."""
-    robot.config.floor_config(FLOOR_NEEDED)
-    return stance_readings(robot.config, robot.joint_names)
+    return stance_readings(robot.config.floor_config(FLOOR_NEEDED).floor_stances, robot.model)
 
 
 def camera_in_floor(

@@ -8,6 +8,8 @@ is data for the fit, not bad input). The floor samples hold one of the config's 
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 
 from wolfcal.config import RobotConfig
@@ -38,14 +40,13 @@ def off_plane(gaps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return tilt, gap, (tilt > MAX_SOLE_TILT_RAD) | (gap > MAX_SOLE_GAP_M)
 
 
-def stance_readings(config: RobotConfig, joint_names: list[str]) -> np.ndarray:
-    """(K, J) encoder readings [rad] of the config's stances (`FloorConfig.floor_stances`), other joints 0."""
-    stances = config.floor_config().floor_stances
-    q = np.zeros((len(stances), len(joint_names)))
-    column = {j: k for k, j in enumerate(joint_names)}
+def stance_readings(stances: Sequence[Mapping[str, float]], model: KinematicModel) -> np.ndarray:
+    """(K, J) encoder readings [rad] of stances given as joint -> rad maps (`floor.standing`, `floor.stances`), in
+    the model's joint columns, other joints 0."""
+    q = np.zeros((len(stances), len(model.actuated_joint_names)))
     for i, stance in enumerate(stances):
         for joint, value in stance.items():
-            q[i, column[joint]] = value
+            q[i, model.column(joint)] = value
     return q
 
 
@@ -57,10 +58,7 @@ def check_stances(config: RobotConfig, model: KinematicModel) -> None:
         return
     named = [("floor.standing", floor.standing)]
     named += [(f"floor.stances[{i}]", s) for i, s in enumerate(floor.stances)]
-    q = np.zeros((len(named), len(model.actuated_joint_names)))
-    for i, (_, stance) in enumerate(named):
-        for joint, value in stance.items():
-            q[i, model.column(joint)] = value
+    q = stance_readings([stance for _, stance in named], model)
     poses = model.link_poses(q, floor.soles[:2], base=config.base_link)
     tilt, gap, bad = off_plane(sole_gaps(np.stack([poses[s] for s in floor.soles[:2]])))
     if bad.any():
