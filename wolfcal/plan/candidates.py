@@ -22,6 +22,7 @@ each one is uniform over the valid poses. An external camera has no head joints:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -185,6 +186,22 @@ def viewer_joints(robot: Robot, camera: PlanCamera, joints: list[str]) -> list[s
     return [j for j in joints if j in moving]
 
 
+def draw_until(n: int, batch: Callable[[], tuple[np.ndarray, np.ndarray, int]]) -> tuple[np.ndarray, np.ndarray, int]:
+    """Calls `batch` (the candidates it keeps (k, J), what each shows (k, ...), how many it drew) until n are kept,
+    MAX_DRAWN are drawn, or HOPELESS_DRAWN are drawn without one kept; returns the first n kept, what they show and
+    the number drawn."""
+    kept_q, kept_v, drawn = [], [], 0
+    while drawn < MAX_DRAWN:
+        q, visible, count = batch()
+        kept_q.append(q)
+        kept_v.append(visible)
+        drawn += count
+        found = sum(len(k) for k in kept_q)
+        if found >= n or (not found and drawn >= HOPELESS_DRAWN):
+            break
+    return np.concatenate(kept_q)[:n], np.concatenate(kept_v)[:n], drawn
+
+
 def draw_candidates(
     robot: Robot, camera: PlanCamera, tag_ids: list[int], n: int, rng: np.random.Generator,
     collisions: CollisionModel, margin: float = 0.1,
@@ -198,11 +215,10 @@ def draw_candidates(
     ids = [t for t in robot.config.tag_ids if t in tag_ids]
     tag_joints = robot.actuated_joints_to([robot.config.tag(t).link for t in ids])
     factored = bool(aim) and not {robot.joint_names[k] for k in aim} & set(tag_joints)  # tags don't move with the head
-    kept_q, kept_v, drawn = [], [], 0
     rejected = {"tags not in view": 0, "self-collision": 0, "tags hidden by the body": 0}
-    while drawn < MAX_DRAWN:
+
+    def batch() -> tuple[np.ndarray, np.ndarray, int]:
         q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
-        drawn += BATCH * per_body
         free = collisions.collision_free(q, CLEARANCE_M, ~moved)  # the pairs the viewer's joints do not move
         rejected["self-collision"] += int((~free).sum()) * per_body
         q_body = q[free]
@@ -220,12 +236,9 @@ def draw_candidates(
             visible &= line_of_sight(robot, camera, q, collisions)
         ok = pose_ok(robot, camera, visible)
         rejected["tags hidden by the body"] += int((~ok).sum())
-        kept_q.append(q[ok])
-        kept_v.append(visible[ok])
-        found = sum(len(k) for k in kept_q)
-        if found >= n or (not found and drawn >= HOPELESS_DRAWN):
-            break
-    q, visible = np.concatenate(kept_q)[:n], np.concatenate(kept_v)[:n]
+        return q[ok], visible[ok], BATCH * per_body
+
+    q, visible, drawn = draw_until(n, batch)
     if not len(q):
         what = "the tags fixed to the base and another tag" if camera.external else "a tag"
         raise WolfcalError(

@@ -34,11 +34,10 @@ from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.plan.candidates import (
     BATCH,
     CLEARANCE_M,
-    HOPELESS_DRAWN,
     IMAGE_EDGE_MARGIN,
-    MAX_DRAWN,
     Candidates,
     PlanCamera,
+    draw_until,
     joint_bounds,
 )
 from wolfcal.plan.information import plan_problem
@@ -119,23 +118,19 @@ def draw_floor_candidates(robot: Robot, camera: PlanCamera, places: dict[int, np
     if not collisions.collision_free(standing[None], CLEARANCE_M, ~moved)[0]:
         raise WolfcalError(f"{robot.config.path}: the standing pose 'floor.standing' makes the robot touch itself "
                            "(collision model); check its readings")  # fmt: skip
-    kept_q, kept_v, drawn = [], [], 0
     rejected = {"self-collision": 0, "no floor tag in view": 0}
-    while drawn < MAX_DRAWN:
+
+    def batch() -> tuple[np.ndarray, np.ndarray, int]:
         q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
-        drawn += BATCH
         free = collisions.collision_free(q, CLEARANCE_M, moved)
         rejected["self-collision"] += int((~free).sum())
         q = q[free]
         visible = floor_views(robot, camera, q, places, collisions)
         ok = visible.any(axis=1)
         rejected["no floor tag in view"] += int((~ok).sum())
-        kept_q.append(q[ok])
-        kept_v.append(visible[ok])
-        found = sum(len(k) for k in kept_q)
-        if found >= n or (not found and drawn >= HOPELESS_DRAWN):
-            break
-    q, visible = np.concatenate(kept_q)[:n], np.concatenate(kept_v)[:n]
+        return q[ok], visible[ok], BATCH
+
+    q, visible, drawn = draw_until(n, batch)
     if not len(q):
         raise WolfcalError(
             f"none of {drawn} head poses ({', '.join(joints)} within their limits, legs standing) shows a floor tag "

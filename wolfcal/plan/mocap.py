@@ -23,7 +23,7 @@ from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, mocap_block
 from wolfcal.fit.problem import Problem
 from wolfcal.markers import MarkerObservations
-from wolfcal.plan.candidates import BATCH, CLEARANCE_M, HOPELESS_DRAWN, MAX_DRAWN, Candidates, joint_bounds
+from wolfcal.plan.candidates import BATCH, CLEARANCE_M, Candidates, draw_until, joint_bounds
 from wolfcal.plan.information import plan_problem
 from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
@@ -59,20 +59,17 @@ def draw_mocap_candidates(robot: Robot, names: list[str], n: int, rng: np.random
         raise WolfcalError(f"{robot.config.path}: no movable joint between {robot.config.base_link} and the markers' "
                            "links; motion capture has nothing to observe")  # fmt: skip
     lo, hi = joint_bounds(robot, joints, margin)
-    kept, drawn = [], 0
-    while drawn < MAX_DRAWN:
+
+    def batch() -> tuple[np.ndarray, np.ndarray, int]:
         q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
-        drawn += BATCH
-        kept.append(q[collisions.collision_free(q, CLEARANCE_M)])
-        found = sum(len(k) for k in kept)
-        if found >= n or (not found and drawn >= HOPELESS_DRAWN):
-            break
-    q = np.concatenate(kept)[:n]
+        q = q[collisions.collision_free(q, CLEARANCE_M)]
+        return q, np.ones((len(q), len(names)), dtype=bool), BATCH
+
+    q, visible, drawn = draw_until(n, batch)
     if not len(q):
         raise WolfcalError(f"none of {drawn} random poses of {', '.join(joints)} within the joint limits is free of "
                            "self-collision; check the joint limits and the collision geometry")  # fmt: skip
-    return Candidates(q, np.ones((len(q), len(names)), dtype=bool), joints, drawn,
-                      {"self-collision": drawn - len(q)})  # fmt: skip
+    return Candidates(q, visible, joints, drawn, {"self-collision": drawn - len(q)})
 
 
 @dataclass
