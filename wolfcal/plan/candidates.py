@@ -32,12 +32,12 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import HEAD_CAMERA
+from wolfcal.projection import visible_in_view
 from wolfcal.robot.collision import CollisionModel, rest_configuration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.external_poses import external_pose_ok, external_visibility
 from wolfcal.sim.placement import expected_placement, placement_from_text
-from wolfcal.sim.poses import visible_in_view
 from wolfcal.vision.tags import tag_corners
 
 BATCH = 4000  # configurations of the joints that move the tags drawn at a time
