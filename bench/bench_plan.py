@@ -40,6 +40,7 @@ import numpy as np  # noqa: E402
 
 from wolfcal.encoders import encoder_readings  # noqa: E402
 from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
+from wolfcal.external_view import external_tag_poses  # noqa: E402
 from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
 from wolfcal.geometry import invert_transform, transform_from_xyz_rpy  # noqa: E402
 from wolfcal.markers import MarkerObservations  # noqa: E402
@@ -48,13 +49,14 @@ from wolfcal.plan.candidates import plan_camera  # noqa: E402
 from wolfcal.plan.floor import expected_places  # noqa: E402
 from wolfcal.plan.information import fit_null_directions, fit_separated_std  # noqa: E402
 from wolfcal.plan.pipeline import PlanOptions, make_plan  # noqa: E402
-from wolfcal.projection import tag_corner_pixels  # noqa: E402
+from wolfcal.projection import (
+    observations_from_poses,  # noqa: E402
+    tag_corner_pixels,  # noqa: E402
+)
 from wolfcal.robot.corrections import Corrections  # noqa: E402
 from wolfcal.robot.floor import camera_in_floor, floor_tag_poses  # noqa: E402
 from wolfcal.robot.robot import load_robot  # noqa: E402
-from wolfcal.sim.external_poses import external_tag_poses  # noqa: E402
 from wolfcal.sim.mocap_scene import MocapNoise, measure, true_marker_positions  # noqa: E402
-from wolfcal.sim.observations import observations_from_poses  # noqa: E402
 from wolfcal.sim.simulate import offset_joints  # noqa: E402
 from wolfcal.sim.truth import TruthSpec, random_truth  # noqa: E402
 from wolfcal.vision.tags import tag_corners  # noqa: E402

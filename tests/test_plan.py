@@ -504,9 +504,9 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
     from wolfcal.plan.candidates import draw_candidates, plan_camera
     from wolfcal.plan.information import PlanModel, fit_null_directions, fit_separated_std, predicted
     from wolfcal.plan.pipeline import used_tags
+    from wolfcal.projection import observations_from_poses
     from wolfcal.robot.collision import collision_model
     from wolfcal.robot.corrections import Corrections
-    from wolfcal.sim.observations import observations_from_poses
 
     options = PlanOptions(free="head_camera", system="head")
     camera = plan_camera(robot, "head")

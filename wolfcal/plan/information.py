@@ -1,10 +1,10 @@
 """What candidate poses would tell the fit: its own blocks, noise model and priors at simulated observations.
 
-The tag corners of each candidate are projected through the camera model at the nominal kinematics (`wolfcal.sim`,
-no image, no noise) and handed to the fit's `CameraBlock` and `Problem`, whitened with the configured pixel noise
-(priors.pixel_noise) and encoder quantisation (priors.encoder_noise), in the fit's prior-normalised unknowns z
-(prior: unit variance). The information of a pose set S is I + M_rep(n) + sum_k G_k^T G_k, as the fit's noise model
-makes it:
+The tag corners of each candidate are projected through the camera model at the nominal kinematics
+(`wolfcal.projection`, no image, no noise) and handed to the fit's `CameraBlock` and `Problem`, whitened with the
+configured pixel noise (priors.pixel_noise) and encoder quantisation (priors.encoder_noise), in the fit's
+prior-normalised unknowns z (prior: unit variance). The information of a pose set S is I + M_rep(n) + sum_k G_k^T G_k,
+as the fit's noise model makes it:
 - G_k (`factors`, r x P): the whitened rows of candidate k that change with the pose (each candidate pose its own
   noise group: the encoder error of one still pose);
 - M_rep(n) (`repeated_information`): the views that are the same in every pose, an external camera's view of the tags
@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse
 
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_tag_poses
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.pipeline import Fit
@@ -37,11 +38,10 @@ from wolfcal.fit.problem import Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import Observations
 from wolfcal.plan.candidates import PlanCamera
+from wolfcal.projection import observations_from_poses
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_tag_poses
-from wolfcal.sim.observations import observations_from_poses
 
 NULL_INFO = 1e-3  # mean information per pose [z units, prior = 1] below which a direction counts as unobservable
 UNSEPARABLE_SHARE = 1e-3  # a parameter is unseparable when this share of its prior variance lies in null directions
