@@ -39,13 +39,22 @@ WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
                      np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
 FLOOR_DISTANCE_M = (1.0, 4.0)
-# deeper stances of the floor samples besides `floor.standing`: hips and ankles solved (nominal model, scipy
-# least_squares) so that each sole keeps the standing pose's orientation and forward place in the torso frame
+# stances of the floor samples besides `floor.standing` (--stances): the torso moved 3 cm sideways or turned
+# 0.15 rad about the vertical, 1 cm lower, each sole kept where it stands (nominal model, scipy least_squares over each
+# leg's six joints, knees bent forward): every leg joint, the roll and yaw joints too, reads another tick in each
+# stance, so the rounding of the standing readings differs between stances (knee-only stances left the roll and
+# yaw joints at one reading)
 STANCES = [
-    {"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.6, "LHipPitch": 0.1695,
-     "LAnklePitch": -0.1687},
-    {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
-     "LAnklePitch": -0.3186},
+    {"LHipRoll": -0.091, "LHipPitch": 0.2382, "LKnee": 0.7372, "LAnklePitch": -0.2372, "LAnkleRoll": -0.091,
+     "RHipRoll": -0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": -0.0909},
+    {"LHipRoll": 0.091, "LHipPitch": 0.2418, "LKnee": 0.7444, "LAnklePitch": -0.2408, "LAnkleRoll": 0.091,
+     "RHipRoll": 0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": 0.0909},
+    {"LHipYaw": 0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2824, "LKnee": 0.7756, "LAnklePitch": -0.2314,
+     "LAnkleRoll": 0.0019, "RHipYaw": 0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2282, "RKnee": -0.7675,
+     "RAnklePitch": 0.2775, "RAnkleRoll": -0.0019},
+    {"LHipYaw": -0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2297, "LKnee": 0.7702, "LAnklePitch": -0.2787,
+     "LAnkleRoll": 0.0019, "RHipYaw": -0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2806, "RKnee": -0.7723,
+     "RAnklePitch": 0.2299, "RAnkleRoll": -0.0019},
 ]
 
 
