@@ -76,24 +76,37 @@ def _refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: 
     """Refine (4, 2) corners [px] in a float32 image by fitting the two black-square edges next to each
     corner, near that corner.
 
-    Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off),
-    reach along the edge for 2.5 cells and across it for one cell (2-6 px) each way; the edge is measured
-    within half a cell (1-2.5 px) of it, so it sees the black border and the white quiet zone only. The fit
+    Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off; at an
+    acute corner further, so that they stay clear of the other edge), reach along the edge for 2.5 cells and
+    across it for one cell across that edge (2-6 px) each way; the edge is measured within half that cell
+    (1-2.5 px) of it, so it sees the black border and the white quiet zone only. The fit
     is local (a parabola per edge), which keeps the corner exact under lens distortion that bends whole
     edges. A corner whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
     """
     corners = corners.astype(float).copy()
     for _ in range(iterations):
         cell = np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)) / cells
-        half = float(np.clip(cell, 2.0, 6.0))
-        t = np.arange(-half, half + 1e-9, 0.25)
-        d = np.arange(max(2.0, 0.3 * cell), max(2.5 * cell, 4.0) + 1e-9, 0.5)
-        window = float(np.clip(0.5 * cell, 1.0, 2.5))  # small tags: keep clear of data bits and background
         centre = corners.mean(axis=0)
         new = corners.copy()
         for k in range(4):
             c = corners[k]
-            lines = [_edge_line(img, c, corners[(k + j) % 4], c - centre, t, d, window) for j in (1, -1)]
+            lines = []
+            for j in (1, -1):
+                e = corners[(k + j) % 4] - c
+                e /= np.linalg.norm(e)
+                f = corners[(k - j) % 4] - c  # the other edge at this corner
+                f /= np.linalg.norm(f)
+                n = np.array([-e[1], e[0]])
+                n = n if np.dot(n, c - centre) >= 0 else -n
+                across = max(np.dot(c - q, n) for q in corners) / cells  # one cell across this edge [px]
+                half = float(np.clip(across, 2.0, 6.0))
+                t = np.arange(-half, half + 1e-9, 0.25)
+                window = float(np.clip(0.5 * across, 1.0, 2.5))  # keep clear of data bits and background
+                cos = float(np.dot(e, f))
+                clear = (1.0 + (window + 1.0) * max(cos, 0.0)) / np.sqrt(max(1.0 - cos * cos, 1e-6))
+                first = max(2.0, 0.3 * cell, clear)  # acute corner: profiles clear of the other edge
+                d = np.arange(first, max(2.5 * cell, 4.0, first + 4.0) + 1e-9, 0.5)
+                lines.append(_edge_line(img, c, corners[(k + j) % 4], c - centre, t, d, window))
             if lines[0] is None or lines[1] is None:
                 continue
             p = _intersect(*lines[0], *lines[1])
