@@ -205,6 +205,9 @@ class DenseWhitening:
                 weights.append(share[on])
         return np.concatenate(values), np.concatenate(weights)
 
+    def standardizer(self, r: np.ndarray):
+        return lambda sigma: self.standardized(r, sigma)
+
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         w = self.matrices(sigma)[0] @ r
         return np.array([np.sum(w[rows] ** 2) for rows in self.groups])

@@ -18,6 +18,7 @@ factors D^-1 U_g whitens D^-1 r.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -183,23 +184,35 @@ class GroupedWhitening:
         weights to its number of rows, as an eigenbasis of its covariance would count them; an eigenspace of one
         vector gives every row the same number, its component). Rows the shared errors explain fully carry no
         information on sigma and are dropped."""
+        return self.standardizer(r)(sigma)
+
+    def standardizer(self, r: np.ndarray) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+        """sigma -> `standardized(r, sigma)`, with everything that does not depend on sigma (projections, shares,
+        eigenspaces) done once: a noise-level search evaluates it at many sigma."""
         r = r / self.row_scale
-        own = (r - self.Q @ (self.QT @ r))[self.rows] / sigma
+        tr = self.QT @ r
+        own = (r - self.Q @ tr)[self.rows]
         free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
         informative = free > RANK_TOLERANCE**0.5
-        values = [own[informative] / np.sqrt(free[informative])]
-        weights = [free[informative]]
+        own, root_free, weights = own[informative], np.sqrt(free[informative]), [free[informative]]
         if len(self.s2):
-            t = (self.QT @ r) / np.sqrt(sigma**2 + self.s2)
             Q = self.Q.tocoo()
             space = self._eigenspaces()[Q.col]  # each entry's eigenspace (numbered over all groups)
             key = np.unique(Q.row.astype(np.int64) * (int(space.max()) + 1) + space, return_inverse=True)[1].ravel()
-            projection = np.bincount(key, Q.data * t[Q.col])
             share = np.bincount(key, Q.data**2)
             on = share > RANK_TOLERANCE
-            values.append(projection[on] / np.sqrt(share[on]))
+            root_share = np.sqrt(share[on])
             weights.append(share[on])
-        return np.concatenate(values), np.concatenate(weights)
+        weight = np.concatenate(weights)
+
+        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:
+            values = [own / sigma / root_free]
+            if len(self.s2):
+                t = tr / np.sqrt(sigma**2 + self.s2)
+                values.append(np.bincount(key, Q.data * t[Q.col])[on] / root_share)
+            return np.concatenate(values), weight
+
+        return at
 
     def _eigenspaces(self) -> np.ndarray:
         """(K,) eigenspace of each shared column: columns of one group whose s^2 agree to EIGEN_TOLERANCE of the

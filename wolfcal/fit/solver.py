@@ -111,13 +111,24 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     return float(MAD_TO_SIGMA * weighted_median(np.abs(w), dof) * np.sqrt(n / (n - n_params)))
 
 
+def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
+    """Whether `residual_scale` of these standardised numbers exceeds 1, without sorting them: the weighted median
+    lies above a value exactly when less than half of the weight lies at or below it."""
+    n = float(np.sum(dof))
+    if n <= n_params:
+        return False
+    at_most_one = MAD_TO_SIGMA * np.abs(w) * np.sqrt(n / (n - n_params)) <= 1.0
+    return bool(np.sum(dof[at_most_one]) < 0.5 * n)
+
+
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
     not below `floor` [unit]); returns the residual scale reached."""
+    standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if residual_scale(state, residual, float(np.exp(mid)), n_params) > 1.0:
+        if _scale_above_one(*standardized(float(np.exp(mid))), n_params):
             lo = mid
         else:
             hi = mid
