@@ -156,9 +156,6 @@ class DenseWhitening:
         ]
         self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
-    def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
-        return DenseWhitening(self.group_of_row, shared, self.row_scale)
-
     def matrices(self, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """W (R, R), the split's own part (R, R) and shared part (K, R), and each row's free share 1 - h (R,)."""
         if sigma not in self.cache:

@@ -79,7 +79,11 @@ class GroupedWhitening:
         self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
         sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
         self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
-        self.QT = self.Q.T.tocsr()
+
+    @property
+    def QT(self) -> scipy.sparse.csc_matrix:
+        """Q^T: a view of Q's arrays (no copy)."""
+        return self.Q.T
 
     def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
         """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
@@ -133,10 +137,6 @@ class GroupedWhitening:
             (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))), shape=(self.n_rows, K)
         )
         return Q, np.concatenate(s2), np.concatenate(group_of_column)
-
-    def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
-        """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.group_of_row, shared, self.row_scale)
 
     def apply(self, M, sigma: float):
         """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""

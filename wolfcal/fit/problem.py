@@ -91,6 +91,7 @@ class BlockState:
     def rebuild(self, lin: Linearization) -> None:
         """Noise groups over the inlier units at this linearisation (left-out views are in no group): units that
         share a joint reading or a repeating detection error are in one group."""
+        self.whitening = None  # the old factors go before the new ones are built (memory)
         shared = self.shared_errors(lin)
         reading = self.reading_of_unit
         group_of_unit = reading
@@ -116,7 +117,9 @@ class BlockState:
         tau = self.shared_size(sigma)
         shared = self.noise_model.shared
         if shared.tau != tau and np.any(shared.label >= 0):
-            self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
+            groups, row_scale = self.noise_model.group_of_row, self.noise_model.row_scale
+            self.whitening = None  # the old factors go before the new ones are built (memory)
+            self.whitening = GroupedWhitening(groups, replace(shared, tau=tau), row_scale)
 
     def whiten(self, M, split: bool = True):
         """The block's rows (R,) or (R, P) whitened at its noise level: `GroupedWhitening.split` (R + K rows, what

@@ -132,6 +132,7 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
             lo = mid
         else:
             hi = mid
+    del standardized  # its arrays are not kept while set_sigma may decompose the groups again
     state.set_sigma(float(np.exp(hi)))
     return residual_scale(state, residual, state.sigma, n_params)
 
@@ -252,6 +253,8 @@ def _update_round(
     """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`); the linearisations
     live only here."""
     lins = problem.evaluate(z)
+    for state in problem.states:  # rebuilt below: not kept beside the per-view noise models of the outlier flags
+        state.whitening = None
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
     settled, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
