@@ -81,13 +81,14 @@ class GroupedWhitening:
         self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
 
     @property
-    def QT(self) -> scipy.sparse.csc_matrix:
+    def QT(self) -> scipy.sparse.csr_matrix:
         """Q^T: a view of Q's arrays (no copy)."""
         return self.Q.T
 
-    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
+    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray]:
         """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
-        group of each column."""
+        group of each column. Q is stored by columns (each column: its group's rows, ascending), built in place
+        from the decompositions (a copy through (row, column) pairs would hold several times its size)."""
         shared, rows = self.shared, self.rows
         moving = np.any(shared.A != 0, axis=0)  # joints that move no row are left out
         A = shared.sigma_q * shared.A[:, moving] / self.row_scale[:, None]
@@ -105,7 +106,7 @@ class GroupedWhitening:
         starts = np.concatenate([[0], np.cumsum(sizes)])
         data: list[np.ndarray] = []
         row_idx: list[np.ndarray] = []
-        col_idx: list[np.ndarray] = []
+        col_len: list[np.ndarray] = []
         s2: list[np.ndarray] = []
         group_of_column: list[np.ndarray] = []
         K = 0  # columns so far
@@ -126,16 +127,15 @@ class GroupedWhitening:
             Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
             g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
             data.append(Q[g, :, c].ravel())
-            row_idx.append(rows[at].reshape(len(members), n)[g].ravel())
-            col_idx.append(np.repeat(K + np.arange(len(g)), n))
+            row_idx.append(rows[at].reshape(len(members), n)[g].ravel().astype(np.int32))
+            col_len.append(np.full(len(g), n))
             s2.append(s[g, c] ** 2)
             group_of_column.append(members[g])
             K += len(g)
         if not data:
-            return scipy.sparse.csr_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
-        Q = scipy.sparse.csr_matrix(
-            (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))), shape=(self.n_rows, K)
-        )
+            return scipy.sparse.csc_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
+        indptr = np.concatenate([[0], np.cumsum(np.concatenate(col_len))])
+        Q = scipy.sparse.csc_matrix((np.concatenate(data), np.concatenate(row_idx), indptr), shape=(self.n_rows, K))
         return Q, np.concatenate(s2), np.concatenate(group_of_column)
 
     def apply(self, M, sigma: float):
@@ -190,15 +190,25 @@ class GroupedWhitening:
         """sigma -> `standardized(r, sigma)`, with everything that does not depend on sigma (projections, shares,
         eigenspaces) done once: a noise-level search evaluates it at many sigma."""
         r = r / self.row_scale
+        Q, per_column = self.Q, np.diff(self.Q.indptr)
         tr = self.QT @ r
-        own = (r - self.Q @ tr)[self.rows]
-        free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
+        own = (r - Q @ tr)[self.rows]
+        free = 1.0 - np.bincount(Q.indices, Q.data**2, minlength=self.n_rows)[self.rows]
         informative = free > RANK_TOLERANCE**0.5
         own, root_free, weights = own[informative], np.sqrt(free[informative]), [free[informative]]
         if len(self.s2):
-            Q = self.Q.tocoo()
-            space = self._eigenspaces()[Q.col]  # each entry's eigenspace (numbered over all groups)
-            key = np.unique(Q.row.astype(np.int64) * (int(space.max()) + 1) + space, return_inverse=True)[1].ravel()
+            # one number per (row, eigenspace of its group), ordered by row, then eigenspace: from Q's layout (each
+            # column holds its group's rows; a group's eigenspaces are numbered consecutively), no sort
+            space, group = self._eigenspaces(), self.group_of_column
+            first = np.full(self.n_groups, len(space))
+            np.minimum.at(first, group, space)
+            n_spaces = np.zeros(self.n_groups, dtype=np.int64)
+            np.maximum.at(n_spaces, group, space - first[group] + 1)
+            spaces_of_row = np.zeros(self.n_rows, dtype=np.int64)
+            spaces_of_row[self.rows] = n_spaces[self.group_of_row[self.rows]]
+            offset = np.cumsum(spaces_of_row) - spaces_of_row
+            key = np.repeat(space - first[group], per_column)
+            key += offset[Q.indices]
             share = np.bincount(key, Q.data**2)
             on = share > RANK_TOLERANCE
             root_share = np.sqrt(share[on])
@@ -209,7 +219,7 @@ class GroupedWhitening:
             values = [own / sigma / root_free]
             if len(self.s2):
                 t = tr / np.sqrt(sigma**2 + self.s2)
-                values.append(np.bincount(key, Q.data * t[Q.col])[on] / root_share)
+                values.append(np.bincount(key, Q.data * np.repeat(t, per_column))[on] / root_share)
             return np.concatenate(values), weight
 
         return at
