@@ -18,7 +18,7 @@ factors D^-1 U_g whitens D^-1 r.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,7 +70,11 @@ class GroupedWhitening:
     with covariance sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are
     independent, rows in no group get zero weight."""
 
-    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
+    def __init__(
+        self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None,
+        factors: tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
         self.group_of_row, self.shared = group_of_row, shared
         self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
         self.in_group = group_of_row >= 0
@@ -78,7 +82,31 @@ class GroupedWhitening:
         grouped = np.flatnonzero(self.in_group)
         self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
         sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
-        self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
+        self.Q, self.s2, self.group_of_column = self._thin_factors(sizes) if factors is None else factors
+
+    def chunks(self, max_rows: int) -> Iterator[tuple[np.ndarray, GroupedWhitening]]:
+        """The grouped rows a few whole groups at a time (consecutive groups up to `max_rows` rows; a larger group
+        alone): each chunk's rows (R_c,) and the whitening of those rows alone, numerically the same as this one's
+        on them (rows in no group carry no weight and are in no chunk). For sums over rows (normal equations)
+        without whitening every row at once."""
+        sizes = np.bincount(self.group_of_row[self.rows], minlength=self.n_groups)
+        ends = np.concatenate([[0], np.cumsum(sizes)])  # in `rows`, of groups 0 .. n_groups
+        position = np.zeros(self.n_rows, dtype=np.int64)
+        position[self.rows] = np.arange(len(self.rows))
+        first = 0
+        while first < self.n_groups:
+            end = max(int(np.searchsorted(ends, ends[first] + max_rows, side="right")) - 1, first + 1)
+            rows = self.rows[ends[first] : ends[end]]
+            columns = np.flatnonzero((self.group_of_column >= first) & (self.group_of_column < end))
+            Q = self.Q[:, columns]
+            Q = scipy.sparse.csc_matrix((Q.data, position[Q.indices] - ends[first], Q.indptr),
+                                        shape=(len(rows), len(columns)))  # fmt: skip
+            shared = self.shared
+            part = SharedErrors(shared.A[rows], shared.sigma_q, shared.reading[rows], shared.label[rows],
+                                shared.axis[rows], shared.tau)  # fmt: skip
+            factors = (Q, self.s2[columns], self.group_of_column[columns] - first)
+            yield rows, GroupedWhitening(self.group_of_row[rows] - first, part, self.row_scale[rows], factors)
+            first = end
 
     @property
     def QT(self) -> scipy.sparse.csr_matrix:

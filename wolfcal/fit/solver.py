@@ -21,7 +21,7 @@ from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
-from wolfcal.fit.uncertainty import Uncertainty, uncertainty
+from wolfcal.fit.uncertainty import Uncertainty, information_uncertainty
 from wolfcal.observations import rms_by
 
 # Bounds of a block's estimated noise per unit; the pixel floor is the fit's setting (`FitOptions.noise_floor_px`,
@@ -272,19 +272,20 @@ def solve(
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
-        result = levenberg_marquardt(problem.residuals, problem.jacobian, z, cost_tol=ROUND_COST_TOL,
+        result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL,
                                      std_tol=ROUND_STD_TOL)
         z, evaluations = result.x, evaluations + result.nfev
         changed, settled, notes = _update_round(problem, z, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break
-    result = levenberg_marquardt(problem.residuals, problem.jacobian, z, std_tol=FINAL_STD_TOL)
+    result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, std_tol=FINAL_STD_TOL)
     z, evaluations = result.x, evaluations + result.nfev
     after = problem.raw_residuals(z)
+    information, _, triangular = problem.information(z, triangular=True)
     return Solution(
         values=problem.values(z),
-        uncertainty=uncertainty(problem.data_jacobian(z), problem.params.prior_sigmas),
+        uncertainty=information_uncertainty(information, problem.params.prior_sigmas, triangular),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,
