@@ -26,6 +26,9 @@ import scipy.sparse
 
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
 EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
+# Entries of the shared-error matrices U_g decomposed in one batched call (a long recording's groups in batches: a
+# few MB at a time)
+DECOMPOSE_ENTRIES = 1 << 18
 
 
 def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> np.ndarray:
@@ -108,6 +111,19 @@ class GroupedWhitening:
             yield rows, GroupedWhitening(self.group_of_row[rows] - first, part, self.row_scale[rows], factors)
             first = end
 
+    @staticmethod
+    def _batches(sizes: np.ndarray, counts: list[np.ndarray], labels: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+        """Groups decomposed in one batched call: of one size n, in order, about DECOMPOSE_ENTRIES entries of their
+        factors at a time (groups without shared errors are left out)."""
+        widths = np.sum(counts, axis=0) + labels if counts else labels  # columns of each group (before rank)
+        for n in np.unique(sizes[sizes > 0]):
+            members = np.flatnonzero((sizes == n) & (widths > 0))
+            if not len(members):
+                continue
+            per_batch = max(1, DECOMPOSE_ENTRIES // (n * int(widths[members].max())))
+            for first in range(0, len(members), per_batch):
+                yield int(n), members[first : first + per_batch]
+
     @property
     def QT(self) -> scipy.sparse.csr_matrix:
         """Q^T: a view of Q's arrays (no copy)."""
@@ -118,16 +134,18 @@ class GroupedWhitening:
         group of each column. Q is stored by columns (each column: its group's rows, ascending), built in place
         from the decompositions (a copy through (row, column) pairs would hold several times its size)."""
         shared, rows = self.shared, self.rows
-        moving = np.any(shared.A != 0, axis=0)  # joints that move no row are left out
-        A = shared.sigma_q * shared.A[:, moving] / self.row_scale[:, None]
+        nonzero = shared.A != 0
+        moving = np.flatnonzero(np.any(nonzero, axis=0))  # joints that move no row are left out
+        nonzero = nonzero[:, moving]
         reading = shared.reading[:, None] if shared.reading.ndim == 1 else shared.reading[:, moving]
         group = self.group_of_row[rows]
         if reading.shape[1] == 1:  # one reading per row: all its joints' columns follow that reading's slot
-            slot, count = _slots(group, reading[rows, 0], np.any(A[rows] != 0, axis=1), self.n_groups)
-            slots, counts = [slot] * A.shape[1], [count] * A.shape[1]
+            slot, count = _slots(group, reading[rows, 0], np.any(nonzero[rows], axis=1), self.n_groups)
+            slots, counts = [slot] * len(moving), [count] * len(moving)
         else:
-            pairs = [_slots(group, reading[rows, j], A[rows, j] != 0, self.n_groups) for j in range(A.shape[1])]
+            pairs = [_slots(group, reading[rows, j], nonzero[rows, j], self.n_groups) for j in range(len(moving))]
             slots, counts = [p[0] for p in pairs], [p[1] for p in pairs]
+        del nonzero
         n_axes = int(shared.axis.max()) + 1 if len(shared.axis) else 1
         labelled = (shared.label[rows] >= 0) & (shared.tau > 0)
         label_slot, labels = _slots(group, shared.label[rows] * n_axes + shared.axis[rows], labelled, self.n_groups)
@@ -138,18 +156,16 @@ class GroupedWhitening:
         s2: list[np.ndarray] = []
         group_of_column: list[np.ndarray] = []
         K = 0  # columns so far
-        for n in np.unique(sizes[sizes > 0]):
-            members = np.flatnonzero(sizes == n)
+        for n, members in self._batches(sizes, counts, labels):
             widths = [int(c[members].max(initial=0)) for c in counts]  # columns per joint: its distinct readings
             k_reading = int(np.sum(widths))
             k = k_reading + int(labels[members].max())
-            if k == 0:
-                continue
             at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
             U = np.zeros((len(members) * n, k))
             for j, (slot, first) in enumerate(zip(slots, np.cumsum([0, *widths[:-1]]))):
                 has = np.flatnonzero(slot[at] >= 0)
-                U[has, first + slot[at][has]] = A[rows[at][has], j]
+                unit = rows[at][has]
+                U[has, first + slot[at][has]] = shared.sigma_q * shared.A[unit, moving[j]] / self.row_scale[unit]
             has = np.flatnonzero(label_slot[at] >= 0)
             U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
             Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
