@@ -245,7 +245,7 @@ class Problem:
         """d(raw residual rows)/dz (len(rows), P) of a block's rows (indices into its raw rows), dense or, above
         DENSE_LIMIT unknowns, sparse."""
         n, sig = len(self.params), self.params.prior_sigmas
-        J_chain = lin.jac_chain.reshape(-1, self.n_chain)[rows] * sig[: self.n_chain]
+        J_chain = lin.jac_chain.reshape(lin.residual.size, self.n_chain)[rows] * sig[: self.n_chain]
         dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
         if dense is not None:
             dense[:, : self.n_chain] = J_chain
