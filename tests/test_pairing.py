@@ -118,8 +118,12 @@ def assert_same(a: Capture, b: Capture) -> None:
         assert (x.stamp_ns, x.joint_names, x.source) == (y.stamp_ns, y.joint_names, y.source)
         assert np.array_equal(x.positions, y.positions)
         assert (x.velocities is None and y.velocities is None) or np.array_equal(x.velocities, y.velocities)
-        assert {k: (i.stamp_ns, i.location, i.format, i.camera.width, i.camera.K.tolist()) for k, i in x.images.items()} \
-            == {k: (i.stamp_ns, i.location, i.format, i.camera.width, i.camera.K.tolist()) for k, i in y.images.items()}
+        assert image_keys(x) == image_keys(y)
+
+
+def image_keys(sample) -> dict:
+    images = sample.images.items()
+    return {k: (i.stamp_ns, i.location, i.format, i.camera.width, i.camera.K.tolist()) for k, i in images}
 
 
 def whole_log_pairing(path: Path, topic: str) -> dict[int, Paired | str]:
