@@ -168,9 +168,11 @@ def test_streamed_pairing_equals_the_whole_log(simulated, tmp_path, monkeypatch,
         assert sum(set(s.images) == {"head", "tripod"} for s in streamed.samples) >= 10
 
 
-def test_the_window_of_joint_states_stays_bounded():
-    """A minute of 20 joints at 100 Hz and images at 10 Hz: the pairer never holds more than the window's states,
-    and pairs every image as the whole log does."""
+@pytest.mark.parametrize("image_delay_ns", [3 * MS, 0])
+def test_the_window_of_joint_states_stays_bounded(image_delay_ns):
+    """A minute of 20 joints at 100 Hz and images at 10 Hz (3 ms after a joint state, or with its very stamp, as in a
+    simulator's clock): the pairer never holds more than the window's states, and pairs every image as the whole log
+    does."""
     names = [f"j{k}" for k in range(20)]
     t_ns = np.arange(6000) * 10 * MS
     q = np.where((t_ns // (3000 * MS)) % 2 == 0, 0.1, 0.1 + 1e-3 * (t_ns % (3000 * MS)) / MS)  # still 3 s, moving 3 s
@@ -180,7 +182,7 @@ def test_the_window_of_joint_states_stays_bounded():
         for pairer in (streamed, whole):
             pairer.add_joints(stamp, names, [q[k]] * 20, [])
             if k % 10 == 5:
-                pairer.add_frame("head", stamp + 3 * MS, k)
+                pairer.add_frame("head", stamp + image_delay_ns, k)
         largest = max(largest, sum(len(g[1]) for g in streamed._log.groups()))
     a, b = streamed.finish(), whole.finish()
     assert largest <= (DISORDER_NS + 2 * STILL_WINDOW_NS + BATCH_NS) // (10 * MS) + 2

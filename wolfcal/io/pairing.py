@@ -12,8 +12,9 @@ look at, so the results are the same; states older than any frame still to pair 
 A file that breaks the bound (a message stamped too far back, or a joint first published after frames were paired)
 raises `Disorder`: the reader then reads it again with `disorder_ns=None`, which pairs every frame on the whole log
 at the end (memory of the joint states as before). Capture files (one joint state with the stamp of each sample's
-images) are recognised at the end as before: every image's stamp is a joint state's, and there are as many joint
-states as image stamps; their frames are paired by exact stamp.
+images) are recognised as before: every image's stamp is a joint state's, and there are as many joint states as
+image stamps; their frames are paired by exact stamp. Until a frame without a joint state of its stamp shows the
+file is not one, nothing is paired or dropped (see `FramePairer`).
 """
 
 from __future__ import annotations
@@ -42,15 +43,15 @@ class PairedFrame:
     camera: str
     stamp: int  # [ns] header stamp
     item: object  # the caller's data on the frame (e.g. its image header)
-    result: Paired | str | None  # the recording rule's result; None: not paired (not an image, see `pair`)
-    exact: Paired | str | None  # the capture-file rule's result (stamps equal), while the file may be one
+    result: Paired | str | None  # the paired readings or why not; None: not paired (not an image, or `bad_stamp`)
     bad_stamp: bool  # a joint state with this stamp was left out (non-finite positions)
 
 
 @dataclass
 class Pairing:
-    """The outcome of a whole file: frames in the order they were paired, whether it is a capture file, the joint
-    names (every joint with finite readings, in order of first appearance) and the non-finite readings."""
+    """The outcome of a whole file: frames in the order they were paired, whether it is a capture file (frames
+    paired by exact stamp, else by the recording rule), the joint names (every joint with finite readings, in order
+    of first appearance) and the non-finite readings."""
 
     frames: list[PairedFrame]
     exact: bool
@@ -64,11 +65,13 @@ class FramePairer:
     """Feed joint states and frames in file order (`add_joints`, `add_frame`), then `finish`.
 
     `disorder_ns`: the bound on the stamps' disorder (module docstring); None keeps every joint state and pairs
-    every frame at the end (the whole log)."""
+    every frame at the end (the whole log). While every final frame has a joint state of its own stamp, the file
+    may be a capture file (small: one joint state per sample): nothing is dropped or paired until `finish` decides;
+    the first final frame without one makes it a recording, paired from then on as it is read."""
 
     def __init__(self, disorder_ns: int | None = DISORDER_NS) -> None:
         self.disorder_ns = disorder_ns
-        self._log = JointLog()  # the window; every message while disorder_ns is None
+        self._log = JointLog()  # the window; every message while disorder_ns is None or the file may be a capture
         self._names: dict[str, None] = {}  # every joint, in order of first appearance of its message's name list
         self._finite: set[str] = set()  # joints with a message whose positions are all finite
         self._top: int | None = None  # largest stamp read [ns]
@@ -76,7 +79,7 @@ class FramePairer:
         self._pending: list[tuple[str, int, object, bool]] = []  # (camera, stamp, item, pair it) not yet paired
         self._frames: list[PairedFrame] = []
         self._names_used: list[str] | None = None  # the names the frames were paired with so far
-        self._all_exact = True  # every frame so far has a joint state with its stamp
+        self._maybe_capture = True  # every final frame so far has a joint state with its stamp
         self._bad = 0
         self._bad_joints: Counter[str] = Counter()
         self._image_stamps = array("q")  # every frame's stamp (how many distinct ones: capture file or not)
@@ -108,14 +111,16 @@ class FramePairer:
 
     def finish(self) -> Pairing:
         """Pair the frames left; `Disorder` when a joint appeared after frames were paired without it."""
-        self._pair(self._pending)
+        distinct = len(np.unique(np.frombuffer(self._image_stamps, np.int64)))
+        if self._maybe_capture:
+            self._maybe_capture = self._log.count == distinct and self._all_have_stamps(self._pending)
+        self._pair(self._pending, exact=self._maybe_capture)
         self._pending = []
         names = self._joint_names()
         if self._names_used is not None and self._names_used != names:
             raise Disorder("a joint was first published after frames were paired")
-        exact = self._all_exact and self._log.count == len(np.unique(np.frombuffer(self._image_stamps, np.int64)))
         bad_joints = Counter({n: self._bad_joints[n] for n in self._names if self._bad_joints[n]})
-        return Pairing(self._frames, exact, names, self._log.count, self._bad, bad_joints)
+        return Pairing(self._frames, self._maybe_capture, names, self._log.count, self._bad, bad_joints)
 
     def _joint_names(self) -> list[str]:
         return [n for n in self._names if n in self._finite]
@@ -123,6 +128,16 @@ class FramePairer:
     def _check_order(self, stamp: int) -> None:
         if self.disorder_ns is not None and self._top is not None and stamp < self._top - self.disorder_ns:
             raise Disorder(f"a message stamped {(self._top - stamp) / 1e9:.3f} s before one read earlier")
+
+    def _all_have_stamps(self, frames: list[tuple[str, int, object, bool]]) -> bool:
+        """Whether a joint state (finite or not) has the stamp of each frame."""
+        return bool(np.isin(np.array([f[1] for f in frames], dtype=np.int64), self._log.stamps()).all())
+
+    def _joints_have_images(self, horizon: int) -> bool:
+        """Whether every joint state stamped before `horizon` has the stamp of an image (as in a capture file: one
+        joint state per image stamp); the images of those stamps have all been read."""
+        every = self._log.stamps()
+        return bool(np.isin(every[every < horizon], np.frombuffer(self._image_stamps, np.int64)).all())
 
     def _advance(self, stamp: int) -> None:
         """Pair the frames that became final, drop the joint states no frame to come can use."""
@@ -136,13 +151,17 @@ class FramePairer:
         self._paired_at = stamp
         horizon = stamp - self.disorder_ns  # no message to come is stamped before this
         ready = [p for p in self._pending if p[1] + STILL_WINDOW_NS < horizon]
+        if self._maybe_capture:
+            if self._all_have_stamps(ready) and self._joints_have_images(horizon):
+                return  # may be a capture file: keep everything until `finish`
+            self._maybe_capture = False
         if ready:
             self._pending = [p for p in self._pending if p[1] + STILL_WINDOW_NS >= horizon]
-            self._pair(ready)
+            self._pair(ready, exact=False)
         oldest = min([horizon, *(p[1] for p in self._pending)])
         self._log.drop_before(oldest - STILL_WINDOW_NS)
 
-    def _pair(self, frames: list[tuple[str, int, object, bool]]) -> None:
+    def _pair(self, frames: list[tuple[str, int, object, bool]], exact: bool) -> None:
         """`pair_frame` of each frame on the window's states (all the joints seen so far, finite messages only)."""
         if not frames:
             return
@@ -155,17 +174,8 @@ class FramePairer:
         self._names_used = names
         none = JointSeries(np.empty(0, np.int64), np.empty(0), np.empty(0))
         states = JointStates(names, {n: window.series.get(n, none) for n in names})
-        stamps = [g[1] for g in groups]
-        every = np.concatenate(stamps) if stamps else np.empty(0, np.int64)
-        bad = np.concatenate([s[~k] for s, k in zip(stamps, keep)]) if stamps else np.empty(0, np.int64)
+        bad = np.concatenate([g[1][~k] for g, k in zip(groups, keep)]) if groups else np.empty(0, np.int64)
         for camera, stamp, item, pair in frames:
-            if self._all_exact and not np.any(every == stamp):
-                self._all_exact = False  # not a capture file: the exact results are not needed
-                for done in self._frames:
-                    done.exact = None
             bad_stamp = bool(np.any(bad == stamp))
-            result = exact = None
-            if pair and not bad_stamp:
-                result = pair_frame(states, stamp, exact=False)
-                exact = pair_frame(states, stamp, exact=True) if self._all_exact else None
-            self._frames.append(PairedFrame(camera, stamp, item, result, exact, bad_stamp))
+            result = pair_frame(states, stamp, exact=exact) if pair and not bad_stamp else None
+            self._frames.append(PairedFrame(camera, stamp, item, result, bad_stamp))

@@ -232,7 +232,7 @@ def _keep_frames(
             continue
         if frame.bad_stamp:
             continue
-        paired = frame.exact if read.pairing.exact else frame.result
+        paired = frame.result
         if not isinstance(paired, Paired):
             skipped.append(f"{where}: {paired}")
             continue
