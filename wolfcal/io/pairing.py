@@ -19,7 +19,6 @@ file is not one, nothing is paired or dropped (see `FramePairer`).
 
 from __future__ import annotations
 
-from array import array
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -79,10 +78,9 @@ class FramePairer:
         self._pending: list[tuple[str, int, object, bool]] = []  # (camera, stamp, item, pair it) not yet paired
         self._frames: list[PairedFrame] = []
         self._names_used: list[str] | None = None  # the names the frames were paired with so far
-        self._maybe_capture = True  # every final frame so far has a joint state with its stamp
+        self._capture: _CaptureTest | None = _CaptureTest()  # None once the file is known to be a recording
         self._bad = 0
         self._bad_joints: Counter[str] = Counter()
-        self._image_stamps = array("q")  # every frame's stamp (how many distinct ones: capture file or not)
 
     def add_joints(
         self, stamp: int, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
@@ -99,28 +97,29 @@ class FramePairer:
             self._bad += 1
             self._bad_joints.update(name for name, ok in zip(names[:n], finite) if not ok)
         self._log.add(stamp, names, positions, velocities)
+        if self._capture is not None:
+            self._capture.add(stamp, joint=True)
         self._advance(stamp)
 
     def add_frame(self, camera: str, stamp: int, item: object, pair: bool = True) -> None:
         """One image of `camera` at header `stamp` [ns]; `pair=False` for one that is not an image (its stamp still
         counts in telling a capture file)."""
         self._check_order(stamp)
-        self._image_stamps.append(stamp)
         self._pending.append((camera, stamp, item, pair))
+        if self._capture is not None:
+            self._capture.add(stamp, joint=False)
         self._advance(stamp)
 
     def finish(self) -> Pairing:
         """Pair the frames left; `Disorder` when a joint appeared after frames were paired without it."""
-        distinct = len(np.unique(np.frombuffer(self._image_stamps, np.int64)))
-        if self._maybe_capture:
-            self._maybe_capture = self._log.count == distinct and self._all_have_stamps(self._pending)
-        self._pair(self._pending, exact=self._maybe_capture)
+        capture = self._capture is not None and self._capture.is_capture(self._log.count)
+        self._pair(self._pending, exact=capture)
         self._pending = []
         names = self._joint_names()
         if self._names_used is not None and self._names_used != names:
             raise Disorder("a joint was first published after frames were paired")
         bad_joints = Counter({n: self._bad_joints[n] for n in self._names if self._bad_joints[n]})
-        return Pairing(self._frames, self._maybe_capture, names, self._log.count, self._bad, bad_joints)
+        return Pairing(self._frames, capture, names, self._log.count, self._bad, bad_joints)
 
     def _joint_names(self) -> list[str]:
         return [n for n in self._names if n in self._finite]
@@ -128,16 +127,6 @@ class FramePairer:
     def _check_order(self, stamp: int) -> None:
         if self.disorder_ns is not None and self._top is not None and stamp < self._top - self.disorder_ns:
             raise Disorder(f"a message stamped {(self._top - stamp) / 1e9:.3f} s before one read earlier")
-
-    def _all_have_stamps(self, frames: list[tuple[str, int, object, bool]]) -> bool:
-        """Whether a joint state (finite or not) has the stamp of each frame."""
-        return bool(np.isin(np.array([f[1] for f in frames], dtype=np.int64), self._log.stamps()).all())
-
-    def _joints_have_images(self, horizon: int) -> bool:
-        """Whether every joint state stamped before `horizon` has the stamp of an image (as in a capture file: one
-        joint state per image stamp); the images of those stamps have all been read."""
-        every = self._log.stamps()
-        return bool(np.isin(every[every < horizon], np.frombuffer(self._image_stamps, np.int64)).all())
 
     def _advance(self, stamp: int) -> None:
         """Pair the frames that became final, drop the joint states no frame to come can use."""
@@ -151,10 +140,10 @@ class FramePairer:
         self._paired_at = stamp
         horizon = stamp - self.disorder_ns  # no message to come is stamped before this
         ready = [p for p in self._pending if p[1] + STILL_WINDOW_NS < horizon]
-        if self._maybe_capture:
-            if self._all_have_stamps(ready) and self._joints_have_images(horizon):
+        if self._capture is not None:
+            if self._capture.holds(horizon):
                 return  # may be a capture file: keep everything until `finish`
-            self._maybe_capture = False
+            self._capture = None
         if ready:
             self._pending = [p for p in self._pending if p[1] + STILL_WINDOW_NS >= horizon]
             self._pair(ready, exact=False)
@@ -179,3 +168,30 @@ class FramePairer:
             bad_stamp = bool(np.any(bad == stamp))
             result = pair_frame(states, stamp, exact=exact) if pair and not bad_stamp else None
             self._frames.append(PairedFrame(camera, stamp, item, result, bad_stamp))
+
+
+class _CaptureTest:
+    """Whether the stamps read fit a capture file: one joint state per image stamp, i.e. every image's stamp is a joint
+    state's and every joint state's an image's. A stamp is checked once it is final (no message to come is stamped
+    before it), so only the last `DISORDER_NS` of stamps wait."""
+
+    def __init__(self) -> None:
+        self.stamps: tuple[set[int], set[int]] = (set(), set())  # (joint states', images') [ns]
+        self.waiting: tuple[list[int], list[int]] = ([], [])
+
+    def add(self, stamp: int, joint: bool) -> None:
+        self.stamps[not joint].add(stamp)
+        self.waiting[not joint].append(stamp)
+
+    def holds(self, horizon: float) -> bool:
+        """Whether each stamp before `horizon` [ns] has its counterpart (an image's a joint state's and back)."""
+        for kind in (0, 1):
+            others, waiting = self.stamps[1 - kind], self.waiting[kind]
+            if any(s < horizon and s not in others for s in waiting):
+                return False
+            waiting[:] = [s for s in waiting if s >= horizon]
+        return True
+
+    def is_capture(self, joint_messages: int) -> bool:
+        """At the end of the file: every stamp has its counterpart, one joint-state message per image stamp."""
+        return self.holds(float("inf")) and joint_messages == len(self.stamps[1])
