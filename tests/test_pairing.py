@@ -1,7 +1,7 @@
 """Pairing frames with joint states while a recording is read (`wolfcal.io.pairing`) gives what pairing on the whole
 log gives: simulated ROS 2 recordings rewritten with messages out of order (images logged after their stamps, joint
 states jittered, a late batch), a second camera, joints published in two groups; a file beyond the bound is paired on
-the whole log; the window of joint states stays bounded."""
+the whole log; the window of joint states stays bounded. Frames that repeat the image before them are named."""
 
 from __future__ import annotations
 
@@ -17,13 +17,16 @@ from mcap_ros2.decoder import DecoderFactory
 
 import wolfcal.io.reader as reader_module
 from wolfcal.config import load_robot_config
+from wolfcal.fit.pipeline import repeat_warnings
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_frame
 from wolfcal.io.samples import Capture
 from wolfcal.robot.robot import load_robot
+from wolfcal.sim.faulty import rewrite_capture
 from wolfcal.sim.recording import RecordingOptions, simulate_recording
+from wolfcal.vision.observe import detect_observations
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 MS = 1_000_000
@@ -195,3 +198,31 @@ def test_the_window_of_joint_states_stays_bounded(image_delay_ns):
         else:
             assert x.result == y.result
     assert 200 <= kept <= 300 and not a.exact
+
+
+def test_frames_repeating_one_image_are_counted_and_warned_about(simulated, tmp_path):
+    """Each still frame's own image noise makes its corners differ from the frame before; a stream that repeats the
+    image before (every second frame a copy of the one before, as a driver repeating its last frame) is named."""
+    config = load_robot_config(WOLFGANG)
+    robot = load_robot(WOLFGANG)
+    previous: dict[str, bytes] = {}
+
+    def repeat_every_second(topic: str, index: int, message):
+        if topic == config.camera.topic:
+            if index % 2 == 1:
+                message.data = previous["data"]
+            previous["data"] = bytes(message.data)
+        return message
+
+    repeated = tmp_path / "repeated.mcap"
+    rewrite_capture(simulated, repeated, repeat_every_second)
+    counts = {}
+    for path in (simulated, repeated):
+        samples = read_capture(path, config).samples
+        observations, _ = detect_observations(samples, robot)
+        counts[path] = (observations["head"].repeated_samples(), observations["head"].n_samples)
+    assert counts[simulated][0] == 0 and counts[simulated][1] >= 20
+    assert counts[repeated][1] == counts[simulated][1] and counts[repeated][0] >= counts[repeated][1] // 3
+    warning = repeat_warnings({"head": observations["head"]}, 0.05)
+    assert len(warning) == 1 and f"head camera: {counts[repeated][0]} of {counts[repeated][1]} sample(s)" in warning[0]
+    assert "stays at its floor (0.05 px)" in warning[0]
