@@ -6,14 +6,14 @@ resident memory (ru_maxrss of the child), wall and CPU time, the number of sampl
 (the machine may be shared); then the targets: the largest peak under 500 MB and within 10 % of the smallest.
 
 The recordings: the head camera at 10 Hz, joint states of all 20 joints at 100 Hz, no CameraInfo (the config's
-intrinsics). The robot holds a pose for 2 s, then moves to the next in 1 s, cycling through 12 poses; about
-half of the frames are still (kept). The poses are simulated without encoder offsets, which `--free camera`
-could not fit (with offsets on every joint the fit left 6.5 px RMS and 255 tag views out). Rendering 6000 distinct
-2048x1536 frames would take most of an hour here, so each pose is rendered once (`wolfcal simulate`, true
-geometry); each still frame is that render plus its own image noise (sigma `NOISE_SIGMA` gray levels: a crop at a random offset of one large noise field), encoded as jpeg
-(quality 95), as a camera gives; frames in motion (never kept) reuse the render's jpeg. Frames that repeat one image
-exactly would leave the fit no scatter between the frames of a pose to tell the pixel noise from (it then stays at
-its floor and the fit warns).
+intrinsics). The robot holds a pose for 2 s, then moves to the next in 1 s, cycling through 12 poses; about half of
+the frames are still (kept). The poses are simulated without encoder offsets, which `--free camera` could not fit
+(with offsets on every joint the fit left 6.5 px RMS and 255 tag views out). Rendering 6000 distinct 2048x1536
+frames would take most of an hour here, so each pose is rendered once (`wolfcal simulate`, true geometry); each
+still frame is that render plus its own image noise (sigma `NOISE_SIGMA` gray levels: a crop at a random offset of
+one large noise field), encoded as jpeg (quality 95), as a camera gives; frames in motion (never kept) reuse the
+render's jpeg. Frames that repeat one image exactly would leave the fit no scatter between the frames of a pose to
+tell the pixel noise from (it then stays at its floor and the fit warns).
 """
 
 from __future__ import annotations
