@@ -19,6 +19,7 @@ file is not one, nothing is paired or dropped (see `FramePairer`).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -72,6 +73,7 @@ class FramePairer:
         self.disorder_ns = disorder_ns
         self._log = JointLog()  # the window; every message while disorder_ns is None or the file may be a capture
         self._names: dict[str, None] = {}  # every joint, in order of first appearance of its message's name list
+        self._lists: dict[tuple[str, ...], bool] = {}  # each list of names seen: whether a message of it was finite
         self._finite: set[str] = set()  # joints with a message whose positions are all finite
         self._top: int | None = None  # largest stamp read [ns]
         self._paired_at: int | None = None  # `_top` when frames were last paired
@@ -88,14 +90,18 @@ class FramePairer:
         """One JointState message (header stamp [ns], as `JointLog.add`)."""
         self._check_order(stamp)
         n = min(len(names), len(positions))
-        for name in names[:n]:
-            self._names.setdefault(name, None)
-        finite = np.isfinite(np.asarray(positions[:n], dtype=float))
-        if finite.all():
-            self._finite.update(names[:n])
+        key = tuple(names[:n])
+        if key not in self._lists:  # a new list of names: its joints in order of first appearance
+            self._lists[key] = False
+            for name in key:
+                self._names.setdefault(name, None)
+        if all(map(math.isfinite, positions[:n])):
+            if not self._lists[key]:
+                self._finite.update(key)
+                self._lists[key] = True
         else:
             self._bad += 1
-            self._bad_joints.update(name for name, ok in zip(names[:n], finite) if not ok)
+            self._bad_joints.update(name for name, q in zip(key, positions) if not math.isfinite(q))
         self._log.add(stamp, names, positions, velocities)
         if self._capture is not None:
             self._capture.add(stamp, joint=True)
