@@ -331,7 +331,7 @@ def run_fit(
     if options.system != "mocap":
         required = (HEAD_CAMERA,) if options.system == "head" else ()
         samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-        release_freed_memory()  # the joint-state log of a long recording is gone: detection starts from the samples
+        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
         warnings += read_warnings
         say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
         names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])

@@ -6,10 +6,10 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
 kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
 (see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
-camera only). One pass: frames are kept from stamps and image headers; a kept image holds only its location in
-the file (`wolfcal.io.stream`), its bytes are read back when they are detected or drawn. Memory does not grow with
-the images: a ten-minute recording at 2048x1536 reads in the memory of a one-minute one (bench/bench_stream.py);
-joint states are kept compactly (`JointLog`, ~20 MB for ten minutes of 20 joints at 100 Hz).
+camera only). One pass: frames are paired with the joint states as they are read (`wolfcal.io.pairing`: a window
+of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
+log) and kept from stamps and image headers; a kept image holds only its location in the file (`wolfcal.io.stream`),
+its bytes are read back when they are detected or drawn. Memory does not grow with the images or the joint states.
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
