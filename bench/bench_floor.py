@@ -7,7 +7,8 @@ leg and head encoder offsets and the camera ~4 deg off. Per seed:
           +30 deg) before and after, the measured one (held-out 16 floor samples, no truth) with its 1-sigma,
           the soles' worst pose error over 500 calibration-range poses, fit time
   camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
-Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR] [--stances]
+Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR] [--stances] [--floor-tags 6]
+     [--floor-samples 20]
 """
 
 from __future__ import annotations
@@ -39,19 +40,29 @@ WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
                      np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
 FLOOR_DISTANCE_M = (1.0, 4.0)
-# deeper stances of the floor samples besides `floor.standing`: hips and ankles solved (nominal model, scipy
-# least_squares) so that each sole keeps the standing pose's orientation and forward place in the torso frame
+FLOOR_TAG_SIZES_M = (0.12, 0.14, 0.16, 0.18, 0.2, 0.15)
+# stances of the floor samples besides `floor.standing` (--stances): the torso moved 3 cm sideways or turned
+# 0.15 rad about the vertical, 1 cm lower, each sole kept where it stands (nominal model, scipy least_squares over each
+# leg's six joints, knees bent forward): every leg joint, the roll and yaw joints too, reads another tick in each
+# stance, so the rounding of the standing readings differs between stances (knee-only stances left the roll and
+# yaw joints at one reading)
 STANCES = [
-    {"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.6, "LHipPitch": 0.1695,
-     "LAnklePitch": -0.1687},
-    {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
-     "LAnklePitch": -0.3186},
+    {"LHipRoll": -0.091, "LHipPitch": 0.2382, "LKnee": 0.7372, "LAnklePitch": -0.2372, "LAnkleRoll": -0.091,
+     "RHipRoll": -0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": -0.0909},
+    {"LHipRoll": 0.091, "LHipPitch": 0.2418, "LKnee": 0.7444, "LAnklePitch": -0.2408, "LAnkleRoll": 0.091,
+     "RHipRoll": 0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": 0.0909},
+    {"LHipYaw": 0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2824, "LKnee": 0.7756, "LAnklePitch": -0.2314,
+     "LAnkleRoll": 0.0019, "RHipYaw": 0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2282, "RKnee": -0.7675,
+     "RAnklePitch": 0.2775, "RAnkleRoll": -0.0019},
+    {"LHipYaw": -0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2297, "LKnee": 0.7702, "LAnklePitch": -0.2787,
+     "LAnkleRoll": 0.0019, "RHipYaw": -0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2806, "RKnee": -0.7723,
+     "RAnklePitch": 0.2299, "RAnkleRoll": -0.0019},
 ]
 
 
-def write_config(folder: Path, stances: bool = True) -> Path:
-    """robot.yaml with other tag ids and sizes, the 1280x960 camera and (`stances`) the floor stances; returns its
-    path."""
+def write_config(folder: Path, stances: bool = True, n_tags: int = 6) -> Path:
+    """robot.yaml with other tag ids and sizes, the 1280x960 camera, `n_tags` floor tags (60, 61, ... of the sizes
+    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances; returns its path."""
     data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
     data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
     save_camera_info(CAMERA, folder / "camera.yaml")
@@ -61,7 +72,8 @@ def write_config(folder: Path, stances: bool = True) -> Path:
     for tag in data["tags"]:
         tag["size"] = 0.12 if tag["id"] == 42 else 0.1
         tag["id"] = new_ids[tag["id"]]
-    data["floor"]["tags"] = [{"id": 60 + k, "size": s} for k, s in enumerate([0.12, 0.14, 0.16, 0.18, 0.2, 0.15])]
+    sizes = FLOOR_TAG_SIZES_M
+    data["floor"]["tags"] = [{"id": 60 + k, "size": sizes[k % len(sizes)]} for k in range(n_tags)]
     if stances:
         data["floor"]["stances"] = [data["floor"]["standing"], *STANCES]
     path = folder / ("robot.yaml" if stances else "robot_standing.yaml")
@@ -74,27 +86,29 @@ def observations(robot: Robot, captures: list[Path]) -> dict[str, Observations]:
     return detect_observations(samples, robot)[0]
 
 
-def simulate(config: Path, folder: Path, seed: int, offsets: str) -> dict[str, Path]:
-    """feet, floor (in the stances) and held-out floor (standing) captures of one simulated robot (names ->
-    paths), each made once per folder."""
+def simulate(
+    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20
+) -> dict[str, Path]:
+    """feet, floor (`n_floor` samples, in the stances) and held-out floor (16, standing; `n_tags` floor tags)
+    captures of one simulated robot (names -> paths), each made once per folder."""
     paths = {k: folder / f"{k}.mcap" for k in ("feet", "floor", "held_floor")}
     quiet = lambda _m: None  # noqa: E731
     if not paths["feet"].exists():
         simulate_capture(config, paths["feet"], SimOptions(samples=24, seed=seed, offsets=offsets), say=quiet)
     truth = truth_paths(paths["feet"])[0]
-    for name, n, s in (("floor", 20, seed + 100), ("held_floor", 16, seed + 200)):
+    for name, n, s in (("floor", n_floor, seed + 100), ("held_floor", 16, seed + 200)):
         if paths[name].exists():
             continue
-        held = write_config(folder, stances=False) if name == "held_floor" else config
+        held = write_config(folder, stances=False, n_tags=n_tags) if name == "held_floor" else config
         simulate_capture(held, paths[name], SimOptions(samples=n, seed=s, floor=True, truth_file=truth,
                                                          floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
     return paths
 
 
-def run(scenario: str, seed: int, folder: Path, stances: bool) -> str:
+def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, n_floor: int = 20) -> str:
     folder.mkdir(parents=True, exist_ok=True)
-    config = write_config(folder, stances)
-    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none")
+    config = write_config(folder, stances, n_tags)
+    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor)
     robot = load_robot(config)
     truth = load_corrections(truth_paths(paths["feet"])[0], key="truth")
     obs = observations(robot, [paths["feet"], paths["floor"]])
@@ -132,13 +146,16 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder and reuse them")
     parser.add_argument("--stances", action="store_true", help="floor samples spread over STANCES too (default: "
                         "all standing at floor.standing)")
+    parser.add_argument("--floor-tags", type=int, default=6, help="floor tags lying on the floor (default 6)")
+    parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         for scenario in args.scenarios:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
-                    print(run(scenario, seed, root / f"{scenario}_{seed}", args.stances), flush=True)
+                    folder = root / f"{scenario}_{seed}"
+                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples), flush=True)
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
                     print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 

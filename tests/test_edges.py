@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from edge_reference import _refine_edges as reference_refine
-from test_vision import CAMERA, FACING, random_view, tag_target, truth
+from test_vision import CAMERA, FACING, SIZE, random_view, tag_target, truth
 
 from wolfcal.geometry import make_transform
 from wolfcal.vision import edges
 from wolfcal.vision.edges import edge_offsets, refine_edges
 from wolfcal.vision.render import render_targets
-from wolfcal.vision.tags import _detector, _to_gray, tag_cells
+from wolfcal.vision.tags import _detector, _found, _to_gray, detect_tags, tag_cells
 
 
 @pytest.mark.parametrize("camera", [CAMERA, CAMERA.scaled(0.25, 0.25, 512, 384)], ids=["full", "binned"])
@@ -51,6 +51,27 @@ def test_tags_refined_together_get_the_corners_they_get_alone(monkeypatch):
     np.testing.assert_allclose(refine_edges(img, start, tag_cells("tag36h11")), alone, atol=1e-9)
     for tag_id, found in zip(ids.ravel(), together):
         assert np.linalg.norm(found - truth(CAMERA, views[tag_id]), axis=1).max() < 0.3
+
+
+def test_refinement_in_a_crop_equals_the_whole_image():
+    """detect_tags refines in a float32 crop around an image's tags (`_tags_crop`): the same corners as refining the
+    same starts in the whole image (to float32 rounding of the sample points), for a large tag (cells of 27 px), a
+    small one, and one whose profiles reach past the image border (crop clipped there)."""
+    rng = np.random.default_rng(13)
+    views = [make_transform(FACING, [x, y, z]) for x, y, z in ((-0.25, -0.1, 0.5), (0.5, 0.0, 2.6))]
+    ray = np.ravel(CAMERA.unproject(np.array([3.0, 800.0])))  # a tag's left edge 3 px inside the image
+    views.append(make_transform(FACING, [ray[0] / ray[2] * 0.6 + SIZE / 2, ray[1] / ray[2] * 0.6 - SIZE / 2, 0.6]))
+    image = render_targets(CAMERA, [tag_target("tag36h11", i, T) for i, T in enumerate(views)], noise_sigma=2.0,
+                           rng=rng)  # fmt: skip
+    found = _found(image, "tag36h11", None, "edges")
+    assert sorted(found) == [0, 1, 2]
+    assert 1.0 < found[2][:, 0].min() < 5.0  # by the border
+    start = np.stack([found[k] for k in range(3)])
+    whole = refine_edges(image.astype(np.float32), start, tag_cells("tag36h11"))
+    cropped = detect_tags(image)
+    np.testing.assert_allclose(np.stack([cropped[k] for k in range(3)]), whole, atol=2e-4)
+    for tag_id, corners in cropped.items():
+        assert np.linalg.norm(corners - truth(CAMERA, views[tag_id]), axis=1).max() < 0.3
 
 
 def test_corner_by_the_image_border_keeps_its_estimate():

@@ -17,6 +17,7 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.cli import app
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_tag_poses
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, group_by_stamp
@@ -26,7 +27,6 @@ from wolfcal.io.writer import CaptureWriter, camera_info_message
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
-from wolfcal.sim.external_poses import external_tag_poses
 from wolfcal.sim.faulty import rewrite_capture, with_camera_info, with_damaged_image
 from wolfcal.vision.observe import detect_observations
 from wolfcal.vision.tags import tag_corners

@@ -10,25 +10,44 @@ import pytest
 import yaml
 from conftest import OTHER_CAMERA, wolfgang_with_other_tags
 from rich.console import Console
+from test_floor_fit import joined
 from typer.testing import CliRunner
 
 from wolfcal.capture.floor import floor_script
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
+from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import stance_poses
 from wolfcal.robot.robot import load_robot
 from wolfcal.robot.stances import off_plane, sole_gaps
 from wolfcal.sim.floor import simulate_floor
+from wolfcal.sim.scenario import synthetic_scenario
 
 # knees bent deeper, hips and ankles solved (nominal model) so that each sole keeps the standing orientation
 DEEP = [{"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.6, "LHipPitch": 0.1695,
          "LAnklePitch": -0.1687},
         {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
          "LAnklePitch": -0.3186}]  # fmt: skip
+# the torso 3 cm sideways or turned 0.15 rad, 1 cm lower, each sole kept where it stands (nominal model; the stances
+# of bench/bench_floor.py): every leg joint, roll and yaw too, reads another tick than in the standing pose
+LEAN = [
+    {"LHipRoll": -0.091, "LHipPitch": 0.2382, "LKnee": 0.7372, "LAnklePitch": -0.2372, "LAnkleRoll": -0.091,
+     "RHipRoll": -0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": -0.0909},
+    {"LHipRoll": 0.091, "LHipPitch": 0.2418, "LKnee": 0.7444, "LAnklePitch": -0.2408, "LAnkleRoll": 0.091,
+     "RHipRoll": 0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": 0.0909},
+    {"LHipYaw": 0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2824, "LKnee": 0.7756, "LAnklePitch": -0.2314,
+     "LAnkleRoll": 0.0019, "RHipYaw": 0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2282, "RKnee": -0.7675,
+     "RAnklePitch": 0.2775, "RAnkleRoll": -0.0019},
+    {"LHipYaw": -0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2297, "LKnee": 0.7702, "LAnklePitch": -0.2787,
+     "LAnkleRoll": 0.0019, "RHipYaw": -0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2806, "RKnee": -0.7723,
+     "RAnklePitch": 0.2299, "RAnkleRoll": -0.0019},
+]  # fmt: skip
+STANDING = {"RKnee": -0.2618, "LKnee": 0.2618}
 
 
 def write_config(folder, stances) -> object:
@@ -38,6 +57,29 @@ def write_config(folder, stances) -> object:
         data["floor"]["stances"] = stances
     (folder / "robot.yaml").write_text(yaml.safe_dump(data))
     return folder / "robot.yaml"
+
+
+@pytest.mark.slow
+def test_stances_that_move_every_leg_joint_average_the_standing_readings_rounding(tmp_path):
+    """Floor samples all standing share one rounded reading of each leg joint, which the leg fit takes in as an
+    offset; spread over stances in which every joint (roll and yaw too) reads another tick, the roundings average.
+    Truth: the simulator's offsets; 20 floor samples and 24 feet samples (synthetic corners), 4 seeds."""
+    errors = {}
+    for name, stances in (("standing", None), ("lean", [STANDING, *LEAN])):
+        (tmp_path / name).mkdir()
+        robot = load_robot(write_config(tmp_path / name, stances))
+        _, gap, bad = off_plane(sole_gaps(np.stack(list(robot.model.link_poses(stance_poses(robot),
+                                                                               ["l_sole", "r_sole"]).values()))))
+        assert not bad.any() and gap.max() < 1e-3  # the nominal soles stay on one plane in every stance
+        errors[name] = []
+        for seed in range(4):
+            feet = synthetic_scenario(robot, OTHER_CAMERA, 24, seed, offsets="all")
+            floor = simulate_floor(robot, OTHER_CAMERA, feet.truth, 20, np.random.default_rng(seed + 100))
+            fit = fit_observations(robot, {"head": joined(feet.obs, floor.obs)}, FitOptions(free="leg", side="both"))
+            row = ground_errors(robot, OTHER_CAMERA, feet.truth, {"m": fit.corrections}, (4.5,))[0]
+            errors[name].append(row["models"]["m"]["error_m"])
+    standing, lean = np.array(errors["standing"]), np.array(errors["lean"])
+    assert lean.max() < 0.025 and lean.mean() < 0.7 * standing.mean(), (standing, lean)
 
 
 def test_stances_are_read_in_order_and_default_to_standing(tmp_path):

@@ -499,13 +499,14 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
     at the fit's noise level it predicts the std the fit reports at a true kinematics, once the unseparable direction
     (HeadTilt.offset ~ the camera's rotation about the tilt axis) is known exactly: at the truth the camera's rotation
     correction turns that direction so that camera.ry and camera.rz share the prior held along it."""
+    from wolfcal.evaluate.accuracy import camera_pose_errors
     from wolfcal.fit.pipeline import FitOptions, fit_observations
     from wolfcal.plan.candidates import draw_candidates, plan_camera
-    from wolfcal.plan.information import PlanModel, fit_separated_std, predicted
+    from wolfcal.plan.information import PlanModel, fit_null_directions, fit_separated_std, predicted
     from wolfcal.plan.pipeline import used_tags
+    from wolfcal.projection import observations_from_poses
     from wolfcal.robot.collision import collision_model
     from wolfcal.robot.corrections import Corrections
-    from wolfcal.sim.observations import observations_from_poses
 
     options = PlanOptions(free="head_camera", system="head")
     camera = plan_camera(robot, "head")
@@ -535,3 +536,17 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
         assert separated[i] == pytest.approx(expected[i], rel=0.05), name
     ry = fit.params.names.index("camera.ry")
     assert reported[ry] > 1.5 * separated[ry], "the turned unseparable direction lends camera.ry its prior"
+
+    # the direction it takes as known (`fit_null_directions`): one, HeadTilt.offset against camera.rx, along which
+    # the camera's pose in the base frame does not change over the head's range
+    null = fit_null_directions(fit)
+    assert null.shape == (len(fit.params), 1)
+    largest = {fit.params.names[i] for i in np.argsort(-np.abs(null[:, 0]))[:2]}
+    assert largest == {"HeadTilt.offset", "camera.rx"}
+    c, sigma = len(fit.chain), fit.params.prior_sigmas[: len(fit.chain)]
+    values = fit.solution.values[:c]
+    moved = fit.chain.corrections(values + 0.1 * sigma * null[:c, 0])
+    rotation, position = camera_pose_errors(robot, moved, fit.chain.corrections(values))
+    tilt = fit.params.names.index("HeadTilt.offset")
+    assert rotation.max() < 0.02 * abs(0.1 * sigma[tilt] * null[tilt, 0])
+    assert position.max() < 1e-5

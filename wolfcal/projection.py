@@ -12,8 +12,9 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
+from wolfcal.encoders import encoder_readings
 from wolfcal.geometry import transform_points
-from wolfcal.observations import Observations
+from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import tag_corners
@@ -30,6 +31,50 @@ def tag_corner_pixels(camera: CameraModel, T_camera_tag: np.ndarray, corners: np
     """(..., 4, 2) pixels of tag corners `corners` (..., 4, 3) [m] under the poses T_camera_tag (..., 4, 4)
     (broadcast); NaN behind the camera."""
     return camera.project(transform_points(T_camera_tag, corners))
+
+
+def visible_in_view(
+    camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray, margin_px: float, min_size_px: float,
+    max_angle_rad: float = np.deg2rad(60.0),
+) -> np.ndarray:
+    """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
+    margin, appears at least `min_size_px` per edge and faces the camera (less than `max_angle_rad` off the ray)."""
+    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
+    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # (N, T, 4, 2)
+    inside = np.all(camera.in_image(uv, margin_px), axis=-1)
+    edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
+    big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px
+    normal = T_camera_tag[..., :3, 2]
+    to_camera = -T_camera_tag[..., :3, 3]
+    cos = np.sum(normal * to_camera, axis=-1) / np.linalg.norm(to_camera, axis=-1)
+    return inside & big & (cos > np.cos(max_angle_rad))
+
+
+def observations_from_poses(
+    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, T_camera_tag: np.ndarray,
+    visible: np.ndarray, noise_px: float, rng: np.random.Generator, camera_name: str = HEAD_CAMERA,
+    sources: list[str] | None = None,
+) -> Observations:
+    """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids, poses T_camera_tag (N, T, 4, 4))
+    with Gaussian pixel noise [px], and the encoder readings a real robot would report."""
+    tag_ids = robot.config.tag_ids
+    s_idx, t_idx = np.nonzero(visible)
+    corners = tag_corner_table(robot.config, tag_ids)[t_idx]  # (V, 4, 3)
+    uv = tag_corner_pixels(camera, T_camera_tag[s_idx, t_idx], corners)
+    uv = uv + rng.normal(0.0, noise_px, size=uv.shape)
+    n = len(q_true)
+    return Observations(
+        joint_names=list(robot.joint_names),
+        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        stamps_ns=np.arange(n, dtype=np.int64),
+        sources=sources or ["synthetic"] * n,
+        camera=camera,
+        sample_index=np.repeat(s_idx, 4),
+        tag_ids=np.repeat(np.array(tag_ids)[t_idx], 4),
+        corner_index=np.tile(np.arange(4), len(s_idx)),
+        uv=uv.reshape(-1, 2),
+        camera_name=camera_name,
+    )
 
 
 def pixel_jacobian(camera: CameraModel, p_camera: np.ndarray) -> np.ndarray:

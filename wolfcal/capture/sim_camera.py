@@ -15,9 +15,9 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.hardware.emulator import load_truth, read_true_angles
 from wolfcal.io.truth import load_external_truth, load_floor_places
+from wolfcal.placement import TARGET_BASE, look_at
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.placement import TARGET_BASE, look_at
 from wolfcal.sim.scene import SimScene
 
 DEFAULT_PLACEMENT = look_at(np.array([1.2, 0.0, 0.5]), TARGET_BASE)  # (4, 4) T_base_camera

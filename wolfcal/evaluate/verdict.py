@@ -59,49 +59,20 @@ def deploy_verdict(
     notes: list[str] = []
     worse = bool(after_px > before_px)
     if structure is not None and structure["unexplained"]:
-        what = (LEGS_ADVICE if free in ("camera", "head_camera") else
-                "the fitted model does not explain the held-out data: check the tags' ids, sizes and links, the "
-                "camera intrinsics, and that the captures are of this robot")  # fmt: skip
-        refusals.append((what, (
-            f"Held-out tags are off by {structure['view_shift_rms_px']:.2f} px RMS per axis, {structure['scale']:.1f} "
-            f"times what detection noise ({structure['corner_noise_px']:.2f} px) and joint quantisation explain: "
-            f"{what}.")))
+        refusals.append(_unexplained_refusal(free, structure))
     if worse:
         refusals.append(("keep the input URDF and refit with more varied poses or fewer free parameters", (
             f"The calibration makes held-out error worse: reprojection RMS {after_px:.3f} px calibrated vs "
             f"{before_px:.3f} px with the input URDF.")))
-    limit_cm = limits.ground_limit_m * 100
     if measured_ground is not None:
-        b, a = measured_ground["before_m"] * 100, measured_ground["after_m"] * 100
-        sa, sb = measured_ground["after_std_m"] * 100, measured_ground.get("before_std_m", 0.0) * 100
-        advice = LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE
-        if a - b > GROUND_SIGMAS * np.hypot(sa, sb):
-            refusals.append((advice, f"The measured ground error at 4.5 m gets worse: {b:.1f} +- {sb:.1f} cm -> "
-                                     f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
-        elif a > limit_cm:
-            unsure = (" The measurement is that uncertain: capture more floor samples (more head angles, nearer tags) "
-                      "to measure it more precisely." if a - GROUND_SIGMAS * sa <= limit_cm else "")  # fmt: skip
-            refusals.append((advice, (
-                f"The measured ground error at 4.5 m stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
-                f"{limit_cm:g} cm (--ground-limit-cm).{unsure}")))
-        elif a + GROUND_SIGMAS * sa > limit_cm:
-            notes.append(
-                f"The measured ground error at 4.5 m is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
-                f"cannot confirm that it is below the limit ({limit_cm:g} cm); capture more floor samples (more "
-                "head angles, nearer tags) to measure it more precisely."
-            )
+        _judge_measured_ground(free, measured_ground, limits.ground_limit_m, refusals, notes)
     else:
         predicted = "" if predicted_ground_m is None else (
             f"; the fit's uncertainty alone predicts +- {predicted_ground_m * 100:.1f} cm at 4.5 m (1 sigma), "
             "which does not include errors its free parameters cannot represent")  # fmt: skip
         notes.append(f"The ground error was not measured (no floor samples held out){predicted}.")
     if camera_turn_rad > limits.mount_limit_rad:
-        notes.append(
-            f"The camera correction turns the camera by {np.rad2deg(camera_turn_rad):.1f} deg, more than a camera "
-            f"mount moves ({np.rad2deg(limits.mount_limit_rad):g} deg): it may be absorbing joint offsets; "
-            + ("the ground error measured on the held-out floor views is the check of that." if measured_ground
-               else "check the ground error with floor samples before deploying.")  # fmt: skip
-        )
+        notes.append(_mount_note(camera_turn_rad, limits.mount_limit_rad, measured_ground is not None))
     deploy = not refusals
     if deploy:
         ground = ("" if measured_ground is None else
@@ -114,3 +85,49 @@ def deploy_verdict(
     return {"deploy": deploy, "worse": worse, "refusals": [why for _, why in refusals], "notes": notes,
             "message": banner, "ground_limit_m": limits.ground_limit_m,
             "mount_limit_rad": limits.mount_limit_rad}  # fmt: skip
+
+
+def _unexplained_refusal(free: str, structure: dict) -> tuple[str, str]:
+    """(what to do, why) when the free parameters cannot explain the held-out tags (`structure.unexplained`)."""
+    what = (LEGS_ADVICE if free in ("camera", "head_camera") else
+            "the fitted model does not explain the held-out data: check the tags' ids, sizes and links, the "
+            "camera intrinsics, and that the captures are of this robot")  # fmt: skip
+    return what, (
+        f"Held-out tags are off by {structure['view_shift_rms_px']:.2f} px RMS per axis, {structure['scale']:.1f} "
+        f"times what detection noise ({structure['corner_noise_px']:.2f} px) and joint quantisation explain: "
+        f"{what}.")
+
+
+def _judge_measured_ground(
+    free: str, measured_ground: dict, limit_m: float, refusals: list[tuple[str, str]], notes: list[str]
+) -> None:
+    """Appends the ground rules' refusal or note: worse by GROUND_SIGMAS, above the limit, or not confirmed below."""
+    limit_cm = limit_m * 100
+    b, a = measured_ground["before_m"] * 100, measured_ground["after_m"] * 100
+    sa, sb = measured_ground["after_std_m"] * 100, measured_ground.get("before_std_m", 0.0) * 100
+    advice = LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE
+    if a - b > GROUND_SIGMAS * np.hypot(sa, sb):
+        refusals.append((advice, f"The measured ground error at 4.5 m gets worse: {b:.1f} +- {sb:.1f} cm -> "
+                                 f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
+    elif a > limit_cm:
+        unsure = (" The measurement is that uncertain: capture more floor samples (more head angles, nearer tags) "
+                  "to measure it more precisely." if a - GROUND_SIGMAS * sa <= limit_cm else "")  # fmt: skip
+        refusals.append((advice, (
+            f"The measured ground error at 4.5 m stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
+            f"{limit_cm:g} cm (--ground-limit-cm).{unsure}")))
+    elif a + GROUND_SIGMAS * sa > limit_cm:
+        notes.append(
+            f"The measured ground error at 4.5 m is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
+            f"cannot confirm that it is below the limit ({limit_cm:g} cm); capture more floor samples (more "
+            "head angles, nearer tags) to measure it more precisely."
+        )
+
+
+def _mount_note(camera_turn_rad: float, mount_limit_rad: float, ground_measured: bool) -> str:
+    """The warning that the camera correction turns the camera by more than a mount moves."""
+    return (
+        f"The camera correction turns the camera by {np.rad2deg(camera_turn_rad):.1f} deg, more than a camera "
+        f"mount moves ({np.rad2deg(mount_limit_rad):g} deg): it may be absorbing joint offsets; "
+        + ("the ground error measured on the held-out floor views is the check of that." if ground_measured
+           else "check the ground error with floor samples before deploying.")  # fmt: skip
+    )

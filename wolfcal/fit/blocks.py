@@ -99,4 +99,4 @@ def held_joint_groups(q_measured: np.ndarray, sample_of_unit: np.ndarray) -> np.
     units whose sample read the same encoder tick share that reading's error (the standing legs of floor samples,
     which keep one pose while the head looks around)."""
     ticks = np.round(q_measured / RAD_PER_TICK).astype(np.int64)[sample_of_unit]
-    return ticks - ticks.min(axis=0, initial=0)  # groups 0, 1, ...
+    return ticks - ticks.min(axis=0, initial=0)  # labels only: equal tick, equal label (non-negative, not 0..G-1)

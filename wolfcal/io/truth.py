@@ -37,11 +37,16 @@ def external_truth_entry(T_base_camera: np.ndarray) -> dict:
     return {"T_base_camera": [[float(v) for v in row] for row in np.asarray(T_base_camera)], "meaning": MEANING}
 
 
+def _truth_section(path: Path, key: str) -> object:
+    """The `key` section of a simulation's FILE.truth.yaml, or None when the file has none."""
+    data = read_yaml(path, "simulation truth", "give the .truth.yaml written beside a simulated capture")
+    return data.get(key) if isinstance(data, dict) else None
+
+
 def load_external_truth(path: str | Path) -> dict[str, np.ndarray]:
     """camera name -> (4, 4) true T_base_camera from a simulation's FILE.truth.yaml (empty for a head-only one)."""
     path = Path(path)
-    data = read_yaml(path, "simulation truth", "give the .truth.yaml written beside a simulated capture")
-    cameras = data.get("external_cameras") if isinstance(data, dict) else None
+    cameras = _truth_section(path, "external_cameras")
     if cameras is None:
         return {}
     if not isinstance(cameras, dict):
@@ -58,8 +63,7 @@ def load_external_truth(path: str | Path) -> dict[str, np.ndarray]:
 def load_floor_places(path: str | Path) -> dict[int, np.ndarray]:
     """floor tag id -> true (x, y, yaw) [m, rad] from a simulation's FILE.truth.yaml (empty when it has none)."""
     path = Path(path)
-    data = read_yaml(path, "simulation truth", "give the .truth.yaml written beside a simulated capture")
-    tags = data.get("floor_tags") if isinstance(data, dict) else None
+    tags = _truth_section(path, "floor_tags")
     if tags is None:
         return {}
     places = {}

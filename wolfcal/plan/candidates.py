@@ -30,14 +30,14 @@ import numpy as np
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_pose_ok, external_visibility
 from wolfcal.geometry import invert_transform
 from wolfcal.observations import HEAD_CAMERA
+from wolfcal.placement import expected_placement, placement_from_text
+from wolfcal.projection import visible_in_view
 from wolfcal.robot.collision import CollisionModel, rest_configuration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_pose_ok, external_visibility
-from wolfcal.sim.placement import expected_placement, placement_from_text
-from wolfcal.sim.poses import visible_in_view
 from wolfcal.vision.tags import tag_corners
 
 BATCH = 4000  # configurations of the joints that move the tags drawn at a time
@@ -77,7 +77,7 @@ class Candidates:
 
 def plan_camera(robot: Robot, system: str, external: str | None = None, placement: str | None = None) -> PlanCamera:
     """The camera of a --system (head | external), its intrinsics from the robot config; an external camera at
-    `placement` ('x,y,z,roll,pitch,yaw', see `wolfcal.sim.placement`) or the simulator's expected placement."""
+    `placement` ('x,y,z,roll,pitch,yaw', see `wolfcal.placement`) or the simulator's expected placement."""
     if system == "head":
         name = HEAD_CAMERA
         robot.config.head_camera("--system head plans for it")
@@ -131,7 +131,8 @@ def tag_views(
     robot: Robot, camera: PlanCamera, q: np.ndarray, tag_ids: list[int], T_base_tag: np.ndarray | None = None
 ) -> np.ndarray:
     """(N, T) bool over config.tag_ids: tag in `tag_ids`, fully in the image with a margin, large and facing the
-    camera (the simulator's rules, `wolfcal.sim.poses`, nominal model); line of sight is checked by `line_of_sight`.
+    camera (the simulator's rules, `wolfcal.projection.visible_in_view`, nominal model); line of sight is checked by
+    `line_of_sight`.
     Head camera: T_base_tag (N, len(used), 4, 4) of the used tags in config order, when known, saves their FK."""
     nominal = Corrections()
     used = np.isin(robot.config.tag_ids, tag_ids)

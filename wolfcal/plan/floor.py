@@ -41,13 +41,12 @@ from wolfcal.plan.candidates import (
     joint_bounds,
 )
 from wolfcal.plan.information import plan_problem
+from wolfcal.projection import visible_in_view
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_joints
 from wolfcal.robot.collision import CollisionModel
-from wolfcal.robot.floor import floor_frames, standing_pose
+from wolfcal.robot.floor import floor_frames, floor_tag_poses, standing_pose
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.floor import floor_tag_poses
-from wolfcal.sim.poses import visible_in_view
 from wolfcal.vision.tags import tag_corners
 
 MIN_EDGE_PX = 12.0  # shortest edge of a floor tag view [px] (as `wolfcal.sim.floor.floor_views`)

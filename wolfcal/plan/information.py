@@ -1,10 +1,10 @@
 """What candidate poses would tell the fit: its own blocks, noise model and priors at simulated observations.
 
-The tag corners of each candidate are projected through the camera model at the nominal kinematics (`wolfcal.sim`,
-no image, no noise) and handed to the fit's `CameraBlock` and `Problem`, whitened with the configured pixel noise
-(priors.pixel_noise) and encoder quantisation (priors.encoder_noise), in the fit's prior-normalised unknowns z
-(prior: unit variance). The information of a pose set S is I + M_rep(n) + sum_k G_k^T G_k, as the fit's noise model
-makes it:
+The tag corners of each candidate are projected through the camera model at the nominal kinematics
+(`wolfcal.projection`, no image, no noise) and handed to the fit's `CameraBlock` and `Problem`, whitened with the
+configured pixel noise (priors.pixel_noise) and encoder quantisation (priors.encoder_noise), in the fit's
+prior-normalised unknowns z (prior: unit variance). The information of a pose set S is I + M_rep(n) + sum_k G_k^T G_k,
+as the fit's noise model makes it:
 - G_k (`factors`, r x P): the whitened rows of candidate k that change with the pose (each candidate pose its own
   noise group: the encoder error of one still pose);
 - M_rep(n) (`repeated_information`): the views that are the same in every pose, an external camera's view of the tags
@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse
 
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_tag_poses
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.pipeline import Fit
@@ -37,11 +38,10 @@ from wolfcal.fit.problem import Problem
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import Observations
 from wolfcal.plan.candidates import PlanCamera
+from wolfcal.projection import observations_from_poses
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_tag_poses
-from wolfcal.sim.observations import observations_from_poses
 
 NULL_INFO = 1e-3  # mean information per pose [z units, prior = 1] below which a direction counts as unobservable
 UNSEPARABLE_SHARE = 1e-3  # a parameter is unseparable when this share of its prior variance lies in null directions
@@ -184,21 +184,41 @@ def separated_std(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.n
     is below NULL_INFO. What the poses decide: at the fit's solution an unseparable group (HeadTilt.offset against
     the camera's rotation about the tilt axis) is turned by the camera's rotation correction and lends its prior to
     the camera's other rotations (`fit.uncertainty` reports that share too), whatever the poses."""
-    information = J_data.T @ J_data
-    information = information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
-    lam, V = np.linalg.eigh(information / max(n_samples, 1))
-    B = V[:, lam >= NULL_INFO]
-    cov_z = B @ np.linalg.solve(B.T @ (information + np.eye(len(lam))) @ B, B.T)
+    information, (_, B) = _information(J_data), _split_directions(J_data, n_samples)
+    cov_z = B @ np.linalg.solve(B.T @ (information + np.eye(len(information))) @ B, B.T)
     return np.sqrt(np.clip(np.diag(cov_z), 0.0, None)) * prior_sigmas
+
+
+def _information(J_data: np.ndarray | scipy.sparse.spmatrix) -> np.ndarray:
+    information = J_data.T @ J_data
+    return information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
+
+
+def _split_directions(J_data: np.ndarray | scipy.sparse.spmatrix, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal directions of z (P, m) whose information per sample is below NULL_INFO, and the others (P, P-m)."""
+    lam, V = np.linalg.eigh(_information(J_data) / max(n_samples, 1))
+    return V[:, lam < NULL_INFO], V[:, lam >= NULL_INFO]
+
+
+def _fit_jacobian(fit: Fit) -> tuple[np.ndarray | scipy.sparse.spmatrix, int]:
+    """A fit's whitened data Jacobian at its solution (z units, as for the std it reports) and its sample count."""
+    problem = fit.problem
+    z = (fit.solution.values - problem.params.references) / problem.params.prior_sigmas
+    return problem.data_jacobian(z), sum(len(b.q_measured) for b in fit.blocks)
 
 
 def fit_separated_std(fit: Fit) -> np.ndarray:
     """(P,) a fit's std [SI] with the directions no pose informs known exactly (`separated_std`), from the same
     whitened Jacobian at its solution as the std it reports."""
-    problem = fit.problem
-    z = (fit.solution.values - problem.params.references) / problem.params.prior_sigmas
-    n_samples = sum(len(b.q_measured) for b in fit.blocks)
-    return separated_std(problem.data_jacobian(z), problem.params.prior_sigmas, n_samples)
+    J, n_samples = _fit_jacobian(fit)
+    return separated_std(J, fit.problem.params.prior_sigmas, n_samples)
+
+
+def fit_null_directions(fit: Fit) -> np.ndarray:
+    """(P, m) the directions of a fit's prior-normalised unknowns z that its data do not inform (information per
+    sample below NULL_INFO at its solution: those `fit_separated_std` takes as known), orthonormal."""
+    J, n_samples = _fit_jacobian(fit)
+    return _split_directions(J, n_samples)[0]
 
 
 @dataclass

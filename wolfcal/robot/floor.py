@@ -29,6 +29,17 @@ def floor_frames(sole_poses: np.ndarray) -> np.ndarray:
     return T
 
 
+def floor_tag_poses(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """T_floor_tag (4, 4) of each floor tag lying face up at its place (x, y, yaw) [m, rad]."""
+    out = {}
+    for tag_id, (x, y, yaw) in places.items():
+        T = np.eye(4)
+        T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+        T[:3, 3] = x, y, robot.config.floor_config().tag(tag_id).thickness
+        out[tag_id] = T
+    return out
+
+
 def floor_frame_twists(sole_poses: np.ndarray, sole_twists: np.ndarray) -> np.ndarray:
     """(N, C, 6) spatial twists (v0, w) of the floor frame (`floor_frames`) from the sole poses (K, N, 4, 4) and the
     soles' twists (K, N, C, 6) per column (joint reading or parameter), all in one root frame. The floor frame is

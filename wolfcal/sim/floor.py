@@ -17,10 +17,11 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.geometry import transform_points
 from wolfcal.observations import Observations
 from wolfcal.robot.aim import aim_joints
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import camera_in_floor, stance_poses
+from wolfcal.robot.floor import camera_in_floor, floor_tag_poses, stance_poses
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_corners, tag_texture, tag_texture_width
@@ -35,25 +36,8 @@ class FloorScene:
 
 def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
     """(4, 3) corners of each floor tag in the floor frame [m], aruco order."""
-    out = {}
-    for tag_id, (x, y, yaw) in places.items():
-        tag = robot.config.floor_config().tag(tag_id)
-        c, s = np.cos(yaw), np.sin(yaw)
-        p = tag_corners(tag.size)
-        out[tag_id] = np.stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1],
-                                np.full(4, tag.thickness)], axis=1)  # fmt: skip
-    return out
-
-
-def floor_tag_poses(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-    """T_floor_tag (4, 4) of each floor tag lying face up at its place (x, y, yaw) [m, rad]."""
-    out = {}
-    for tag_id, (x, y, yaw) in places.items():
-        T = np.eye(4)
-        T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
-        T[:3, 3] = x, y, robot.config.floor_config().tag(tag_id).thickness
-        out[tag_id] = T
-    return out
+    return {t: transform_points(T_floor_tag, tag_corners(robot.config.floor_config().tag(t).size))
+            for t, T_floor_tag in floor_tag_poses(robot, places).items()}  # fmt: skip
 
 
 @dataclass

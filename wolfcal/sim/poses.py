@@ -11,28 +11,10 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.projection import tag_corner_pixels
+from wolfcal.projection import visible_in_view
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
-
-
-def visible_in_view(
-    camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray, margin_px: float, min_size_px: float,
-    max_angle_rad: float = np.deg2rad(60.0),
-) -> np.ndarray:
-    """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
-    margin, appears at least `min_size_px` per edge and faces the camera (less than `max_angle_rad` off the ray)."""
-    corners = np.stack([tag_corners(s) for s in sizes])  # (T, 4, 3)
-    uv = tag_corner_pixels(camera, T_camera_tag, corners)  # (N, T, 4, 2)
-    inside = np.all(camera.in_image(uv, margin_px), axis=-1)
-    edges = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=-1)
-    big = np.nan_to_num(np.min(edges, axis=-1), nan=0.0) >= min_size_px
-    normal = T_camera_tag[..., :3, 2]
-    to_camera = -T_camera_tag[..., :3, 3]
-    cos = np.sum(normal * to_camera, axis=-1) / np.linalg.norm(to_camera, axis=-1)
-    return inside & big & (cos > np.cos(max_angle_rad))
 
 
 def tag_visibility(

@@ -8,12 +8,13 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_pose_ok, external_tag_poses, external_visibility
 from wolfcal.observations import Observations
+from wolfcal.projection import observations_from_poses
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_pose_ok, external_tag_poses, external_visibility
-from wolfcal.sim.observations import observations_from_poses, synthetic_observations
+from wolfcal.sim.observations import synthetic_observations
 from wolfcal.sim.placement import random_placement
 from wolfcal.sim.poses import random_visible_poses
 from wolfcal.sim.simulate import offset_joints

@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.external_view import external_tag_poses
 from wolfcal.geometry import invert_transform
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.external_poses import external_tag_poses
 from wolfcal.sim.floor import floor_targets
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_texture, tag_texture_width

@@ -1,11 +1,11 @@
 """`wolfcal simulate`: a capture file of a simulated robot with known ground truth.
 
 Systems: `head` (the head camera sees the foot tags in random reachable poses), `external` (an external camera of the
-robot config, on a tripod in front of the robot on its stand, sees the torso tag and the foot tags while the legs
-move: `external_poses`, placement `placement`), `all` (both cameras in every sample). Writes FILE.mcap (the capture
-format of DESIGN.md), FILE.truth.yaml (true corrections, cameras, settings, and the true pose of each external camera
-under `external_cameras`) and FILE.truth.urdf (the robot as it really is: frame corrections folded into the origins,
-encoder offsets as `<calibration rising>`).
+robot config, on a tripod in front of the robot on its stand, sees the torso tag and the foot tags while the legs move:
+`wolfcal.external_view`, placement `wolfcal.sim.placement`), `all` (both cameras in every sample). Writes FILE.mcap (the
+capture format of DESIGN.md), FILE.truth.yaml (true corrections, cameras, settings, and the true pose of each external
+camera under `external_cameras`) and FILE.truth.urdf (the robot as it really is: frame corrections folded into the
+origins, encoder offsets as `<calibration rising>`).
 """
 
 from __future__ import annotations
@@ -22,19 +22,20 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.external_view import external_pose_ok, external_visibility
 from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.outputs import check_outputs
+from wolfcal.placement import placement_from_text
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.floor import FLOOR_NEEDED
 from wolfcal.robot.ranges import sampling_bounds
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.sim.external_poses import external_pose_ok, external_visibility
 from wolfcal.sim.floor import floor_views, render_floor
 from wolfcal.sim.mocap import simulate_mocap
-from wolfcal.sim.placement import placement_from_text, random_placement
+from wolfcal.sim.placement import random_placement
 from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibility
 from wolfcal.sim.scene import SimScene
 from wolfcal.sim.truth import TruthSpec, random_truth

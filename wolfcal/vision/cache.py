@@ -35,7 +35,7 @@ import numpy as np
 from wolfcal.atomic import atomic_output
 from wolfcal.vision.batch import Detections, detect_encoded
 
-DETECTOR_VERSION = 3  # bump when detection or refinement changes its corners
+DETECTOR_VERSION = 4  # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px)
 FORMAT = 1  # entry layout
 RACY_NS = 2_000_000_000  # a digest taken this soon after the file's last change is not remembered [ns]
 _enabled: ContextVar[bool] = ContextVar("wolfcal_detection_cache", default=True)

@@ -35,35 +35,34 @@ def edge_offsets(
     window: float | np.ndarray,
     length: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Edge position along t [px] of each dark -> light profile (N, S) sampled at t; NaN if it has no edge.
+    """Edge position along t [px] of each dark -> light profile (..., S) sampled at t; NaN if it has no edge.
 
-    `t`: (S,) offsets shared by all profiles, or (N, S) one row per profile; `length` (N,): how many samples of
-    each row are the profile (the rest is padding; default all S). `dark`, `light`, `window`: (N,) or scalar.
-    Area method: within `window` px (less near the profile's ends, at least 0.75 px) of the mid-grey crossing
-    nearest the profile centre, the edge lies where the dark area ends: edge = t_start + sum((light - I) /
-    (light - dark)) * dt.
+    `t`: (S,) offsets shared by all profiles, or one row per profile, broadcast to (..., S) (e.g. (E, 1, S) for
+    profiles (E, M, S): no copy per profile); `length` (...): how many samples of each row are the profile (the
+    rest is padding; default all S). `dark`, `light`, `window`: (...) or scalar. Area method: within `window` px
+    (less near the profile's ends, at least 0.75 px) of the mid-grey crossing nearest the profile centre, the edge
+    lies where the dark area ends: edge = t_start + sum((light - I) / (light - dark)) * dt.
     """
-    N, S = profiles.shape
-    t = np.broadcast_to(t, (N, S))
-    length = np.full(N, S) if length is None else np.asarray(length)
-    dark = np.reshape(dark, (-1, 1))
-    light = np.reshape(light, (-1, 1))
-    rows = np.arange(N)
-    step = t[:, 1] - t[:, 0]
+    lead, S = profiles.shape[:-1], profiles.shape[-1]
+    t = np.broadcast_to(t, (*lead, S))
+    length = np.broadcast_to(S if length is None else np.asarray(length), lead)
+    dark, light = np.asarray(dark)[..., None], np.asarray(light)[..., None]
+    step = t[..., 1] - t[..., 0]
     above = profiles >= 0.5 * (dark + light)
     gaps = np.arange(S - 1)
-    change = above[:, 1:] & ~above[:, :-1] & (gaps < length[:, None] - 1)  # dark -> light between k and k + 1
+    change = above[..., 1:] & ~above[..., :-1] & (gaps < length[..., None] - 1)  # dark -> light between k and k + 1
     centre = (length - 1) / 2
-    dist = np.where(change, np.abs(gaps + 0.5 - centre[:, None]), np.inf)
-    k = np.argmin(dist, axis=1)
-    ok = np.isfinite(dist[rows, k])
-    cross = t[rows, k] + step / 2
-    reach = np.minimum(window, np.minimum(cross - t[:, 0], t[rows, length - 1] - cross) - step)  # inside the profile
+    dist = np.where(change, np.abs(gaps + 0.5 - centre[..., None]), np.inf)
+    k = np.argmin(dist, axis=-1)[..., None]
+    ok = np.isfinite(np.take_along_axis(dist, k, axis=-1)[..., 0])
+    cross = np.take_along_axis(t, k, axis=-1)[..., 0] + step / 2
+    last = np.take_along_axis(t, length[..., None] - 1, axis=-1)[..., 0]
+    reach = np.minimum(window, np.minimum(cross - t[..., 0], last - cross) - step)  # inside the profile
     ok &= reach >= 0.75
-    inside = np.abs(t - cross[:, None]) <= reach[:, None]
-    start = np.where(inside, t, np.inf).min(axis=1) - step / 2
+    inside = np.abs(t - cross[..., None]) <= reach[..., None]
+    start = np.where(inside, t, np.inf).min(axis=-1) - step / 2
     dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
-    edge = start + (dark_part * inside).sum(axis=1) * step
+    edge = start + (dark_part * inside).sum(axis=-1) * step
     return np.where(ok, edge, np.nan)
 
 
@@ -196,18 +195,18 @@ def refine_tags(
         ends = base[:, :, None] + t_ends[:, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
         inside = (ends >= 0).all(axis=(2, 3)) & (ends <= far[:, None, None]).all(axis=(2, 3))  # the box is convex
         keep = inside & (d < 0.45 * length[:, None]) & (np.arange(M) < n_d[:, None])  # (E, M): near the corner
-        pts = (base[:, :, None] + t[:, None, :, None] * n[:, None, None]).astype(np.float32)  # (E, M, S, 2)
+        # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
+        maps = [np.add(base[:, :, None, a], (t * n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
+                       dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
         profiles = np.empty((E, M, S), np.float32)
         for i, rows in edges_of_image:
-            at = pts[rows].reshape(-1, S, 2)
-            profiles[rows] = cv2.remap(images[i], at[..., 0], at[..., 1], cv2.INTER_LINEAR).reshape(-1, M, S)
+            x, y = (m[rows].reshape(-1, S) for m in maps)
+            profiles[rows] = cv2.remap(images[i], x, y, cv2.INTER_LINEAR).reshape(-1, M, S)
         dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :])
-        profiles = profiles.astype(float)
         usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
         dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
-        off = edge_offsets(profiles.reshape(E * M, S), np.repeat(t, M, axis=0), np.repeat(dark, M),
-                           np.repeat(light, M), np.repeat(window, M), np.repeat(n_t, M))  # fmt: skip
-        off = off.reshape(E, M)
+        off = edge_offsets(profiles, t[:, None], dark[:, None], light[:, None], window[:, None],
+                           np.broadcast_to(n_t[:, None], (E, M)))  # fmt: skip
         good = keep & np.isfinite(off) & usable[:, None]
         usable &= good.sum(axis=1) >= MIN_POINTS
         tangent = np.full((E, 2), np.nan)

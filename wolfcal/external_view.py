@@ -1,14 +1,14 @@
-"""Random leg poses of a robot on a stand (base fixed) seen by an external camera at T_base_camera.
+"""What an external camera at T_base_camera sees of a robot on its stand (base fixed): the rule the simulator draws
+leg poses by and pose planning keeps its candidates by.
 
-Joint values are true angles [rad]. The Wolfgang's foot tags lie face up on plates ahead of the feet, so a camera in
-front sees them well only when the feet are lifted forward and tilted towards it: the legs are drawn from the
-config's `sampling_ranges.external` (`wolfcal.robot.ranges`; Wolfgang: hips swung forward up to about 90 deg, knees
-bent, ankles pitched both ways, small yaw and roll; head and arms at 0), and a pose is kept when the external camera
-sees the torso tag (every tag on a link rigidly fixed to the base) and at least one foot tag fully inside the image
-(margin 2 % of the width), at least 1.5 % of the width per edge, facing it (less than `MAX_ANGLE_RAD` off the
+Joint values are true angles [rad] (readings under the nominal model for a plan). A pose is good when the external
+camera sees the torso tag (every tag on a link rigidly fixed to the base) and at least one foot tag fully inside the
+image (margin 2 % of the width), at least 1.5 % of the width per edge, facing it (less than `MAX_ANGLE_RAD` off the
 viewing ray), and apart from every other tag in the image (bounding boxes grown by `SEPARATION` of their size must
-not overlap: a foot tag lifted in front of the torso tag would hide it or break its white border). Occlusion by the
-robot's body is not modelled.
+not overlap: a foot tag lifted in front of the torso tag would hide it or break its white border). The Wolfgang's
+foot tags lie face up on plates ahead of the feet, so a camera in front sees them well only when the feet are lifted
+forward and tilted towards it (the simulator draws the legs from the config's `sampling_ranges.external`). Occlusion
+by the robot's body is not modelled here (planning adds it: `wolfcal.plan.candidates`).
 """
 
 from __future__ import annotations
@@ -18,10 +18,9 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import invert_transform, transform_points
-from wolfcal.projection import tag_corner_pixels
+from wolfcal.projection import tag_corner_pixels, visible_in_view
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.sim.poses import visible_in_view
 from wolfcal.vision.tags import tag_corners
 
 MAX_ANGLE_RAD = np.deg2rad(55.0)
