@@ -1,4 +1,4 @@
-"""Fit speed: the leg preset (both sides) with the head camera on 25, 100 and 400 synthetic samples, and with an
+"""Fit speed: the leg preset (both sides) with the head camera on 25, 100, 400 and 1000 synthetic samples, and with an
 external camera on 30 and 120 samples.
 
 Run: python bench/bench_fit.py. Prints the solve's wall and CPU time (median of 3; reading and tag detection
@@ -40,7 +40,7 @@ def timed(robot, obs, options: FitOptions) -> tuple[float, float, object]:
 def main() -> None:
     robot = load_robot(CONFIG)
     camera = load_camera_info(CONFIG / "basler_acA2040.yaml")
-    for n in (25, 100, 400):
+    for n in (25, 100, 400, 1000):
         scenario = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all")
         wall, cpu, fit = timed(robot, scenario.obs, FitOptions(free="leg", side="both"))
         print(f"head camera, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d} corners, {len(fit.params)} "

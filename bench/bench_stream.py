@@ -6,10 +6,14 @@ resident memory (ru_maxrss of the child), wall and CPU time, the number of sampl
 (the machine may be shared); then the targets: the largest peak under 500 MB and within 10 % of the smallest.
 
 The recordings: the head camera at 10 Hz, joint states of all 20 joints at 100 Hz, no CameraInfo (the config's
-intrinsics). The robot holds a pose for 2 s, then moves to the next in 1 s, cycling through 12 poses; about
-half of the frames are still (kept). Rendering 6000 distinct 2048x1536 frames would take most of an hour here,
-so each pose is rendered once (`wolfcal simulate`, true geometry) and its jpeg (quality 95) is reused for every
-frame of that pose: the reader and the detector still read, decode and detect every frame.
+intrinsics). The robot holds a pose for 2 s, then moves to the next in 1 s, cycling through 12 poses; about half of
+the frames are still (kept). The poses are simulated without encoder offsets, which `--free camera` could not fit
+(with offsets on every joint the fit left 6.5 px RMS and 255 tag views out). Rendering 6000 distinct 2048x1536
+frames would take most of an hour here, so each pose is rendered once (`wolfcal simulate`, true geometry); each
+still frame is that render plus its own image noise (sigma `NOISE_SIGMA` gray levels: a crop at a random offset of
+one large noise field), encoded as jpeg (quality 95), as a camera gives; frames in motion (never kept) reuse the
+render's jpeg. Frames that repeat one image exactly would leave the fit no scatter between the frames of a pose to
+tell the pixel noise from (it then stays at its floor and the fit warns).
 """
 
 from __future__ import annotations
@@ -38,21 +42,41 @@ POSES = 12
 CAMERA_HZ, JOINT_HZ = 10, 100
 HOLD_S, MOVE_S = 2.0, 1.0
 T0 = 1_700_000_000_000_000_000  # [ns]
+NOISE_SIGMA = 2.0  # [gray levels] per-frame image noise of the still frames
+NOISE_MARGIN = 96  # [px] the noise field's margin: 9216 offsets of the per-frame crops (one per still frame)
 
 
-def render_poses(folder: Path) -> tuple[list[str], np.ndarray, list[bytes]]:
-    """Joint names, measured readings (POSES, J) [rad] and jpeg bytes of POSES simulated still poses."""
+def render_poses(folder: Path) -> tuple[list[str], np.ndarray, list[np.ndarray], list[bytes]]:
+    """Joint names, measured readings (POSES, J) [rad], images and their jpeg bytes of POSES simulated still
+    poses."""
     capture_path = folder / "poses.mcap"
-    options = SimOptions(samples=POSES, seed=5, offsets="all")
+    options = SimOptions(samples=POSES, seed=5)  # no encoder offsets: what `--free camera` can fit
     simulate_capture(CONFIG, capture_path, options, say=lambda _: None, force=True)
     capture = read_capture(capture_path, load_robot_config(CONFIG))
     names = capture.samples[0].joint_names
     q = np.stack([s.positions for s in capture.samples])
-    jpegs = [
-        cv2.imencode(".jpg", s.images[HEAD_CAMERA].decode(), [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
-        for s in capture.samples
-    ]
-    return names, q, jpegs
+    images = [s.images[HEAD_CAMERA].decode() for s in capture.samples]
+    return names, q, images, [jpeg(image) for image in images]
+
+
+def jpeg(image: np.ndarray) -> bytes:
+    return cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
+
+
+class FrameNoise:
+    """Image noise of one frame: a crop of one large Gaussian field at an offset not used before."""
+
+    def __init__(self, shape: tuple[int, ...], seed: int = 0) -> None:
+        rng = np.random.default_rng(seed)
+        self.shape = shape
+        big = (shape[0] + NOISE_MARGIN, shape[1] + NOISE_MARGIN, *shape[2:])
+        self.field = rng.normal(0.0, NOISE_SIGMA, big).astype(np.float32)
+        self.offsets = iter(rng.permutation(NOISE_MARGIN * NOISE_MARGIN).tolist())
+
+    def add(self, image: np.ndarray) -> np.ndarray:
+        dy, dx = divmod(next(self.offsets), NOISE_MARGIN)
+        noise = self.field[dy : dy + self.shape[0], dx : dx + self.shape[1]]
+        return np.clip(image + noise, 0, 255).astype(np.uint8)
 
 
 def joint_state_at(t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -68,8 +92,11 @@ def joint_state_at(t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, int
     return q[a] + blend * (q[b] - q[a]), velocity, a
 
 
-def write_recording(path: Path, frames: int, names: list[str], q: np.ndarray, jpegs: list[bytes]) -> None:
+def write_recording(
+    path: Path, frames: int, names: list[str], q: np.ndarray, images: list[np.ndarray], jpegs: list[bytes]
+) -> None:
     config = load_robot_config(CONFIG)
+    noise = FrameNoise(images[0].shape)
     duration = frames / CAMERA_HZ
     with path.open("wb") as handle:
         writer = Ros2Writer(handle, compression=None)
@@ -85,7 +112,9 @@ def write_recording(path: Path, frames: int, names: list[str], q: np.ndarray, jp
                            "velocity": velocity.tolist(), "effort": []}  # fmt: skip
                 writer.write_message(config.joint_states_topic, schemas[JOINT_STATE], message, log_time=stamp)
             else:
-                message = {"header": header, "format": "jpeg", "data": jpegs[pose]}
+                still = not np.any(velocity)
+                data = jpeg(noise.add(images[pose])) if still else jpegs[pose]
+                message = {"header": header, "format": "jpeg", "data": data}
                 writer.write_message(config.camera.topic, schemas[COMPRESSED_IMAGE], message, log_time=stamp)
         writer.finish()
 
@@ -116,14 +145,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as temp:
         folder = args.keep or Path(temp)
         folder.mkdir(parents=True, exist_ok=True)
-        names, q, jpegs = render_poses(folder)
+        names, q, images, jpegs = render_poses(folder)
         print(f"{POSES} poses rendered at 2048x1536, jpeg {np.mean([len(j) for j in jpegs]) / 1e6:.2f} MB each")
         peaks = []
         for frames in (int(f) for f in args.frames.split(",")):
             path = folder / f"recording_{frames}.mcap"
             if not path.exists():
                 start = time.perf_counter()
-                write_recording(path, frames, names, q, jpegs)
+                write_recording(path, frames, names, q, images, jpegs)
                 print(f"wrote {path.name}: {path.stat().st_size / 1e9:.2f} GB in {time.perf_counter() - start:.0f} s")
             # one child per size: ru_maxrss of RUSAGE_CHILDREN is the largest child's so far
             measure = [sys.executable, __file__, "--measure", str(path)]

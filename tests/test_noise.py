@@ -156,9 +156,6 @@ class DenseWhitening:
         ]
         self.cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
-    def with_shared(self, shared: SharedErrors) -> "DenseWhitening":
-        return DenseWhitening(self.group_of_row, shared, self.row_scale)
-
     def matrices(self, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """W (R, R), the split's own part (R, R) and shared part (K, R), and each row's free share 1 - h (R,)."""
         if sigma not in self.cache:
@@ -204,6 +201,12 @@ class DenseWhitening:
                 values.append(projection[on] / np.sqrt(share[on]) / level)
                 weights.append(share[on])
         return np.concatenate(values), np.concatenate(weights)
+
+    def chunks(self, max_rows: int):
+        yield np.arange(len(self.group_of_row)), self  # one chunk: rows in no group are zero rows
+
+    def standardizer(self, r: np.ndarray):
+        return lambda sigma: self.standardized(r, sigma)
 
     def group_norms(self, r: np.ndarray, sigma: float) -> np.ndarray:
         w = self.matrices(sigma)[0] @ r

@@ -93,6 +93,20 @@ class Observations:
             camera_name=self.camera_name,
         )
 
+    def repeated_samples(self) -> int:
+        """How many samples show exactly (to the bit) the tags and corners of the sample before them in time, from
+        the same file: the same image again, since two exposures never give the same refined corners."""
+        order = np.lexsort((self.corner_index, self.tag_ids, self.sample_index))
+        ends = np.searchsorted(self.sample_index[order], np.arange(self.n_samples + 1))
+        rows = np.column_stack([self.tag_ids[order], self.corner_index[order]]).astype(np.float64)
+        rows = np.column_stack([rows, self.uv[order]])
+        keys = [rows[a:b].tobytes() for a, b in zip(ends[:-1], ends[1:])]
+        by_time = np.argsort(self.stamps_ns, kind="stable")
+        return sum(
+            1 for a, b in zip(by_time[:-1], by_time[1:])
+            if keys[b] and keys[a] == keys[b] and self.sources[a] == self.sources[b]
+        )  # fmt: skip
+
     def only_tags(self, tag_ids: list[int]) -> Observations:
         """The corners of the given tags; samples that see none of them are dropped."""
         seen = np.unique(self.sample_index[np.isin(self.tag_ids, tag_ids)])

@@ -2,7 +2,8 @@
 
 scipy's trf decomposes the whole (R, P) Jacobian by SVD at every step; with R in the thousands and P in the tens
 that dominates a fit. Here each step solves the (P, P) damped normal equations (J^T J + mu diag(J^T J)) dz = -J^T r
-(Marquardt's scaling, Nielsen's damping update). Residuals and Jacobian come from the caller (`Problem`).
+(Marquardt's scaling, Nielsen's damping update). Residuals and the normal equations J^T J, J^T r come from the
+caller (`Problem`, which sums them over chunks of rows: the whole Jacobian is never needed).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse
 
 
 @dataclass
@@ -25,7 +25,7 @@ class LMResult:
 
 def levenberg_marquardt(
     fun: Callable[[np.ndarray], np.ndarray],
-    jac: Callable[[np.ndarray], np.ndarray],
+    normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     x0: np.ndarray,
     max_iterations: int = 200,
     xtol: float = 1e-8,
@@ -34,8 +34,8 @@ def levenberg_marquardt(
     cost_tol: float = 0.0,
     std_tol: float = 0.0,
 ) -> LMResult:
-    """Minimise 0.5 * |fun(x)|^2 with a Jacobian jac(x) (R, P), dense or sparse (the normal equations are
-    solved densely: P up to a few thousand). Stops when a step lowers the cost by less than ftol * cost or
+    """Minimise 0.5 * |fun(x)|^2 given normal(x) = (J^T J (P, P), J^T fun(x) (P,)) of its Jacobian J at x
+    (solved densely: P up to a few thousand). Stops when a step lowers the cost by less than ftol * cost or
     cost_tol (absolute, the cost's unit), or (std_tol > 0, residuals whitened: J^T J is the inverse covariance of
     x) once an accepted step moves every unknown by at most std_tol times its standard deviation,
     sqrt(diag((J^T J)^-1)) at the step's start: the steps left are below what the data can tell,
@@ -44,7 +44,7 @@ def levenberg_marquardt(
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost, nfev = float(r @ r), 1
-    H, g = _normal_equations(jac(x), r)
+    H, g = normal(x)
     scale = np.maximum(np.diag(H), 1e-12)
     mu, nu = 1e-4, 2.0
     for _ in range(max_iterations):
@@ -66,8 +66,8 @@ def levenberg_marquardt(
         if rho > 0 and np.isfinite(cost_new):
             small_change = cost - cost_new < max(ftol * cost, 2.0 * cost_tol, 1e-300)
             within_noise = std_tol > 0 and bool(np.all(np.abs(dx) <= std_tol * _marginal_std(H)))
-            x, r, cost = x_new, r_new, cost_new
-            H, g = _normal_equations(jac(x), r)
+            x, cost = x_new, cost_new
+            H, g = normal(x)
             scale = np.maximum(scale, np.diag(H))
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
@@ -78,12 +78,6 @@ def levenberg_marquardt(
         else:
             mu, nu = mu * nu, nu * 2.0
     return LMResult(x, 0.5 * cost, nfev, 0)
-
-
-def _normal_equations(J, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """J^T J (dense) and J^T r."""
-    H = J.T @ J
-    return (H.toarray() if scipy.sparse.issparse(H) else H), np.asarray(J.T @ r).ravel()
 
 
 def _marginal_std(H: np.ndarray) -> np.ndarray:

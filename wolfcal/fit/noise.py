@@ -18,6 +18,7 @@ factors D^-1 U_g whitens D^-1 r.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,9 @@ import scipy.sparse
 
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
 EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
+# Entries of the shared-error matrices U_g decomposed in one batched call (a long recording's groups in batches: a
+# few MB at a time)
+DECOMPOSE_ENTRIES = 1 << 18
 
 
 def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> np.ndarray:
@@ -69,7 +73,11 @@ class GroupedWhitening:
     with covariance sigma^2 I + (shared part), the shared part from `SharedErrors`; rows of different groups are
     independent, rows in no group get zero weight."""
 
-    def __init__(self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None) -> None:
+    def __init__(
+        self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None,
+        factors: tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
         self.group_of_row, self.shared = group_of_row, shared
         self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
         self.in_group = group_of_row >= 0
@@ -77,65 +85,102 @@ class GroupedWhitening:
         grouped = np.flatnonzero(self.in_group)
         self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
         sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
-        self.Q, self.s2, self.group_of_column = self._thin_factors(sizes)
-        self.QT = self.Q.T.tocsr()
+        self.Q, self.s2, self.group_of_column = self._thin_factors(sizes) if factors is None else factors
 
-    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csr_matrix, np.ndarray, np.ndarray]:
+    def chunks(self, max_rows: int) -> Iterator[tuple[np.ndarray, GroupedWhitening]]:
+        """The grouped rows a few whole groups at a time (consecutive groups up to `max_rows` rows; a larger group
+        alone): each chunk's rows (R_c,) and the whitening of those rows alone, numerically the same as this one's
+        on them (rows in no group carry no weight and are in no chunk). For sums over rows (normal equations)
+        without whitening every row at once."""
+        sizes = np.bincount(self.group_of_row[self.rows], minlength=self.n_groups)
+        ends = np.concatenate([[0], np.cumsum(sizes)])  # in `rows`, of groups 0 .. n_groups
+        position = np.zeros(self.n_rows, dtype=np.int64)
+        position[self.rows] = np.arange(len(self.rows))
+        first = 0
+        while first < self.n_groups:
+            end = max(int(np.searchsorted(ends, ends[first] + max_rows, side="right")) - 1, first + 1)
+            rows = self.rows[ends[first] : ends[end]]
+            columns = np.flatnonzero((self.group_of_column >= first) & (self.group_of_column < end))
+            Q = self.Q[:, columns]
+            Q = scipy.sparse.csc_matrix((Q.data, position[Q.indices] - ends[first], Q.indptr),
+                                        shape=(len(rows), len(columns)))  # fmt: skip
+            shared = self.shared
+            part = SharedErrors(shared.A[rows], shared.sigma_q, shared.reading[rows], shared.label[rows],
+                                shared.axis[rows], shared.tau)  # fmt: skip
+            factors = (Q, self.s2[columns], self.group_of_column[columns] - first)
+            yield rows, GroupedWhitening(self.group_of_row[rows] - first, part, self.row_scale[rows], factors)
+            first = end
+
+    @staticmethod
+    def _batches(sizes: np.ndarray, counts: list[np.ndarray], labels: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+        """Groups decomposed in one batched call: of one size n, in order, about DECOMPOSE_ENTRIES entries of their
+        factors at a time (groups without shared errors are left out)."""
+        widths = np.sum(counts, axis=0) + labels if counts else labels  # columns of each group (before rank)
+        for n in np.unique(sizes[sizes > 0]):
+            members = np.flatnonzero((sizes == n) & (widths > 0))
+            if not len(members):
+                continue
+            per_batch = max(1, DECOMPOSE_ENTRIES // (n * int(widths[members].max())))
+            for first in range(0, len(members), per_batch):
+                yield int(n), members[first : first + per_batch]
+
+    @property
+    def QT(self) -> scipy.sparse.csr_matrix:
+        """Q^T: a view of Q's arrays (no copy)."""
+        return self.Q.T
+
+    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray]:
         """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
-        group of each column."""
+        group of each column. Q is stored by columns (each column: its group's rows, ascending), built in place
+        from the decompositions (a copy through (row, column) pairs would hold several times its size)."""
         shared, rows = self.shared, self.rows
-        moving = np.any(shared.A != 0, axis=0)  # joints that move no row are left out
-        A = shared.sigma_q * shared.A[:, moving] / self.row_scale[:, None]
+        nonzero = shared.A != 0
+        moving = np.flatnonzero(np.any(nonzero, axis=0))  # joints that move no row are left out
+        nonzero = nonzero[:, moving]
         reading = shared.reading[:, None] if shared.reading.ndim == 1 else shared.reading[:, moving]
         group = self.group_of_row[rows]
         if reading.shape[1] == 1:  # one reading per row: all its joints' columns follow that reading's slot
-            slot, count = _slots(group, reading[rows, 0], np.any(A[rows] != 0, axis=1), self.n_groups)
-            slots, counts = [slot] * A.shape[1], [count] * A.shape[1]
+            slot, count = _slots(group, reading[rows, 0], np.any(nonzero[rows], axis=1), self.n_groups)
+            slots, counts = [slot] * len(moving), [count] * len(moving)
         else:
-            pairs = [_slots(group, reading[rows, j], A[rows, j] != 0, self.n_groups) for j in range(A.shape[1])]
+            pairs = [_slots(group, reading[rows, j], nonzero[rows, j], self.n_groups) for j in range(len(moving))]
             slots, counts = [p[0] for p in pairs], [p[1] for p in pairs]
+        del nonzero
         n_axes = int(shared.axis.max()) + 1 if len(shared.axis) else 1
         labelled = (shared.label[rows] >= 0) & (shared.tau > 0)
         label_slot, labels = _slots(group, shared.label[rows] * n_axes + shared.axis[rows], labelled, self.n_groups)
         starts = np.concatenate([[0], np.cumsum(sizes)])
         data: list[np.ndarray] = []
         row_idx: list[np.ndarray] = []
-        col_idx: list[np.ndarray] = []
+        col_len: list[np.ndarray] = []
         s2: list[np.ndarray] = []
         group_of_column: list[np.ndarray] = []
         K = 0  # columns so far
-        for n in np.unique(sizes[sizes > 0]):
-            members = np.flatnonzero(sizes == n)
+        for n, members in self._batches(sizes, counts, labels):
             widths = [int(c[members].max(initial=0)) for c in counts]  # columns per joint: its distinct readings
             k_reading = int(np.sum(widths))
             k = k_reading + int(labels[members].max())
-            if k == 0:
-                continue
             at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
             U = np.zeros((len(members) * n, k))
             for j, (slot, first) in enumerate(zip(slots, np.cumsum([0, *widths[:-1]]))):
                 has = np.flatnonzero(slot[at] >= 0)
-                U[has, first + slot[at][has]] = A[rows[at][has], j]
+                unit = rows[at][has]
+                U[has, first + slot[at][has]] = shared.sigma_q * shared.A[unit, moving[j]] / self.row_scale[unit]
             has = np.flatnonzero(label_slot[at] >= 0)
             U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
             Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
             g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
             data.append(Q[g, :, c].ravel())
-            row_idx.append(rows[at].reshape(len(members), n)[g].ravel())
-            col_idx.append(np.repeat(K + np.arange(len(g)), n))
+            row_idx.append(rows[at].reshape(len(members), n)[g].ravel().astype(np.int32))
+            col_len.append(np.full(len(g), n))
             s2.append(s[g, c] ** 2)
             group_of_column.append(members[g])
             K += len(g)
         if not data:
-            return scipy.sparse.csr_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
-        Q = scipy.sparse.csr_matrix(
-            (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))), shape=(self.n_rows, K)
-        )
+            return scipy.sparse.csc_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
+        indptr = np.concatenate([[0], np.cumsum(np.concatenate(col_len))])
+        Q = scipy.sparse.csc_matrix((np.concatenate(data), np.concatenate(row_idx), indptr), shape=(self.n_rows, K))
         return Q, np.concatenate(s2), np.concatenate(group_of_column)
-
-    def with_shared(self, shared: SharedErrors) -> GroupedWhitening:
-        """The same groups under another shared part (e.g. another size of the shared detection error)."""
-        return GroupedWhitening(self.group_of_row, shared, self.row_scale)
 
     def apply(self, M, sigma: float):
         """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""
@@ -183,23 +228,45 @@ class GroupedWhitening:
         weights to its number of rows, as an eigenbasis of its covariance would count them; an eigenspace of one
         vector gives every row the same number, its component). Rows the shared errors explain fully carry no
         information on sigma and are dropped."""
+        return self.standardizer(r)(sigma)
+
+    def standardizer(self, r: np.ndarray) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+        """sigma -> `standardized(r, sigma)`, with everything that does not depend on sigma (projections, shares,
+        eigenspaces) done once: a noise-level search evaluates it at many sigma."""
         r = r / self.row_scale
-        own = (r - self.Q @ (self.QT @ r))[self.rows] / sigma
-        free = 1.0 - np.asarray(self.Q.multiply(self.Q).sum(axis=1)).ravel()[self.rows]
+        Q, per_column = self.Q, np.diff(self.Q.indptr)
+        tr = self.QT @ r
+        own = (r - Q @ tr)[self.rows]
+        free = 1.0 - np.bincount(Q.indices, Q.data**2, minlength=self.n_rows)[self.rows]
         informative = free > RANK_TOLERANCE**0.5
-        values = [own[informative] / np.sqrt(free[informative])]
-        weights = [free[informative]]
+        own, root_free, weights = own[informative], np.sqrt(free[informative]), [free[informative]]
         if len(self.s2):
-            t = (self.QT @ r) / np.sqrt(sigma**2 + self.s2)
-            Q = self.Q.tocoo()
-            space = self._eigenspaces()[Q.col]  # each entry's eigenspace (numbered over all groups)
-            key = np.unique(Q.row.astype(np.int64) * (int(space.max()) + 1) + space, return_inverse=True)[1].ravel()
-            projection = np.bincount(key, Q.data * t[Q.col])
+            # one number per (row, eigenspace of its group), ordered by row, then eigenspace: from Q's layout (each
+            # column holds its group's rows; a group's eigenspaces are numbered consecutively), no sort
+            space, group = self._eigenspaces(), self.group_of_column
+            first = np.full(self.n_groups, len(space))
+            np.minimum.at(first, group, space)
+            n_spaces = np.zeros(self.n_groups, dtype=np.int64)
+            np.maximum.at(n_spaces, group, space - first[group] + 1)
+            spaces_of_row = np.zeros(self.n_rows, dtype=np.int64)
+            spaces_of_row[self.rows] = n_spaces[self.group_of_row[self.rows]]
+            offset = np.cumsum(spaces_of_row) - spaces_of_row
+            key = np.repeat(space - first[group], per_column)
+            key += offset[Q.indices]
             share = np.bincount(key, Q.data**2)
             on = share > RANK_TOLERANCE
-            values.append(projection[on] / np.sqrt(share[on]))
+            root_share = np.sqrt(share[on])
             weights.append(share[on])
-        return np.concatenate(values), np.concatenate(weights)
+        weight = np.concatenate(weights)
+
+        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:
+            values = [own / sigma / root_free]
+            if len(self.s2):
+                t = tr / np.sqrt(sigma**2 + self.s2)
+                values.append(np.bincount(key, Q.data * np.repeat(t, per_column))[on] / root_share)
+            return np.concatenate(values), weight
+
+        return at
 
     def _eigenspaces(self) -> np.ndarray:
         """(K,) eigenspace of each shared column: columns of one group whose s^2 agree to EIGEN_TOLERANCE of the

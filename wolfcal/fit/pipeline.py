@@ -270,6 +270,22 @@ def attached_robot_name(config_text: str | None) -> str | None:
 FIT_OUTPUTS = ("result.yaml", "calibrated.urdf", "calibrated_robot.yaml")
 
 
+def repeat_warnings(observations: dict[str, Observations], noise_floor_px: float) -> list[str]:
+    """A warning per camera whose samples repeat the image before them exactly (`Observations.repeated_samples`)."""
+    warnings = []
+    for name, obs in observations.items():
+        repeated = obs.repeated_samples()
+        if repeated:
+            warnings.append(
+                f"{name} camera: {repeated} of {obs.n_samples} sample(s) show exactly the tag corners of the sample "
+                "before them (the same image again: a camera driver repeating its last frame, or a copied stream); "
+                "they add no information, and the pixel noise estimate, which reads the scatter between the frames "
+                "of a pose, stays at its floor "
+                f"({noise_floor_px} px)"
+            )
+    return warnings
+
+
 def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
     """The outlier rule must not absorb unusable data: WolfcalError when more than MAX_LEFT_OUT of a measurement
     system's samples or tag views were left out as outliers."""
@@ -315,7 +331,7 @@ def run_fit(
     if options.system != "mocap":
         required = (HEAD_CAMERA,) if options.system == "head" else ()
         samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-        release_freed_memory()  # the joint-state log of a long recording is gone: detection starts from the samples
+        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
         warnings += read_warnings
         say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
         names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
@@ -323,7 +339,7 @@ def run_fit(
         observations, detect_warnings = detect_observations(
             samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
         )
-        warnings += detect_warnings
+        warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
         release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")

@@ -19,10 +19,14 @@ from scipy.sparse.csgraph import connected_components
 
 from wolfcal.fit.blocks import Block, Linearization
 from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
+from wolfcal.fit.uncertainty import triangular_factor
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
 MAD_TO_SIGMA = 1.4826  # standard deviation of a normal distribution per median absolute deviation
+# Measured rows whitened at a time in the normal equations (whole noise groups): a few hundred KB per chunk of
+# Jacobian, and large enough that numpy's per-call overhead stays small.
+CHUNK_ROWS = 4096
 
 
 def huber_sqrt(r: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
@@ -91,6 +95,7 @@ class BlockState:
     def rebuild(self, lin: Linearization) -> None:
         """Noise groups over the inlier units at this linearisation (left-out views are in no group): units that
         share a joint reading or a repeating detection error are in one group."""
+        self.whitening = None  # the old factors go before the new ones are built (memory)
         shared = self.shared_errors(lin)
         reading = self.reading_of_unit
         group_of_unit = reading
@@ -116,7 +121,9 @@ class BlockState:
         tau = self.shared_size(sigma)
         shared = self.noise_model.shared
         if shared.tau != tau and np.any(shared.label >= 0):
-            self.whitening = self.noise_model.with_shared(replace(shared, tau=tau))
+            groups, row_scale = self.noise_model.group_of_row, self.noise_model.row_scale
+            self.whitening = None  # the old factors go before the new ones are built (memory)
+            self.whitening = GroupedWhitening(groups, replace(shared, tau=tau), row_scale)
 
     def whiten(self, M, split: bool = True):
         """The block's rows (R,) or (R, P) whitened at its noise level: `GroupedWhitening.split` (R + K rows, what
@@ -194,43 +201,69 @@ class Problem:
         """d(whitened data residuals)/dz, sparse above DENSE_LIMIT unknowns: of the robust residuals (R + K, P) or,
         with robust False, of the plainly whitened rows (R, P), row i of the block's measured row i (the same
         information J^T J either way)."""
-        n = len(self.params)
-        sparse = n > DENSE_LIMIT
         parts = []
         for state, lin, w in zip(self.states, self.evaluate(z), self._whitened(z)):
-            rows = lin.residual.size
-            J_chain = lin.jac_chain.reshape(rows, self.n_chain)
-            if sparse:
-                empty = scipy.sparse.csr_matrix((rows, n - self.n_chain))
-                J = scipy.sparse.hstack([scipy.sparse.csr_matrix(J_chain), empty]).tocsr()
-            else:
-                J = np.zeros((rows, n))
-                J[:, : self.n_chain] = J_chain
-            if lin.jac_local is not None and lin.local_cols is not None:
-                L = lin.jac_local.shape[-1]
-                r_idx = np.repeat(np.arange(rows), L)
-                c_idx = state.start + np.repeat(lin.local_cols, state.block.dim, axis=0).ravel()
-                vals = lin.jac_local.reshape(rows, L).ravel()
-                local = scipy.sparse.csr_matrix((vals, (r_idx, c_idx)), shape=(rows, n))
-                J = (J + local).tocsr() if sparse else J + local.toarray()
-            J = state.whiten(J, split=robust)
+            J = state.whiten(self._rows_jacobian(state, lin, np.arange(lin.residual.size)), split=robust)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
-                J = scipy.sparse.diags(scale) @ J if sparse else np.multiply(J, scale[:, None], out=J)
+                J = scipy.sparse.diags(scale) @ J if scipy.sparse.issparse(J) else np.multiply(J, scale[:, None], out=J)
             parts.append(J)
-        sig = self.params.prior_sigmas
-        if sparse:
-            return scipy.sparse.vstack(parts).tocsr() @ scipy.sparse.diags(sig)
-        stacked = parts[0] if len(parts) == 1 else np.vstack(parts)
-        return np.multiply(stacked, sig, out=stacked)
+        if len(self.params) > DENSE_LIMIT:
+            return scipy.sparse.vstack(parts).tocsr()
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
-    def jacobian(self, z: np.ndarray) -> np.ndarray | scipy.sparse.csr_matrix:
-        """d(residuals)/dz: the robust data Jacobian above the identity of the priors."""
-        J = self.data_jacobian(z)
+    def information(self, z: np.ndarray, triangular: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """J^T J (P, P) and J^T r (P,) of the robust whitened data residuals at z (J: `data_jacobian`, r: their
+        part of `residuals`), summed over a few whole noise groups at a time (CHUNK_ROWS): the whole whitened
+        Jacobian of a long recording is never in memory. With `triangular` (dense J only), also J's triangular
+        factor R (J = Q R, (P, P)), updated chunk by chunk, else None."""
         n = len(self.params)
-        if scipy.sparse.issparse(J):
-            return scipy.sparse.vstack([J, scipy.sparse.identity(n, format="csr")]).tocsr()
-        return np.vstack([J, np.eye(n)])
+        H, g, R = np.zeros((n, n)), np.zeros(n), np.zeros((0, n)) if triangular and n <= DENSE_LIMIT else None
+        for state, lin in zip(self.states, self.evaluate(z)):
+            residual = lin.residual.ravel()
+            for rows, part in state.noise_model.chunks(CHUNK_ROWS):
+                robust, slope = huber_sqrt(part.split(residual[rows], state.sigma), self.huber_k)
+                J = part.split(self._rows_jacobian(state, lin, rows), state.sigma)
+                if scipy.sparse.issparse(J):
+                    J = scipy.sparse.diags(slope) @ J
+                    H += (J.T @ J).toarray()
+                else:
+                    J *= slope[:, None]
+                    H += J.T @ J
+                    if R is not None:
+                        R = triangular_factor(np.vstack([R, J]))
+                g += J.T @ robust
+        return H, g, R
+
+    def normal_equations(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """J^T J and J^T r of every residual (`residuals`: the data's, `information`, then the priors z)."""
+        H, g, _ = self.information(z)
+        H[np.diag_indices_from(H)] += 1.0
+        return H, g + np.asarray(z, dtype=float)
+
+    def _rows_jacobian(self, state: BlockState, lin: Linearization, rows: np.ndarray):
+        """d(raw residual rows)/dz (len(rows), P) of a block's rows (indices into its raw rows), dense or, above
+        DENSE_LIMIT unknowns, sparse."""
+        n, sig = len(self.params), self.params.prior_sigmas
+        J_chain = lin.jac_chain.reshape(lin.residual.size, self.n_chain)[rows] * sig[: self.n_chain]
+        dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
+        if dense is not None:
+            dense[:, : self.n_chain] = J_chain
+        local = None
+        if lin.jac_local is not None and lin.local_cols is not None:
+            L = lin.jac_local.shape[-1]
+            cols = state.start + lin.local_cols[rows // state.block.dim]  # (len(rows), L)
+            vals = lin.jac_local.reshape(-1, L)[rows] * sig[cols]
+            if dense is not None:
+                np.add.at(dense, (np.arange(len(rows))[:, None], cols), vals)
+            else:
+                local = scipy.sparse.csr_matrix((vals.ravel(), (np.repeat(np.arange(len(rows)), L), cols.ravel())),
+                                                shape=(len(rows), n))  # fmt: skip
+        if dense is not None:
+            return dense
+        empty = scipy.sparse.csr_matrix((len(rows), n - self.n_chain))
+        J = scipy.sparse.hstack([scipy.sparse.csr_matrix(J_chain), empty]).tocsr()
+        return J if local is None else (J + local).tocsr()
 
 
 def _one_group(reading: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from wolfcal.fit.lm import levenberg_marquardt
 from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
-from wolfcal.fit.uncertainty import Uncertainty, uncertainty
+from wolfcal.fit.uncertainty import Uncertainty, information_uncertainty
 from wolfcal.observations import rms_by
 
 # Bounds of a block's estimated noise per unit; the pixel floor is the fit's setting (`FitOptions.noise_floor_px`,
@@ -111,16 +111,28 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     return float(MAD_TO_SIGMA * weighted_median(np.abs(w), dof) * np.sqrt(n / (n - n_params)))
 
 
+def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
+    """Whether `residual_scale` of these standardised numbers exceeds 1, without sorting them: the weighted median
+    lies above a value exactly when less than half of the weight lies at or below it."""
+    n = float(np.sum(dof))
+    if n <= n_params:
+        return False
+    at_most_one = MAD_TO_SIGMA * np.abs(w) * np.sqrt(n / (n - n_params)) <= 1.0
+    return bool(np.sum(dof[at_most_one]) < 0.5 * n)
+
+
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
     not below `floor` [unit]); returns the residual scale reached."""
+    standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if residual_scale(state, residual, float(np.exp(mid)), n_params) > 1.0:
+        if _scale_above_one(*standardized(float(np.exp(mid))), n_params):
             lo = mid
         else:
             hi = mid
+    del standardized  # its arrays are not kept while set_sigma may decompose the groups again
     state.set_sigma(float(np.exp(hi)))
     return residual_scale(state, residual, state.sigma, n_params)
 
@@ -241,6 +253,8 @@ def _update_round(
     """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`); the linearisations
     live only here."""
     lins = problem.evaluate(z)
+    for state in problem.states:  # rebuilt below: not kept beside the per-view noise models of the outlier flags
+        state.whitening = None
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
     settled, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
@@ -258,19 +272,20 @@ def solve(
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
-        result = levenberg_marquardt(problem.residuals, problem.jacobian, z, cost_tol=ROUND_COST_TOL,
+        result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL,
                                      std_tol=ROUND_STD_TOL)
         z, evaluations = result.x, evaluations + result.nfev
         changed, settled, notes = _update_round(problem, z, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and settled:
             break
-    result = levenberg_marquardt(problem.residuals, problem.jacobian, z, std_tol=FINAL_STD_TOL)
+    result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, std_tol=FINAL_STD_TOL)
     z, evaluations = result.x, evaluations + result.nfev
     after = problem.raw_residuals(z)
+    information, _, triangular = problem.information(z, triangular=True)
     return Solution(
         values=problem.values(z),
-        uncertainty=uncertainty(problem.data_jacobian(z), problem.params.prior_sigmas),
+        uncertainty=information_uncertainty(information, problem.params.prior_sigmas, triangular),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,

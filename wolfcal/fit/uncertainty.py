@@ -35,7 +35,23 @@ class Uncertainty:
 def uncertainty(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.ndarray) -> Uncertainty:
     """Uncertainty of the unknowns from the whitened data Jacobian (R, P) in prior-normalised units."""
     information = J_data.T @ J_data
-    information = information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
+    if scipy.sparse.issparse(J_data):
+        return information_uncertainty(information.toarray(), prior_sigmas)
+    return information_uncertainty(np.asarray(information), prior_sigmas, triangular_factor(J_data))
+
+
+def triangular_factor(M: np.ndarray) -> np.ndarray:
+    """R of M = Q R (M (m, n): R (min(m, n), n)); stacking R over further rows and factoring again gives the factor
+    of all the rows (a Jacobian's chunk by chunk)."""
+    return np.asarray(np.linalg.qr(M, mode="r"))
+
+
+def information_uncertainty(information: np.ndarray, prior_sigmas: np.ndarray,
+                            triangular: np.ndarray | None = None) -> Uncertainty:
+    """Uncertainty of the unknowns from the information J^T J (P, P) of the whitened data Jacobian J in
+    prior-normalised units. The condition number from J's triangular factor R (J = Q R, (P, P)) when given, else
+    from the information's eigenvalues (which lose what lies below 1e-8 of the largest singular value: a nearly
+    singular problem reads infinite)."""
     n = len(prior_sigmas)
     cov_z = np.linalg.inv(information + np.eye(n))
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
@@ -44,11 +60,11 @@ def uncertainty(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.nda
         condition = 1.0
     elif np.any(norms < 1e-12):
         condition = float("inf")
-    elif scipy.sparse.issparse(J_data):
-        s = np.linalg.eigvalsh(information / np.outer(norms, norms))
-        condition = float(np.sqrt(s[-1] / s[0])) if s[0] > 0 else float("inf")
-    else:  # singular values of the column-scaled Jacobian, through its (P, P) triangular factor
-        s = np.linalg.svd(np.linalg.qr(np.asarray(J_data) / norms, mode="r"), compute_uv=False)
+    elif triangular is None:
+        e = np.linalg.eigvalsh(information / np.outer(norms, norms))
+        condition = float(np.sqrt(e[-1] / e[0])) if e[0] > 0 else float("inf")
+    else:  # singular values of the column-scaled Jacobian J / norms = Q (R / norms)
+        s = np.linalg.svd(triangular / norms, compute_uv=False)
         condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     return Uncertainty(
         std=d * prior_sigmas,

@@ -6,10 +6,10 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
 kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
 (see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
-camera only). One pass: frames are kept from stamps and image headers; a kept image holds only its location in
-the file (`wolfcal.io.stream`), its bytes are read back when they are detected or drawn. Memory does not grow with
-the images: a ten-minute recording at 2048x1536 reads in the memory of a one-minute one (bench/bench_stream.py);
-joint states are kept compactly (`JointLog`, ~20 MB for ten minutes of 20 joints at 100 Hz).
+camera only). One pass: frames are paired with the joint states as they are read (`wolfcal.io.pairing`: a window
+of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
+log) and kept from stamps and image headers; a kept image holds only its location in the file (`wolfcal.io.stream`),
+its bytes are read back when they are detected or drawn. Memory does not grow with the images or the joint states.
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
@@ -19,6 +19,7 @@ with a note naming camera, index and time (an error when more than 20 % of a cam
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,10 +38,11 @@ from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
 from wolfcal.io.msgdefs import header_stamp_ns
-from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, JointLog, JointStates, Paired, group_by_stamp, pair_frame
+from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
+from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
-from wolfcal.io.validate import drop_damaged_images, finite_joint_states
+from wolfcal.io.validate import drop_damaged_images, finite_joint_note
 from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
 
@@ -110,6 +112,15 @@ class _Frame:
     damage: str | None
 
 
+@dataclass
+class _PassOne:
+    """What one pass over the file gives: the frames paired, each camera's image stamps (sorted) and CameraInfo."""
+
+    pairing: Pairing
+    stamps: dict[str, np.ndarray]  # camera -> (N,) int64 header stamps of all its images [ns], sorted
+    infos: dict[str, list[tuple[int, InfoModel | None]]]
+
+
 def _pass_one(
     path: Path,
     reader,
@@ -117,12 +128,13 @@ def _pass_one(
     cameras: list[str],
     info_cameras: set[str],
     progress: ProgressCallback | None,
-):
-    """Joint-state messages, per-camera image headers and per-camera CameraInfo models."""
+    disorder_ns: int | None,
+) -> _PassOne:
+    """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models."""
     image_topics = {config.camera_topics(n)[0]: n for n in cameras}
     info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
-    joint_messages = JointLog()
-    images: dict[str, list[_Header]] = {n: [] for n in cameras}
+    pairer = FramePairer(disorder_ns)
+    stamps: dict[str, array] = {n: array("q") for n in cameras}
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
     topics = [config.joint_states_topic, *image_topics, *info_topics]
@@ -132,20 +144,23 @@ def _pass_one(
             progress(count, total)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
-            joint_messages.add(stamp, decoded.name, decoded.position, decoded.velocity)
+            pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
         elif channel.topic in image_topics:
+            name = image_topics[channel.topic]
             kind, data = image_kind(decoded.data), decoded.data
-            damage = image_damage(data) if kind else None
-            images[image_topics[channel.topic]].append(_Header(stamp, kind, image_size(data), damage, message.log_time))
+            header = _Header(stamp, kind, image_size(data), image_damage(data) if kind else None, message.log_time)
+            stamps[name].append(stamp)
+            pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
         else:
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
             if key not in models:  # one model per distinct CameraInfo
                 models[key] = camera_info_model(path, channel.topic, decoded)
             infos[info_topics[channel.topic]].append((stamp, models[key]))
+    pairing = pairer.finish()
     if progress is not None:
         progress(total, total)
-    return joint_messages, images, infos
+    return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos)
 
 
 def _read(
@@ -160,28 +175,27 @@ def _read(
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
-    joint_messages, images, infos = _pass_one(path, reader, config, found.cameras, info_cameras, progress)
+    try:
+        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS)
+    except Disorder:  # stamps further out of order than the window allows: pair on the whole log
+        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None)
+    pairing = read.pairing
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
-    image_stamps = {h.stamp for headers in images.values() for h in headers}
-    # a capture file: one joint state per sample, with the stamp of the sample's images
-    exact = joint_messages.count == len(image_stamps) and image_stamps <= {
-        int(t) for _, stamps, _, _ in joint_messages.groups() for t in stamps
-    }
-    states, bad_stamps, skipped = finite_joint_states(path, config.joint_states_topic, joint_messages)
+    skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,
+                                pairing.bad_joints)  # fmt: skip
     frames: list[_Frame] = []
     for name in found.cameras:
-        frames += _keep_frames(
-            path, config, name, images[name], infos[name], states, exact, intrinsics, bad_stamps, skipped
-        )
+        frames += _keep_frames(path, config, name, read, intrinsics, skipped)
     if not frames:
-        counts = ", ".join(f"{len(images[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}" for n in images)
+        counts = ", ".join(f"{len(read.stamps[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}"
+                           for n in found.cameras)  # fmt: skip
         why = f"; e.g. {skipped[0]}" if skipped else ""
         raise WolfcalError(
-            f"{path}: no usable samples ({counts}, {joint_messages.count} joint state(s) on "
+            f"{path}: no usable samples ({counts}, {pairing.messages} joint state(s) on "
             f"{config.joint_states_topic}{why}); record the robot holding still poses with the camera running"
         )
-    frames = _drop_damaged(path, images, frames, skipped)
-    samples = _group(path, states, frames, 0 if exact else SAMPLE_TOLERANCE_NS)
+    frames = _drop_damaged(path, read.stamps, frames, skipped)
+    samples = _group(path, pairing.names, frames, 0 if pairing.exact else SAMPLE_TOLERANCE_NS)
     return Capture(
         path=path,
         samples=samples,
@@ -196,30 +210,29 @@ def _keep_frames(
     path: Path,
     config: RobotConfig,
     name: str,
-    images: list[_Header],
-    infos: list[tuple[int, InfoModel | None]],
-    states: JointStates,
-    exact: bool,
+    read: _PassOne,
     intrinsics: CameraModel | None,
-    bad_stamps: set[int],
     skipped: list[str],
 ) -> list[_Frame]:
     """The still (or, in a capture file, stamped) frames of one camera; reasons for the others go to `skipped`.
-    Frames stamped like a joint state that was left out (`bad_stamps`) are left out: `skipped` says so already."""
+    Frames stamped like a joint state that was left out (non-finite) are left out: `skipped` says so already."""
     chooser = IntrinsicsChooser(path, config, name, intrinsics)
     topic = config.camera_topics(name)[0]
+    infos = read.infos[name]
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
-    images = sorted(images, key=lambda item: item.stamp)
-    start = images[0].stamp if images else 0
+    mine = sorted((f for f in read.pairing.frames if f.camera == name), key=lambda f: f.stamp)
+    start = int(read.stamps[name][0]) if len(read.stamps[name]) else 0
     kept: dict[int, _Frame] = {}
-    for stamp, kind, size, damage, log_time in images:
+    for frame in mine:
+        header: _Header = frame.item  # type: ignore[assignment]
+        stamp, kind, size, damage, log_time = header
         where = f"'{name}' image {(stamp - start) / 1e9:.3f} s after its first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
             continue
-        if stamp in bad_stamps:
+        if frame.bad_stamp:
             continue
-        paired = pair_frame(states, stamp, exact)
+        paired = frame.result
         if not isinstance(paired, Paired):
             skipped.append(f"{where}: {paired}")
             continue
@@ -235,21 +248,22 @@ def _keep_frames(
 
 def _drop_damaged(
     path: Path,
-    images: dict[str, list[_Header]],
+    stamps: dict[str, np.ndarray],
     frames: list[_Frame],
     skipped: list[str],
 ) -> list[_Frame]:
-    """The frames whose image is whole; the others are named (camera, index, time) in `skipped`."""
+    """The frames whose image is whole; the others are named (camera, index, time) in `skipped` (`stamps`: each
+    camera's image stamps, sorted)."""
     whole: set[tuple[str, int]] = set()
-    for name, headers in images.items():
+    for name, sorted_stamps in stamps.items():
         damage = {f.stamp: f.damage for f in frames if f.camera == name}
-        kept, notes = drop_damaged_images(path, name, damage, sorted(h.stamp for h in headers))
+        kept, notes = drop_damaged_images(path, name, damage, sorted_stamps.tolist())
         skipped += notes
         whole |= {(name, stamp) for stamp in kept}
     return [f for f in frames if (f.camera, f.stamp) in whole]
 
 
-def _group(path: Path, states: JointStates, frames: list[_Frame], tolerance_ns: int) -> list[Sample]:
+def _group(path: Path, names: list[str], frames: list[_Frame], tolerance_ns: int) -> list[Sample]:
     """Samples of frames grouped by stamp; a sample's stamp and joint readings are those of its first frame."""
     groups = group_by_stamp([f.stamp for f in frames], [f.camera for f in frames], tolerance_ns)
     samples = []
@@ -258,7 +272,7 @@ def _group(path: Path, states: JointStates, frames: list[_Frame], tolerance_ns: 
         samples.append(
             Sample(
                 stamp_ns=first.stamp,
-                joint_names=list(states.names),
+                joint_names=list(names),
                 positions=first.paired.positions,
                 images={frames[i].camera: frames[i].image for i in group},
                 velocities=first.paired.velocities,

@@ -59,6 +59,25 @@ class JointLog:
         vs.extend(velocities[:n] if len(velocities) == len(names) else [np.nan] * n)
         self.count += 1
 
+    def drop_before(self, stamp: int) -> None:
+        """Forget the messages stamped before `stamp` [ns] (`count` still counts them; name lists stay known)."""
+        for names, (stamps, qs, vs) in self._groups.items():
+            times = np.frombuffer(stamps, np.int64)
+            keep = times >= stamp
+            if keep.all():
+                continue
+            shape = (len(stamps), len(names))
+            self._groups[names] = (
+                array("q", times[keep].tobytes()),
+                array("d", np.frombuffer(qs).reshape(shape)[keep].tobytes()),
+                array("d", np.frombuffer(vs).reshape(shape)[keep].tobytes()),
+            )
+
+    def stamps(self) -> np.ndarray:
+        """(N,) int64 the stamps of every message held [ns], group after group."""
+        stamps = [np.frombuffer(t, np.int64) for t, _, _ in self._groups.values()]
+        return np.concatenate(stamps) if stamps else np.empty(0, np.int64)
+
     def groups(self) -> list[tuple[tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]]:
         """(names, stamps (N,) [ns], positions (N, J) [rad], velocities (N, J) [rad/s]) per distinct name list,
         in order of first appearance (views of the log's arrays)."""
@@ -129,15 +148,14 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
         s = states.series[name]
         i = int(np.searchsorted(s.times, stamp_ns))
         candidates = [j for j in (i - 1, i) if 0 <= j < len(s.times)]
-        j = min(candidates, key=lambda c: abs(int(s.times[c]) - stamp_ns))
-        dt = abs(int(s.times[j]) - stamp_ns)
+        j = min(candidates, key=lambda c: abs(int(s.times[c]) - stamp_ns)) if candidates else -1
+        dt = abs(int(s.times[j]) - stamp_ns) if candidates else None
         if exact and dt != 0:
             return f"no joint state of {name} with the image's stamp"
-        if dt > PAIR_TOLERANCE_NS:
-            return (
-                f"no joint state of {name} within {PAIR_TOLERANCE_NS / 1e6:.0f} ms "
-                f"(nearest {dt / 1e6:.0f} ms away)"
-            )
+        if dt is None or dt > PAIR_TOLERANCE_NS:
+            nearest = f"nearest {dt / 1e6:.0f} ms away" if dt is not None and dt <= STILL_WINDOW_NS else (
+                f"none within {STILL_WINDOW_NS / 1e6:.0f} ms")  # what a window of +-STILL_WINDOW_NS tells
+            return f"no joint state of {name} within {PAIR_TOLERANCE_NS / 1e6:.0f} ms ({nearest})"
         positions.append(s.positions[j])
         velocities.append(s.velocities[j])
         if exact:

@@ -6,37 +6,25 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
-
 from wolfcal.errors import WolfcalError
-from wolfcal.io.recording import JointLog, JointStates
 from wolfcal.leftout import MAX_LEFT_OUT, check_left_out, too_many
 
 
-def finite_joint_states(path: Path, topic: str, log: JointLog) -> tuple[JointStates, set[int], list[str]]:
-    """(the joint states of the messages whose positions are all finite, stamps of those left out, a note on them).
+def finite_joint_note(path: Path, topic: str, messages: int, bad: int, joints: Counter[str]) -> list[str]:
+    """The note on the `bad` of `messages` joint states left out for NaN or infinite positions (`joints`: joint ->
+    how many of its positions), [] when none. The sample(s) at those readings are left out by the reader.
 
     WolfcalError naming the file, topic, joints and counts when more than MAX_LEFT_OUT of them are bad."""
-    keep: list[np.ndarray] = []
-    dropped: set[int] = set()
-    joints: Counter[str] = Counter()
-    for names, stamps, positions, _ in log.groups():
-        finite = np.isfinite(positions)
-        keep.append(finite.all(axis=1))
-        dropped.update(int(s) for s in stamps[~keep[-1]])
-        joints.update({names[j]: int(n) for j, n in enumerate((~finite).sum(axis=0)) if n})
-    states = JointStates.from_log(log, keep)
-    if not joints:
-        return states, set(), []
-    n_bad = log.count - sum(int(k.sum()) for k in keep)
+    if not bad:
+        return []
     listed = ", ".join(f"{joint} {count}x" for joint, count in joints.most_common())
-    what = f"{path}: {n_bad} of {log.count} joint state(s) on {topic} hold NaN or infinite positions ({listed})"
-    if too_many(n_bad, log.count):
+    what = f"{path}: {bad} of {messages} joint state(s) on {topic} hold NaN or infinite positions ({listed})"
+    if too_many(bad, messages):
         raise WolfcalError(
             f"{what}: more than {MAX_LEFT_OUT:.0%} of the readings are unusable; check the servo and the joint "
             "state publisher of these joints, then capture again"
         )
-    return states, dropped, [f"{what}: the sample(s) at these readings are left out"]
+    return [f"{what}: the sample(s) at these readings are left out"]
 
 
 def drop_damaged_images(

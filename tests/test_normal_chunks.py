@@ -1,0 +1,60 @@
+"""The normal equations summed over chunks of whole noise groups (bounded memory on long recordings) equal those of
+the whole whitened Jacobian, and a fit with tiny chunks is the fit with one chunk: head camera with still poses seen
+in several frames (groups of many rows, repeating detection errors) and an external camera with a pose per sample
+(a sparse Jacobian)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_noise import TRIPOD, repeated_frames
+
+from wolfcal.fit import problem
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.sim.scenario import synthetic_external_scenario
+
+SLOW = pytest.mark.slow
+
+
+def scenario(robot, camera, system: str):
+    if system == "head, repeated frames":
+        return repeated_frames(robot, camera, 3), FitOptions(free="leg", side="both")
+    obs = synthetic_external_scenario(robot, TRIPOD, n=50, seed=22).obs
+    return obs, FitOptions(free="leg", external_moving=True)
+
+
+@pytest.mark.parametrize("system", ["head, repeated frames", pytest.param("external moving", marks=SLOW)])
+def test_chunked_normal_equations_equal_the_whole_jacobians(robot, camera, monkeypatch, system):
+    obs, options = scenario(robot, camera, system)
+    fit = fit_observations(robot, obs, options)
+    prob = fit.problem
+    z = (fit.solution.values - prob.params.references) / prob.params.prior_sigmas
+    J = prob.data_jacobian(z)
+    J = J.toarray() if hasattr(J, "toarray") else J
+    r = prob.residuals(z)[: -len(z)]
+    H_whole, g_whole = J.T @ J, J.T @ r
+    scale = np.max(np.abs(H_whole))
+    sizes = np.bincount(prob.states[0].noise_model.group_of_row[prob.states[0].noise_model.rows])
+    monkeypatch.setattr(problem, "CHUNK_ROWS", int(sizes.max() + sizes.min()))  # a few groups per chunk
+    chunks = list(prob.states[0].noise_model.chunks(problem.CHUNK_ROWS))
+    assert 1 < len(chunks) < len(sizes)
+    H, g, R = prob.information(z, triangular=True)
+    np.testing.assert_allclose(H, H_whole, atol=1e-12 * scale)
+    np.testing.assert_allclose(g, g_whole, atol=1e-12 * np.max(np.abs(g_whole)))
+    if R is not None:  # the triangular factor of the dense Jacobian: R^T R = J^T J
+        np.testing.assert_allclose(R.T @ R, H_whole, atol=1e-12 * scale)
+    assert (R is None) == (len(z) > problem.DENSE_LIMIT) == (system == "external moving")
+    H_prior, g_prior = prob.normal_equations(z)
+    np.testing.assert_allclose(H_prior, H + np.eye(len(z)), atol=1e-12 * scale)
+    np.testing.assert_allclose(g_prior, g + z)
+
+
+def test_a_fit_in_tiny_chunks_is_the_fit_in_one(robot, camera, monkeypatch):
+    obs, options = scenario(robot, camera, "head, repeated frames")
+    whole = fit_observations(robot, obs, options)
+    monkeypatch.setattr(problem, "CHUNK_ROWS", 1)  # one group per chunk
+    chunked = fit_observations(robot, obs, options)
+    np.testing.assert_allclose(chunked.solution.values, whole.solution.values,
+                               atol=1e-6 * float(np.min(whole.solution.std)))  # fmt: skip
+    np.testing.assert_allclose(chunked.solution.std, whole.solution.std, rtol=1e-6)
+    assert [b.outlier_views for b in chunked.solution.blocks] == [b.outlier_views for b in whole.solution.blocks]

@@ -1,0 +1,228 @@
+"""Pairing frames with joint states while a recording is read (`wolfcal.io.pairing`) gives what pairing on the whole
+log gives: simulated ROS 2 recordings rewritten with messages out of order (images logged after their stamps, joint
+states jittered, a late batch), a second camera, joints published in two groups; a file beyond the bound is paired on
+the whole log; the window of joint states stays bounded. Frames that repeat the image before them are named."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer as McapWriter
+from mcap_ros2._dynamic import serialize_dynamic
+from mcap_ros2.decoder import DecoderFactory
+
+import wolfcal.io.reader as reader_module
+from wolfcal.config import load_robot_config
+from wolfcal.fit.pipeline import repeat_warnings
+from wolfcal.io.msgdefs import header_stamp_ns
+from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
+from wolfcal.io.reader import read_capture
+from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_frame
+from wolfcal.io.samples import Capture
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.faulty import rewrite_capture
+from wolfcal.sim.recording import RecordingOptions, simulate_recording
+from wolfcal.vision.observe import detect_observations
+
+WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+MS = 1_000_000
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory) -> Path:
+    """A simulated plain recording: 6 still poses, joint states at 100 Hz, head images at 10 Hz (log time = stamp)."""
+    path = tmp_path_factory.mktemp("rec") / "sim.mcap"
+    options = RecordingOptions(hold_s=1.5, move_s=0.8, flicker=0.3, seed=3)
+    simulate_recording(load_robot(WOLFGANG), path, 6, offsets="legs", binning=8, options=options)
+    return path
+
+
+def rewrite(src: Path, dst: Path, late_ns: int = 0, tripod: bool = False, split_head_from_s: float | None = None):
+    """Copy a recording with its messages logged out of their stamps' order: images 120 ms after their stamp, joint
+    states 0-30 ms after (random), the joint states stamped 5.0-5.5 s after the start `late_ns` after; with
+    `tripod`, a second camera's images 8 ms after each head image (60 ms after every 4th), logged 300 ms late;
+    with `split_head_from_s`, the head joints on messages of their own, first published that long after the start."""
+    rng = np.random.default_rng(0)
+    config = load_robot_config(WOLFGANG)
+    with open(src, "rb") as handle, open(dst, "wb") as out:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None
+        writer = McapWriter(out)
+        writer.start(profile="ros2", library="test")
+        schemas = {s.name: (k, s) for k, s in summary.schemas.items()}
+        schema_ids = {k: writer.register_schema(s.name, s.encoding, s.data) for k, s in summary.schemas.items()}
+        channels = {c.topic: writer.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id], {})
+                    for c in summary.channels.values()}  # fmt: skip
+        image_schema = schemas["sensor_msgs/msg/CompressedImage"][0]
+        channels["tripod"] = writer.register_channel(config.camera_topics("tripod")[0], "cdr", schema_ids[image_schema],
+                                                     {})  # fmt: skip
+        encoders = {s.name: serialize_dynamic(s.name, s.data.decode())[s.name] for s in summary.schemas.values()}
+        messages = []
+        start = None
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            stamp = header_stamp_ns(decoded.header, message.log_time)
+            start = stamp if start is None else start
+            t = (stamp - start) / 1e9
+            encode = encoders[schema.name]
+            if channel.topic == config.joint_states_topic:
+                delay = int(rng.uniform(0, 30 * MS)) + (late_ns if 5.0 <= t < 5.5 else 0)
+                if split_head_from_s is None:
+                    messages.append((stamp + delay, channels[channel.topic], encode(decoded)))
+                    continue
+                names, positions = list(decoded.name), list(decoded.position)
+                head = [i for i, n in enumerate(names) if n.startswith("Head")]
+                rest = [i for i in range(len(names)) if i not in head]
+                for part in (rest, head) if t >= split_head_from_s else (rest,):
+                    decoded.name, decoded.position = [names[i] for i in part], [positions[i] for i in part]
+                    messages.append((stamp + delay, channels[channel.topic], encode(decoded)))
+            elif channel.topic == config.camera.topic:
+                messages.append((stamp + 120 * MS, channels[channel.topic], encode(decoded)))
+                if tripod:
+                    index = round((stamp - start) / 1e8)
+                    shift = (60 if index % 4 == 3 else 8) * MS
+                    image = cv2.imdecode(np.frombuffer(bytes(decoded.data), np.uint8), cv2.IMREAD_UNCHANGED)
+                    decoded.data = cv2.imencode(".png", cv2.resize(image, (240, 135)))[1].tobytes()
+                    decoded.header.stamp.nanosec = (decoded.header.stamp.nanosec + shift) % 1_000_000_000
+                    decoded.header.stamp.sec += (decoded.header.stamp.nanosec < shift) * 1
+                    messages.append((stamp + shift + 300 * MS, channels["tripod"], encode(decoded)))
+            else:
+                messages.append((message.log_time, channels[channel.topic], encode(decoded)))
+        for log_time, channel_id, data in sorted(messages, key=lambda m: m[0]):
+            writer.add_message(channel_id, log_time, data, log_time)
+        writer.finish()
+
+
+def read_both(path: Path, monkeypatch) -> tuple[Capture, Capture, list[int | None]]:
+    """(read as a stream, read on the whole log, the disorder bound of each pass of the streamed read)."""
+    config = load_robot_config(WOLFGANG)
+    passes: list[int | None] = []
+    pass_one = reader_module._pass_one
+
+    def spy(*args):
+        passes.append(args[-1])
+        return pass_one(*args)
+
+    monkeypatch.setattr(reader_module, "_pass_one", spy)
+    streamed = read_capture(path, config)
+    monkeypatch.setattr(reader_module, "DISORDER_NS", None)
+    whole = read_capture(path, config)
+    return streamed, whole, passes[:-1]
+
+
+def assert_same(a: Capture, b: Capture) -> None:
+    assert a.skipped == b.skipped and a.cameras == b.cameras
+    assert len(a.samples) == len(b.samples)
+    for x, y in zip(a.samples, b.samples):
+        assert (x.stamp_ns, x.joint_names, x.source) == (y.stamp_ns, y.joint_names, y.source)
+        assert np.array_equal(x.positions, y.positions)
+        assert (x.velocities is None and y.velocities is None) or np.array_equal(x.velocities, y.velocities)
+        assert image_keys(x) == image_keys(y)
+
+
+def image_keys(sample) -> dict:
+    images = sample.images.items()
+    return {k: (i.stamp_ns, i.location, i.format, i.camera.width, i.camera.K.tolist()) for k, i in images}
+
+
+def whole_log_pairing(path: Path, topic: str) -> dict[int, Paired | str]:
+    """Each image of `topic` paired by `pair_frame` on every joint state of the file (no reader involved)."""
+    config = load_robot_config(WOLFGANG)
+    joints, stamps = [], []
+    with open(path, "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages(topics=[config.joint_states_topic, topic]):
+            stamp = header_stamp_ns(decoded.header, message.log_time)
+            if channel.topic == topic:
+                stamps.append(stamp)
+            else:
+                joints.append((stamp, list(decoded.name), list(decoded.position), list(decoded.velocity)))
+    states = JointStates.from_messages(joints)
+    return {s: pair_frame(states, s, exact=False) for s in stamps}
+
+
+@pytest.mark.parametrize(
+    "late_ms, tripod, split, falls_back",
+    [(0, False, None, False), (1500, True, None, False), (4000, True, None, True), (0, False, 4.0, True),
+     (0, True, 0.0, False)],
+)  # fmt: skip
+def test_streamed_pairing_equals_the_whole_log(simulated, tmp_path, monkeypatch, late_ms, tripod, split, falls_back):
+    path = tmp_path / "rec.mcap"
+    rewrite(simulated, path, late_ms * MS, tripod, split)
+    streamed, whole, passes = read_both(path, monkeypatch)
+    assert passes == ([DISORDER_NS, None] if falls_back else [DISORDER_NS])
+    assert_same(streamed, whole)
+    config = load_robot_config(WOLFGANG)
+    for camera in ["head", "tripod"] if tripod else ["head"]:
+        reference = whole_log_pairing(path, config.camera_topics(camera)[0])
+        kept = {s.images[camera].stamp_ns: s for s in streamed.samples if camera in s.images}
+        still = {stamp: p for stamp, p in reference.items() if isinstance(p, Paired)}
+        assert 20 <= len(still) < len(reference) and set(kept) <= set(still)
+        first = {s.stamp_ns for s in streamed.samples}
+        for stamp, sample in kept.items():  # a sample's readings are those of its first frame
+            if stamp in first:
+                assert np.array_equal(sample.positions, still[stamp].positions)
+        assert len(set(still) - set(kept)) == 0 or camera == "tripod"  # tripod frames grouped with a head frame
+    if tripod:
+        assert sum(set(s.images) == {"head", "tripod"} for s in streamed.samples) >= 10
+
+
+@pytest.mark.parametrize("image_delay_ns", [3 * MS, 0])
+def test_the_window_of_joint_states_stays_bounded(image_delay_ns):
+    """A minute of 20 joints at 100 Hz and images at 10 Hz (3 ms after a joint state, or with its very stamp, as in a
+    simulator's clock): the pairer never holds more than the window's states, and pairs every image as the whole log
+    does."""
+    names = [f"j{k}" for k in range(20)]
+    t_ns = np.arange(6000) * 10 * MS
+    q = np.where((t_ns // (3000 * MS)) % 2 == 0, 0.1, 0.1 + 1e-3 * (t_ns % (3000 * MS)) / MS)  # still 3 s, moving 3 s
+    streamed, whole = FramePairer(), FramePairer(None)
+    largest = 0
+    for k, stamp in enumerate(t_ns.tolist()):
+        for pairer in (streamed, whole):
+            pairer.add_joints(stamp, names, [q[k]] * 20, [])
+            if k % 10 == 5:
+                pairer.add_frame("head", stamp + image_delay_ns, k)
+        largest = max(largest, sum(len(g[1]) for g in streamed._log.groups()))
+    a, b = streamed.finish(), whole.finish()
+    assert largest <= (DISORDER_NS + 2 * STILL_WINDOW_NS + BATCH_NS) // (10 * MS) + 2
+    assert [(f.stamp, f.item) for f in a.frames] == [(f.stamp, f.item) for f in b.frames]
+    kept = 0
+    for x, y in zip(a.frames, b.frames):
+        if isinstance(x.result, Paired):
+            kept += 1
+            assert isinstance(y.result, Paired) and np.array_equal(x.result.positions, y.result.positions)
+        else:
+            assert x.result == y.result
+    assert 200 <= kept <= 300 and not a.exact
+
+
+def test_frames_repeating_one_image_are_counted_and_warned_about(simulated, tmp_path):
+    """Each still frame's own image noise makes its corners differ from the frame before; a stream that repeats the
+    image before (every second frame a copy of the one before, as a driver repeating its last frame) is named."""
+    config = load_robot_config(WOLFGANG)
+    robot = load_robot(WOLFGANG)
+    previous: dict[str, bytes] = {}
+
+    def repeat_every_second(topic: str, index: int, message):
+        if topic == config.camera.topic:
+            if index % 2 == 1:
+                message.data = previous["data"]
+            previous["data"] = bytes(message.data)
+        return message
+
+    repeated = tmp_path / "repeated.mcap"
+    rewrite_capture(simulated, repeated, repeat_every_second)
+    counts = {}
+    for path in (simulated, repeated):
+        samples = read_capture(path, config).samples
+        observations, _ = detect_observations(samples, robot)
+        counts[path] = (observations["head"].repeated_samples(), observations["head"].n_samples)
+    assert counts[simulated][0] == 0 and counts[simulated][1] >= 20
+    assert counts[repeated][1] == counts[simulated][1] and counts[repeated][0] >= counts[repeated][1] // 3
+    warning = repeat_warnings({"head": observations["head"]}, 0.05)
+    assert len(warning) == 1 and f"head camera: {counts[repeated][0]} of {counts[repeated][1]} sample(s)" in warning[0]
+    assert "stays at its floor (0.05 px)" in warning[0]
