@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, ClassVar, cast
 import numpy as np
 
 import wolfcal
-from wolfcal.atomic import write_text_atomic
+from wolfcal.atomic import atomic_output
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import TagViewBlock
 from wolfcal.fit.camera_block import CameraBlock
@@ -23,7 +23,7 @@ from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
-from wolfcal.yamlfile import dump_yaml, read_yaml
+from wolfcal.yamlfile import dump_yaml_pieces, read_yaml
 
 if TYPE_CHECKING:
     from wolfcal.fit.pipeline import Fit
@@ -371,7 +371,11 @@ def plain(value):
 
 
 def write_result(path: Path, result: FitResult) -> None:
-    write_text_atomic(path, dump_yaml(result.to_dict(), sort_keys=False, width=120))
+    """Write result.yaml atomically, in pieces (`dump_yaml_pieces`: a long recording's per-sample rows are never
+    one node tree in memory)."""
+    with atomic_output(path) as handle:
+        for piece in dump_yaml_pieces(result.to_dict(), sort_keys=False, width=120):
+            handle.write(piece.encode("utf-8"))
 
 
 def load_result(path: str | Path) -> FitResult:
