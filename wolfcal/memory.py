@@ -24,3 +24,26 @@ def release_freed_memory() -> None:
     trim = _malloc_trim()
     if trim is not None:
         trim(0)
+
+
+M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
+MMAP_THRESHOLD = 128 * 1024  # [bytes] glibc's initial value
+
+
+@cache
+def _mallopt():
+    try:
+        return getattr(ctypes.CDLL(None), "mallopt", None)
+    except OSError:
+        return None
+
+
+def keep_large_blocks_mapped() -> None:
+    """Blocks from MMAP_THRESHOLD up (numpy arrays of more than 16384 numbers) each get their own mapping, handed
+    back when freed. glibc starts there but raises the threshold (up to 32 MB) whenever such a block is freed, after
+    which a long fit's large transient arrays land on the heap, fragment it and stay resident: 9 MB of the
+    6000-frame bench fit's peak (bench_stream, cached detections). Setting the threshold stops that adjustment.
+    Elsewhere (no glibc) this does nothing."""
+    mallopt = _mallopt()
+    if mallopt is not None:
+        mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)

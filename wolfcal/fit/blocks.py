@@ -78,8 +78,10 @@ class Block:
 
     def joint_reading_groups(self) -> np.ndarray:
         """(U, J) group of each unit's reading of each joint: units with the same group of joint j share that
-        reading's error. Default: the still pose (`noise_groups`) for every joint."""
-        return np.repeat(self.noise_groups()[:, None], self.q_measured.shape[1], axis=1)
+        reading's error. Default: the still pose (`noise_groups`) for every joint (a read-only view of one column:
+        (U,) numbers held, not U * J)."""
+        groups = self.noise_groups()
+        return np.broadcast_to(groups[:, None], (len(groups), self.q_measured.shape[1]))
 
     def shared_labels(self) -> np.ndarray:
         """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""

@@ -35,8 +35,9 @@ from wolfcal.robot.robot import Robot
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
 # Samples linearised at a time: bounds the per-sample poses and twists and the per-corner twists (about 6 KB per
-# corner) of a long recording; a few hundred keep numpy's per-call overhead small.
-CHUNK_SAMPLES = 512
+# corner: 4.6 MB at 128 samples of 6 corners, 18 MB at 512) of a long recording; a hundred or more keep numpy's
+# per-call overhead small.
+CHUNK_SAMPLES = 128
 
 
 class CameraBlock(Block):

@@ -295,5 +295,6 @@ def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
     if values.size == 0:
         return float("nan")
     order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    cumulative = weights[order]
+    np.cumsum(cumulative, out=cumulative)  # in place, and no sorted copy of the values: a long fit's transient
+    return float(values[order[np.searchsorted(cumulative, 0.5 * cumulative[-1])]])

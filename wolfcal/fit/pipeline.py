@@ -25,7 +25,7 @@ from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.markers import MarkerObservations
-from wolfcal.memory import release_freed_memory
+from wolfcal.memory import keep_large_blocks_mapped, release_freed_memory
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
@@ -316,6 +316,7 @@ def run_fit(
     Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
     (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
     (one per capture, clock offsets `mocap_offsets` or estimated)."""
+    keep_large_blocks_mapped()  # a long recording's transient arrays do not stay on the heap (wolfcal/memory.py)
     robot = load_robot(robot_path)
     inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)

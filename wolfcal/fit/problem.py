@@ -269,7 +269,7 @@ class Problem:
 def _one_group(reading: np.ndarray) -> np.ndarray:
     """(U,) units linked by any shared joint reading (U, J) into one group (connected components)."""
     if not np.any(reading != reading[:, :1]):
-        return reading[:, 0] if reading.size else np.zeros(len(reading), dtype=int)
+        return reading[:, 0].copy() if reading.size else np.zeros(len(reading), dtype=int)  # not a view of (U, J)
     n_units, n_joints = reading.shape
     joint = np.broadcast_to(np.arange(n_joints), reading.shape)
     _, node = np.unique(np.stack([joint, reading], axis=-1).reshape(-1, 2), axis=0, return_inverse=True)

@@ -108,7 +108,7 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     n = float(np.sum(dof))
     if n <= n_params:
         return 1.0
-    return float(MAD_TO_SIGMA * weighted_median(np.abs(w), dof) * np.sqrt(n / (n - n_params)))
+    return float(MAD_TO_SIGMA * weighted_median(np.abs(w, out=w), dof) * np.sqrt(n / (n - n_params)))
 
 
 def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
