@@ -43,7 +43,8 @@ def keep_large_blocks_mapped() -> None:
     back when freed. glibc starts there but raises the threshold (up to 32 MB) whenever such a block is freed, after
     which a long fit's large transient arrays land on the heap, fragment it and stay resident: 9 MB of the
     6000-frame bench fit's peak (bench_stream, cached detections). Setting the threshold stops that adjustment.
-    Elsewhere (no glibc) this does nothing."""
+    For the solve only: image buffers above it are mapped and zeroed afresh each time (reading and detecting 600
+    frames at 2048x1536 took 9 s of system time instead of 1). Elsewhere (no glibc) this does nothing."""
     mallopt = _mallopt()
     if mallopt is not None:
         mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)

@@ -316,7 +316,6 @@ def run_fit(
     Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
     (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
     (one per capture, clock offsets `mocap_offsets` or estimated)."""
-    keep_large_blocks_mapped()  # a long recording's transient arrays do not stay on the heap (wolfcal/memory.py)
     robot = load_robot(robot_path)
     inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
     check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
@@ -345,6 +344,9 @@ def run_fit(
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
+    # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
+    # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
+    keep_large_blocks_mapped()
     fit = fit_observations(robot, observations, options, say, markers)
     check_solution_left_out(fit, captures)
     result = fit_result(fit, options, captures, intrinsics, warnings)
