@@ -41,23 +41,9 @@ CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0]
                      np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
 FLOOR_DISTANCE_M = (1.0, 4.0)
 FLOOR_TAG_SIZES_M = (0.12, 0.14, 0.16, 0.18, 0.2, 0.15)
-# stances of the floor samples besides `floor.standing` (--stances): the torso moved 3 cm sideways or turned
-# 0.15 rad about the vertical, 1 cm lower, each sole kept where it stands (nominal model, scipy least_squares over each
-# leg's six joints, knees bent forward): every leg joint, the roll and yaw joints too, reads another tick in each
-# stance, so the rounding of the standing readings differs between stances (knee-only stances left the roll and
-# yaw joints at one reading)
-STANCES = [
-    {"LHipRoll": -0.091, "LHipPitch": 0.2382, "LKnee": 0.7372, "LAnklePitch": -0.2372, "LAnkleRoll": -0.091,
-     "RHipRoll": -0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": -0.0909},
-    {"LHipRoll": 0.091, "LHipPitch": 0.2418, "LKnee": 0.7444, "LAnklePitch": -0.2408, "LAnkleRoll": 0.091,
-     "RHipRoll": 0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": 0.0909},
-    {"LHipYaw": 0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2824, "LKnee": 0.7756, "LAnklePitch": -0.2314,
-     "LAnkleRoll": 0.0019, "RHipYaw": 0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2282, "RKnee": -0.7675,
-     "RAnklePitch": 0.2775, "RAnkleRoll": -0.0019},
-    {"LHipYaw": -0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2297, "LKnee": 0.7702, "LAnklePitch": -0.2787,
-     "LAnkleRoll": 0.0019, "RHipYaw": -0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2806, "RKnee": -0.7723,
-     "RAnklePitch": 0.2299, "RAnkleRoll": -0.0019},
-]
+# stances of the floor samples besides `floor.standing` (--stances): the torso moved sideways or turned, soles kept,
+# so every leg joint reads another tick (see the file's comment)
+STANCES = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 
 
 def write_config(folder: Path, stances: bool = True, n_tags: int = 6) -> Path:

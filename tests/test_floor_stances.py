@@ -8,7 +8,7 @@ import io
 import numpy as np
 import pytest
 import yaml
-from conftest import OTHER_CAMERA, wolfgang_with_other_tags
+from conftest import OTHER_CAMERA, WOLFGANG, wolfgang_with_other_tags
 from rich.console import Console
 from test_floor_fit import joined
 from typer.testing import CliRunner
@@ -34,19 +34,8 @@ DEEP = [{"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.
         {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
          "LAnklePitch": -0.3186}]  # fmt: skip
 # the torso 3 cm sideways or turned 0.15 rad, 1 cm lower, each sole kept where it stands (nominal model; the stances
-# of bench/bench_floor.py): every leg joint, roll and yaw too, reads another tick than in the standing pose
-LEAN = [
-    {"LHipRoll": -0.091, "LHipPitch": 0.2382, "LKnee": 0.7372, "LAnklePitch": -0.2372, "LAnkleRoll": -0.091,
-     "RHipRoll": -0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": -0.0909},
-    {"LHipRoll": 0.091, "LHipPitch": 0.2418, "LKnee": 0.7444, "LAnklePitch": -0.2408, "LAnkleRoll": 0.091,
-     "RHipRoll": 0.0909, "RHipPitch": -0.2384, "RKnee": -0.7379, "RAnklePitch": 0.2377, "RAnkleRoll": 0.0909},
-    {"LHipYaw": 0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2824, "LKnee": 0.7756, "LAnklePitch": -0.2314,
-     "LAnkleRoll": 0.0019, "RHipYaw": 0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2282, "RKnee": -0.7675,
-     "RAnklePitch": 0.2775, "RAnkleRoll": -0.0019},
-    {"LHipYaw": -0.15, "LHipRoll": 0.0019, "LHipPitch": 0.2297, "LKnee": 0.7702, "LAnklePitch": -0.2787,
-     "LAnkleRoll": 0.0019, "RHipYaw": -0.15, "RHipRoll": -0.0019, "RHipPitch": -0.2806, "RKnee": -0.7723,
-     "RAnklePitch": 0.2299, "RAnkleRoll": -0.0019},
-]  # fmt: skip
+# of bench/bench_floor.py --stances): every leg joint, roll and yaw too, reads another tick than in the standing pose
+LEAN = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 STANDING = {"RKnee": -0.2618, "LKnee": 0.2618}
 
 
