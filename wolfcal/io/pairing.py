@@ -121,14 +121,17 @@ class FramePairer:
         capture = self._capture is not None and self._capture.is_capture(self._log.count)
         self._pair(self._pending, exact=capture)
         self._pending = []
-        names = self._joint_names()
-        if self._names_used is not None and self._names_used != names:
-            raise Disorder("a joint was first published after frames were paired")
+        names = self._pairing_names()
         bad_joints = Counter({n: self._bad_joints[n] for n in self._names if self._bad_joints[n]})
         return Pairing(self._frames, capture, names, self._log.count, self._bad, bad_joints)
 
-    def _joint_names(self) -> list[str]:
-        return [n for n in self._names if n in self._finite]
+    def _pairing_names(self) -> list[str]:
+        """Every joint with a finite message, in order of first appearance; `Disorder` when that is not the list
+        the frames were paired with so far (a joint first published after frames were paired)."""
+        names = [n for n in self._names if n in self._finite]
+        if self._names_used is not None and self._names_used != names:
+            raise Disorder("a joint was first published after frames were paired")
+        return names
 
     def _check_order(self, stamp: int) -> None:
         if self.disorder_ns is not None and self._top is not None and stamp < self._top - self.disorder_ns:
@@ -163,9 +166,7 @@ class FramePairer:
         groups = self._log.groups()
         keep = [np.isfinite(qs).all(axis=1) for _, _, qs, _ in groups]
         window = JointStates.from_log(self._log, keep)
-        names = self._joint_names()
-        if self._names_used is not None and self._names_used != names:
-            raise Disorder("a joint was first published after frames were paired")
+        names = self._pairing_names()
         self._names_used = names
         none = JointSeries(np.empty(0, np.int64), np.empty(0), np.empty(0))
         states = JointStates(names, {n: window.series.get(n, none) for n in names})

@@ -73,11 +73,6 @@ class JointLog:
                 array("d", np.frombuffer(vs).reshape(shape)[keep].tobytes()),
             )
 
-    def stamps(self) -> np.ndarray:
-        """(N,) int64 the stamps of every message held [ns], group after group."""
-        stamps = [np.frombuffer(t, np.int64) for t, _, _ in self._groups.values()]
-        return np.concatenate(stamps) if stamps else np.empty(0, np.int64)
-
     def groups(self) -> list[tuple[tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]]:
         """(names, stamps (N,) [ns], positions (N, J) [rad], velocities (N, J) [rad/s]) per distinct name list,
         in order of first appearance (views of the log's arrays)."""
