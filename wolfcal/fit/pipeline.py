@@ -25,7 +25,7 @@ from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.markers import MarkerObservations
-from wolfcal.memory import keep_large_blocks_mapped, release_freed_memory
+from wolfcal.memory import large_blocks_mapped, release_freed_memory
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
@@ -346,14 +346,14 @@ def run_fit(
     say(f"fitting --free {options.free} ...")
     # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
     # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
-    keep_large_blocks_mapped()
-    fit = fit_observations(robot, observations, options, say, markers)
-    check_solution_left_out(fit, captures)
-    result = fit_result(fit, options, captures, intrinsics, warnings)
-    with output_set():
-        write_result(out_dir / "result.yaml", result)
-        write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
-        write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
+    with large_blocks_mapped():
+        fit = fit_observations(robot, observations, options, say, markers)
+        check_solution_left_out(fit, captures)
+        result = fit_result(fit, options, captures, intrinsics, warnings)
+        with output_set():
+            write_result(out_dir / "result.yaml", result)
+            write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+            write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
     for line in summary_lines(result):
         say(line)
     for line in explain(fit.params, fit.solution):
