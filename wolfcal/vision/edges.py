@@ -134,6 +134,11 @@ def _tangents(d: np.ndarray, off: np.ndarray, good: np.ndarray) -> np.ndarray:
     return coeffs[:, :2]
 
 
+def mean_side(corners: np.ndarray) -> np.ndarray:
+    """(T,) mean length [px] of the four sides of each tag's corners (T, 4, 2) [px]."""
+    return np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1)
+
+
 def _grid(first: np.ndarray, stop: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Per row, np.arange(first, stop, step) padded (continued) to the longest row -> (values (T, N), lengths
     (T,)). The values are computed as np.arange computes them (first + i * ((first + step) - first))."""
@@ -170,7 +175,7 @@ def refine_tags(
     """
     corners = np.array(corners, dtype=float).reshape(-1, 4, 2)
     if len(corners) > TAGS_PER_PASS:  # tags of similar size together, so that little of the arrays is padding
-        size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1)
+        size = mean_side(corners)
         refined = np.empty_like(corners)
         for part in np.array_split(np.argsort(size), -(-len(corners) // TAGS_PER_PASS)):
             refined[part] = refine_tags(images, np.asarray(image_of_tag)[part], corners[part], cells, iterations)
@@ -182,7 +187,7 @@ def refine_tags(
     far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]  # (E, 2)
     edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
     for _ in range(iterations):
-        cell = (np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1) / cells)[tag]  # (E,)
+        cell = (mean_side(corners) / cells)[tag]  # (E,)
         c = corners[:, start].reshape(-1, 2)
         e = corners[:, end].reshape(-1, 2) - c
         length = np.linalg.norm(e, axis=1)

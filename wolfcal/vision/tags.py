@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.vision.edges import refine_tags
+from wolfcal.vision.edges import mean_side, refine_tags
 
 FAMILIES = {
     "tag36h11": cv2.aruco.DICT_APRILTAG_36h11,
@@ -176,7 +176,7 @@ def _tags_crop(gray: np.ndarray, corners: np.ndarray, cells: int) -> tuple[np.nd
     spares the float copy of the whole image (2.4 ms at 2048x1536).
     """
     h, w = gray.shape
-    cell = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1).max() / cells
+    cell = mean_side(corners).max() / cells
     margin = 12.0 + 2.0 * cell
     low = np.maximum(np.floor(corners.reshape(-1, 2).min(axis=0) - margin), 0).astype(int)
     high = np.minimum(np.ceil(corners.reshape(-1, 2).max(axis=0) + margin) + 1, [w, h]).astype(int)
