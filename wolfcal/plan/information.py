@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import scipy.sparse
 
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_tag_poses
@@ -178,47 +177,44 @@ def predicted(problem: Problem) -> Uncertainty:
     return uncertainty(problem.data_jacobian(np.zeros(len(problem.params)), robust=False), problem.params.prior_sigmas)
 
 
-def separated_std(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.ndarray, n_samples: int) -> np.ndarray:
+def separated_std(information: np.ndarray, prior_sigmas: np.ndarray, n_samples: int) -> np.ndarray:
     """(P,) std [SI] of each unknown with the directions that no pose informs known exactly: the fit's covariance
-    conditioned on the directions of z whose information per sample (whitened data Jacobian J_data (R, P), z units)
-    is below NULL_INFO. What the poses decide: at the fit's solution an unseparable group (HeadTilt.offset against
-    the camera's rotation about the tilt axis) is turned by the camera's rotation correction and lends its prior to
-    the camera's other rotations (`fit.uncertainty` reports that share too), whatever the poses."""
-    information, (_, B) = _information(J_data), _split_directions(J_data, n_samples)
+    conditioned on the directions of z whose information per sample (J^T J (P, P) of the whitened data Jacobian, z
+    units) is below NULL_INFO. What the poses decide: at the fit's solution an unseparable group (HeadTilt.offset
+    against the camera's rotation about the tilt axis) is turned by the camera's rotation correction and lends its
+    prior to the camera's other rotations (`fit.uncertainty` reports that share too), whatever the poses."""
+    _, B = _split_directions(information, n_samples)
     cov_z = B @ np.linalg.solve(B.T @ (information + np.eye(len(information))) @ B, B.T)
     return np.sqrt(np.clip(np.diag(cov_z), 0.0, None)) * prior_sigmas
 
 
-def _information(J_data: np.ndarray | scipy.sparse.spmatrix) -> np.ndarray:
-    information = J_data.T @ J_data
-    return information.toarray() if scipy.sparse.issparse(information) else np.asarray(information)
-
-
-def _split_directions(J_data: np.ndarray | scipy.sparse.spmatrix, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal directions of z (P, m) whose information per sample is below NULL_INFO, and the others (P, P-m)."""
-    lam, V = np.linalg.eigh(_information(J_data) / max(n_samples, 1))
+def _split_directions(information: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal directions of z (P, m) whose information per sample (of J^T J (P, P)) is below NULL_INFO, and the
+    others (P, P-m)."""
+    lam, V = np.linalg.eigh(information / max(n_samples, 1))
     return V[:, lam < NULL_INFO], V[:, lam >= NULL_INFO]
 
 
-def _fit_jacobian(fit: Fit) -> tuple[np.ndarray | scipy.sparse.spmatrix, int]:
-    """A fit's whitened data Jacobian at its solution (z units, as for the std it reports) and its sample count."""
+def _fit_information(fit: Fit) -> tuple[np.ndarray, int]:
+    """A fit's information J^T J at its solution (`Problem.information`: z units, what the std it reports comes
+    from) and its sample count."""
     problem = fit.problem
     z = (fit.solution.values - problem.params.references) / problem.params.prior_sigmas
-    return problem.data_jacobian(z), sum(len(b.q_measured) for b in fit.blocks)
+    return problem.information(z)[0], sum(len(b.q_measured) for b in fit.blocks)
 
 
 def fit_separated_std(fit: Fit) -> np.ndarray:
     """(P,) a fit's std [SI] with the directions no pose informs known exactly (`separated_std`), from the same
-    whitened Jacobian at its solution as the std it reports."""
-    J, n_samples = _fit_jacobian(fit)
-    return separated_std(J, fit.problem.params.prior_sigmas, n_samples)
+    information at its solution as the std it reports."""
+    information, n_samples = _fit_information(fit)
+    return separated_std(information, fit.problem.params.prior_sigmas, n_samples)
 
 
 def fit_null_directions(fit: Fit) -> np.ndarray:
     """(P, m) the directions of a fit's prior-normalised unknowns z that its data do not inform (information per
     sample below NULL_INFO at its solution: those `fit_separated_std` takes as known), orthonormal."""
-    J, n_samples = _fit_jacobian(fit)
-    return _split_directions(J, n_samples)[0]
+    information, n_samples = _fit_information(fit)
+    return _split_directions(information, n_samples)[0]
 
 
 @dataclass
