@@ -41,7 +41,7 @@ from wolfcal.plan.candidates import (
     joint_bounds,
 )
 from wolfcal.plan.information import plan_problem
-from wolfcal.projection import visible_in_view
+from wolfcal.projection import tag_corner_pixels, visible_in_view
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_joints
 from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.floor import floor_frames, floor_tag_poses, standing_pose
@@ -82,15 +82,22 @@ def _camera_and_floor(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return poses[frame], floor_frames(np.stack([poses[s] for s in soles]))
 
 
+def _floor_tags_seen(robot: Robot, q: np.ndarray, places: dict[int, np.ndarray]) -> tuple[np.ndarray, ...]:
+    """T_root_camera (N, 4, 4), T_root_tag and T_camera_tag (N, T, 4, 4) of the floor tags (floor.tag_ids) at their
+    places, under the nominal model at readings q (N, J)."""
+    T_root_camera, T_root_floor = _camera_and_floor(robot, q)
+    tag_poses = floor_tag_poses(robot, places)
+    T_floor_tag = np.stack([tag_poses[t] for t in robot.config.floor_config().tag_ids])  # (T, 4, 4)
+    T_root_tag = T_root_floor[:, None] @ T_floor_tag[None]
+    return T_root_camera, T_root_tag, invert_transform(T_root_camera)[:, None] @ T_root_tag
+
+
 def floor_views(robot: Robot, camera: PlanCamera, q: np.ndarray, places: dict[int, np.ndarray],
                 collisions: CollisionModel | None = None) -> np.ndarray:  # fmt: skip
     """(N, T) bool over floor.tag_ids: tag whole in view, large enough and (with `collisions`) not hidden by the
     robot's body (see the module docstring)."""
     floor = robot.config.floor_config()
-    T_root_camera, T_root_floor = _camera_and_floor(robot, q)
-    T_floor_tag = np.stack([floor_tag_poses(robot, places)[t] for t in floor.tag_ids])  # (T, 4, 4)
-    T_root_tag = T_root_floor[:, None] @ T_floor_tag[None]
-    T_camera_tag = invert_transform(T_root_camera)[:, None] @ T_root_tag
+    T_root_camera, T_root_tag, T_camera_tag = _floor_tags_seen(robot, q, places)
     sizes = np.array([floor.tag(t).size for t in floor.tag_ids])
     width = camera.model.width
     visible = visible_in_view(camera.model, T_camera_tag, sizes, IMAGE_EDGE_MARGIN * width, MIN_EDGE_PX, np.pi / 2)
@@ -160,17 +167,14 @@ class FloorPlanModel:
     def observations(self, q: np.ndarray, visible: np.ndarray) -> Observations:
         """Noise-free corners of the visible floor tags (visible: (N, T) over floor.tag_ids) at readings q (N, J)."""
         floor = self.robot.config.floor_config()
-        T_root_camera, T_root_floor = _camera_and_floor(self.robot, q)
-        T_floor_tag = np.stack([floor_tag_poses(self.robot, self.places)[t] for t in floor.tag_ids])
-        T_camera_tag = invert_transform(T_root_camera)[:, None] @ T_root_floor[:, None] @ T_floor_tag[None]
+        T_camera_tag = _floor_tags_seen(self.robot, q, self.places)[2]
         s, t = np.nonzero(visible)
         corners = np.stack([tag_corners(floor.tag(i).size) for i in floor.tag_ids])[t]  # (V, 4, 3)
-        p = np.einsum("vij,vcj->vci", T_camera_tag[s, t, :3, :3], corners) + T_camera_tag[s, t, None, :3, 3]
         return Observations(
             joint_names=list(self.robot.joint_names), q_measured=q, stamps_ns=np.arange(len(q), dtype=np.int64),
             sources=["plan"] * len(q), camera=self.camera.model, sample_index=np.repeat(s, 4),
             tag_ids=np.repeat(np.array(floor.tag_ids)[t], 4), corner_index=np.tile(np.arange(4), len(s)),
-            uv=self.camera.model.project(p.reshape(-1, 3)),
+            uv=tag_corner_pixels(self.camera.model, T_camera_tag[s, t], corners).reshape(-1, 2),
         )  # fmt: skip
 
     def chain(self) -> ParameterSet:
