@@ -6,35 +6,40 @@ leg and head encoder offsets and the camera ~4 deg off. Per seed:
   leg     24 feet + 20 floor samples, `--free leg --side both`: true ground error at 4.5 m (worst bearing of -30, 0,
           +30 deg) before and after, the measured one (held-out 16 floor samples, no truth) with its 1-sigma,
           the soles' worst pose error over 500 calibration-range poses, fit time
+          (--held-stances: the held-out samples spread over the stances)
   camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
 Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR] [--stances] [--floor-tags 6]
      [--floor-samples 20]
+     [--held-stances]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import yaml
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: BLAS threads spinning on 2 busy cores cost 50x
 
-from wolfcal.camera.camera_info import save_camera_info
-from wolfcal.camera.model import CameraModel
-from wolfcal.errors import WolfcalError
-from wolfcal.evaluate.accuracy import link_pose_errors
-from wolfcal.evaluate.floor_ground import measured_ground_errors
-from wolfcal.evaluate.ground import ground_errors
-from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor
-from wolfcal.io.truth import truth_paths
-from wolfcal.observations import Observations
-from wolfcal.robot.corrections import Corrections, load_corrections
-from wolfcal.robot.robot import Robot, load_robot
-from wolfcal.sim.simulate import SimOptions, simulate_capture
-from wolfcal.vision.corner_bias import CORNER_INSET
-from wolfcal.vision.observe import detect_observations
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+from wolfcal.camera.camera_info import save_camera_info  # noqa: E402
+from wolfcal.camera.model import CameraModel  # noqa: E402
+from wolfcal.errors import WolfcalError  # noqa: E402
+from wolfcal.evaluate.accuracy import link_pose_errors  # noqa: E402
+from wolfcal.evaluate.floor_ground import measured_ground_errors  # noqa: E402
+from wolfcal.evaluate.ground import ground_errors  # noqa: E402
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor  # noqa: E402
+from wolfcal.io.truth import truth_paths  # noqa: E402
+from wolfcal.observations import Observations  # noqa: E402
+from wolfcal.robot.corrections import Corrections, load_corrections  # noqa: E402
+from wolfcal.robot.robot import Robot, load_robot  # noqa: E402
+from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
+from wolfcal.vision.corner_bias import CORNER_INSET  # noqa: E402
+from wolfcal.vision.observe import detect_observations  # noqa: E402
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
@@ -73,10 +78,12 @@ def observations(robot: Robot, captures: list[Path]) -> dict[str, Observations]:
 
 
 def simulate(
-    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20
+    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20,
+    held_stances: bool = False,
 ) -> dict[str, Path]:
-    """feet, floor (`n_floor` samples, in the stances) and held-out floor (16, standing; `n_tags` floor tags)
-    captures of one simulated robot (names -> paths), each made once per folder."""
+    """feet, floor (`n_floor` samples, in the stances) and held-out floor (16, standing; with `held_stances` in
+    the stances too; `n_tags` floor tags) captures of one simulated robot (names -> paths), each made once per
+    folder."""
     paths = {k: folder / f"{k}.mcap" for k in ("feet", "floor", "held_floor")}
     quiet = lambda _m: None  # noqa: E731
     if not paths["feet"].exists():
@@ -85,16 +92,17 @@ def simulate(
     for name, n, s in (("floor", n_floor, seed + 100), ("held_floor", 16, seed + 200)):
         if paths[name].exists():
             continue
-        held = write_config(folder, stances=False, n_tags=n_tags) if name == "held_floor" else config
+        held = write_config(folder, stances=held_stances, n_tags=n_tags) if name == "held_floor" else config
         simulate_capture(held, paths[name], SimOptions(samples=n, seed=s, floor=True, truth_file=truth,
                                                          floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
     return paths
 
 
-def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, n_floor: int = 20) -> str:
+def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, n_floor: int = 20,
+        held_stances: bool = False) -> str:  # fmt: skip
     folder.mkdir(parents=True, exist_ok=True)
     config = write_config(folder, stances, n_tags)
-    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor)
+    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor, held_stances)
     robot = load_robot(config)
     truth = load_corrections(truth_paths(paths["feet"])[0], key="truth")
     obs = observations(robot, [paths["feet"], paths["floor"]])
@@ -134,6 +142,8 @@ def main() -> None:
                         "all standing at floor.standing)")
     parser.add_argument("--floor-tags", type=int, default=6, help="floor tags lying on the floor (default 6)")
     parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
+    parser.add_argument("--held-stances", action="store_true", help="the held-out floor samples spread over STANCES "
+                        "too (default: all standing): each stance rounds the standing legs' readings anew")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
@@ -141,7 +151,8 @@ def main() -> None:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
                     folder = root / f"{scenario}_{seed}"
-                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples), flush=True)
+                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples,
+                              args.held_stances), flush=True)
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
                     print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 
