@@ -76,9 +76,10 @@ def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
     sort for both."""
     E = len(profiles)
     ordered = np.sort(np.where(keep, profiles, np.inf).reshape(E, -1), axis=1)
-    last = np.maximum(keep.sum(axis=(1, 2)) - 1, 0)
+    count = np.count_nonzero(keep.reshape(E, -1), axis=1)
+    last = np.maximum(count - 1, 0)
     rows = np.arange(E)
-    seen = keep.any(axis=(1, 2))
+    seen = count > 0
     out = []
     for q in (0.10, 0.90):
         pos = q * last
