@@ -53,8 +53,9 @@ def edge_offsets(
     change = above[..., 1:] & ~above[..., :-1] & (gaps < length[..., None] - 1)  # dark -> light between k and k + 1
     # the crossing nearest the profile centre (length - 1) / 2, by twice its distance |2 k + 2 - length| in small
     # integers (exact; the first of equals)
-    twice = np.abs((2 * gaps + 2).astype(np.int16) - np.asarray(length, np.int16)[..., None])
-    k = np.argmin(np.where(change, twice, np.int16(2 * S)), axis=-1)[..., None]
+    small = np.min_scalar_type(-2 * S - 2)  # holds -2 S .. 2 S (int8 for the refinement's S <= 49)
+    twice = np.abs((2 * gaps + 2).astype(small) - np.asarray(length, small)[..., None])
+    k = np.argmin(np.where(change, twice, small.type(2 * S)), axis=-1)[..., None]
     ok = np.take_along_axis(change, k, axis=-1)[..., 0]
     cross = np.take_along_axis(t, k, axis=-1)[..., 0] + step / 2
     last = np.take_along_axis(t, length[..., None] - 1, axis=-1)[..., 0]
@@ -75,7 +76,8 @@ def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
     (E, M, S)], as np.percentile (linear interpolation) gives them; NaN for an edge without kept samples. One
     sort for both."""
     E = len(profiles)
-    ordered = np.sort(np.where(keep, profiles, np.inf).reshape(E, -1), axis=1)
+    ordered = np.where(keep, profiles, np.inf).reshape(E, -1)
+    ordered.sort(axis=1)  # in place: a fresh array
     count = np.count_nonzero(keep.reshape(E, -1), axis=1)
     last = np.maximum(count - 1, 0)
     rows = np.arange(E)
