@@ -21,10 +21,13 @@ from dataclasses import dataclass, fields
 from functools import partial
 
 import numpy as np
+import scipy.sparse
 from scipy.optimize import least_squares
+from scipy.optimize._numdiff import approx_derivative
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
+from wolfcal.fit.blocks import held_joint_groups
 from wolfcal.geometry import exp_so3, invert_transform
 from wolfcal.observations import Observations
 from wolfcal.projection import BEHIND_CAMERA_PX
@@ -52,6 +55,8 @@ class FloorViews:
     uv: np.ndarray  # (V, 4, 2) detected corners [px]
     inward: np.ndarray  # (V, 4, 2) `corner_bias.inset_moves` [px/px]
     weight: np.ndarray  # (V,) `corner_bias.small_view_weight`
+    twists: np.ndarray  # (V, K, 6) the camera's motion per radian of each chain joint's reading (v, w), camera frame
+    readings: np.ndarray  # (V, K) int: which reading error (`_reading_errors`) each chain joint of the view has
 
 
 def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorViews:
@@ -64,8 +69,32 @@ def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorVie
     ring = uv[start[:, None] + np.arange(4)]
     T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, model)
     inward = inset_moves(ring)
+    twists, readings = _reading_errors(robot, obs.q_measured, model, s[start])
     return FloorViews(t[start], s[start], T_floor_camera[s[start]], ring, inward,
-                      small_view_weight(apparent_edges(ring)))  # fmt: skip
+                      small_view_weight(apparent_edges(ring)), twists, readings)  # fmt: skip
+
+
+def _reading_errors(robot: Robot, q: np.ndarray, model: Corrections, sample_of_view: np.ndarray,
+                    step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Each view's camera motion per radian of the readings of the joints between the soles and the camera
+    (V, K, 6) [m/rad, rad/rad], camera frame, and which reading error each has (V, K) int: the views of samples that
+    read a joint at the same encoder tick share that reading's rounding (`fit.blocks.held_joint_groups`: the
+    standing legs while the head looks around), numbered 0..G-1 over all joints."""
+    columns = [robot.model.column(j) for j in robot.camera_and_leg_joints()]
+    T_floor_camera, _ = camera_in_floor(robot, q, model)
+    twists = np.zeros((len(q), len(columns), 6))
+    for k, column in enumerate(columns):
+        plus, minus = q.copy(), q.copy()
+        plus[:, column] += step
+        minus[:, column] -= step
+        dT = (camera_in_floor(robot, plus, model)[0] - camera_in_floor(robot, minus, model)[0]) / (2 * step)
+        body = np.swapaxes(T_floor_camera[:, :3, :3], 1, 2) @ dT[:, :3, :]  # R^T dR | R^T dt
+        twists[:, k, :3] = body[:, :, 3]
+        twists[:, k, 3:] = np.stack([body[:, 2, 1], body[:, 0, 2], body[:, 1, 0]], axis=1)
+    groups = held_joint_groups(q, sample_of_view)[:, columns]  # (V, K) labels per joint
+    _, readings = np.unique(np.stack([np.broadcast_to(np.arange(len(columns)), groups.shape), groups], axis=-1)
+                            .reshape(-1, 2), axis=0, return_inverse=True)  # fmt: skip
+    return twists[sample_of_view], readings.reshape(groups.shape)
 
 
 def _plane(values: np.ndarray) -> np.ndarray:
@@ -96,19 +125,29 @@ def _meet(T_real_model: np.ndarray, origins: np.ndarray, rays: np.ndarray, heigh
 
 
 class _FloorFit:
-    """The least-squares fit of the plane, the camera turn and the tags' places to the views' corner pixels."""
+    """The least-squares fit of the plane, the camera turn, the tags' places and the joint readings' rounding to the
+    views' corner pixels. Unknowns: plane (3), turn (3), inset (1), places (3 per tag), then the readings' errors
+    (`FloorViews.readings`, each with a prior of the config's `priors.encoder_noise`) [rad, m, px]."""
 
     def __init__(self, robot: Robot, views: FloorViews, camera: CameraModel, inset: tuple[float, float]) -> None:
         self.views, self.camera, self.inset = views, camera, inset
-        self.scale = 1.0  # [px] of the corner residuals: the inset's prior residual counts in it
+        self.scale = 1.0  # [px] of the corner residuals: the priors' residuals count in it
+        self.encoder_noise = robot.config.priors.encoder_noise
         floor = robot.config.floor_config()
         self.ids, self.tag_of_view = np.unique(views.tags, return_inverse=True)
         self.tag_of_view = self.tag_of_view.ravel()
         self.printed = np.stack([tag_corners(floor.tag(int(i)).size) for i in self.ids])  # (T, 4, 3)
         self.printed[..., 2] = np.array([floor.tag(int(i)).thickness for i in self.ids])[:, None]
+        self.n_readings = int(views.readings.max()) + 1 if views.readings.size else 0
+
+    @property
+    def first_reading(self) -> int:
+        """Index of the first reading error in the unknowns."""
+        return 7 + 3 * len(self.ids)
 
     def start(self) -> np.ndarray:
-        """Zero plane and turn; tag places under the model's floor: centre and yaw of each tag's first view."""
+        """Zero plane, turn and reading errors; tag places under the model's floor: centre and yaw of each tag's
+        first view."""
         v = self.views
         rays = np.einsum("vij,vcj->vci", v.T_floor_camera[:, :3, :3], self.camera.unproject(v.uv))
         height = self.printed[self.tag_of_view, :, 2]
@@ -118,20 +157,24 @@ class _FloorFit:
             first = seen[self.tag_of_view == k][0]
             edge = first[1] - first[0]
             places[k] = [*first.mean(axis=0), np.arctan2(edge[1], edge[0])]
-        return np.concatenate([np.zeros(6), [self.inset[0]], np.nan_to_num(places).ravel()])
+        return np.concatenate([np.zeros(6), [self.inset[0]], np.nan_to_num(places).ravel(), np.zeros(self.n_readings)])
 
     def residuals(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
-        """Weighted corner residuals [px] of the views `keep` (V,) bool."""
+        """Weighted corner residuals [px] of the views `keep` (V,) bool, then the priors' (inset, readings)."""
         v = self.views
-        place = x[7:].reshape(-1, 3)[self.tag_of_view[keep]]
+        place = x[7:self.first_reading].reshape(-1, 3)[self.tag_of_view[keep]]
         c, s = np.cos(place[:, 2:3]), np.sin(place[:, 2:3])
         p = self.printed[self.tag_of_view[keep]]
         p_real = np.stack([place[:, :1] + c * p[..., 0] - s * p[..., 1], place[:, 1:2] + s * p[..., 0] + c * p[..., 1],
                            p[..., 2]], axis=-1)  # fmt: skip
-        T_camera_real = invert_transform(_real_camera(x, v.T_floor_camera[keep]))
+        errors = x[self.first_reading:]
+        moved = np.einsum("vkd,vk->vd", v.twists[keep], errors[v.readings[keep]])  # (V, 6) camera frame
+        T_camera_moved = np.tile(np.eye(4), (len(moved), 1, 1))
+        T_camera_moved[:, :3, :3], T_camera_moved[:, :3, 3] = exp_so3(moved[:, 3:]), moved[:, :3]
+        T_camera_real = invert_transform(_real_camera(x, v.T_floor_camera[keep] @ T_camera_moved))
         p_camera = np.einsum("vij,vcj->vci", T_camera_real[:, :3, :3], p_real) + T_camera_real[:, None, :3, 3]
         r = (self.camera.project(p_camera) + x[6] * v.inward[keep] - v.uv[keep]) * v.weight[keep, None, None]
-        prior = self.scale * (x[6] - self.inset[0]) / self.inset[1]
+        prior = self.scale * np.append((x[6] - self.inset[0]) / self.inset[1], errors / self.encoder_noise)
         return np.append(np.nan_to_num(r, nan=BEHIND_CAMERA_PX).ravel(), prior)
 
     def solve(self, x0: np.ndarray, keep: np.ndarray, scale: float | None = None) -> np.ndarray:
@@ -139,7 +182,23 @@ class _FloorFit:
         if scale is not None:
             self.scale = scale
         loss = {} if scale is None else {"loss": "huber", "f_scale": 2.0 * scale}
-        return least_squares(self.residuals, x0, x_scale="jac", args=(keep,), **loss).x
+        pattern = self.sparsity(keep)
+        jacobian = lambda x, keep: approx_derivative(self.residuals, x, args=(keep,), sparsity=pattern).toarray()  # noqa: E731
+        return least_squares(self.residuals, x0, jacobian, x_scale="jac", args=(keep,), **loss).x
+
+    def sparsity(self, keep: np.ndarray) -> scipy.sparse.csr_matrix:
+        """Which unknowns each residual of `residuals(x, keep)` depends on: a view's 8 on the plane, turn and inset,
+        its tag's place and its readings' errors; each prior on its own unknown."""
+        v, n = self.views, self.first_reading + self.n_readings
+        view_rows = [np.arange(7)[None].repeat(keep.sum(), 0), 7 + 3 * self.tag_of_view[keep, None] + np.arange(3),
+                     self.first_reading + v.readings[keep]]  # fmt: skip
+        columns = np.concatenate(view_rows, axis=1)  # (V', C)
+        rows = np.repeat(np.arange(len(columns)), columns.shape[1])
+        pattern = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, columns.ravel())), shape=(len(columns), n))
+        pattern = scipy.sparse.kron(pattern, np.ones((8, 1)), format="csr")
+        priors = scipy.sparse.csr_matrix((np.ones(1 + self.n_readings), (np.arange(1 + self.n_readings),
+                                          np.r_[6, np.arange(self.first_reading, n)])), shape=(1 + self.n_readings, n))
+        return scipy.sparse.vstack([pattern, priors], format="csr")
 
 
 def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset: tuple[float, float] = (0.0, 0.0),
@@ -155,18 +214,37 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     inset = (corner_inset[0], max(corner_inset[1], INSET_SPREAD * abs(corner_inset[0]), MIN_INSET_STD_PX))
     fit = _FloorFit(robot, views, camera or obs.camera, inset)
     every = np.ones(len(views.tags), dtype=bool)
+    n_pixels = 8 * len(views.tags)
+    fit.scale = robot.config.priors.pixel_noise
     x = fit.solve(fit.start(), every)
-    scale = 1.4826 * float(np.median(np.abs(fit.residuals(x, every)[:-1])))
-    x = fit.solve(x, every, scale)
-    r = fit.residuals(x, every)
+    for _ in range(2):  # robustly, at the scale of the residuals (dof-corrected median), twice
+        scale = 1.4826 * float(np.median(np.abs(fit.residuals(x, every)[:n_pixels])))
+        scale *= float(np.sqrt(n_pixels / max(n_pixels - len(x), 1)))
+        x = fit.solve(x, every, scale)
+    r = fit.residuals(x, every)[:n_pixels]
     J = _jacobian(lambda u: fit.residuals(u, every), x)
-    dof = max(len(r) - len(x), 1)
-    covariance = np.linalg.pinv(J.T @ J) * max(float(r @ r) / dof, robot.config.priors.pixel_noise**2)
+    noise = max(float(r @ r) / max(n_pixels - len(x), 1), scale**2)  # [px^2] of the corners (the priors: scale^2)
+    information = J[:n_pixels].T @ J[:n_pixels] / noise + J[n_pixels:].T @ J[n_pixels:] / scale**2
+    covariance = np.linalg.pinv(information)
+    shared = np.flatnonzero(_shared_readings(views))
+    kept = np.setdiff1d(np.arange(len(x)), fit.first_reading + shared)
+    held = np.linalg.pinv(information[np.ix_(kept, kept)])[:7, :7]  # as if the shared readings' rounding were known
     samples, tags = np.unique(views.samples), np.unique(views.tags)
     by_sample = np.stack([fit.solve(x, views.samples != s, scale)[:7] for s in samples]) if len(samples) > 2 else None
     by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
-    return {"unknowns": x[:7], "covariance": covariance[:7, :7], "jackknife_samples": by_sample,
-            "jackknife_tags": by_tag, "views": len(views.tags), "scale_px": scale, "inset_px": float(x[6])}  # fmt: skip
+    return {"unknowns": x[:7], "covariance": held, "rounding_covariance": covariance[:7, :7] - held,
+            "jackknife_samples": by_sample, "jackknife_tags": by_tag, "views": len(views.tags), "scale_px": scale,
+            "inset_px": float(x[6])}  # fmt: skip
+
+
+def _shared_readings(views: FloorViews) -> np.ndarray:
+    """(G,) bool: the reading errors shared by views of more than one sample (a joint held still)."""
+    n = int(views.readings.max()) + 1 if views.readings.size else 0
+    first, last = np.full(n, np.iinfo(np.int64).max), np.full(n, -1)
+    samples = np.broadcast_to(views.samples[:, None], views.readings.shape)
+    np.minimum.at(first, views.readings.ravel(), samples.ravel())
+    np.maximum.at(last, views.readings.ravel(), samples.ravel())
+    return last > first
 
 
 def _seen_twice(tags: np.ndarray) -> np.ndarray:
@@ -245,8 +323,10 @@ def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
     G = _jacobian(offset, x, 1e-6)
     formal = G @ floor["covariance"] @ G.T
     by_sample, by_tag = (_jackknife_covariance(offset, floor[k]) for k in ("jackknife_samples", "jackknife_tags"))
-    total = (formal if np.trace(formal) > np.trace(by_sample) else by_sample) + by_tag
-    parts = {"std_m": total, "formal_std_m": formal, "sample_std_m": by_sample, "tag_std_m": by_tag}
+    rounding = G @ floor["rounding_covariance"] @ G.T
+    total = (formal if np.trace(formal) > np.trace(by_sample) else by_sample) + by_tag + rounding
+    parts = {"std_m": total, "formal_std_m": formal, "sample_std_m": by_sample, "tag_std_m": by_tag,
+             "rounding_std_m": rounding}
     return {k: float(np.sqrt(np.trace(c))) for k, c in parts.items()}
 
 
