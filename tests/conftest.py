@@ -4,6 +4,8 @@ import os
 import subprocess
 from pathlib import Path
 
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI: BLAS threads spinning on busy cores cost 50x
+
 import numpy as np
 import pytest
 import yaml

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.evaluate.floor_ground import measured_ground_errors
+from wolfcal.evaluate.floor_ground import measured_ground_errors, real_floor
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import load_robot
@@ -58,3 +58,19 @@ def test_a_small_ground_error_is_measured_within_its_uncertainty(seed):
     assert 0.04 < true < 0.3
     assert abs(measured["error_m"] - true) < 2 * measured["std_m"], (true, measured)
     assert measured["std_m"] < 0.4 * true, (true, measured)
+
+
+def test_the_readings_rounding_is_fitted_and_the_standing_legs_part_kept_in_the_sigma():
+    """The exact model (true ground error 0 at unrounded readings) on views whose readings are rounded to ticks: the
+    corner residual comes down to the corner noise (0.15 px), not the head readings' rounding (~0.6 px at this
+    camera's 1336 px focal length), and the standing legs' rounding, one tick shared by every sample, stays in the
+    1 sigma, which covers the measured error."""
+    robot = load_robot(WOLFGANG)
+    camera = load_camera_info(robot.config.head_camera().intrinsics)
+    rng = np.random.default_rng(1)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "all")), rng)
+    floor = simulate_floor(robot, camera, truth, 30, rng, distance=(0.5, 5.0), noise_px=0.15)
+    assert real_floor(robot, floor.obs, truth)["scale_px"] < 0.25
+    row = measured_ground_errors(robot, floor.obs, {"exact": truth}, (4.5,))["models"]["exact"]["rows"][0]
+    assert row["rounding_std_m"] > 0.005, row
+    assert row["error_m"] < 2 * row["std_m"], row

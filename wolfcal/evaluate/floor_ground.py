@@ -11,7 +11,11 @@ floor: the ball at D on the real floor, the ray from the standing camera (head a
 the model's floor; the worst of the bearings -30, 0, +30 deg [m], with its 1-sigma uncertainty from the plane
 unknowns' covariance (residual scatter). Distances beyond the views' are extrapolated by the plane (said in the
 report). A turn or shift of the floor within its plane is not seen (the tags' places are unknown), nor errors that
-change with the head angle (the plane is one for all samples).
+change with the head angle (the plane is one for all samples). Each joint reading between the soles and the camera
+is rounded to an encoder tick: that rounding is an unknown too (prior `priors.encoder_noise`), one per joint and
+tick, so views of samples that read a joint at the same tick share it (the standing legs while the head looks
+around: their rounding moves the floor as the plane does, no view in that stance tells them apart, so it stays in
+the 1 sigma as its own part; held-out samples in several stances average it).
 """
 
 from __future__ import annotations
