@@ -150,23 +150,29 @@ class CameraBlock(Block):
         # (`point_motion`), and a . (w x p) = w . (p x a) for each row a of d(pixel)/d(p_root)
         D_root = D @ R_camera_root  # (M, 2, 3)
         D_twist = np.concatenate([D_root, cross(p_root[:, None, :], D_root)], axis=2)  # (M, 2, 6)
-        # twists relative to the viewer per (tag, sample) before they are spread over the corners: one (M, 6, K)
-        # array per kind instead of three (memory on long recordings)
+        # the tag's twists relative to the viewer's per view (one tag in one sample): a view's corners share them
+        views, first_unit, view_of_unit = np.unique(self.view_of_unit[units], return_index=True, return_inverse=True)
+        view_tag, view_sample = t[first_unit], s[first_unit]
+        n_units = len(view_of_unit)
+        regular = n_units == 4 * len(views) and np.array_equal(view_of_unit, np.arange(n_units) // 4)
+
+        def chain_rule(tag_twists: list[np.ndarray], viewer_twists: np.ndarray) -> np.ndarray:
+            """(M, 2, K) d(pixel)/d(unknowns) from the tags' and the viewer's twists (S, K, 6)."""
+            relative = np.empty((len(views), 6, viewer_twists.shape[1]))  # (V, 6, K)
+            for col, tag_twist in enumerate(tag_twists):
+                mine = np.flatnonzero(view_tag == col)
+                relative[mine] = np.swapaxes(tag_twist[view_sample[mine]] - viewer_twists[view_sample[mine]], 1, 2)
+            if regular:  # each view's four corners in a row (whole tags): one product per view
+                return (D_twist.reshape(len(views), 8, 6) @ relative).reshape(n_units, 2, -1)
+            return D_twist @ relative[view_of_unit.ravel()]
+
         return Linearization(
             residual=residual,
-            jac_chain=D_twist @ self._corner_twists([d.twist_p(k) for k in keys], d.twist_p(self.viewer), t, s),
+            jac_chain=chain_rule([d.twist_p(k) for k in keys], d.twist_p(self.viewer)),
             jac_local=None if jac_local is None else D @ jac_local,
             local_cols=local_cols,
-            joint_sensitivity=D_twist @ self._corner_twists([d.twist_q(k) for k in keys], d.twist_q(self.viewer),
-                                                             t, s),  # fmt: skip
+            joint_sensitivity=chain_rule([d.twist_q(k) for k in keys], d.twist_q(self.viewer)),
         )
-
-    @staticmethod
-    def _corner_twists(tag_twists: list[np.ndarray], viewer_twists: np.ndarray, t: np.ndarray, s: np.ndarray):
-        """(M, 6, K) twists of each corner's tag relative to the viewer, from each tag's (S, K, 6) and the viewer's
-        (S, K, 6), corner m on tag t[m] in sample s[m] (laid out for the product with d(pixel)/d(twist))."""
-        relative = np.stack(tag_twists) - viewer_twists  # (T, S, K, 6)
-        return np.ascontiguousarray(np.swapaxes(relative, 2, 3))[t, s]
 
     def _through_camera_pose(self, pose_values: np.ndarray, k: np.ndarray, p_base: np.ndarray):
         """Points in the external camera's frame from those in the base frame, the rotation R_camera_base (M, 3, 3)
