@@ -28,11 +28,11 @@ from typing import IO, NamedTuple
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
+from wolfcal.io.cdr import FastDecoderFactory
 from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
@@ -172,7 +172,7 @@ def _read(
 ) -> Capture:
     """Read an open file: pair and select frames per camera, leave out damaged images, group the frames into
     samples."""
-    reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+    reader = make_reader(handle, decoder_factories=[FastDecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
     try:
