@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
+from wolfcal.fit.inputs import load_samples
+from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.recording import RecordingOptions, simulate_recording
