@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors
-from wolfcal.fit.inputs import load_samples
-from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
 from wolfcal.io.truth import truth_paths
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import load_corrections

@@ -27,8 +27,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.accuracy import link_pose_errors
 from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground import ground_errors
-from wolfcal.fit.inputs import load_samples
-from wolfcal.fit.pipeline import FitOptions, fit_observations, split_floor
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor
 from wolfcal.io.truth import truth_paths
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections, load_corrections

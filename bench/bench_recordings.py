@@ -17,8 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.fit.inputs import load_samples
-from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.recording import RecordingOptions, simulate_recording

@@ -40,9 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_vision import BINNED, FULL, accuracy, render_views  # noqa: E402
 from naive_reference import naive_solve, predicted  # noqa: E402
 
-from wolfcal.fit.inputs import load_samples  # noqa: E402
-from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
-from wolfcal.fit.run import run_fit  # noqa: E402
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, run_fit  # noqa: E402
 from wolfcal.io.samples import encoded_images  # noqa: E402
 from wolfcal.observations import HEAD_CAMERA  # noqa: E402
 from wolfcal.projection import predict_corners  # noqa: E402

@@ -25,9 +25,8 @@ from wolfcal.cli import app
 from wolfcal.config import default_robot, load_robot_config, packaged_robot
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.pipeline import run_evaluate
-from wolfcal.fit import run as fit_run
-from wolfcal.fit.pipeline import FitOptions
-from wolfcal.fit.run import run_fit
+from wolfcal.fit import pipeline as fit_pipeline
+from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.io.reader import read_capture
 from wolfcal.progress import Progress
 from wolfcal.robot.robot import load_robot
@@ -229,7 +228,7 @@ def test_fit_outputs_are_written_as_a_set(good, good_fit, tmp_path, monkeypatch)
     def disk_full(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(fit_run, "write_calibrated_urdf", disk_full)
+    monkeypatch.setattr(fit_pipeline, "write_calibrated_urdf", disk_full)
     with pytest.raises(OSError, match="No space left"):
         run_fit([good], ROBOT, out, FitOptions(free="camera", fix_tags=True), say=quiet, force=True)
     assert {p.name: digest(p) for p in out.iterdir()} == before  # the new result.yaml did not land alone

@@ -25,8 +25,7 @@ from wolfcal.capture.floor import floor_script
 from wolfcal.capture.manual import joint_groups
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.pipeline import FitOptions, split_floor
-from wolfcal.fit.run import run_fit
+from wolfcal.fit.pipeline import FitOptions, run_fit, split_floor
 from wolfcal.hardware.bus import DynamixelBus, rad_to_ticks, ticks_to_rad
 from wolfcal.hardware.emulator import EmulatorProcess, spec_from_config
 from wolfcal.io.reader import read_capture

@@ -19,8 +19,7 @@ from wolfcal.evaluate.metrics import measure_tag_views, model_errors
 from wolfcal.evaluate.pipeline import run_evaluate
 from wolfcal.evaluate.report import before_after_table
 from wolfcal.fit import pipeline as fit_pipeline
-from wolfcal.fit.pipeline import FitOptions
-from wolfcal.fit.run import run_fit
+from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.geometry import transform_from_twist_params
 from wolfcal.io.reader import read_capture
 from wolfcal.io.truth import truth_paths

@@ -11,8 +11,7 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.evaluate.pipeline import run_evaluate
-from wolfcal.fit.pipeline import FitOptions
-from wolfcal.fit.run import run_fit
+from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.simulate import SimOptions, simulate_capture

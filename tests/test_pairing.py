@@ -17,7 +17,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 import wolfcal.io.reader as reader_module
 from wolfcal.config import load_robot_config
-from wolfcal.fit.inputs import repeat_warnings
+from wolfcal.fit.pipeline import repeat_warnings
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture

@@ -12,8 +12,7 @@ from wolfcal.cli import app
 from wolfcal.evaluate.deploy import DEPLOY_FILES
 from wolfcal.evaluate.pipeline import run_evaluate
 from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
-from wolfcal.fit.pipeline import FitOptions
-from wolfcal.fit.run import run_fit
+from wolfcal.fit.pipeline import FitOptions, run_fit
 from wolfcal.sim.simulate import SimOptions, simulate_capture
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"

@@ -162,8 +162,7 @@ def fit(
     force: bool = force_option(),
 ) -> None:
     """Estimate the chosen free parameters from one or more captures."""
-    from wolfcal.fit.options import FitOptions
-    from wolfcal.fit.run import run_fit
+    from wolfcal.fit.pipeline import FitOptions, run_fit
     from wolfcal.vision.cache import cache_enabled
 
     options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving,

@@ -19,8 +19,7 @@ from pathlib import Path
 
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.pipeline import run_evaluate
-from wolfcal.fit.options import FitOptions
-from wolfcal.fit.run import run_fit
+from wolfcal.fit.pipeline import FitOptions, run_fit
 
 DEMO_CAPTURE = Path("captures/demo.mcap")
 DEMO_HELDOUT = Path("captures/demo_heldout.mcap")

@@ -43,9 +43,8 @@ from wolfcal.evaluate.ground import VERDICT_DISTANCE_M
 from wolfcal.evaluate.metrics import measure_tag_views, model_errors, outlier_samples
 from wolfcal.evaluate.pipeline import load_fit, refuse_fitted_captures
 from wolfcal.evaluate.report import render_html, render_markdown
-from wolfcal.fit.inputs import load_captures, samples_of
 from wolfcal.fit.mocap_block import MocapBlock
-from wolfcal.fit.pipeline import split_floor
+from wolfcal.fit.pipeline import load_captures, samples_of, split_floor
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.samples import Capture

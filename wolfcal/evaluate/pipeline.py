@@ -45,9 +45,8 @@ from wolfcal.evaluate.report_content import (
 from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
-from wolfcal.fit.inputs import load_captures, samples_of
+from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
-from wolfcal.fit.run import FIT_OUTPUTS
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out

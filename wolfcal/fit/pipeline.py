@@ -1,4 +1,4 @@
-"""The fit: observations -> measurement blocks -> problem -> solution (`wolfcal.fit.run` reads, detects and writes)."""
+"""`wolfcal fit`: captures -> observations -> problem -> solution -> result.yaml + calibrated.urdf."""
 
 from __future__ import annotations
 
@@ -7,22 +7,36 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from wolfcal.atomic import output_set
+from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
-from wolfcal.fit.inputs import in_system
 from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
+from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
 from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
+from wolfcal.io.mocap_load import load_marker_observations
+from wolfcal.io.reader import read_capture, require_cameras
+from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.markers import MarkerObservations
+from wolfcal.memory import large_blocks_mapped, release_freed_memory
 from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.outputs import check_output_folder
+from wolfcal.progress import Progress
+from wolfcal.robot.config_writer import write_calibrated_config
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
-from wolfcal.robot.robot import Robot
+from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.robot.urdf_writer import write_calibrated_urdf
+from wolfcal.vision.cache import digest_ahead
+from wolfcal.vision.observe import detect_observations
+from wolfcal.yamlfile import load_yaml
 
 SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
@@ -49,6 +63,12 @@ class Fit:
     def corrections(self) -> Corrections:
         return self.chain.corrections(self.solution.values[: len(self.chain)])
 
+
+
+def in_system(camera: str, system: str | None) -> bool:
+    """Whether a camera belongs to a --system: head -> the head camera, external -> any other; all (or no
+    choice) -> every camera."""
+    return system in (None, "all") or (system == "head") == (camera == HEAD_CAMERA)
 
 
 def _systems(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
@@ -202,6 +222,71 @@ def split_floor(
     return rest, head.only_tags(floor_ids)
 
 
+def load_captures(
+    robot: Robot, captures: list[Path], intrinsics: Path | None, say: Callable[[str], None] | None = None
+) -> list[Capture]:
+    """The captures read; one whose attached robot config names another robot is refused. `say` gets progress
+    lines while long files are read."""
+    camera = load_camera_info(intrinsics) if intrinsics else None
+    progress = (lambda path: Progress(say, f"reading {Path(path).name}", "messages")) if say else (lambda path: None)
+    loaded = [read_capture(path, robot.config, camera, progress(path)) for path in captures]
+    for capture in loaded:
+        name = attached_robot_name(capture.robot_config_text)
+        if name is not None and name != robot.config.name:
+            raise WolfcalError(
+                f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "
+                f"({robot.config.path}); use the config of the robot that was captured"
+            )
+    return loaded
+
+
+def samples_of(
+    loaded: list[Capture], robot: Robot, cameras: tuple[str, ...] = (HEAD_CAMERA,)
+) -> tuple[list[Sample], list[str]]:
+    """All samples of read captures, and notes on frames a recording skipped; a capture without images of each of
+    `cameras` is refused."""
+    require_cameras(loaded, cameras, robot.config)
+    samples = [s for c in loaded for s in c.samples]
+    notes = [f"{c.path.name}: {len(c.skipped)} frame(s) skipped ({c.skipped[0]} ...)" for c in loaded if c.skipped]
+    return samples, notes
+
+
+def load_samples(
+    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,),
+    say: Callable[[str], None] | None = None,
+) -> tuple[list[Sample], list[str]]:
+    """`samples_of` the captures read by `load_captures`."""
+    return samples_of(load_captures(robot, captures, intrinsics, say), robot, cameras)
+
+
+def attached_robot_name(config_text: str | None) -> str | None:
+    """The `name` of a robot config attached to a capture (None when absent or unreadable)."""
+    try:
+        data = load_yaml(config_text) if config_text else None
+    except yaml.YAMLError:
+        return None
+    return data.get("name") if isinstance(data, dict) else None
+
+
+FIT_OUTPUTS = ("result.yaml", "calibrated.urdf", "calibrated_robot.yaml")
+
+
+def repeat_warnings(observations: dict[str, Observations], noise_floor_px: float) -> list[str]:
+    """A warning per camera whose samples repeat the image before them exactly (`Observations.repeated_samples`)."""
+    warnings = []
+    for name, obs in observations.items():
+        repeated = obs.repeated_samples()
+        if repeated:
+            warnings.append(
+                f"{name} camera: {repeated} of {obs.n_samples} sample(s) show exactly the tag corners of the sample "
+                "before them (the same image again: a camera driver repeating its last frame, or a copied stream); "
+                "they add no information, and the pixel noise estimate, which reads the scatter between the frames "
+                "of a pose, stays at its floor "
+                f"({noise_floor_px} px)"
+            )
+    return warnings
+
+
 def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
     """The outlier rule must not absorb unusable data: WolfcalError when more than MAX_LEFT_OUT of a measurement
     system's samples or tag views were left out as outliers."""
@@ -217,3 +302,65 @@ def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
     )
 
 
+def run_fit(
+    captures: list[Path],
+    robot_path: Path,
+    out_dir: Path,
+    options: FitOptions,
+    intrinsics: Path | None = None,
+    say: Callable[[str], None] = print,
+    force: bool = False,
+    mocap: Sequence[Path] = (),
+    mocap_offsets: Sequence[float] = (),
+) -> FitResult:
+    """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
+    Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
+    (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
+    (one per capture, clock offsets `mocap_offsets` or estimated)."""
+    robot = load_robot(robot_path)
+    inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
+    markers: MarkerObservations | None = None
+    warnings: list[str] = []
+    observations: dict[str, Observations] = {}
+    if options.system == "mocap" or mocap:
+        markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
+        say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+            + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+        warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
+                     ] if markers.unknown_names else []  # fmt: skip
+    if options.system != "mocap":
+        required = (HEAD_CAMERA,) if options.system == "head" else ()
+        digest_ahead(captures)  # the detection cache's key, hashed while the captures are read
+        samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
+        warnings += read_warnings
+        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+        observations, detect_warnings = detect_observations(
+            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+        )
+        warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
+        release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
+    for name, obs in observations.items():
+        say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
+    say(f"fitting --free {options.free} ...")
+    # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
+    # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
+    with large_blocks_mapped():
+        fit = fit_observations(robot, observations, options, say, markers)
+        check_solution_left_out(fit, captures)
+        result = fit_result(fit, options, captures, intrinsics, warnings)
+        with output_set():
+            write_result(out_dir / "result.yaml", result)
+            write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
+            write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
+    for line in summary_lines(result):
+        say(line)
+    for line in explain(fit.params, fit.solution):
+        say(f"note: {line}")
+    for line in warnings:
+        say(f"warning: {line}")
+    say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
+    return result
