@@ -120,15 +120,12 @@ def _digest_quietly(path: Path) -> None:
         file_digest(path, wait=False)
     except OSError:  # the caller's own file_digest meets the error and handles it
         pass
-    finally:  # done: no entry is left behind for a file whose detection never comes (e.g. a bad capture)
-        if _ahead.get(path) is threading.current_thread():
-            del _ahead[path]
 
 
 def file_digest(path: Path, wait: bool = True) -> str:
     """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring); with
     `wait`, after `digest_ahead`'s hashing of the file, if any, has finished."""
-    pending = _ahead.get(Path(path).resolve()) if wait else None
+    pending = _ahead.pop(Path(path).resolve(), None) if wait else None
     if pending is not None:
         pending.join()
     before = os.stat(path)
