@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import threading
 from pathlib import Path
 
 import cv2
@@ -175,24 +174,6 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     os.utime(replacement, ns=(info.st_atime_ns, info.st_mtime_ns))
     replacement.replace(path)  # re-recorded: same name, size and mtime
     assert cache.file_digest(path) == cache.content_digest(path) != true_digest
-
-
-def test_digest_ahead_hashes_once_beside_the_caller(capture, tmp_path, monkeypatch):
-    """`digest_ahead` hashes the file in the background; `file_digest` then waits for it and finds the digest
-    remembered (one hash in all); with the cache off it starts nothing."""
-    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(cache, "RACY_NS", 0)
-    path, _ = capture
-    true_digest = cache.content_digest(path)
-    hashed = []
-    monkeypatch.setattr(cache, "content_digest", lambda p: hashed.append(threading.current_thread()) or true_digest)
-    with cache_enabled(False):
-        cache.digest_ahead([path])
-    assert cache._ahead == {} and hashed == []
-    cache.digest_ahead([path, str(path)])  # one thread per file
-    assert cache.file_digest(path) == true_digest
-    assert len(hashed) == 1 and hashed[0] is not threading.main_thread() and cache._ahead == {}
-    assert cache.file_digest(path) == true_digest and len(hashed) == 1  # remembered
 
 
 def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):

@@ -34,7 +34,6 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.vision.cache import digest_ahead
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
 
@@ -331,7 +330,6 @@ def run_fit(
                      ] if markers.unknown_names else []  # fmt: skip
     if options.system != "mocap":
         required = (HEAD_CAMERA,) if options.system == "head" else ()
-        digest_ahead(captures)  # the detection cache's key, hashed while the captures are read
         samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
         release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
         warnings += read_warnings

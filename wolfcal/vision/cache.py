@@ -15,8 +15,6 @@ so a file's digest is remembered beside the entries (`file_digest`) with the fil
 modification and status-change times [ns]. Any write to the file changes its status-change time (the kernel sets
 it; no tool can set it back), so the file is hashed again; and, as git does for its index, a digest taken less than
 2 s after the file's last change is not trusted (a write within the same clock tick could keep every time).
-A pipeline that reads a capture before detecting it starts the hashing first (`digest_ahead`: a thread, hashing
-releases the interpreter lock), so the digest is ready when the detection looks the entry up.
 """
 
 from __future__ import annotations
@@ -24,7 +22,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import threading
 import time
 import zipfile
 from collections.abc import Callable, Iterable, Mapping
@@ -99,35 +96,8 @@ def content_digest(path: Path, chunk: int = 1 << 20) -> str:
     return digest.hexdigest()
 
 
-_ahead: dict[Path, threading.Thread] = {}  # files being hashed by `digest_ahead` (resolved path -> its thread)
-
-
-def digest_ahead(paths: Iterable[str | Path]) -> None:
-    """Start `file_digest` of these files in a background thread (nothing while the cache is off), so that it runs
-    beside the caller's own work, e.g. reading the files; `file_digest` of one of them then waits for it and finds
-    the digest remembered."""
-    if not _enabled.get():
-        return
-    for path in dict.fromkeys(Path(p).resolve() for p in paths):
-        if path.is_file() and path not in _ahead:
-            thread = threading.Thread(target=_digest_quietly, args=(path,), daemon=True)
-            _ahead[path] = thread
-            thread.start()
-
-
-def _digest_quietly(path: Path) -> None:
-    try:
-        file_digest(path, wait=False)
-    except OSError:  # the caller's own file_digest meets the error and handles it
-        pass
-
-
-def file_digest(path: Path, wait: bool = True) -> str:
-    """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring); with
-    `wait`, after `digest_ahead`'s hashing of the file, if any, has finished."""
-    pending = _ahead.pop(Path(path).resolve(), None) if wait else None
-    if pending is not None:
-        pending.join()
+def file_digest(path: Path) -> str:
+    """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring)."""
     before = os.stat(path)
     identity = [before.st_dev, before.st_ino, before.st_size, before.st_mtime_ns, before.st_ctime_ns]
     memo = cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
