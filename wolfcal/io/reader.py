@@ -28,6 +28,7 @@ from typing import IO, NamedTuple
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
@@ -172,7 +173,7 @@ def _read(
 ) -> Capture:
     """Read an open file: pair and select frames per camera, leave out damaged images, group the frames into
     samples."""
-    reader = make_reader(handle, decoder_factories=[FastDecoderFactory()])
+    reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
     try:

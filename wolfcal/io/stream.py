@@ -14,9 +14,9 @@ from pathlib import Path
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.cdr import FastDecoderFactory
 from wolfcal.io.msgdefs import header_stamp_ns
 
 
@@ -48,7 +48,7 @@ def _stream_file(path: Path, wanted: list[ImageLocation]) -> Iterator[bytes]:
         remaining[key] = remaining.get(key, 0) + 1
     times = {(topic, log_time) for topic, log_time, _ in keys}
     waiting: dict[tuple[str, int, int], bytes] = {}
-    factory = FastDecoderFactory()
+    factory = DecoderFactory()
     turn = 0
     try:
         with path.open("rb") as handle:
