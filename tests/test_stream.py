@@ -101,3 +101,37 @@ def test_joint_log_matches_per_message_reading():
     np.testing.assert_array_equal(states.series["c"].positions, [2.0])
     masked = JointStates.from_log(log, [np.array([False, True]), np.array([False])])
     assert masked.names == ["a", "b"] and masked.series["b"].positions.tolist() == [1.0]
+
+
+def _objects_reachable(root: object) -> int:
+    """Distinct objects reachable from `root` (through gc's referents), modules and classes not followed."""
+    import gc
+    import types
+
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or isinstance(obj, (type, types.ModuleType)):
+            continue
+        seen.add(id(obj))
+        stack.extend(gc.get_referents(obj))
+    return len(seen)
+
+
+def test_samples_of_a_recording_hold_a_fixed_number_of_objects_each(tmp_path):
+    """A long recording's samples: per sample the Sample, its image dict, image and location, its two rows of
+    readings and its two stamps (header, log time); the joint names, source strings, file path and camera model
+    are one object each for all samples (thousands of samples in a ten-minute recording)."""
+    config = load_robot_config(CONFIG)
+    counts = {}
+    for n in (10, 30):
+        write_still_recording(tmp_path / f"rec{n}.mcap", n)
+        samples = read_capture(tmp_path / f"rec{n}.mcap", config).samples
+        assert len(samples) == n
+        counts[n] = _objects_reachable(samples)
+    per_sample = (counts[30] - counts[10]) / 20
+    assert per_sample <= 8, per_sample
+    first, last = samples[0], samples[-1]
+    assert first.joint_names is last.joint_names and first.source is last.source
+    assert first.images[HEAD_CAMERA].source is last.images[HEAD_CAMERA].source

@@ -20,7 +20,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.msgdefs import header_stamp_ns
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ImageLocation:
     """Where an image message lies in an MCAP file."""
 
