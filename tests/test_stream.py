@@ -67,6 +67,19 @@ def test_read_capture_keeps_locations_not_bytes_and_reads_them_back(tmp_path):
     assert kept[4].encoded() == images[4] and kept[4].decode().shape == (48, 64)
 
 
+def test_images_read_back_in_windows_of_a_few(tmp_path, monkeypatch):
+    """Locations are looked up WINDOW at a time (each window one pass over its span of the file): with windows of 2,
+    every order (the file's, reversed, repeats, a window spanning the file) gives the images of one window."""
+    from wolfcal.io import stream
+
+    path = tmp_path / "rec.mcap"
+    images = write_still_recording(path, 7)
+    kept = [s.images[HEAD_CAMERA].location for s in read_capture(path, load_robot_config(CONFIG)).samples]
+    monkeypatch.setattr(stream, "WINDOW", 2)
+    for order in ([0, 1, 2, 3, 4, 5, 6], [6, 5, 4, 3, 2, 1, 0], [0, 6, 6, 3, 1], [2, 2, 2]):
+        assert list(stream_images(kept[i] for i in order)) == [images[i] for i in order]
+
+
 def test_header_stamps_against_file_order_and_images_made_in_memory(tmp_path):
     path = tmp_path / "rec.mcap"
     images = write_still_recording(path, 5, reverse_stamps=True)
