@@ -1,9 +1,12 @@
 """Detection and intrinsics speed, side by side with their references, in one run on this machine.
 
-Run: python bench/bench_detection.py [--views N] [--quick]. Prints:
+Run: python bench/bench_detection.py [--views N] [--quick] [--before REV]. Prints:
 1. per-image tag detection [ms] at 512x384 and 2048x1536 (one tag of 0.08 m at 0.3-1.2 m, noise sigma 2, as in
    bench/bench_vision.py): OpenCV's bare detector, wolfcal before (the per-edge refinement loop, kept in
    tests/edge_reference.py) and after (vectorised), and the corner error [px] median / 95th percentile of both;
+   then the CPU per image, one thread, split into decoding the png, OpenCV's detector and the refinement (in tasks
+   of `task_size` images, as the workers run it); with --before REV (a git revision) also the refinement of
+   wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px];
 2. a capture's worth of png images decoded and detected on all cores: serial, threads, worker processes
    (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker detector on all cores;
 3. the detection cache: first run (hash + detect + write) and second run (hash + read), and the cost of
@@ -25,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import types
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -40,9 +44,9 @@ from edge_reference import _refine_edges as refine_before  # noqa: E402
 from opencv_intrinsics import calibrate as plain_calibrate  # noqa: E402
 
 from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics  # noqa: E402
-from wolfcal.vision import cache  # noqa: E402
-from wolfcal.vision.batch import cpu_count, detect_encoded  # noqa: E402
-from wolfcal.vision.tags import _detector, _to_gray, detect_tags, tag_cells  # noqa: E402
+from wolfcal.vision import cache, tags  # noqa: E402
+from wolfcal.vision.batch import cpu_count, detect_encoded, task_size  # noqa: E402
+from wolfcal.vision.tags import _detector, _found, _to_gray, detect_tags, refine_found, tag_cells  # noqa: E402
 
 FAMILY = "tag36h11"
 
@@ -56,14 +60,15 @@ def median_time(function, repeat: int = 3) -> float:
     return float(np.median(times))
 
 
-def interleaved(functions: dict, repeat: int = 5) -> dict[str, float]:
-    """Median seconds of each function, run in turn (A B C A B C ...) so a shared machine's drift hits all."""
+def interleaved(functions: dict, repeat: int = 5, clock=time.perf_counter) -> dict[str, float]:
+    """Median seconds (of `clock`) of each function, run in turn (A B C A B C ...) so a shared machine's drift hits
+    all."""
     times: dict[str, list[float]] = {name: [] for name in functions}
     for _ in range(repeat):
         for name, function in functions.items():
-            start = time.perf_counter()
+            start = clock()
             function()
-            times[name].append(time.perf_counter() - start)
+            times[name].append(clock() - start)
     return {name: float(np.median(t)) for name, t in times.items()}
 
 
@@ -101,6 +106,63 @@ def _per_image_row(label: str, views: list) -> None:
           f"{1e3 * (after - bare):.1f})")  # fmt: skip
     for name, e in errors.items():
         print(f"  {'':10s} {name:6s} corner error median {np.median(e):.4f}  p95 {np.percentile(e, 95):.4f}")
+
+
+def edges_at(revision: str) -> types.ModuleType:
+    """wolfcal/vision/edges.py as it was at git `revision`, as a module of its own."""
+    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{revision}:wolfcal/vision/edges.py"],
+                            capture_output=True, text=True, check=True).stdout  # fmt: skip
+    module = types.ModuleType(f"edges_at_{revision}")
+    exec(compile(source, f"{revision}:wolfcal/vision/edges.py", "exec"), module.__dict__)
+    return module
+
+
+def _refine_tasks(tasks: list, edges: types.ModuleType | None = None) -> list:
+    """refine_found over each task (gray images, OpenCV's tags), with `edges`' refine_tags if given."""
+    now = tags.refine_tags
+    if edges is not None:
+        tags.refine_tags = edges.refine_tags
+    try:
+        return [tag for grays, found in tasks for tag in refine_found(grays, found, FAMILY)]
+    finally:
+        tags.refine_tags = now
+
+
+def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
+    """Per-image CPU [ms], one thread: decode, OpenCV's detector, refinement (now and at git `before`)."""
+    print("\n1b. CPU per image, one thread [ms CPU/image]: decode (png -> gray) + OpenCV detector + refinement")
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    old = edges_at(before) if before else None
+    try:
+        for label, views in views_by_camera.items():
+            data = [cv2.imencode(".png", im, [cv2.IMWRITE_PNG_COMPRESSION, 1])[1].tobytes() for _, im, _ in views]
+            grays = [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data]
+            found = [_found(g, FAMILY, None, "edges") for g in grays]
+            size = task_size(data[0], processes=False)
+            tasks = [(grays[i : i + size], found[i : i + size]) for i in range(0, len(grays), size)]
+            functions = {
+                "decode": lambda: [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data],  # noqa: B023
+                "detector": lambda: [_found(g, FAMILY, None, "edges") for g in grays],  # noqa: B023
+                "refinement": lambda: _refine_tasks(tasks),  # noqa: B023
+            }
+            if old is not None:
+                functions["refinement before"] = lambda: _refine_tasks(tasks, old)  # noqa: B023
+            t = {k: 1e3 * v / len(data) for k, v in interleaved(functions, repeat, time.process_time).items()}
+            n_tags = sum(len(f) for f in found) / len(data)
+            total = t["decode"] + t["detector"] + t["refinement"]
+            line = (f"  {label:10s} ({n_tags:.1f} tags/image, {size} per task) decode {t['decode']:5.2f} + detector "
+                    f"{t['detector']:5.2f} + refinement {t['refinement']:5.2f} = {total:5.2f}")  # fmt: skip
+            if old is not None:
+                before_total = total - t["refinement"] + t["refinement before"]
+                now, then = _refine_tasks(tasks), _refine_tasks(tasks, old)
+                diff = max(np.abs(a[k] - b[k]).max() for a, b in zip(now, then) for k in a)
+                line += (f"; refinement at {before} {t['refinement before']:5.2f} (total {before_total:5.2f}, "
+                         f"{before_total / total:.2f}x; refinement {t['refinement before'] / t['refinement']:.2f}x; "
+                         f"corners differ by at most {diff:.1e} px)")  # fmt: skip
+            print(line)
+    finally:
+        cv2.setNumThreads(threads)
 
 
 def _floor_one(data: bytes) -> None:
@@ -233,12 +295,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=40, help="rendered views per camera")
     parser.add_argument("--quick", action="store_true", help="fewer views and repetitions")
+    parser.add_argument("--before", help="git revision whose refinement (wolfcal/vision/edges.py) to time beside")
+    parser.add_argument("--only-split", action="store_true", help="only part 1b (the CPU split)")
     args = parser.parse_args()
     views = 12 if args.quick else args.views
     repeat = 1 if args.quick else 3
     print(f"{cpu_count()} cores; OpenCV {cv2.__version__}")
     by_camera = {"512x384": render_views(BINNED, views, seed=11), "2048x1536": render_views(FULL, views, seed=11)}
+    if args.only_split:
+        cpu_split(by_camera, args.before, 5 if args.quick else 9)
+        return
     per_image(by_camera)
+    cpu_split(by_camera, args.before, 5 if args.quick else 9)
     encoded = all_cores(by_camera, copies=max(1, 48 // views + 1))
     cached(encoded)
     intrinsics(repeat)

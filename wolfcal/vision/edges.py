@@ -51,18 +51,23 @@ def edge_offsets(
     above = profiles >= 0.5 * (dark + light)
     gaps = np.arange(S - 1)
     change = above[..., 1:] & ~above[..., :-1] & (gaps < length[..., None] - 1)  # dark -> light between k and k + 1
-    centre = (length - 1) / 2
-    dist = np.where(change, np.abs(gaps + 0.5 - centre[..., None]), np.inf)
-    k = np.argmin(dist, axis=-1)[..., None]
-    ok = np.isfinite(np.take_along_axis(dist, k, axis=-1)[..., 0])
+    # the crossing nearest the profile centre (length - 1) / 2, by twice its distance |2 k + 2 - length| in small
+    # integers (exact; the first of equals)
+    small = np.min_scalar_type(-2 * S - 2)  # holds -2 S .. 2 S (int8 for the refinement's S <= 49)
+    twice = np.abs((2 * gaps + 2).astype(small) - np.asarray(length, small)[..., None])
+    k = np.argmin(np.where(change, twice, small.type(2 * S)), axis=-1)[..., None]
+    ok = np.take_along_axis(change, k, axis=-1)[..., 0]
     cross = np.take_along_axis(t, k, axis=-1)[..., 0] + step / 2
     last = np.take_along_axis(t, length[..., None] - 1, axis=-1)[..., 0]
     reach = np.minimum(window, np.minimum(cross - t[..., 0], last - cross) - step)  # inside the profile
     ok &= reach >= 0.75
     inside = np.abs(t - cross[..., None]) <= reach[..., None]
-    start = np.where(inside, t, np.inf).min(axis=-1) - step / 2
-    dark_part = np.clip((light - profiles) / (light - dark), -0.5, 1.5)
-    edge = start + (dark_part * inside).sum(axis=-1) * step
+    # t rises along each row: the window starts at its first sample
+    start = np.take_along_axis(t, np.argmax(inside, axis=-1)[..., None], axis=-1)[..., 0] - step / 2
+    dark_part = np.subtract(light, profiles, dtype=np.float64)  # in place from here: no temporaries
+    dark_part /= light - dark
+    np.clip(dark_part, -0.5, 1.5, out=dark_part)
+    edge = start + np.sum(dark_part, axis=-1, where=inside) * step
     return np.where(ok, edge, np.nan)
 
 
@@ -71,10 +76,12 @@ def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
     (E, M, S)], as np.percentile (linear interpolation) gives them; NaN for an edge without kept samples. One
     sort for both."""
     E = len(profiles)
-    ordered = np.sort(np.where(keep, profiles, np.inf).reshape(E, -1), axis=1)
-    last = np.maximum(keep.sum(axis=(1, 2)) - 1, 0)
+    ordered = np.where(keep, profiles, np.inf).reshape(E, -1)
+    ordered.sort(axis=1)  # in place: a fresh array
+    count = np.count_nonzero(keep.reshape(E, -1), axis=1)
+    last = np.maximum(count - 1, 0)
     rows = np.arange(E)
-    seen = keep.any(axis=(1, 2))
+    seen = count > 0
     out = []
     for q in (0.10, 0.90):
         pos = q * last
@@ -103,8 +110,8 @@ def _fit(d: np.ndarray, off: np.ndarray, weight: np.ndarray, degree: np.ndarray)
     x = d / scale
     quadratic = (degree == 2)[:, None]
     A = np.stack([np.ones_like(x), x, x * x * quadratic], axis=2) * weight[..., None]  # (E, M, 3)
-    AtA = np.einsum("emi,emj->eij", A, A)
-    Atb = np.einsum("emi,em->ei", A, np.where(weight > 0, off, 0.0))
+    AtA = np.matmul(A.transpose(0, 2, 1), A)
+    Atb = np.matmul(A.transpose(0, 2, 1), np.where(weight > 0, off, 0.0)[..., None])[..., 0]
     AtA[~quadratic[:, 0], 2, 2] = 1.0  # lines: no quadratic column, so its coefficient solves to 0
     ok = np.abs(np.linalg.det(AtA)) > 1e-12
     AtA[~ok] = np.eye(3)

@@ -154,7 +154,15 @@ def detect_tags_many(
         raise ValueError(f"unknown refinement {refine!r}; use one of {', '.join(REFINEMENTS)}")
     grays = [_to_gray(image) for image in images]
     found = [_found(gray, family, ids, refine) for gray in grays]
-    if refine != "edges" or not any(found):
+    return refine_found(grays, found, family) if refine == "edges" else found
+
+
+def refine_found(
+    grays: Sequence[np.ndarray], found: list[dict[int, np.ndarray]], family: str
+) -> list[dict[int, np.ndarray]]:
+    """OpenCV's tags `found` ({id: (4, 2) corners [px]}) in each 8-bit gray image of `grays`, their corners refined
+    (`wolfcal.vision.edges.refine_tags`, all tags in one pass, each image's tags in a crop)."""
+    if not any(found):
         return found
     with_tags = [k for k, tags in enumerate(found) if tags]
     image_of_tag = np.concatenate([np.full(len(found[k]), i) for i, k in enumerate(with_tags)])
