@@ -1,15 +1,17 @@
 """A camera block linearised chunk by chunk of samples (bounded memory on long recordings) gives every corner the
-numbers of one pass over all samples, for the head camera and for an external camera with two placements."""
+numbers of one pass over all samples, for the head camera and for an external camera with two placements; corners
+in any order, or tags with fewer than four corners, get the numbers they get in whole tags in detection order."""
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
 from test_external_fit import WEBCAM, other_robot  # noqa: F401 (fixture)
 
 from wolfcal.fit import camera_block
+from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
 
@@ -45,3 +47,21 @@ def test_external_camera_linearised_in_chunks_equals_one_pass(other_robot, place
     fit = fit_observations(other_robot, scenario.obs, FitOptions(free="leg", system="external"))
     assert fit.blocks[0].external
     assert_same(fit, monkeypatch)
+
+
+def test_corners_in_any_order_or_missing_get_their_numbers(robot, camera):
+    scenario = synthetic_scenario(robot, camera, n=20, seed=4, offsets="legs")
+    fit = fit_observations(robot, scenario.obs, FitOptions(free="leg"))
+    obs, block, values = scenario.obs, fit.blocks[0], fit.solution.values
+    chain_values = values[: len(fit.chain)]
+    whole = block.linearize(chain_values, np.zeros(0), fit.chain)
+    rng = np.random.default_rng(0)
+    order = rng.permutation(len(obs.uv))  # corners shuffled, and one corner of every fifth view left out
+    order = order[~np.isin(order, np.flatnonzero(obs.corner_index == 2)[::5])]
+    picked = replace(obs, sample_index=obs.sample_index[order], tag_ids=obs.tag_ids[order],
+                     corner_index=obs.corner_index[order], uv=obs.uv[order])  # fmt: skip
+    other = CameraBlock(robot, picked, block.tag_ids).linearize(chain_values, np.zeros(0), fit.chain)
+    for f in fields(whole):
+        x, y = getattr(whole, f.name), getattr(other, f.name)
+        if x is not None:
+            np.testing.assert_allclose(y, x[order], rtol=1e-12, atol=1e-9 * np.abs(x).max(), err_msg=f.name)

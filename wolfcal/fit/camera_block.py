@@ -28,16 +28,16 @@ from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX
 from wolfcal.projection import BEHIND_CAMERA_PX, corner_points, pixel_jacobian, tag_pose_from_corners
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.derivatives import ChainDerivatives, point_motion, tag_key
+from wolfcal.robot.derivatives import ChainDerivatives, cross, tag_key
 from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
 
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
 # Samples linearised at a time: bounds the per-sample poses and twists and the per-corner twists (about 6 KB per
-# corner: 4.6 MB at 128 samples of 6 corners, 18 MB at 512) of a long recording; a hundred or more keep numpy's
-# per-call overhead small.
-CHUNK_SAMPLES = 128
+# corner: 18 MB at 512 samples of 6 corners) of a long recording; a few hundred keep numpy's per-call overhead small
+# (a 400-sample leg fit's linearisation: 8.8-9.4 ms CPU in one chunk, 12-13 ms in four of 128).
+CHUNK_SAMPLES = 512
 
 
 class CameraBlock(Block):
@@ -130,18 +130,15 @@ class CameraBlock(Block):
         keys = [tag_key(tag) for tag in self.tag_ids]
         T_root_tag = np.stack([d.T_root[k] for k in keys])[t, s]  # (M, 4, 4)
         p_root = np.einsum("mij,mj->mi", T_root_tag[:, :3, :3], self.p_tag[units]) + T_root_tag[:, :3, 3]
-        # twists relative to the viewer per (tag, sample) before they are spread over the corners: one (M, K, 6)
-        # array per kind instead of three (memory on long recordings)
-        dp_p = point_motion((np.stack([d.twist_p(k) for k in keys]) - d.twist_p(self.viewer))[t, s], p_root)
-        dp_q = point_motion((np.stack([d.twist_q(k) for k in keys]) - d.twist_q(self.viewer))[t, s], p_root)
         T_root_viewer = d.T_root[self.viewer][s]
         R_viewer_root = np.swapaxes(T_root_viewer[:, :3, :3], 1, 2)
         p_view = np.einsum("mij,mj->mi", R_viewer_root, p_root - T_root_viewer[:, :3, 3])
-        dp_p, dp_q = R_viewer_root @ dp_p, R_viewer_root @ dp_q
         jac_local = local_cols = None
+        R_camera_root = R_viewer_root
         if self.external:
             k = self.placement_of_sample[self.sample_of_unit[units]]
-            p_view, dp_p, dp_q, jac_local, local_cols = self._through_camera_pose(local_values, k, p_view, dp_p, dp_q)
+            p_view, R_camera_base, jac_local, local_cols = self._through_camera_pose(local_values, k, p_view)
+            R_camera_root = R_camera_base @ R_viewer_root
         camera = self.obs.camera
         uv = camera.project(p_view)
         D = pixel_jacobian(camera, p_view)
@@ -149,23 +146,43 @@ class CameraBlock(Block):
         bad = ~np.all(np.isfinite(residual), axis=1) | ~np.all(np.isfinite(D), axis=(1, 2))
         residual[bad] = BEHIND_CAMERA_PX
         D[bad] = 0.0
+        # d(pixel)/d(twist (v0, w) [root frame]) of each corner: a twist moves the point by v0 + w x p_root
+        # (`point_motion`), and a . (w x p) = w . (p x a) for each row a of d(pixel)/d(p_root)
+        D_root = D @ R_camera_root  # (M, 2, 3)
+        D_twist = np.concatenate([D_root, cross(p_root[:, None, :], D_root)], axis=2)  # (M, 2, 6)
+        # the tag's twists relative to the viewer's per view (one tag in one sample): a view's corners share them
+        views, first_unit, view_of_unit = np.unique(self.view_of_unit[units], return_index=True, return_inverse=True)
+        view_tag, view_sample = t[first_unit], s[first_unit]
+        n_units = len(view_of_unit)
+        regular = n_units == 4 * len(views) and np.array_equal(view_of_unit, np.arange(n_units) // 4)
+
+        def chain_rule(tag_twists: list[np.ndarray], viewer_twists: np.ndarray) -> np.ndarray:
+            """(M, 2, K) d(pixel)/d(unknowns) from the tags' and the viewer's twists (S, K, 6)."""
+            relative = np.empty((len(views), 6, viewer_twists.shape[1]))  # (V, 6, K)
+            for col, tag_twist in enumerate(tag_twists):
+                mine = np.flatnonzero(view_tag == col)
+                relative[mine] = np.swapaxes(tag_twist[view_sample[mine]] - viewer_twists[view_sample[mine]], 1, 2)
+            if regular:  # each view's four corners in a row (whole tags): one product per view
+                return (D_twist.reshape(len(views), 8, 6) @ relative).reshape(n_units, 2, -1)
+            return D_twist @ relative[view_of_unit.ravel()]
+
         return Linearization(
             residual=residual,
-            jac_chain=D @ dp_p,
+            jac_chain=chain_rule([d.twist_p(k) for k in keys], d.twist_p(self.viewer)),
             jac_local=None if jac_local is None else D @ jac_local,
             local_cols=local_cols,
-            joint_sensitivity=D @ dp_q,
+            joint_sensitivity=chain_rule([d.twist_q(k) for k in keys], d.twist_q(self.viewer)),
         )
 
-    def _through_camera_pose(self, pose_values: np.ndarray, k: np.ndarray, p_base, dp_p, dp_q):
-        """Points, derivatives and pose derivatives in the external camera's frame from those in the base frame;
-        `k` (M,): the placement of each corner."""
+    def _through_camera_pose(self, pose_values: np.ndarray, k: np.ndarray, p_base: np.ndarray):
+        """Points in the external camera's frame from those in the base frame, the rotation R_camera_base (M, 3, 3)
+        and the points' derivatives by the camera's pose; `k` (M,): the placement of each corner."""
         pose = pose_values.reshape(-1, 6)[k]  # (M, 6) T_base_camera as (x, y, z, rx, ry, rz)
         R_camera_base = np.swapaxes(exp_so3(pose[:, 3:]), 1, 2)
         p_camera = np.einsum("mij,mj->mi", R_camera_base, p_base - pose[:, :3])
         jac_local = np.concatenate([-R_camera_base, skew(p_camera) @ right_jacobian_so3(pose[:, 3:])], axis=2)
         local_cols = 6 * k[:, None] + np.arange(6)
-        return p_camera, R_camera_base @ dp_p, R_camera_base @ dp_q, jac_local, local_cols
+        return p_camera, R_camera_base, jac_local, local_cols
 
 
 def placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:

@@ -67,14 +67,14 @@ def levenberg_marquardt(
             small_change = cost - cost_new < max(ftol * cost, 2.0 * cost_tol, 1e-300)
             within_noise = std_tol > 0 and bool(np.all(np.abs(dx) <= std_tol * _marginal_std(H)))
             x, cost = x_new, cost_new
+            if small_change:  # returned before the normal equations at x, which nothing would use
+                return LMResult(x, 0.5 * cost, nfev, 2)
+            if within_noise:
+                return LMResult(x, 0.5 * cost, nfev, 4)
             H, g = normal(x)
             scale = np.maximum(scale, np.diag(H))
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
-            if small_change:
-                return LMResult(x, 0.5 * cost, nfev, 2)
-            if within_noise:
-                return LMResult(x, 0.5 * cost, nfev, 4)
         else:
             mu, nu = mu * nu, nu * 2.0
     return LMResult(x, 0.5 * cost, nfev, 0)
