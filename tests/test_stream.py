@@ -67,6 +67,19 @@ def test_read_capture_keeps_locations_not_bytes_and_reads_them_back(tmp_path):
     assert kept[4].encoded() == images[4] and kept[4].decode().shape == (48, 64)
 
 
+def test_images_read_back_in_windows_of_a_few(tmp_path, monkeypatch):
+    """Locations are looked up WINDOW at a time (each window one pass over its span of the file): with windows of 2,
+    every order (the file's, reversed, repeats, a window spanning the file) gives the images of one window."""
+    from wolfcal.io import stream
+
+    path = tmp_path / "rec.mcap"
+    images = write_still_recording(path, 7)
+    kept = [s.images[HEAD_CAMERA].location for s in read_capture(path, load_robot_config(CONFIG)).samples]
+    monkeypatch.setattr(stream, "WINDOW", 2)
+    for order in ([0, 1, 2, 3, 4, 5, 6], [6, 5, 4, 3, 2, 1, 0], [0, 6, 6, 3, 1], [2, 2, 2]):
+        assert list(stream_images(kept[i] for i in order)) == [images[i] for i in order]
+
+
 def test_header_stamps_against_file_order_and_images_made_in_memory(tmp_path):
     path = tmp_path / "rec.mcap"
     images = write_still_recording(path, 5, reverse_stamps=True)
@@ -101,3 +114,37 @@ def test_joint_log_matches_per_message_reading():
     np.testing.assert_array_equal(states.series["c"].positions, [2.0])
     masked = JointStates.from_log(log, [np.array([False, True]), np.array([False])])
     assert masked.names == ["a", "b"] and masked.series["b"].positions.tolist() == [1.0]
+
+
+def _objects_reachable(root: object) -> int:
+    """Distinct objects reachable from `root` (through gc's referents), modules and classes not followed."""
+    import gc
+    import types
+
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or isinstance(obj, (type, types.ModuleType)):
+            continue
+        seen.add(id(obj))
+        stack.extend(gc.get_referents(obj))
+    return len(seen)
+
+
+def test_samples_of_a_recording_hold_a_fixed_number_of_objects_each(tmp_path):
+    """A long recording's samples: per sample the Sample, its image dict, image and location, its two rows of
+    readings and its two stamps (header, log time); the joint names, source strings, file path and camera model
+    are one object each for all samples (thousands of samples in a ten-minute recording)."""
+    config = load_robot_config(CONFIG)
+    counts = {}
+    for n in (10, 30):
+        write_still_recording(tmp_path / f"rec{n}.mcap", n)
+        samples = read_capture(tmp_path / f"rec{n}.mcap", config).samples
+        assert len(samples) == n
+        counts[n] = _objects_reachable(samples)
+    per_sample = (counts[30] - counts[10]) / 20
+    assert per_sample <= 8, per_sample
+    first, last = samples[0], samples[-1]
+    assert first.joint_names is last.joint_names and first.source is last.source
+    assert first.images[HEAD_CAMERA].source is last.images[HEAD_CAMERA].source

@@ -36,7 +36,7 @@ class Disorder(Exception):
     """The file's stamps are further out of order than `DISORDER_NS`: pair it on the whole log."""
 
 
-@dataclass
+@dataclass(slots=True)
 class PairedFrame:
     """What pairing decided for one frame of one camera (the frame's header data is the caller's `item`)."""
 

@@ -103,7 +103,7 @@ class _Header(NamedTuple):
     log_time: int  # [ns]
 
 
-@dataclass
+@dataclass(slots=True)
 class _Frame:
     camera: str
     stamp: int
@@ -137,6 +137,7 @@ def _pass_one(
     stamps: dict[str, array] = {n: array("q") for n in cameras}
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
+    sizes: dict[tuple[int, int] | None, tuple[int, int] | None] = {None: None}  # one tuple per image size
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
     for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
@@ -148,7 +149,9 @@ def _pass_one(
         elif channel.topic in image_topics:
             name = image_topics[channel.topic]
             kind, data = image_kind(decoded.data), decoded.data
-            header = _Header(stamp, kind, image_size(data), image_damage(data) if kind else None, message.log_time)
+            size = image_size(data)
+            size = sizes.setdefault(size, size)
+            header = _Header(stamp, kind, size, image_damage(data) if kind else None, message.log_time)
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
         else:
@@ -183,9 +186,11 @@ def _read(
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,
                                 pairing.bad_joints)  # fmt: skip
+    del reader  # its index of the file's chunks (~0.7 kB a chunk)
     frames: list[_Frame] = []
     for name in found.cameras:
         frames += _keep_frames(path, config, name, read, intrinsics, skipped)
+    pairing.frames.clear()  # the pass's state of every frame: the samples are built in the room it leaves
     if not frames:
         counts = ", ".join(f"{len(read.stamps[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}"
                            for n in found.cameras)  # fmt: skip
@@ -218,6 +223,7 @@ def _keep_frames(
     Frames stamped like a joint state that was left out (non-finite) are left out: `skipped` says so already."""
     chooser = IntrinsicsChooser(path, config, name, intrinsics)
     topic = config.camera_topics(name)[0]
+    source = f"{path}: {topic}"  # one string for all the camera's images
     infos = read.infos[name]
     info_stamps = np.asarray([s for s, _ in infos], dtype=np.int64)
     mine = sorted((f for f in read.pairing.frames if f.camera == name), key=lambda f: f.stamp)
@@ -241,7 +247,7 @@ def _keep_frames(
             continue
         info = infos[int(np.argmin(np.abs(info_stamps - stamp)))][1] if len(infos) else None
         location = ImageLocation(path, topic, log_time, stamp)
-        image = SampleImage(b"", kind, chooser.for_image(size, info), f"{path}: {topic}", stamp, location)
+        image = SampleImage(b"", kind, chooser.for_image(size, info), source, stamp, location)
         kept[stamp] = _Frame(name, stamp, image, paired, damage)
     return list(kept.values())
 
@@ -264,19 +270,27 @@ def _drop_damaged(
 
 
 def _group(path: Path, names: list[str], frames: list[_Frame], tolerance_ns: int) -> list[Sample]:
-    """Samples of frames grouped by stamp; a sample's stamp and joint readings are those of its first frame."""
+    """Samples of frames grouped by stamp; a sample's stamp and joint readings are those of its first frame.
+    The samples share one list of joint names and one source string (thousands of samples in a long recording)."""
     groups = group_by_stamp([f.stamp for f in frames], [f.camera for f in frames], tolerance_ns)
+    names, source = list(names), str(path)
+    readings = [frames[group[0]].paired for group in groups]
+    # one block of readings, a row per sample: the pairing's small per-frame arrays (spread over the heap between
+    # the file's message buffers, where they would keep its pages resident) are freed with the pairing
+    positions = np.array([r.positions for r in readings], dtype=float).reshape(len(readings), len(names))
+    velocities = np.array([r.velocities if r.velocities is not None else np.full(len(names), np.nan)
+                           for r in readings], dtype=float).reshape(len(readings), len(names))  # fmt: skip
     samples = []
-    for group in groups:
+    for k, group in enumerate(groups):
         first = frames[group[0]]
         samples.append(
             Sample(
                 stamp_ns=first.stamp,
-                joint_names=list(names),
-                positions=first.paired.positions,
+                joint_names=names,
+                positions=positions[k],
                 images={frames[i].camera: frames[i].image for i in group},
-                velocities=first.paired.velocities,
-                source=str(path),
+                velocities=None if readings[k].velocities is None else velocities[k],
+                source=source,
             )
         )
     return samples

@@ -124,7 +124,7 @@ class JointStates:
         return cls([n for n, s in series.items() if len(s.times)], {n: s for n, s in series.items() if len(s.times)})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Paired:
     positions: np.ndarray  # (J,) in the order of JointStates.names [rad]
     velocities: np.ndarray | None  # (J,) [rad/s]; None unless every joint reported one

@@ -25,7 +25,7 @@ from wolfcal.observations import HEAD_CAMERA
 __all__ = ["HEAD_CAMERA", "Capture", "Sample", "SampleImage", "encoded_images"]
 
 
-@dataclass
+@dataclass(slots=True)  # no per-object dict: a long recording holds thousands
 class SampleImage:
     data: bytes  # encoded image (png or jpeg); empty when `location` says where to read it
     format: str  # 'png' | 'jpeg'
@@ -62,7 +62,7 @@ def encoded_images(images: Iterable[SampleImage]) -> Iterator[bytes]:
             yield from (image.data for image in run)
 
 
-@dataclass
+@dataclass(slots=True)
 class Sample:
     stamp_ns: int
     joint_names: list[str]

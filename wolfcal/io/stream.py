@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from itertools import groupby
+from itertools import groupby, islice
 from pathlib import Path
 
 from mcap.exceptions import McapError
@@ -20,7 +20,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.msgdefs import header_stamp_ns
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ImageLocation:
     """Where an image message lies in an MCAP file."""
 
@@ -30,55 +30,66 @@ class ImageLocation:
     stamp_ns: int  # [ns] its header stamp (tells apart messages of one topic with one log time)
 
 
+WINDOW = 256  # images looked up per pass over the part of the file they span
+
+
 def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
     """The encoded bytes of the image at each location, in the order given.
 
-    Consecutive locations in one file are read in one pass over the time span they cover, in the file's order;
-    an image that comes before its turn waits in memory until then (none waits when the order given is the
-    file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the file
-    changed since it was read)."""
+    Consecutive locations in one file are read in passes over the time span of up to `WINDOW` of them, in the
+    file's order (what a pass keeps of its images and of the file's chunks grows with the images it looks up, not
+    with the recording); an image that comes before its turn waits in memory until then (none waits when the order
+    given is the file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the
+    file changed since it was read)."""
     for path, run in groupby(locations, key=lambda location: location.path):
-        yield from _stream_file(path, list(run))
+        yield from _stream_file(path, run)
 
 
-def _stream_file(path: Path, wanted: list[ImageLocation]) -> Iterator[bytes]:
+def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]:
+    factory = DecoderFactory()
+    run = iter(wanted)
+    try:
+        with path.open("rb") as handle:
+            reader = make_reader(handle)
+            while window := list(islice(run, WINDOW)):
+                yield from _stream_window(path, reader, factory, window)
+    except (OSError, McapError) as exc:
+        raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
+
+
+def _stream_window(path: Path, reader, factory: DecoderFactory, wanted: list[ImageLocation]) -> Iterator[bytes]:
+    """The images at `wanted` (one file), in that order, from one pass over the time span they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
         remaining[key] = remaining.get(key, 0) + 1
     times = {(topic, log_time) for topic, log_time, _ in keys}
     waiting: dict[tuple[str, int, int], bytes] = {}
-    factory = DecoderFactory()
     turn = 0
-    try:
-        with path.open("rb") as handle:
-            reader = make_reader(handle)
-            messages = reader.iter_messages(
-                topics=sorted({topic for topic, _, _ in keys}),
-                starting_at=min(log_time for _, log_time, _ in keys),
-                ending_at=max(log_time for _, log_time, _ in keys),
-            )
-            for schema, channel, message in messages:
-                if (channel.topic, message.log_time) not in times:
-                    continue
-                decoder = factory.decoder_for(channel.message_encoding, schema)
-                if decoder is None:
-                    raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} "
-                                       "messages (wolfcal reads ROS 2 CDR recordings)")
-                decoded = decoder(message.data)
-                key = (channel.topic, message.log_time, header_stamp_ns(decoded.header, message.log_time))
-                if not remaining.get(key) or key in waiting:
-                    continue
-                waiting[key] = bytes(decoded.data)
-                while turn < len(keys) and keys[turn] in waiting:
-                    data = waiting[keys[turn]]
-                    remaining[keys[turn]] -= 1
-                    if not remaining[keys[turn]]:
-                        del waiting[keys[turn]]
-                    turn += 1
-                    yield data
-    except (OSError, McapError) as exc:
-        raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
+    messages = reader.iter_messages(
+        topics=sorted({topic for topic, _, _ in keys}),
+        starting_at=min(log_time for _, log_time, _ in keys),
+        ending_at=max(log_time for _, log_time, _ in keys),
+    )
+    for schema, channel, message in messages:
+        if (channel.topic, message.log_time) not in times:
+            continue
+        decoder = factory.decoder_for(channel.message_encoding, schema)
+        if decoder is None:
+            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} "
+                               "messages (wolfcal reads ROS 2 CDR recordings)")
+        decoded = decoder(message.data)
+        key = (channel.topic, message.log_time, header_stamp_ns(decoded.header, message.log_time))
+        if not remaining.get(key) or key in waiting:
+            continue
+        waiting[key] = bytes(decoded.data)
+        while turn < len(keys) and keys[turn] in waiting:
+            data = waiting[keys[turn]]
+            remaining[keys[turn]] -= 1
+            if not remaining[keys[turn]]:
+                del waiting[keys[turn]]
+            turn += 1
+            yield data
     if turn < len(keys):
         topic, _, stamp = keys[turn]
         raise WolfcalError(
