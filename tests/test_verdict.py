@@ -53,7 +53,7 @@ STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "c
     ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 +- 1.0 cm"),
     # above the limit, within 2 sigma of it: refused all the same, with the advice to measure it more precisely
     ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm (--ground-limit"
-     "-cm). The measurement is that uncertain: capture more floor samples"),
+     "-cm). The measurement is that uncertain: capture the held-out floor samples in several stances"),
     # below the limit, but its 2 sigma reaches past it: deployed, with a note that the limit is not confirmed
     ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02}, True, "measured ground error at 4.5 m 4.0 +- 2.0 cm"),
     # worse, but within the two measurements' uncertainty

@@ -25,9 +25,7 @@ from dataclasses import dataclass, fields
 from functools import partial
 
 import numpy as np
-import scipy.sparse
 from scipy.optimize import least_squares
-from scipy.optimize._numdiff import approx_derivative
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
@@ -186,23 +184,22 @@ class _FloorFit:
         if scale is not None:
             self.scale = scale
         loss = {} if scale is None else {"loss": "huber", "f_scale": 2.0 * scale}
-        pattern = self.sparsity(keep)
-        jacobian = lambda x, keep: approx_derivative(self.residuals, x, args=(keep,), sparsity=pattern).toarray()  # noqa: E731
-        return least_squares(self.residuals, x0, jacobian, x_scale="jac", args=(keep,), **loss).x
+        columns = _column_groups(self.sparsity(keep))
+        return least_squares(self.residuals, x0, lambda x, k: _grouped_jacobian(self.residuals, x, columns, k),
+                             x_scale="jac", args=(keep,), **loss).x  # fmt: skip
 
-    def sparsity(self, keep: np.ndarray) -> scipy.sparse.csr_matrix:
-        """Which unknowns each residual of `residuals(x, keep)` depends on: a view's 8 on the plane, turn and inset,
-        its tag's place and its readings' errors; each prior on its own unknown."""
+    def sparsity(self, keep: np.ndarray) -> np.ndarray:
+        """(R, N) bool: which unknowns each residual of `residuals(x, keep)` depends on: a view's 8 on the plane,
+        turn and inset, its tag's place and its readings' errors; each prior on its own unknown."""
         v, n = self.views, self.first_reading + self.n_readings
-        view_rows = [np.arange(7)[None].repeat(keep.sum(), 0), 7 + 3 * self.tag_of_view[keep, None] + np.arange(3),
-                     self.first_reading + v.readings[keep]]  # fmt: skip
-        columns = np.concatenate(view_rows, axis=1)  # (V', C)
-        rows = np.repeat(np.arange(len(columns)), columns.shape[1])
-        pattern = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, columns.ravel())), shape=(len(columns), n))
-        pattern = scipy.sparse.kron(pattern, np.ones((8, 1)), format="csr")
-        priors = scipy.sparse.csr_matrix((np.ones(1 + self.n_readings), (np.arange(1 + self.n_readings),
-                                          np.r_[6, np.arange(self.first_reading, n)])), shape=(1 + self.n_readings, n))
-        return scipy.sparse.vstack([pattern, priors], format="csr")
+        view_columns = np.concatenate([np.arange(7)[None].repeat(keep.sum(), 0),
+                                       7 + 3 * self.tag_of_view[keep, None] + np.arange(3),
+                                       self.first_reading + v.readings[keep]], axis=1)  # fmt: skip
+        by_view = np.zeros((len(view_columns), n), dtype=bool)
+        by_view[np.arange(len(view_columns))[:, None], view_columns] = True
+        priors = np.zeros((1 + self.n_readings, n), dtype=bool)
+        priors[np.arange(1 + self.n_readings), np.r_[6, np.arange(self.first_reading, n)]] = True
+        return np.concatenate([np.repeat(by_view, 8, axis=0), priors])
 
 
 def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset: tuple[float, float] = (0.0, 0.0),
@@ -259,6 +256,39 @@ def _seen_twice(tags: np.ndarray) -> np.ndarray:
 
 def _subset(views: FloorViews, keep: np.ndarray) -> FloorViews:
     return FloorViews(*(getattr(views, f.name)[keep] for f in fields(FloorViews)))
+
+
+def _column_groups(pattern: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Columns of a (R, N) bool sparsity pattern in groups that share no row (greedy), so one residual evaluation
+    differences a whole group; per group its columns and the pattern's rows of them (R, len(group)) bool."""
+    groups: list[list[int]] = []
+    used: list[np.ndarray] = []
+    for j in range(pattern.shape[1]):
+        for group, rows in zip(groups, used):
+            if not np.any(rows & pattern[:, j]):
+                group.append(j)
+                rows |= pattern[:, j]
+                break
+        else:
+            groups.append([j])
+            used.append(pattern[:, j].copy())
+    return [(np.array(g), pattern[:, g]) for g in groups]
+
+
+def _grouped_jacobian(f: Callable[..., np.ndarray], x: np.ndarray, groups: list[tuple[np.ndarray, np.ndarray]],
+                      *args: object) -> np.ndarray:  # fmt: skip
+    """Forward-difference Jacobian (R, N) of f(x, *args) with the columns of each group (`_column_groups`) stepped
+    at once: step sqrt(eps) relative, at least sqrt(eps)."""
+    f0 = f(x, *args)
+    J = np.zeros((len(f0), len(x)))
+    for columns, rows in groups:
+        step = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x[columns]))
+        moved = x.copy()
+        moved[columns] += step
+        step = moved[columns] - x[columns]  # the step as represented
+        change = f(moved, *args) - f0
+        J[:, columns] = np.where(rows, change[:, None], 0.0) / step
+    return J
 
 
 def _jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, step: float = 1e-7) -> np.ndarray:

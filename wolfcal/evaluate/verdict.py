@@ -36,6 +36,10 @@ LEGS_ADVICE = (
 )
 
 FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the legs with them (--free leg)"
+# what makes the held-out floor views measure more precisely: the standing legs' shared tick rounding averages only
+# over stances (floor_ground's `rounding_std_m`)
+MORE_PRECISE = ("capture the held-out floor samples in several stances (`floor.stances`), with more head angles and "
+                "nearer tags, to measure it more precisely")
 
 
 def deploy_verdict(
@@ -110,16 +114,14 @@ def _judge_measured_ground(
         refusals.append((advice, f"The measured ground error at 4.5 m gets worse: {b:.1f} +- {sb:.1f} cm -> "
                                  f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
     elif a > limit_cm:
-        unsure = (" The measurement is that uncertain: capture more floor samples (more head angles, nearer tags) "
-                  "to measure it more precisely." if a - GROUND_SIGMAS * sa <= limit_cm else "")  # fmt: skip
+        unsure = f" The measurement is that uncertain: {MORE_PRECISE}." if a - GROUND_SIGMAS * sa <= limit_cm else ""
         refusals.append((advice, (
             f"The measured ground error at 4.5 m stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
             f"{limit_cm:g} cm (--ground-limit-cm).{unsure}")))
     elif a + GROUND_SIGMAS * sa > limit_cm:
         notes.append(
             f"The measured ground error at 4.5 m is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
-            f"cannot confirm that it is below the limit ({limit_cm:g} cm); capture more floor samples (more "
-            "head angles, nearer tags) to measure it more precisely."
+            f"cannot confirm that it is below the limit ({limit_cm:g} cm); {MORE_PRECISE}."
         )
 
 
