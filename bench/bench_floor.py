@@ -150,7 +150,9 @@ def main() -> None:
         for scenario in args.scenarios:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
-                    folder = root / f"{scenario}_{seed}"
+                    # the captures depend on these options: a --keep folder per combination, never a stale one
+                    flags = ("_stances" if args.stances else "") + ("_held-stances" if args.held_stances else "")
+                    folder = root / f"{scenario}_{seed}_tags{args.floor_tags}_floor{args.floor_samples}{flags}"
                     print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples,
                               args.held_stances), flush=True)
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
