@@ -204,10 +204,11 @@ class _FloorFit:
 
 def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset: tuple[float, float] = (0.0, 0.0),
                camera: CameraModel | None = None) -> dict | None:  # fmt: skip
-    """The plane and camera-turn unknowns (6,) [rad, rad, m, rad, rad, rad] with their spread: the formal
-    covariance (6, 6), the delete-one-sample jackknife replicates (n, 6) and the unknowns refitted with the corner
-    inset one sigma larger (6,); the views' count and the residual scale [px]. None with fewer than MIN_VIEWS views
-    or a floor tag seen only once. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
+    """The plane, camera-turn and inset unknowns (7,) [rad, rad, m, rad, rad, rad, px] with their spread: the formal
+    covariance (7, 7) with the shared readings' rounding taken as known, the part that rounding adds (7, 7), the
+    delete-one-sample and delete-one-tag jackknife replicates (n, 7; None with fewer than 3 samples or tags); the
+    views' count, the residual scale [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
+    seen twice. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
     views = floor_views(robot, obs, model)
     views = _subset(views, _seen_twice(views.tags))
     if len(views.tags) < MIN_VIEWS:
