@@ -13,7 +13,7 @@ from itertools import groupby, islice
 from pathlib import Path
 
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import McapReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
@@ -57,7 +57,9 @@ def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]
         raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
 
 
-def _stream_window(path: Path, reader, factory: DecoderFactory, wanted: list[ImageLocation]) -> Iterator[bytes]:
+def _stream_window(
+    path: Path, reader: McapReader, factory: DecoderFactory, wanted: list[ImageLocation]
+) -> Iterator[bytes]:
     """The images at `wanted` (one file), in that order, from one pass over the time span they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
     remaining: dict[tuple[str, int, int], int] = {}
