@@ -19,6 +19,7 @@ import argparse
 import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: BLAS threads spinning on 2 busy cores cost 50x
@@ -36,6 +37,7 @@ from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, spl
 from wolfcal.io.truth import truth_paths  # noqa: E402
 from wolfcal.observations import Observations  # noqa: E402
 from wolfcal.robot.corrections import Corrections, load_corrections  # noqa: E402
+from wolfcal.robot.floor import moved_stance  # noqa: E402
 from wolfcal.robot.robot import Robot, load_robot  # noqa: E402
 from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
 from wolfcal.vision.corner_bias import CORNER_INSET  # noqa: E402
@@ -51,9 +53,21 @@ FLOOR_TAG_SIZES_M = (0.12, 0.14, 0.16, 0.18, 0.2, 0.15)
 STANCES = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 
 
-def write_config(folder: Path, stances: bool = True, n_tags: int = 6) -> Path:
+def held_stances(count: int) -> list[dict[str, float]]:
+    """`count` stances for the held-out floor samples besides `floor.standing`: STANCES, then the torso moved from
+    them at pseudo-random (fixed) places within +-2 cm forward, +-3 cm sideways, 0-1.5 cm lower, +-0.15 rad
+    (`robot.floor.moved_stance`, soles kept)."""
+    robot = load_robot(WOLFGANG / "robot.yaml")
+    centre = moved_stance(robot, STANCES[0], (0.0, -0.03, 0.0, 0.0))  # 1 cm lower, knees bent (not stretched)
+    rng = np.random.default_rng(0)
+    shifts = rng.uniform([-0.02, -0.03, -0.015, -0.15], [0.02, 0.03, 0.0, 0.15], (max(count - len(STANCES), 0), 4))
+    return [*STANCES, *(moved_stance(robot, centre, shift) for shift in shifts)][:count]
+
+
+def write_config(folder: Path, stances: bool | int = True, n_tags: int = 6) -> Path:
     """robot.yaml with other tag ids and sizes, the 1280x960 camera, `n_tags` floor tags (60, 61, ... of the sizes
-    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances; returns its path."""
+    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances (True: STANCES; a number: that many stances in
+    all, `held_stances`); returns its path."""
     data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
     data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
     save_camera_info(CAMERA, folder / "camera.yaml")
@@ -66,7 +80,8 @@ def write_config(folder: Path, stances: bool = True, n_tags: int = 6) -> Path:
     sizes = FLOOR_TAG_SIZES_M
     data["floor"]["tags"] = [{"id": 60 + k, "size": sizes[k % len(sizes)]} for k in range(n_tags)]
     if stances:
-        data["floor"]["stances"] = [data["floor"]["standing"], *STANCES]
+        extra = STANCES if stances is True else held_stances(int(stances) - 1)
+        data["floor"]["stances"] = [data["floor"]["standing"], *extra]
     path = folder / ("robot.yaml" if stances else "robot_standing.yaml")
     path.write_text(yaml.safe_dump(data))
     return path
@@ -77,32 +92,54 @@ def observations(robot: Robot, captures: list[Path]) -> dict[str, Observations]:
     return detect_observations(samples, robot)[0]
 
 
+@dataclass(frozen=True)
+class Held:
+    """The held-out floor capture: `samples` in all, spread over `layouts` captures with the tags laid out anew in
+    each (a user moving the tags), in the stances (`stances`) or all standing, tags `distance` m away."""
+
+    samples: int = 16
+    layouts: int = 1
+    stances: int = 1  # 1: all standing; 5: `floor.standing` and STANCES; more: `held_stances`
+    distance: tuple[float, float] = FLOOR_DISTANCE_M
+
+    def tag(self) -> str:
+        """The part of a --keep folder's name these options set."""
+        stances = {1: "", 5: "_held-stances"}.get(self.stances, f"_held-stances{self.stances}")
+        return (f"_held{self.samples}x{self.layouts}" + stances
+                + ("" if self.distance == FLOOR_DISTANCE_M else f"_held{self.distance[0]:g}-{self.distance[1]:g}m"))
+
+
 def simulate(
-    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20,
-    held_stances: bool = False,
-) -> dict[str, Path]:
-    """feet, floor (`n_floor` samples, in the stances) and held-out floor (16, standing; with `held_stances` in
-    the stances too; `n_tags` floor tags) captures of one simulated robot (names -> paths), each made once per
-    folder."""
-    paths = {k: folder / f"{k}.mcap" for k in ("feet", "floor", "held_floor")}
+    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20, held: Held = Held(),
+) -> tuple[dict[str, Path], list[Path]]:
+    """feet and floor (`n_floor` samples, in the stances) captures of one simulated robot (names -> paths) and the
+    held-out floor captures (`held`; `n_tags` floor tags), each made once per folder."""
+    paths = {k: folder / f"{k}.mcap" for k in ("feet", "floor")}
     quiet = lambda _m: None  # noqa: E731
     if not paths["feet"].exists():
         simulate_capture(config, paths["feet"], SimOptions(samples=24, seed=seed, offsets=offsets), say=quiet)
     truth = truth_paths(paths["feet"])[0]
-    for name, n, s in (("floor", n_floor, seed + 100), ("held_floor", 16, seed + 200)):
-        if paths[name].exists():
-            continue
-        held = write_config(folder, stances=held_stances, n_tags=n_tags) if name == "held_floor" else config
-        simulate_capture(held, paths[name], SimOptions(samples=n, seed=s, floor=True, truth_file=truth,
-                                                         floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
-    return paths
+    if not paths["floor"].exists():
+        simulate_capture(config, paths["floor"], SimOptions(samples=n_floor, seed=seed + 100, floor=True,
+                         truth_file=truth, floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
+    held_folder = folder / held.tag().lstrip("_")  # the fit's captures shared by every held-out protocol
+    held_folder.mkdir(exist_ok=True)
+    held_config = write_config(held_folder, stances=True if held.stances == 5 else held.stances > 1 and held.stances,
+                               n_tags=n_tags)
+    sizes = np.diff(np.linspace(0, held.samples, held.layouts + 1).round().astype(int))
+    held_paths = [held_folder / f"held_floor{k}.mcap" for k in range(held.layouts)]
+    for k, (path, n) in enumerate(zip(held_paths, sizes)):
+        if not path.exists():
+            simulate_capture(held_config, path, SimOptions(samples=int(n), seed=seed + 200 + 1000 * k, floor=True,
+                             truth_file=truth, floor_distance=held.distance), say=quiet)  # fmt: skip
+    return paths, held_paths
 
 
 def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, n_floor: int = 20,
-        held_stances: bool = False) -> str:  # fmt: skip
+        held: Held = Held()) -> str:  # fmt: skip
     folder.mkdir(parents=True, exist_ok=True)
     config = write_config(folder, stances, n_tags)
-    paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor, held_stances)
+    paths, held_paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor, held)
     robot = load_robot(config)
     truth = load_corrections(truth_paths(paths["feet"])[0], key="truth")
     obs = observations(robot, [paths["feet"], paths["floor"]])
@@ -111,17 +148,23 @@ def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, 
     cpu = time.process_time() - start
     rows = ground_errors(robot, CAMERA, truth, {"before": Corrections(), "after": fit.corrections}, (4.5,))[0]
     before, after = (rows["models"][k]["error_m"] for k in ("before", "after"))
-    _, held = split_floor(robot, observations(robot, [paths["held_floor"]]))
+    _, held_obs = split_floor(robot, observations(robot, held_paths))
     line = f"{scenario:6s} seed {seed}: true ground error at 4.5 m {before * 100:.1f} -> {after * 100:.2f} cm"
-    if held is not None:
+    if held_obs is not None:
         names = fit.params.names
         k = names.index(CORNER_INSET)
         inset = (float(fit.solution.values[k]), float(fit.solution.uncertainty.std[k]))
-        measured = measured_ground_errors(robot, held, {"after": fit.corrections}, (4.5,), inset)
+        start = time.process_time()
+        measured = measured_ground_errors(robot, held_obs, {"after": fit.corrections}, (4.5,), inset)
+        measure_cpu = time.process_time() - start
         if measured is not None:
             row = measured["models"]["after"]["rows"][0]
+            agrees = abs(row["error_m"] - after) <= max(0.2 * after, 0.01)
+            parts = " ".join(f"{k.split('_')[0]} {row[k] * 100:.2f}" for k in
+                             ("formal_std_m", "sample_std_m", "tag_std_m", "rounding_std_m"))  # fmt: skip
             line += (f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
-                     f"{(row['error_m'] - after) / row['std_m']:+.1f}; inset {inset[0]:.2f} px)")
+                     f"{(row['error_m'] - after) / row['std_m']:+.1f}; {'AGREES' if agrees else 'off'}; {parts}; "
+                     f"{measured['views']} views; inset {inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)")
     rng = np.random.default_rng(seed)
     soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
     line += (f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "
@@ -144,6 +187,13 @@ def main() -> None:
     parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
     parser.add_argument("--held-stances", action="store_true", help="the held-out floor samples spread over STANCES "
                         "too (default: all standing): each stance rounds the standing legs' readings anew")
+    parser.add_argument("--held-stance-count", type=int, help="the held-out floor samples spread over this many "
+                        "stances (floor.standing, STANCES, then `held_stances`; --held-stances: 5)")
+    parser.add_argument("--held-samples", type=int, default=16, help="held-out floor samples (default 16)")
+    parser.add_argument("--held-layouts", type=int, default=1, help="held-out floor captures, the tags laid out "
+                        "anew in each (the held-out samples split between them; default 1)")
+    parser.add_argument("--held-distance", type=float, nargs=2, default=FLOOR_DISTANCE_M, metavar=("NEAR", "FAR"),
+                        help="the held-out floor tags lie this far away [m] (default 1 4)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
@@ -151,10 +201,12 @@ def main() -> None:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
                     # the captures depend on these options: a --keep folder per combination, never a stale one
-                    flags = ("_stances" if args.stances else "") + ("_held-stances" if args.held_stances else "")
+                    held = Held(args.held_samples, args.held_layouts,
+                                args.held_stance_count or (5 if args.held_stances else 1), tuple(args.held_distance))
+                    flags = "_stances" if args.stances else ""
                     folder = root / f"{scenario}_{seed}_tags{args.floor_tags}_floor{args.floor_samples}{flags}"
-                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples,
-                              args.held_stances), flush=True)
+                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples, held),
+                          flush=True)
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
                     print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 

@@ -32,6 +32,7 @@ from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
 from wolfcal.fit.blocks import held_joint_groups
 from wolfcal.geometry import exp_so3, invert_transform
 from wolfcal.observations import Observations
+from wolfcal.outliers import FIT_VIEW_PX
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.aim import aim_head, ball_position
 from wolfcal.robot.corrections import Corrections
@@ -52,6 +53,7 @@ class FloorViews:
     """Held-out views (one floor tag in one sample, all 4 corners) under one model."""
 
     tags: np.ndarray  # (V,) tag ids
+    placements: np.ndarray  # (V,) int: where the tag lay (one place per tag and capture file: tags moved between)
     samples: np.ndarray  # (V,) sample index
     T_floor_camera: np.ndarray  # (V, 4, 4) the model's camera in the model's floor, at the sample's readings
     uv: np.ndarray  # (V, 4, 2) detected corners [px]
@@ -62,7 +64,7 @@ class FloorViews:
 
 
 def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorViews:
-    """The views with all 4 corners."""
+    """The views with all 4 corners; a tag lies in one place per capture file (`obs.sources`)."""
     order = np.lexsort((obs.corner_index, obs.tag_ids, obs.sample_index))
     s, t, uv = obs.sample_index[order], obs.tag_ids[order], obs.uv[order]
     key = s.astype(np.int64) * 1_000_000 + t
@@ -72,7 +74,9 @@ def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorVie
     T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, model)
     inward = inset_moves(ring)
     twists, readings = _reading_errors(robot, obs.q_measured, model, s[start])
-    return FloorViews(t[start], s[start], T_floor_camera[s[start]], ring, inward,
+    _, source = np.unique(np.asarray(obs.sources, dtype=object).astype(str), return_inverse=True)
+    _, placements = np.unique(np.stack([source.ravel()[s[start]], t[start]], axis=1), axis=0, return_inverse=True)
+    return FloorViews(t[start], placements.ravel(), s[start], T_floor_camera[s[start]], ring, inward,
                       small_view_weight(apparent_edges(ring)), twists, readings)  # fmt: skip
 
 
@@ -128,7 +132,7 @@ def _meet(T_real_model: np.ndarray, origins: np.ndarray, rays: np.ndarray, heigh
 
 class _FloorFit:
     """The least-squares fit of the plane, the camera turn, the tags' places and the joint readings' rounding to the
-    views' corner pixels. Unknowns: plane (3), turn (3), inset (1), places (3 per tag), then the readings' errors
+    views' corner pixels. Unknowns: plane (3), turn (3), inset (1), places (3 per tag place), then the readings' errors
     (`FloorViews.readings`, each with a prior of the config's `priors.encoder_noise`) [rad, m, px]."""
 
     def __init__(self, robot: Robot, views: FloorViews, camera: CameraModel, inset: tuple[float, float]) -> None:
@@ -136,7 +140,9 @@ class _FloorFit:
         self.scale = 1.0  # [px] of the corner residuals: the priors' residuals count in it
         self.encoder_noise = robot.config.priors.encoder_noise
         floor = robot.config.floor_config()
-        self.ids, self.tag_of_view = np.unique(views.tags, return_inverse=True)
+        self.placements, first, self.tag_of_view = np.unique(views.placements, return_index=True,
+                                                             return_inverse=True)  # fmt: skip
+        self.ids = views.tags[first]  # (T,) the tag id of each place
         self.tag_of_view = self.tag_of_view.ravel()
         self.printed = np.stack([tag_corners(floor.tag(int(i)).size) for i in self.ids])  # (T, 4, 3)
         self.printed[..., 2] = np.array([floor.tag(int(i)).thickness for i in self.ids])[:, None]
@@ -179,6 +185,26 @@ class _FloorFit:
         prior = self.scale * np.append((x[6] - self.inset[0]) / self.inset[1], errors / self.encoder_noise)
         return np.append(np.nan_to_num(r, nan=BEHIND_CAMERA_PX).ravel(), prior)
 
+    def carried(self, other: _FloorFit, x: np.ndarray) -> np.ndarray:
+        """Unknowns for this fit (on a subset of `other`'s views) from `other`'s unknowns x: plane, turn, inset, the
+        places this fit has and the readings' errors."""
+        out = self.start()
+        out[:7] = x[:7]
+        index = np.searchsorted(other.placements, self.placements)
+        out[7:self.first_reading] = x[7:other.first_reading].reshape(-1, 3)[index].ravel()
+        out[self.first_reading:] = x[other.first_reading:other.first_reading + self.n_readings]
+        return out
+
+    def robust(self, x: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, float]:
+        """The unknowns solved robustly from x, at the scale of the residuals (dof-corrected median), twice, and
+        that scale [px]."""
+        n_pixels = 8 * int(keep.sum())
+        for _ in range(2):
+            scale = 1.4826 * float(np.median(np.abs(self.residuals(x, keep)[:n_pixels])))
+            scale *= float(np.sqrt(n_pixels / max(n_pixels - len(x), 1)))
+            x = self.solve(x, keep, scale)
+        return x, scale
+
     def solve(self, x0: np.ndarray, keep: np.ndarray, scale: float | None = None) -> np.ndarray:
         """The unknowns fitted to the views `keep`; with a residual `scale` [px] robustly (Huber at 2 scale)."""
         if scale is not None:
@@ -207,22 +233,29 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     """The plane, camera-turn and inset unknowns (7,) [rad, rad, m, rad, rad, rad, px] with their spread: the formal
     covariance (7, 7) with the shared readings' rounding taken as known, the part that rounding adds (7, 7), the
     delete-one-sample and delete-one-tag jackknife replicates (n, 7; None with fewer than 3 samples or tags); the
-    views' count, the residual scale [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
+    views' count (less `outlier_views`: off by far more than the others, `outliers.FIT_VIEW_PX`), the residual scale
+    and the corners' rms [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
     seen twice. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
     views = floor_views(robot, obs, model)
-    views = _subset(views, _seen_twice(views.tags))
+    views = _subset(views, _seen_twice(views.placements))
     if len(views.tags) < MIN_VIEWS:
         return None
     inset = (corner_inset[0], max(corner_inset[1], INSET_SPREAD * abs(corner_inset[0]), MIN_INSET_STD_PX))
     fit = _FloorFit(robot, views, camera or obs.camera, inset)
     every = np.ones(len(views.tags), dtype=bool)
-    n_pixels = 8 * len(views.tags)
     fit.scale = robot.config.priors.pixel_noise
-    x = fit.solve(fit.start(), every)
-    for _ in range(2):  # robustly, at the scale of the residuals (dof-corrected median), twice
-        scale = 1.4826 * float(np.median(np.abs(fit.residuals(x, every)[:n_pixels])))
-        scale *= float(np.sqrt(n_pixels / max(n_pixels - len(x), 1)))
-        x = fit.solve(x, every, scale)
+    x, scale = fit.robust(fit.solve(fit.start(), every), every)
+    # views far off (a corner caught on something else) left out as the fit leaves them out; the rest solved again
+    outliers = FIT_VIEW_PX.flags(np.sqrt(np.mean(fit.residuals(x, every)[:8 * len(every)].reshape(-1, 8) ** 2, 1)))
+    if outliers.any():
+        views = _subset(views, ~outliers)
+        views = _subset(views, _seen_twice(views.placements))
+        if len(views.tags) < MIN_VIEWS:
+            return None
+        first, fit = fit, _FloorFit(robot, views, camera or obs.camera, inset)
+        every = np.ones(len(views.tags), dtype=bool)
+        x, scale = fit.robust(fit.carried(first, x), every)
+    n_pixels = 8 * len(views.tags)
     r = fit.residuals(x, every)[:n_pixels]
     J = _jacobian(lambda u: fit.residuals(u, every), x)
     noise = max(float(r @ r) / max(n_pixels - len(x), 1), scale**2)  # [px^2] of the corners (the priors: scale^2)
@@ -235,7 +268,9 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     by_sample = np.stack([fit.solve(x, views.samples != s, scale)[:7] for s in samples]) if len(samples) > 2 else None
     by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
     return {"unknowns": x[:7], "covariance": held, "rounding_covariance": covariance[:7, :7] - held,
-            "jackknife_samples": by_sample, "jackknife_tags": by_tag, "views": len(views.tags), "scale_px": scale,
+            "jackknife_samples": by_sample, "jackknife_tags": by_tag, "views": len(views.tags),
+            "outlier_views": int(outliers.sum()), "scale_px": scale,
+            "noise_px": float(np.sqrt(noise)),
             "inset_px": float(x[6])}  # fmt: skip
 
 
@@ -249,9 +284,9 @@ def _shared_readings(views: FloorViews) -> np.ndarray:
     return last > first
 
 
-def _seen_twice(tags: np.ndarray) -> np.ndarray:
-    """(V,) bool: the views of tags seen in at least two views (a tag's place is unknown: one view is no data)."""
-    ids, inverse, counts = np.unique(tags, return_inverse=True, return_counts=True)
+def _seen_twice(placements: np.ndarray) -> np.ndarray:
+    """(V,) bool: the views of tag places seen in at least two views (a place is unknown: one view is no data)."""
+    ids, inverse, counts = np.unique(placements, return_inverse=True, return_counts=True)
     return (counts >= 2)[inverse.ravel()]
 
 

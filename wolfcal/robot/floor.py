@@ -3,9 +3,13 @@
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Mapping, Sequence
 
-from wolfcal.geometry import invert_transform
+import numpy as np
+from scipy.optimize import least_squares
+
+from wolfcal.errors import WolfcalError
+from wolfcal.geometry import exp_so3, invert_transform, log_so3
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import cross
 from wolfcal.robot.robot import Robot
@@ -84,3 +88,44 @@ def camera_in_floor(
     poses = robot.model.link_poses(q, [frame, *soles], corrections, base=robot.config.base_link)
     T_floor_base = invert_transform(floor_frames(np.stack([poses[s] for s in soles])))
     return T_floor_base @ poses[frame], T_floor_base
+
+
+def moved_stance(robot: Robot, stance: Mapping[str, float], shift: Sequence[float]) -> dict[str, float]:
+    """Readings [rad] of a stance with the torso moved by `shift` (dx, dy, dz [m] along the floor's axes, yaw [rad]
+    about the vertical through the base) from `stance` (joint -> rad; not a stretched leg, where the knee could bend either way), the soles (config `floor.soles`) kept where
+    they stand, under the nominal model: the actuated joints between the base and the soles solved by least squares
+    (each sole's position [m] and rotation [rad]) within their URDF limits; other joints as in `stance`. Rounded
+    to 0.1 mrad. A WolfcalError when the soles cannot be kept within 1 mm and 1 mrad (beyond the legs' reach)."""
+    model, base = robot.model, robot.config.base_link
+    soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
+    q0 = stance_readings([stance], model)
+    T_base_sole = np.stack([model.link_poses(q0, soles, base=base)[s] for s in soles])  # (K, 1, 4, 4)
+    T_floor_base = invert_transform(floor_frames(T_base_sole))[0]
+    joints = robot.actuated_joints_to(soles)
+    columns = [model.column(j) for j in joints]
+    lower, upper = (np.array([getattr(model.joints[j], side) for j in joints]) for side in ("lower", "upper"))
+
+    def residuals(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+        q = q0.copy()
+        q[0, columns] = x
+        poses = model.link_poses(q, soles, base=base)
+        T = np.stack([poses[s][0] for s in soles])
+        rotation = log_so3(np.swapaxes(target[:, :3, :3], 1, 2) @ T[:, :3, :3])
+        return np.concatenate([(T[:, :3, 3] - target[:, :3, 3]).ravel(), rotation.ravel()])
+
+    x = np.clip(q0[0, columns], lower, upper)
+    for fraction in np.linspace(0.1, 1.0, 10):  # in steps from the standing pose: the legs stay on its branch
+        T_new = T_floor_base.copy()
+        T_new[:3, :3] = exp_so3(np.array([0.0, 0.0, fraction * shift[3]])) @ T_floor_base[:3, :3]
+        T_new[:3, 3] += fraction * np.asarray(shift[:3])
+        target = invert_transform(T_new) @ T_floor_base @ T_base_sole[:, 0]  # (K, 4, 4) the soles stay put
+        x = least_squares(residuals, x, bounds=(lower, upper), xtol=1e-12, ftol=1e-12, args=(target,)).x
+    r = np.abs(residuals(x, target))
+    n = 3 * len(soles)
+    if r[:n].max() > 1e-3 or r[n:].max() > 1e-3:
+        raise WolfcalError(f"{robot.config.path}: the torso moved by {[float(v) for v in shift]} (dx, dy, dz [m], "
+                           f"yaw [rad]) leaves the soles {r[:n].max() * 1000:.1f} mm and {r[n:].max() * 1000:.1f} "
+                           "mrad from where they stand: take a smaller move")  # fmt: skip
+    moved = dict(stance)
+    moved.update({j: round(float(v), 4) for j, v in zip(joints, x)})
+    return moved
