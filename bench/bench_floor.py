@@ -37,7 +37,6 @@ from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, spl
 from wolfcal.io.truth import truth_paths  # noqa: E402
 from wolfcal.observations import Observations  # noqa: E402
 from wolfcal.robot.corrections import Corrections, load_corrections  # noqa: E402
-from wolfcal.robot.floor import moved_stance  # noqa: E402
 from wolfcal.robot.robot import Robot, load_robot  # noqa: E402
 from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
 from wolfcal.vision.corner_bias import CORNER_INSET  # noqa: E402
@@ -54,25 +53,24 @@ STANCES = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 
 
 def held_stances(count: int) -> list[dict[str, float]]:
-    """`count` stances for the held-out floor samples besides `floor.standing`: STANCES, then the torso moved from
-    them at pseudo-random (fixed) places within +-2 cm forward, +-3 cm sideways, 0-1.5 cm lower, +-0.15 rad
-    (`robot.floor.moved_stance`, soles kept)."""
-    robot = load_robot(WOLFGANG / "robot.yaml")
-    centre = moved_stance(robot, STANCES[0], (0.0, -0.03, 0.0, 0.0))  # 1 cm lower, knees bent (not stretched)
-    rng = np.random.default_rng(0)
-    shifts = rng.uniform([-0.02, -0.03, -0.015, -0.15], [0.02, 0.03, 0.0, 0.15], (max(count - len(STANCES), 0), 4))
-    return [*STANCES, *(moved_stance(robot, centre, shift) for shift in shifts)][:count]
+    """The first `count` of Wolfgang's check stances (`configs/wolfgang/check_stances.yaml`, none of the fit's
+    stances; see its comment) for the held-out floor samples."""
+    stances = yaml.safe_load((WOLFGANG / "check_stances.yaml").read_text())
+    if count > len(stances):
+        raise SystemExit(f"--held-new-stances {count}: check_stances.yaml has {len(stances)}")
+    return stances[:count]
 
 
 def write_config(folder: Path, stances: bool | int = True, n_tags: int = 6) -> Path:
     """robot.yaml with other tag ids and sizes, the 1280x960 camera, `n_tags` floor tags (60, 61, ... of the sizes
-    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances (True: STANCES; a number: that many stances in
-    all, `held_stances`); returns its path."""
+    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances (True: `floor.standing` and STANCES; a number:
+    that many `held_stances`); returns its path."""
     data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
     data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
     save_camera_info(CAMERA, folder / "camera.yaml")
     data["camera"]["intrinsics"] = str(folder / "camera.yaml")
     data.pop("external_cameras", None)
+    data["floor"].pop("check_stances", None)  # a held-out capture's stances are set below
     new_ids = {43: 7, 44: 8, 42: 3}
     for tag in data["tags"]:
         tag["size"] = 0.12 if tag["id"] == 42 else 0.1
@@ -80,8 +78,8 @@ def write_config(folder: Path, stances: bool | int = True, n_tags: int = 6) -> P
     sizes = FLOOR_TAG_SIZES_M
     data["floor"]["tags"] = [{"id": 60 + k, "size": sizes[k % len(sizes)]} for k in range(n_tags)]
     if stances:
-        extra = STANCES if stances is True else held_stances(int(stances) - 1)
-        data["floor"]["stances"] = [data["floor"]["standing"], *extra]
+        data["floor"]["stances"] = ([data["floor"]["standing"], *STANCES] if stances is True
+                                    else held_stances(int(stances)))  # fmt: skip
     path = folder / ("robot.yaml" if stances else "robot_standing.yaml")
     path.write_text(yaml.safe_dump(data))
     return path
@@ -99,12 +97,13 @@ class Held:
 
     samples: int = 16
     layouts: int = 1
-    stances: int = 1  # 1: all standing; 5: `floor.standing` and STANCES; more: `held_stances`
+    stances: int = 1  # 1: all standing; 5: `floor.standing` and STANCES (the fit's); 0: `new_stances`
+    new_stances: int = 0  # held-out stances none of the fit's (`held_stances`)
     distance: tuple[float, float] = FLOOR_DISTANCE_M
 
     def tag(self) -> str:
         """The part of a --keep folder's name these options set."""
-        stances = {1: "", 5: "_held-stances"}.get(self.stances, f"_held-stances{self.stances}")
+        stances = f"_new-stances{self.new_stances}" if self.new_stances else {1: "", 5: "_held-stances"}[self.stances]
         return (f"_held{self.samples}x{self.layouts}" + stances
                 + ("" if self.distance == FLOOR_DISTANCE_M else f"_held{self.distance[0]:g}-{self.distance[1]:g}m"))
 
@@ -124,8 +123,7 @@ def simulate(
                          truth_file=truth, floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
     held_folder = folder / held.tag().lstrip("_")  # the fit's captures shared by every held-out protocol
     held_folder.mkdir(exist_ok=True)
-    held_config = write_config(held_folder, stances=True if held.stances == 5 else held.stances > 1 and held.stances,
-                               n_tags=n_tags)
+    held_config = write_config(held_folder, held.new_stances or held.stances == 5, n_tags=n_tags)
     sizes = np.diff(np.linspace(0, held.samples, held.layouts + 1).round().astype(int))
     held_paths = [held_folder / f"held_floor{k}.mcap" for k in range(held.layouts)]
     for k, (path, n) in enumerate(zip(held_paths, sizes)):
@@ -187,8 +185,8 @@ def main() -> None:
     parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
     parser.add_argument("--held-stances", action="store_true", help="the held-out floor samples spread over STANCES "
                         "too (default: all standing): each stance rounds the standing legs' readings anew")
-    parser.add_argument("--held-stance-count", type=int, help="the held-out floor samples spread over this many "
-                        "stances (floor.standing, STANCES, then `held_stances`; --held-stances: 5)")
+    parser.add_argument("--held-new-stances", type=int, default=0, help="the held-out floor samples spread over "
+                        "this many stances none of the fit's (`held_stances`)")
     parser.add_argument("--held-samples", type=int, default=16, help="held-out floor samples (default 16)")
     parser.add_argument("--held-layouts", type=int, default=1, help="held-out floor captures, the tags laid out "
                         "anew in each (the held-out samples split between them; default 1)")
@@ -202,7 +200,7 @@ def main() -> None:
                 try:
                     # the captures depend on these options: a --keep folder per combination, never a stale one
                     held = Held(args.held_samples, args.held_layouts,
-                                args.held_stance_count or (5 if args.held_stances else 1), tuple(args.held_distance))
+                                5 if args.held_stances else 1, args.held_new_stances, tuple(args.held_distance))
                     flags = "_stances" if args.stances else ""
                     folder = root / f"{scenario}_{seed}_tags{args.floor_tags}_floor{args.floor_samples}{flags}"
                     print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples, held),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from wolfcal.camera.camera_info import load_camera_info
-from wolfcal.evaluate.floor_ground import measured_ground_errors, real_floor
+from wolfcal.evaluate.floor_ground import floor_views, measured_ground_errors, real_floor
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import load_robot
@@ -74,3 +74,57 @@ def test_the_readings_rounding_is_fitted_and_the_standing_legs_part_kept_in_the_
     row = measured_ground_errors(robot, floor.obs, {"exact": truth}, (4.5,))["models"]["exact"]["rows"][0]
     assert row["rounding_std_m"] > 0.005, row
     assert row["error_m"] < 2 * row["std_m"], row
+
+
+def _near_truth(robot, seed):
+    """(camera, truth, a model one ankle off by 1 deg from the truth: ~10 cm at 4.5 m) of a simulated robot."""
+    camera = load_camera_info(robot.config.head_camera().intrinsics)
+    rng = np.random.default_rng(seed)
+    truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, "all")), rng)
+    model = Corrections({**truth.offsets, "LAnkleRoll": truth.offsets.get("LAnkleRoll", 0.0) + np.deg2rad(1.0)},
+                        truth.frames, truth.tags)  # fmt: skip
+    return camera, truth, model, rng
+
+
+def _joined(a, b):
+    """The observations of two captures as one (b's samples after a's)."""
+    return dataclasses.replace(
+        a, q_measured=np.concatenate([a.q_measured, b.q_measured]), stamps_ns=np.concatenate([a.stamps_ns,
+        b.stamps_ns]), sources=[*a.sources, *b.sources], sample_index=np.concatenate([a.sample_index,
+        b.sample_index + a.n_samples]), tag_ids=np.concatenate([a.tag_ids, b.tag_ids]),
+        corner_index=np.concatenate([a.corner_index, b.corner_index]), uv=np.concatenate([a.uv, b.uv]))  # fmt: skip
+
+
+@pytest.mark.slow
+def test_tags_moved_between_two_check_captures_lie_in_one_place_per_capture_file():
+    """Two held-out captures with the tags laid out anew (a user moving them): each tag gets a place per capture
+    file, and the measurement agrees with the truth; the capture's size counts both layouts."""
+    robot = load_robot(WOLFGANG)
+    camera, truth, model, rng = _near_truth(robot, 4)
+    first = simulate_floor(robot, camera, truth, 12, rng, distance=(0.5, 5.0), source="check_a.mcap").obs
+    second = simulate_floor(robot, camera, truth, 12, rng, distance=(0.5, 5.0), source="check_b.mcap").obs
+    both = _joined(first, second)
+    placements = floor_views(robot, both, model).placements
+    assert len(np.unique(placements)) == len(np.unique(first.tag_ids)) + len(np.unique(second.tag_ids))
+    measured = measured_ground_errors(robot, both, {"after": model}, (4.5,))
+    assert measured["capture"] == {"samples": 24, "stances": 1, "layouts": 2}
+    row = measured["models"]["after"]["rows"][0]
+    true = ground_errors(robot, camera, truth, {"after": model}, (4.5,))[0]["models"]["after"]["error_m"]
+    assert abs(row["error_m"] - true) < max(2 * row["std_m"], 0.2 * true), (true, row)
+
+
+@pytest.mark.slow
+def test_a_view_far_off_is_left_out_as_the_fit_leaves_it_out():
+    """One view's corners moved 3 px (a corner caught on something else): it is left out, and the floor comes out
+    as without that view."""
+    robot = load_robot(WOLFGANG)
+    camera, truth, model, rng = _near_truth(robot, 5)
+    obs = simulate_floor(robot, camera, truth, 20, rng, distance=(0.5, 5.0)).obs
+    view = (obs.sample_index == 3) & (obs.tag_ids == obs.tag_ids[obs.sample_index == 3][0])
+    off = dataclasses.replace(obs, uv=obs.uv + np.where(view[:, None], [3.0, -2.0], 0.0))
+    without = dataclasses.replace(obs, sample_index=obs.sample_index[~view], tag_ids=obs.tag_ids[~view],
+                                  corner_index=obs.corner_index[~view], uv=obs.uv[~view])  # fmt: skip
+    floor, clean = real_floor(robot, off, model), real_floor(robot, without, model)
+    assert floor["outlier_views"] == 1 and clean["outlier_views"] == 0
+    assert floor["views"] == clean["views"]
+    assert np.allclose(floor["unknowns"], clean["unknowns"], atol=1e-6), (floor["unknowns"], clean["unknowns"])

@@ -120,6 +120,10 @@ def capture(
     floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands (legs held at the config's "
                                "floor.standing, torque on) and the head looks at the floor tags, aimed through a "
                                "pan/tilt grid, or turned by hand with --manual."),
+    check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit "
+                               "(`evaluate --capture`): the legs go through floor.check_stances, stances the fit's "
+                               "capture did not use, one head view each. Take it twice, the floor tags moved "
+                               "between."),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
@@ -130,7 +134,7 @@ def capture(
         robot=default_robot(robot), out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples,
         limp=limp, yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
         gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external, force=force,
-        floor=floor,
+        floor=floor, floor_check=check,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -264,6 +268,8 @@ def simulate(
                                       "these poses instead of --samples random ones."),
     floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands and turns its head to see the "
                                "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml)."),
+    check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit, "
+                               "its samples spread over floor.check_stances (stances the fit's capture did not use)."),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -273,6 +279,7 @@ def simulate(
     options = SimOptions(
         samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
         truth_file=truth, system=system, external=external, placement=placement, poses=poses, floor=floor,
+        floor_check=check,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
     simulate_capture(default_robot(robot), out, options, camera, say=typer.echo, force=force)

@@ -500,11 +500,25 @@ class FloorConfig:
     standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
     tags: tuple[FloorTagConfig, ...] = ()
     stances: tuple[dict[str, float], ...] = ()  # standing poses of the floor samples (`floor.stances`); () = standing
+    # standing poses of the held-out floor capture that checks a fit (`floor.check_stances`, `capture --floor
+    # --check`), none of the fit's: a stance the fit saw reads the ticks whose rounding the fit took in
+    check_stances: tuple[dict[str, float], ...] = ()
 
     @property
     def floor_stances(self) -> tuple[dict[str, float], ...]:
         """The standing poses floor samples are taken in: `floor.stances`, else just `floor.standing`."""
         return self.stances or (self.standing,)
+
+    def named_stances(self) -> list[tuple[str, dict[str, float]]]:
+        """Every standing pose the config gives, with its key: `floor.standing`, `floor.stances[i]`,
+        `floor.check_stances[i]`."""
+        return [("floor.standing", self.standing), *((f"floor.stances[{i}]", s) for i, s in enumerate(self.stances)),
+                *((f"floor.check_stances[{i}]", s) for i, s in enumerate(self.check_stances))]
+
+    def capture_stances(self, check: bool = False) -> tuple[dict[str, float], ...]:
+        """The stances a floor capture goes through: `floor_stances`, or with `check` `floor.check_stances`
+        (`floor_stances` when there are none)."""
+        return (self.check_stances or self.floor_stances) if check else self.floor_stances
 
     def tag(self, tag_id: int) -> FloorTagConfig:
         return _by_id(self.tags, tag_id)
@@ -517,15 +531,12 @@ class FloorConfig:
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
     r = _Reader(path, data, "floor")
-    r.check_keys(("soles", "standing"), ("tags", "stances"))
+    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances"))
     soles = r.data["soles"]
     if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
         r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
     standing = _readings(r, r.data["standing"], "standing")
-    stances_data = r.data.get("stances") or []
-    if not isinstance(stances_data, list):
-        r.fail("'stances' must be a list of standing poses, each like 'standing' (joint -> reading [rad])")
-    stances = tuple(_readings(r, item, f"stances[{i}]") for i, item in enumerate(stances_data))
+    stances, check_stances = (_stances(r, path, key) for key in ("stances", "check_stances"))
     tags_data = r.data.get("tags") or []
     if not isinstance(tags_data, list):
         r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
@@ -549,7 +560,19 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
         if thickness < 0:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
-    return FloorConfig(tuple(soles), standing, tuple(tags), stances)
+    return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances)
+
+
+def _stances(r: _Reader, path: Path, key: str) -> tuple[dict[str, float], ...]:
+    """`floor.<key>`: a list of standing poses, each like 'standing', or the name of a YAML file (beside the config)
+    holding that list."""
+    data = r.data.get(key) or []
+    if isinstance(data, str):
+        data = read_yaml(_resolve(path.parent, data), f"file of 'floor.{key}'", "a list of standing poses") or []
+    if not isinstance(data, list):
+        r.fail(f"'{key}' must be a list of standing poses, each like 'standing' (joint -> reading [rad]), or a "
+               "YAML file holding one")  # fmt: skip
+    return tuple(_readings(r, item, f"{key}[{i}]") for i, item in enumerate(data))
 
 
 def _readings(r: _Reader, data, key: str) -> dict[str, float]:

@@ -25,6 +25,9 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import stance_poses, standing_pose
 from wolfcal.robot.robot import Robot
 
+# head views per stance of the held-out floor capture that checks a fit (`--check`): the standing legs' tick
+# rounding averages over stances, not over views in one stance (see README, "The venue check")
+CHECK_VIEWS_PER_STANCE = 1
 FLOOR_NEEDED_CAPTURE = "capture --floor needs the standing soles, the standing readings and the floor tags"
 
 
@@ -34,20 +37,24 @@ def floor_joints(robot: Robot) -> tuple[list[str], list[str]]:
     return groups["legs"], groups["head"]
 
 
-def stance_targets(robot: Robot) -> list[dict[str, float]]:
-    """`standing_targets` of each stance (`floor.stances`, default `floor.standing`)."""
+def stance_targets(robot: Robot, check: bool = False) -> list[dict[str, float]]:
+    """`standing_targets` of each stance (`floor.stances`, default `floor.standing`; with `check`
+    `floor.check_stances` where given)."""
     robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
-    return [standing_targets(robot, q, k) for k, q in enumerate(stance_poses(robot))]
+    return [standing_targets(robot, q, k, check) for k, q in enumerate(stance_poses(robot, check))]
 
 
-def stance_name(robot: Robot, k: int) -> str:
-    """How the config names stance k: 'floor.standing' or 'floor.stances[k]'."""
-    return f"floor.stances[{k}]" if robot.config.floor_config().stances else "floor.standing"
+def stance_name(robot: Robot, k: int, check: bool = False) -> str:
+    """How the config names stance k: 'floor.standing', 'floor.stances[k]' or (`check`) 'floor.check_stances[k]'."""
+    floor = robot.config.floor_config()
+    if check and floor.check_stances:
+        return f"floor.check_stances[{k}]"
+    return f"floor.stances[{k}]" if floor.stances else "floor.standing"
 
 
-def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0) -> dict[str, float]:
-    """Readings [rad] of a standing pose q (J,) (default `floor.standing`; stance k for messages) for the leg and
-    head servo joints, checked against the URDF limits."""
+def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, check: bool = False) -> dict[str, float]:
+    """Readings [rad] of a standing pose q (J,) (default `floor.standing`; stance k of the capture (`check`) for
+    messages) for the leg and head servo joints, checked against the URDF limits."""
     floor = robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
     if not floor.tags:
         raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; {FLOOR_NEEDED_CAPTURE}")
@@ -58,16 +65,21 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0) -> d
                for j, v in targets.items()
                if not robot.model.joints[j].lower <= v <= robot.model.joints[j].upper]  # fmt: skip
     if outside:
-        raise WolfcalError(f"{robot.config.path}: '{stance_name(robot, k)}' puts joints outside their URDF limits: "
+        raise WolfcalError(f"{robot.config.path}: '{stance_name(robot, k, check)}' puts joints outside their URDF "
+                           "limits: "
                            + "; ".join(outside))  # fmt: skip
     return targets
 
 
-def floor_script(robot: Robot, velocity: float) -> PoseScript:
+def floor_script(robot: Robot, velocity: float, check: bool = False) -> PoseScript:
     """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
-    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance)."""
-    all_targets = stance_targets(robot)
-    stances = stance_poses(robot)
+    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance). With
+    `check` (the held-out capture that checks a fit: `floor.check_stances`) CHECK_VIEWS_PER_STANCE grid points per
+    stance, the grid's points in turn over the stances."""
+    all_targets = stance_targets(robot, check)
+    stances = stance_poses(robot, check)
+    grid = [(distance, bearing) for row, distance in enumerate(AIM_DISTANCES_M)
+            for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]]  # to and fro: short moves  # fmt: skip
     poses = []
     for k, targets in enumerate(all_targets):
         pan_tilt = [j for j in aim_joints(robot) if j in targets]
@@ -76,15 +88,16 @@ def floor_script(robot: Robot, velocity: float) -> PoseScript:
         prefix = f"stance {k}, " if len(stances) > 1 else ""
         seen: set[tuple[int, ...]] = set()
         nominal = Corrections()
-        for row, distance in enumerate(AIM_DISTANCES_M):
-            for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]:  # to and fro: short moves
-                ball = ball_position(robot, nominal, distance, math.radians(bearing))
-                q = aim_head(robot, nominal, ball, stances[k])
-                joints = {**targets, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
-                key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
-                if key not in seen:
-                    seen.add(key)
-                    poses.append(Pose(f"{prefix}floor {distance:g} m, {bearing:+g} deg", joints))
+        points = ([grid[(k * CHECK_VIEWS_PER_STANCE + i) % len(grid)] for i in range(CHECK_VIEWS_PER_STANCE)]
+                  if check else grid)  # fmt: skip
+        for distance, bearing in points:
+            ball = ball_position(robot, nominal, distance, math.radians(bearing))
+            q = aim_head(robot, nominal, ball, stances[k])
+            joints = {**targets, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
+            key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
+            if key not in seen:
+                seen.add(key)
+                poses.append(Pose(f"{prefix}floor {distance:g} m, {bearing:+g} deg", joints))
     return PoseScript(poses, velocity)
 
 

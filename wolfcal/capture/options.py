@@ -34,6 +34,7 @@ class CaptureOptions:
     external: list[str] = field(default_factory=list)  # --external NAME=SOURCE, one per external camera
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
+    floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
 
 
 def parse_external(text: str) -> tuple[str, str]:
@@ -55,6 +56,8 @@ def check_options(options: CaptureOptions) -> None:
                                "--manual to turn the head by hand)")  # fmt: skip
         if options.camera is None:
             raise WolfcalError("--floor records the head camera's views of the floor tags: give --camera SOURCE")
+    elif options.floor_check:
+        raise WolfcalError("--check is the held-out floor capture: give it with --floor")
     elif options.manual == (options.poses is not None):
         raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual or --floor")
     if options.camera is None and not options.external:

@@ -135,8 +135,8 @@ def _manual_stances(session: CaptureSession, robot: Robot, stances: list[dict[st
     for k, targets in enumerate(stances):
         stand(session, targets, options.velocity or DEFAULT_VELOCITY)
         if len(stances) > 1:
-            view.event(f"stance {k + 1} of {len(stances)} ({stance_name(robot, k)}): the legs hold it; "
-                       "turn the head to show the floor tags")  # fmt: skip
+            view.event(f"stance {k + 1} of {len(stances)} ({stance_name(robot, k, options.floor_check)}): the legs "
+                       "hold it; turn the head to show the floor tags")  # fmt: skip
         run_manual(session, limp, until=shares[k] if len(stances) > 1 else None)
 
 
@@ -151,12 +151,14 @@ def _plan(
     if options.floor and options.manual:
         check_floor_limp(robot, limp)
         legs = floor_joints(robot)[0]
-        stances = [{j: q for j, q in t.items() if j in legs} for t in stance_targets(robot)]
+        stances = [{j: q for j, q in t.items() if j in legs} for t in stance_targets(robot, options.floor_check)]
         if len(stances) > 1 and options.samples is None:
-            raise WolfcalError(f"{robot.config.path}: 'floor.stances' lists {len(stances)} stances; a manual floor "
+            key = "floor.check_stances" if options.floor_check and robot.config.floor_config().check_stances else (
+                "floor.stances")
+            raise WolfcalError(f"{robot.config.path}: '{key}' lists {len(stances)} stances; a manual floor "
                                "capture takes an equal share of --samples in each: give --samples")  # fmt: skip
     elif options.floor:
-        script = floor_script(robot, options.velocity or DEFAULT_VELOCITY)
+        script = floor_script(robot, options.velocity or DEFAULT_VELOCITY, options.floor_check)
     return script, limp, stances
 
 

@@ -42,6 +42,9 @@ from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_w
 from wolfcal.vision.tags import tag_corners
 
 MIN_VIEWS = 6  # fewer floor-tag views than this measure no ground error
+# the sample jackknife leaves out one group of samples at a time, at most this many groups (one solve each): the
+# grouped jackknife's variance is as honest as delete-one's, for a solve per group rather than per sample
+JACKKNIFE_GROUPS = 12
 # The corner inset differs from tag to tag (the bits next to the border; 0-0.35 px at 30-50 px apparent edge in
 # rendered views): the fit's mean inset is taken as a prior of this relative 1-sigma, at least MIN_INSET_STD_PX
 INSET_SPREAD = 0.5
@@ -232,7 +235,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
                camera: CameraModel | None = None) -> dict | None:  # fmt: skip
     """The plane, camera-turn and inset unknowns (7,) [rad, rad, m, rad, rad, rad, px] with their spread: the formal
     covariance (7, 7) with the shared readings' rounding taken as known, the part that rounding adds (7, 7), the
-    delete-one-sample and delete-one-tag jackknife replicates (n, 7; None with fewer than 3 samples or tags); the
+    jackknife replicates deleting one group of samples (at most JACKKNIFE_GROUPS groups) and one tag (n, 7; None
+    with fewer than 3 samples or tags); the
     views' count (less `outlier_views`: off by far more than the others, `outliers.FIT_VIEW_PX`), the residual scale
     and the corners' rms [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
     seen twice. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
@@ -265,7 +269,10 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     kept = np.setdiff1d(np.arange(len(x)), fit.first_reading + shared)
     held = np.linalg.pinv(information[np.ix_(kept, kept)])[:7, :7]  # as if the shared readings' rounding were known
     samples, tags = np.unique(views.samples), np.unique(views.tags)
-    by_sample = np.stack([fit.solve(x, views.samples != s, scale)[:7] for s in samples]) if len(samples) > 2 else None
+    # delete-a-group: the samples dealt into at most JACKKNIFE_GROUPS groups in turn (each group spans the stances)
+    group = np.searchsorted(samples, views.samples) % min(len(samples), JACKKNIFE_GROUPS)
+    by_sample = (np.stack([fit.solve(x, group != g, scale)[:7] for g in np.unique(group)]) if len(samples) > 2
+                 else None)  # fmt: skip
     by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
     return {"unknowns": x[:7], "covariance": held, "rounding_covariance": covariance[:7, :7] - held,
             "jackknife_samples": by_sample, "jackknife_tags": by_tag, "views": len(views.tags),
@@ -361,7 +368,8 @@ def measured_ground_errors(
     corner_inset: tuple[float, float] = (0.0, 0.0),
 ) -> dict | None:
     """Per model: per distance the measured ground error [m] (worst bearing; None: the ball lies above the model's
-    horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count. None when the floor views cannot
+    horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count and the capture's size
+    (`capture_size`). None when the floor views cannot
     measure it (fewer than MIN_VIEWS views of tags seen twice). `corner_inset`: the fit's `floor.corner_inset` and
     its 1-sigma [px] (result.yaml; (0, 0) without one: then the inset's prior is MIN_INSET_STD_PX wide)."""
     out: dict = {"models": {}}
@@ -380,13 +388,24 @@ def measured_ground_errors(
             rows.append({"distance_m": distance, "error_m": errors[worst], **_spread(offsets[worst], floor)})
         out["models"][name] = {"rows": rows, "unknowns": [float(v) for v in floor["unknowns"]]}
         out["views"] = floor["views"]
+    out["capture"] = capture_size(robot, obs)
     return out
+
+
+def capture_size(robot: Robot, obs: Observations) -> dict[str, int]:
+    """What averages the held-out floor capture's errors: its samples with floor-tag views, the stances they stand
+    in (distinct readings of the joints between the base and the soles: each rounds the standing legs anew) and
+    the tag layouts (capture files: the tags may lie elsewhere in each, and each place has its own corner bias)."""
+    seen = np.unique(obs.sample_index)
+    legs = [robot.model.column(j) for j in robot.actuated_joints_to(list(robot.config.floor_config().soles))]
+    return {"samples": len(seen), "stances": len(np.unique(obs.q_measured[np.ix_(seen, legs)], axis=0)),
+            "layouts": len({obs.sources[i] for i in seen})}
 
 
 def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
     """1-sigma [m] of a ground error: sqrt of the trace of its offset's (2,) covariance, so that it bounds how far
     the error's length can be off even when the offset is near zero. Covariance: the larger of the formal one
-    (residual scale, at least the config's `priors.pixel_noise`) and the delete-one-sample jackknife's (errors shared
+    (residual scale, at least the config's `priors.pixel_noise`) and the sample-group jackknife's (errors shared
     within a sample: joint readings), plus the delete-one-tag jackknife's (errors shared by a tag's views: its
     corner bias); each part's sqrt-trace alongside [m]."""
     x = floor["unknowns"]
@@ -401,8 +420,9 @@ def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
 
 
 def _jackknife_covariance(offset: Callable[[np.ndarray], np.ndarray], replicates: np.ndarray | None) -> np.ndarray:
-    """(2, 2) delete-one jackknife covariance [m^2] of a landing offset over `replicates` (n, 7) of the unknowns
-    (zero without replicates; inf when a replicate puts the ball above the horizon)."""
+    """(2, 2) jackknife covariance [m^2] of a landing offset over `replicates` (n, 7) of the unknowns, each with one
+    unit left out (a group of samples or a tag; zero without replicates; inf when a replicate puts the ball above
+    the horizon)."""
     if replicates is None:
         return np.zeros((2, 2))
     values = np.array([offset(u) for u in replicates])

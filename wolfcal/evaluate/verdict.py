@@ -36,10 +36,22 @@ LEGS_ADVICE = (
 )
 
 FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the legs with them (--free leg)"
-# what makes the held-out floor views measure more precisely: the standing legs' shared tick rounding averages only
-# over stances (floor_ground's `rounding_std_m`)
-MORE_PRECISE = ("capture the held-out floor samples in several stances (`floor.stances`), with more head angles and "
-                "nearer tags, to measure it more precisely")
+# The held-out floor capture that measures the ground error at 4.5 m to about 1 cm (README, "The venue check"):
+# the standing legs' shared tick rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's
+# corner bias only over the places it lies in (`tag_std_m`)
+CHECK_CAPTURE = {"samples": 32, "stances": 16, "layouts": 2}
+CHECK_HOW = ("`wolfcal capture --floor --check` twice (floor.check_stances: 16 stances none of the fit's, one head "
+             "view each), the floor tags moved between the two, and both given to `evaluate --capture`")
+
+
+def more_precise(capture: dict | None) -> str:
+    """What to capture to measure the ground error more precisely, naming what the held-out floor capture
+    (`floor_ground.capture_size`) lacks of CHECK_CAPTURE."""
+    short = [f"{k} {capture[k]} (the check takes {v})" for k, v in CHECK_CAPTURE.items()
+             if capture is not None and capture[k] < v]  # fmt: skip
+    if not short:
+        return f"to measure it more precisely, take more held-out floor samples: {CHECK_HOW}"
+    return f"the held-out floor capture is smaller than the check needs: {', '.join(short)}; take {CHECK_HOW}"
 
 
 def deploy_verdict(
@@ -55,7 +67,7 @@ def deploy_verdict(
     """metrics.json's 'verdict': deploy (bool), worse (the pixel rule), refusals and notes (sentences), banner.
 
     measured_ground: {'before_m', 'after_m', 'after_std_m', optional 'before_std_m'} at 4.5 m from floor samples
-    [m], or None;
+    [m] and optional 'capture' (`floor_ground.capture_size` of the held-out floor capture), or None;
     predicted_ground_m: 1-sigma ground error at 4.5 m from the fit's covariance [m], or None;
     camera_turn_rad: rotation angle of the fitted camera frame correction [rad].
     """
@@ -114,14 +126,16 @@ def _judge_measured_ground(
         refusals.append((advice, f"The measured ground error at 4.5 m gets worse: {b:.1f} +- {sb:.1f} cm -> "
                                  f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
     elif a > limit_cm:
-        unsure = f" The measurement is that uncertain: {MORE_PRECISE}." if a - GROUND_SIGMAS * sa <= limit_cm else ""
+        unsure = (f" The measurement is that uncertain: {more_precise(measured_ground.get('capture'))}."
+                  if a - GROUND_SIGMAS * sa <= limit_cm else "")  # fmt: skip
         refusals.append((advice, (
             f"The measured ground error at 4.5 m stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
             f"{limit_cm:g} cm (--ground-limit-cm).{unsure}")))
     elif a + GROUND_SIGMAS * sa > limit_cm:
         notes.append(
             f"The measured ground error at 4.5 m is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
-            f"cannot confirm that it is below the limit ({limit_cm:g} cm); {MORE_PRECISE}."
+            f"cannot confirm that it is below the limit ({limit_cm:g} cm); "
+            f"{more_precise(measured_ground.get('capture'))}."
         )
 
 

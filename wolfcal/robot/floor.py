@@ -73,10 +73,11 @@ def standing_pose(robot: Robot) -> np.ndarray:
     return stance_readings([robot.config.floor_config(FLOOR_NEEDED).standing], robot.model)[0]
 
 
-def stance_poses(robot: Robot) -> np.ndarray:
+def stance_poses(robot: Robot, check: bool = False) -> np.ndarray:
     """(K, J) encoder readings of the stances floor samples are taken in: the config's `floor.stances`, else
-    `floor.standing` alone; other joints 0 [rad]."""
-    return stance_readings(robot.config.floor_config(FLOOR_NEEDED).floor_stances, robot.model)
+    `floor.standing` alone; with `check` (the held-out capture that checks a fit) `floor.check_stances` where
+    given; other joints 0 [rad]."""
+    return stance_readings(robot.config.floor_config(FLOOR_NEEDED).capture_stances(check), robot.model)
 
 
 def camera_in_floor(
@@ -92,10 +93,11 @@ def camera_in_floor(
 
 def moved_stance(robot: Robot, stance: Mapping[str, float], shift: Sequence[float]) -> dict[str, float]:
     """Readings [rad] of a stance with the torso moved by `shift` (dx, dy, dz [m] along the floor's axes, yaw [rad]
-    about the vertical through the base) from `stance` (joint -> rad; not a stretched leg, where the knee could bend either way), the soles (config `floor.soles`) kept where
-    they stand, under the nominal model: the actuated joints between the base and the soles solved by least squares
-    (each sole's position [m] and rotation [rad]) within their URDF limits; other joints as in `stance`. Rounded
-    to 0.1 mrad. A WolfcalError when the soles cannot be kept within 1 mm and 1 mrad (beyond the legs' reach)."""
+    about the vertical through the base) from `stance` (joint -> rad; not stretched legs, where a knee could bend
+    either way), the soles (config `floor.soles`) kept where they stand, under the nominal model: the actuated
+    joints between the base and the soles solved by least squares (each sole's position [m] and rotation [rad]),
+    within their URDF limits, in ten steps along the move; other joints as in `stance`. Rounded to 0.1 mrad. A
+    WolfcalError when the soles cannot be kept within 1 mm and 1 mrad (beyond the legs' reach)."""
     model, base = robot.model, robot.config.base_link
     soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
     q0 = stance_readings([stance], model)

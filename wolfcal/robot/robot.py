@@ -126,9 +126,7 @@ def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
     for i, sole in enumerate(config.floor.soles):
         if sole not in model.links:
             raise WolfcalError(f"{config.path}: 'floor.soles[{i}]' {sole!r} is not a link of {config.urdf}")
-    named = [("floor.standing", config.floor.standing)]
-    named += [(f"floor.stances[{i}]", s) for i, s in enumerate(config.floor.stances)]
-    for key, stance in named:
+    for key, stance in config.floor.named_stances():
         unknown = [j for j in stance if j not in model.actuated_joint_names]
         if unknown:
             raise WolfcalError(

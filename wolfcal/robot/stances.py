@@ -51,13 +51,13 @@ def stance_readings(stances: Sequence[Mapping[str, float]], model: KinematicMode
 
 
 def check_stances(config: RobotConfig, model: KinematicModel) -> None:
-    """Every stance of `floor:` (and `floor.standing`) must be standing under the nominal model (two soles or more:
-    the first two are compared); a WolfcalError naming the stance otherwise."""
+    """Every stance of `floor:` (`floor.standing`, `floor.stances`, `floor.check_stances`) must be standing under
+    the nominal model (two soles or more: the first two are compared); a WolfcalError naming the stance
+    otherwise."""
     floor = config.floor
     if floor is None or len(floor.soles) < 2:
         return
-    named = [("floor.standing", floor.standing)]
-    named += [(f"floor.stances[{i}]", s) for i, s in enumerate(floor.stances)]
+    named = floor.named_stances()
     q = stance_readings([stance for _, stance in named], model)
     poses = model.link_poses(q, floor.soles[:2], base=config.base_link)
     tilt, gap, bad = off_plane(sole_gaps(np.stack([poses[s] for s in floor.soles[:2]])))

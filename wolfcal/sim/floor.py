@@ -52,9 +52,10 @@ class FloorViews:
 def floor_views(
     robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
     distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
+    check: bool = False,
 ) -> FloorViews:
-    """Places of the floor tags and n standing poses (the stances one after the other) with head pan/tilt that see
-    at least one of them whole."""
+    """Places of the floor tags and n standing poses (the stances one after the other; `check`: the check's,
+    `floor.check_stances`) with head pan/tilt that see at least one of them whole."""
     ids = robot.config.floor_config().tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
@@ -63,7 +64,7 @@ def floor_views(
     corners = floor_corners(robot, places)
     joints = [robot.model.joints[j] for j in aim_joints(robot)]
     columns = [robot.model.column(j.name) for j in joints]
-    stances = stance_poses(robot)
+    stances = stance_poses(robot, check)
     stance_of = np.arange(4000) % len(stances)
     q = stances[stance_of]
     for j, col in zip(joints, columns):

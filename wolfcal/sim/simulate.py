@@ -64,6 +64,7 @@ class SimOptions:
     poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
     floor: bool = False  # floor samples: the robot stands and its head camera sees the config's floor tags
     floor_distance: tuple[float, float] = FLOOR_DISTANCE_M  # the floor tags lie this far from the robot [m]
+    floor_check: bool = False  # the held-out floor capture: samples spread over `floor.check_stances`
 
 
 @dataclass
@@ -162,6 +163,8 @@ def simulate_capture(
     robot = load_robot(robot_path)
     if options.floor and (options.system != "head" or options.poses is not None):
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
+    if options.floor_check and not options.floor:
+        raise WolfcalError("--check is the held-out floor capture: give it with --floor")
     if options.floor:
         if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
@@ -199,7 +202,7 @@ def _simulate(
     if options.floor:  # the robot stands; the floor tags lie 0.5-5 m away (options.floor_distance)
         head = cameras[HEAD_CAMERA].image
         floor = floor_views(robot, head, truth, options.samples, rng, options.floor_distance, 0.01 * head.width,
-                            0.01 * head.width)  # fmt: skip
+                            0.01 * head.width, options.floor_check)  # fmt: skip
         q_true = floor.q_true
     else:
         q_true = _poses(robot, options, cameras, truth, rng)
