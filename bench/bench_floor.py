@@ -37,6 +37,7 @@ from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, spl
 from wolfcal.io.truth import truth_paths  # noqa: E402
 from wolfcal.observations import Observations  # noqa: E402
 from wolfcal.robot.corrections import Corrections, load_corrections  # noqa: E402
+from wolfcal.robot.floor import moved_stance  # noqa: E402
 from wolfcal.robot.robot import Robot, load_robot  # noqa: E402
 from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
 from wolfcal.vision.corner_bias import CORNER_INSET  # noqa: E402
@@ -53,24 +54,33 @@ STANCES = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 
 
 def held_stances(count: int) -> list[dict[str, float]]:
-    """The first `count` of Wolfgang's check stances (`configs/wolfgang/check_stances.yaml`, none of the fit's
-    stances; see its comment) for the held-out floor samples."""
-    stances = yaml.safe_load((WOLFGANG / "check_stances.yaml").read_text())
-    if count > len(stances):
-        raise SystemExit(f"--held-new-stances {count}: check_stances.yaml has {len(stances)}")
-    return stances[:count]
+    """`count` stances for the held-out floor samples, none of the fit's: the recipe of Wolfgang's
+    `floor.check_stances` (robot.yaml; its first 16 are these): the torso moved from 1 cm below standing (knees
+    bent) by a pseudo-random (numpy default_rng(0)) dx +-2 cm, dy +-3 cm, dz 0-1.5 cm lower, yaw +-0.15 rad
+    (`robot.floor.moved_stance`, soles kept)."""
+    robot = load_robot(WOLFGANG / "robot.yaml")
+    shipped = list(robot.config.floor_config().check_stances)
+    if count <= len(shipped):
+        return shipped[:count]
+    centre = moved_stance(robot, STANCES[0], (0.0, -0.03, 0.0, 0.0))  # STANCES[0] moved back to the middle
+    shifts = np.random.default_rng(0).uniform([-0.02, -0.03, -0.015, -0.15], [0.02, 0.03, 0.0, 0.15], (count, 4))
+    stances = [moved_stance(robot, centre, shift) for shift in shifts]
+    assert stances[:len(shipped)] == shipped, "robot.yaml's floor.check_stances follow this recipe"
+    return stances
 
 
-def write_config(folder: Path, stances: bool | int = True, n_tags: int = 6) -> Path:
+def write_config(folder: Path, stances: bool = True, n_tags: int = 6, check: int = 0) -> Path:
     """robot.yaml with other tag ids and sizes, the 1280x960 camera, `n_tags` floor tags (60, 61, ... of the sizes
-    FLOOR_TAG_SIZES_M in turn) and (`stances`) the floor stances (True: `floor.standing` and STANCES; a number:
-    that many `held_stances`); returns its path."""
+    FLOOR_TAG_SIZES_M in turn), (`stances`) the floor stances `floor.standing` and STANCES and `check`
+    `held_stances` as `floor.check_stances`; returns its path."""
     data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
     data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
     save_camera_info(CAMERA, folder / "camera.yaml")
     data["camera"]["intrinsics"] = str(folder / "camera.yaml")
     data.pop("external_cameras", None)
-    data["floor"].pop("check_stances", None)  # a held-out capture's stances are set below
+    data["floor"].pop("check_stances", None)
+    if check:
+        data["floor"]["check_stances"] = held_stances(check)
     new_ids = {43: 7, 44: 8, 42: 3}
     for tag in data["tags"]:
         tag["size"] = 0.12 if tag["id"] == 42 else 0.1
@@ -78,8 +88,7 @@ def write_config(folder: Path, stances: bool | int = True, n_tags: int = 6) -> P
     sizes = FLOOR_TAG_SIZES_M
     data["floor"]["tags"] = [{"id": 60 + k, "size": sizes[k % len(sizes)]} for k in range(n_tags)]
     if stances:
-        data["floor"]["stances"] = ([data["floor"]["standing"], *STANCES] if stances is True
-                                    else held_stances(int(stances)))  # fmt: skip
+        data["floor"]["stances"] = [data["floor"]["standing"], *STANCES]
     path = folder / ("robot.yaml" if stances else "robot_standing.yaml")
     path.write_text(yaml.safe_dump(data))
     return path
@@ -123,12 +132,13 @@ def simulate(
                          truth_file=truth, floor_distance=FLOOR_DISTANCE_M), say=quiet)  # fmt: skip
     held_folder = folder / held.tag().lstrip("_")  # the fit's captures shared by every held-out protocol
     held_folder.mkdir(exist_ok=True)
-    held_config = write_config(held_folder, held.new_stances or held.stances == 5, n_tags=n_tags)
+    held_config = write_config(held_folder, bool(held.new_stances) or held.stances == 5, n_tags, held.new_stances)
     sizes = np.diff(np.linspace(0, held.samples, held.layouts + 1).round().astype(int))
     held_paths = [held_folder / f"held_floor{k}.mcap" for k in range(held.layouts)]
     for k, (path, n) in enumerate(zip(held_paths, sizes)):
         if not path.exists():
             simulate_capture(held_config, path, SimOptions(samples=int(n), seed=seed + 200 + 1000 * k, floor=True,
+                             floor_check=bool(held.new_stances),
                              truth_file=truth, floor_distance=held.distance), say=quiet)  # fmt: skip
     return paths, held_paths
 

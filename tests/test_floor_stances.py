@@ -13,16 +13,16 @@ from rich.console import Console
 from test_floor_fit import joined
 from typer.testing import CliRunner
 
-from wolfcal.capture.floor import floor_script
+from wolfcal.capture.floor import CHECK_VIEWS_PER_STANCE, floor_script
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure
-from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import stance_poses
+from wolfcal.robot.floor import moved_stance, stance_poses
 from wolfcal.robot.robot import load_robot
 from wolfcal.robot.stances import off_plane, sole_gaps
 from wolfcal.sim.floor import simulate_floor
@@ -138,3 +138,58 @@ def test_manual_floor_capture_in_several_stances_needs_a_sample_count(tmp_path):
     with pytest.raises(WolfcalError, match=r"'floor.stances' lists 3 stances; .* give --samples"):
         run_capture(options, Console(file=io.StringIO()))
     assert not list(tmp_path.glob("x.mcap*"))
+
+
+def test_a_moved_torso_gives_the_stances_solved_before():
+    """`moved_stance` from the torso-sideways stance back to the middle and then sideways the other way, or turned,
+    gives floor_stances.yaml's stances (solved separately before, to 0.1 mrad), soles kept on one plane."""
+    robot = load_robot(WOLFGANG)
+    centre = moved_stance(robot, LEAN[0], (0.0, -0.03, 0.0, 0.0))
+    for shift, expected in (((0.0, 0.03, 0.0, 0.0), LEAN[0]), ((0.0, -0.03, 0.0, 0.0), LEAN[1]),
+                            ((0.0, 0.0, 0.0, 0.15), LEAN[2])):  # fmt: skip
+        moved = moved_stance(robot, centre, shift)
+        assert max(abs(moved.get(j, 0.0) - v) for j, v in expected.items()) <= 2e-4, (shift, moved)
+    with pytest.raises(WolfcalError, match="from where they stand: take a smaller move"):
+        moved_stance(robot, centre, (0.0, 0.0, -0.3, 0.0))  # 30 cm lower: beyond the legs' reach
+
+
+def test_check_stances_are_read_checked_and_none_of_the_fits(tmp_path):
+    """Wolfgang's `floor.check_stances` are standing poses none of which is a fit stance, every leg joint reading
+    other ticks in most of them; a bad one is named."""
+    floor = load_robot(WOLFGANG).config.floor_config()
+    assert len(floor.check_stances) == 16 and floor.capture_stances(check=True) == floor.check_stances
+    assert floor.capture_stances() == (floor.standing,)
+    fit = [floor.standing, *LEAN]
+    assert not any(c == f for c in floor.check_stances for f in fit)
+    robot = load_robot(WOLFGANG)
+    ticks = np.round(stance_poses(robot, check=True) / (2 * np.pi / 4096))
+    legs = [robot.model.column(j) for j in robot.actuated_joints_to(list(floor.soles))]
+    assert all(len(np.unique(ticks[:, c])) >= 14 for c in legs)
+    data = wolfgang_with_other_tags()
+    data["floor"]["check_stances"] = [floor.check_stances[0], {"RKnee": -0.6}]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(WolfcalError, match=r"'floor.check_stances\[1\]' is not a standing pose"):
+        load_robot(tmp_path / "robot.yaml")
+
+
+def test_the_check_capture_goes_through_the_check_stances(tmp_path):
+    """`capture --floor --check`: one head view per check stance, the grid's points in turn; `simulate --floor
+    --check`: the samples spread over the check stances."""
+    robot = load_robot(WOLFGANG)
+    stances = robot.config.floor_config().check_stances
+    poses = floor_script(robot, 0.5, check=True).poses
+    assert len(poses) == len(stances) * CHECK_VIEWS_PER_STANCE
+    for k, stance in enumerate(stances):
+        pose = poses[k * CHECK_VIEWS_PER_STANCE]
+        assert pose.name.startswith(f"stance {k}, floor ")
+        assert all(pose.joints[j] == v for j, v in stance.items())
+    assert len({p.name.split(", ", 1)[1] for p in poses}) == len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
+    out = tmp_path / "check.mcap"
+    result = CliRunner().invoke(app, ["simulate", "--floor", "--check", "--samples", "16", "--binning", "4",
+                                      "--out", str(out)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    samples, _ = load_samples(robot, [out], None)
+    knees = sorted(dict(zip(s.joint_names, s.positions))["LKnee"] for s in samples)  # no offsets: the readings
+    np.testing.assert_allclose(knees, sorted(s["LKnee"] for s in stances), atol=1e-3)  # one sample per stance
+    refused = CliRunner().invoke(app, ["simulate", "--check", "--out", str(tmp_path / "x.mcap")])
+    assert refused.exit_code != 0 and "--check is the held-out floor capture: give it with --floor" in refused.output

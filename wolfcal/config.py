@@ -536,7 +536,7 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
         r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
     standing = _readings(r, r.data["standing"], "standing")
-    stances, check_stances = (_stances(r, path, key) for key in ("stances", "check_stances"))
+    stances, check_stances = (_stances(r, key) for key in ("stances", "check_stances"))
     tags_data = r.data.get("tags") or []
     if not isinstance(tags_data, list):
         r.fail("'tags' must be a list of floor tags ({id, family, size, thickness})")
@@ -563,15 +563,11 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances)
 
 
-def _stances(r: _Reader, path: Path, key: str) -> tuple[dict[str, float], ...]:
-    """`floor.<key>`: a list of standing poses, each like 'standing', or the name of a YAML file (beside the config)
-    holding that list."""
+def _stances(r: _Reader, key: str) -> tuple[dict[str, float], ...]:
+    """`floor.<key>`: a list of standing poses, each like 'standing'."""
     data = r.data.get(key) or []
-    if isinstance(data, str):
-        data = read_yaml(_resolve(path.parent, data), f"file of 'floor.{key}'", "a list of standing poses") or []
     if not isinstance(data, list):
-        r.fail(f"'{key}' must be a list of standing poses, each like 'standing' (joint -> reading [rad]), or a "
-               "YAML file holding one")  # fmt: skip
+        r.fail(f"'{key}' must be a list of standing poses, each like 'standing' (joint -> reading [rad])")
     return tuple(_readings(r, item, f"{key}[{i}]") for i, item in enumerate(data))
 
 

@@ -397,7 +397,7 @@ def capture_size(robot: Robot, obs: Observations) -> dict[str, int]:
     in (distinct readings of the joints between the base and the soles: each rounds the standing legs anew) and
     the tag layouts (capture files: the tags may lie elsewhere in each, and each place has its own corner bias)."""
     seen = np.unique(obs.sample_index)
-    legs = [robot.model.column(j) for j in robot.actuated_joints_to(list(robot.config.floor_config().soles))]
+    legs = np.array([robot.model.column(j) for j in robot.actuated_joints_to(list(robot.config.floor_config().soles))])
     return {"samples": len(seen), "stances": len(np.unique(obs.q_measured[np.ix_(seen, legs)], axis=0)),
             "layouts": len({obs.sources[i] for i in seen})}
 
