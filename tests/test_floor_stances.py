@@ -13,8 +13,9 @@ from rich.console import Console
 from test_floor_fit import joined
 from typer.testing import CliRunner
 
-from wolfcal.capture.floor import CHECK_VIEWS_PER_STANCE, floor_script
+from wolfcal.capture.floor import CHECK_VIEWS_PER_STANCE, check_views, floor_script
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
+from wolfcal.capture.poses import PoseScript
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
@@ -177,13 +178,18 @@ def test_the_check_capture_goes_through_the_check_stances(tmp_path):
     --check`: the samples spread over the check stances."""
     robot = load_robot(WOLFGANG)
     stances = robot.config.floor_config().check_stances
-    poses = floor_script(robot, 0.5, check=True).poses
+    script = floor_script(robot, 0.5, check=True)
+    grid = len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
+    assert len(script.poses) == len(stances) * grid
+    poses = check_views(script).poses
     assert len(poses) == len(stances) * CHECK_VIEWS_PER_STANCE
     for k, stance in enumerate(stances):
         pose = poses[k * CHECK_VIEWS_PER_STANCE]
         assert pose.name.startswith(f"stance {k}, floor ")
         assert all(pose.joints[j] == v for j, v in stance.items())
-    assert len({p.name.split(", ", 1)[1] for p in poses}) == len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
+    assert len({p.name.split(", ", 1)[1] for p in poses}) == grid  # the whole grid over the stances
+    fewer = PoseScript([p for p in script.poses if "-30 deg" not in p.name], 0.5)  # as if left out for collisions
+    assert len(check_views(fewer).poses) == len(stances) * CHECK_VIEWS_PER_STANCE
     out = tmp_path / "check.mcap"
     result = CliRunner().invoke(app, ["simulate", "--floor", "--check", "--samples", "16", "--binning", "4",
                                       "--out", str(out)])  # fmt: skip

@@ -73,13 +73,11 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, chec
 
 def floor_script(robot: Robot, velocity: float, check: bool = False) -> PoseScript:
     """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
-    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance). With
-    `check` (the held-out capture that checks a fit: `floor.check_stances`) CHECK_VIEWS_PER_STANCE grid points per
-    stance, the grid's points in turn over the stances."""
+    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance); with
+    `check` in the stances of the held-out capture that checks a fit (`floor.check_stances`; `check_views` then
+    picks its views)."""
     all_targets = stance_targets(robot, check)
     stances = stance_poses(robot, check)
-    grid = [(distance, bearing) for row, distance in enumerate(AIM_DISTANCES_M)
-            for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]]  # to and fro: short moves  # fmt: skip
     poses = []
     for k, targets in enumerate(all_targets):
         pan_tilt = [j for j in aim_joints(robot) if j in targets]
@@ -88,17 +86,28 @@ def floor_script(robot: Robot, velocity: float, check: bool = False) -> PoseScri
         prefix = f"stance {k}, " if len(stances) > 1 else ""
         seen: set[tuple[int, ...]] = set()
         nominal = Corrections()
-        points = ([grid[(k * CHECK_VIEWS_PER_STANCE + i) % len(grid)] for i in range(CHECK_VIEWS_PER_STANCE)]
-                  if check else grid)  # fmt: skip
-        for distance, bearing in points:
-            ball = ball_position(robot, nominal, distance, math.radians(bearing))
-            q = aim_head(robot, nominal, ball, stances[k])
-            joints = {**targets, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
-            key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
-            if key not in seen:
-                seen.add(key)
-                poses.append(Pose(f"{prefix}floor {distance:g} m, {bearing:+g} deg", joints))
+        for row, distance in enumerate(AIM_DISTANCES_M):
+            for bearing in AIM_BEARINGS_DEG[:: -1 if row % 2 else 1]:  # to and fro: short moves
+                ball = ball_position(robot, nominal, distance, math.radians(bearing))
+                q = aim_head(robot, nominal, ball, stances[k])
+                joints = {**targets, **{j: float(q[robot.model.column(j)]) for j in pan_tilt}}
+                key = tuple(int(rad_to_ticks(joints[j])) for j in pan_tilt)
+                if key not in seen:
+                    seen.add(key)
+                    poses.append(Pose(f"{prefix}floor {distance:g} m, {bearing:+g} deg", joints))
     return PoseScript(poses, velocity)
+
+
+def check_views(script: PoseScript) -> PoseScript:
+    """The held-out check's views of a floor script (`floor_script(check=True)`, less any left out for
+    collisions): CHECK_VIEWS_PER_STANCE per stance, each stance's remaining grid views taken in turn over the
+    stances, so that the check sees the whole grid."""
+    by_stance: dict[str, list[Pose]] = {}
+    for pose in script.poses:
+        by_stance.setdefault(pose.name.split("floor ", 1)[0], []).append(pose)
+    picked = [views[(k * CHECK_VIEWS_PER_STANCE + i) % len(views)] for k, views in enumerate(by_stance.values())
+              for i in range(min(CHECK_VIEWS_PER_STANCE, len(views)))]  # fmt: skip
+    return PoseScript(picked, script.velocity)
 
 
 def without_collisions(robot: Robot, script: PoseScript, start: dict[str, float]) -> tuple[PoseScript, str | None]:

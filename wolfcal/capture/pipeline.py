@@ -18,6 +18,7 @@ from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, 
 from wolfcal.capture.exit_torque import leave_torque
 from wolfcal.capture.floor import (
     check_floor_limp,
+    check_views,
     floor_joints,
     floor_script,
     stance_name,
@@ -106,6 +107,7 @@ def _checked_script(
     start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
     if options.floor:
         script, note = without_collisions(robot, script, start)
+        script = check_views(script) if options.floor_check else script
         status.target = options.samples or len(script.poses)
     else:
         note = check_collisions(robot, script, options.poses or "", start)
