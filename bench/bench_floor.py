@@ -4,13 +4,17 @@ A robot config and camera the shipped demos do not use (Wolfgang's URDF, feet ta
 floor tags 60-65 of 0.12-0.2 m lying 1-4 m away; a 1280x960 camera with k1 = -0.12), simulated with 0.025 rad rms
 leg and head encoder offsets and the camera ~4 deg off. Per seed:
   leg     24 feet + 20 floor samples, `--free leg --side both`: true ground error at 4.5 m (worst bearing of -30, 0,
-          +30 deg) before and after, the measured one (held-out 16 floor samples, no truth) with its 1-sigma,
-          the soles' worst pose error over 500 calibration-range poses, fit time
-          (--held-stances: the held-out samples spread over the stances)
+          +30 deg) before and after, the measured one on a held-out floor capture (no truth) with its 1-sigma and
+          its parts, whether it agrees with the true one (within 20 % or 1 cm) and its CPU time, the soles' worst
+          pose error over 500 calibration-range poses, fit time
   camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
-Run: python bench/bench_floor.py [--seeds 4] [--scenarios leg camera] [--keep DIR] [--stances] [--floor-tags 6]
-     [--floor-samples 20]
-     [--held-stances]
+The held-out floor capture: 16 samples all standing by default; --held-stances: in the fit's 5 stances;
+--held-new-stances N: in N check stances (`held_stances`, as `simulate --floor --check`); --held-samples in all,
+split between --held-layouts captures with the tags laid out anew in each; --held-distance NEAR FAR [m].
+The check (README, "The venue check"): --held-samples 32 --held-new-stances 16 --held-layouts 2.
+Run: python bench/bench_floor.py [--seeds 4] [--first-seed 0] [--scenarios leg camera] [--keep DIR] [--stances]
+     [--floor-tags 6] [--floor-samples 20] [--held-stances | --held-new-stances N] [--held-samples 16]
+     [--held-layouts 1] [--held-distance 1 4]
 """
 
 from __future__ import annotations
