@@ -245,21 +245,6 @@ def _write_report(out_dir: Path, metrics: dict, figures: Figures) -> None:
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
 
 
-def run_evaluate(
-    fit_dir: Path,
-    captures: list[Path],
-    out_dir: Path,
-    deploy_worse: bool = False,
-    folds: int = 5,
-    say: Callable[[str], None] = print,
-    force: bool = False,
-    limits: VerdictLimits = VerdictLimits(),
-) -> dict:
-    """`_evaluate` with all its outputs written as one set: nothing of a failed run replaces an earlier one."""
-    with output_set():
-        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force, limits)
-
-
 PARAMETER_KEYS = ("name", "value", "std", "unit", "data_share", "display")  # of each fitted parameter in metrics
 
 
@@ -291,7 +276,8 @@ def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: 
     }
 
 
-def _evaluate(
+@output_set()  # all outputs written as one set: nothing of a failed run replaces an earlier one
+def run_evaluate(
     fit_dir: Path,
     captures: list[Path],
     out_dir: Path,
@@ -306,8 +292,8 @@ def _evaluate(
     With `captures` empty, k-fold cross-validation over the fit's own captures. The deploy files are written only
     when the calibration does not make held-out reprojection RMS worse, or with `deploy_worse`; check
     `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table. Outputs of an
-    earlier run in out_dir are replaced only with `force`; all are written as one set. More than MAX_LEFT_OUT
-    of the samples left out as outliers is refused (WolfcalError).
+    earlier run in out_dir are replaced only with `force`; all are written as one set (`output_set`). More than
+    MAX_LEFT_OUT of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot = load_fit(fit_dir)
