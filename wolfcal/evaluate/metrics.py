@@ -103,6 +103,25 @@ def model_errors(robot: Robot, obs: Observations, views: TagViews, corrections: 
     return ModelErrors(residuals, sample_rms, sample_max, grid, sample_grid)
 
 
+@dataclass
+class HeldOutErrors:
+    """Errors of the input URDF (before) and the calibration (after) on samples the judged model was not fitted on."""
+
+    before: ModelErrors
+    after: ModelErrors
+    after_of_sample: list[Corrections]  # (S,) the calibrated model that judged each sample
+    fold_of: np.ndarray | None  # (S,) cross-validation fold that left each sample out; None on held-out captures
+    mode_note: str  # the sentence saying which
+    outliers: np.ndarray  # (S,) bool: samples the better model does not explain, left out of the summaries
+    summary_before: dict  # `metrics.summary` of before over the inliers [px, m]
+    summary_after: dict  # the same of after
+
+    @property
+    def folds(self) -> int | None:
+        """Number of cross-validation folds (None on held-out captures)."""
+        return None if self.fold_of is None else int(self.fold_of.max()) + 1
+
+
 def merge_folds(
     obs: Observations, views: TagViews, fold_of_sample: np.ndarray, folds: list[ModelErrors]
 ) -> ModelErrors:
