@@ -113,7 +113,8 @@ def floor_views(robot: Robot, camera: PlanCamera, q: np.ndarray, places: dict[in
 
 def draw_floor_candidates(robot: Robot, camera: PlanCamera, places: dict[int, np.ndarray], n: int,
                           rng: np.random.Generator, collisions: CollisionModel, margin: float = 0.1) -> Candidates:
-    """Up to n standing poses with the head aimed at random, each showing a floor tag (module docstring)."""
+    """Up to n standing poses with the head aimed at random (pan/tilt within their limits shrunk by `margin` [rad]),
+    each showing a floor tag (module docstring)."""
     joints = aim_joints(robot)
     lo, hi = joint_bounds(robot, joints, margin)
     standing = standing_pose(robot)
