@@ -312,10 +312,12 @@ def run_evaluate(
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
     With `captures` empty, k-fold cross-validation over the fit's own captures. The deploy files are written only
-    when the calibration does not make held-out reprojection RMS worse, or with `deploy_worse`; check
-    `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table. Outputs of an
-    earlier run in out_dir are replaced only with `force`; all are written as one set (`output_set`). More than
-    MAX_LEFT_OUT of the samples left out as outliers is refused (WolfcalError).
+    when the deploy verdict allows it (`verdict.deploy_verdict`: held-out reprojection RMS, whether the free
+    parameters explain the held-out data, the measured ground error; held-out external-camera captures alone: each
+    camera's reprojection RMS), or with `deploy_worse`; check `metrics['deploy']['written']`.
+    `before_after_table(metrics)` gives the terminal table. Outputs of an earlier run in out_dir are replaced only
+    with `force`; all are written as one set (`output_set`). More than MAX_LEFT_OUT of the samples left out as
+    outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot = load_fit(fit_dir)
