@@ -101,16 +101,10 @@ def simulate_floor(
     q_true, vis, uv = views.q_true, views.visible, views.uv
     s_idx, t_idx = np.nonzero(vis)
     detected = uv[s_idx, t_idx] + rng.normal(0.0, noise_px, (len(s_idx), 4, 2))
-    obs = Observations(
-        joint_names=list(robot.joint_names),
-        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        stamps_ns=np.arange(len(q_true), dtype=np.int64) + 10**6,
-        sources=[source] * len(q_true),
-        camera=camera,
-        sample_index=np.repeat(s_idx, 4),
-        tag_ids=np.repeat(np.array(ids)[t_idx], 4),
-        corner_index=np.tile(np.arange(4), len(s_idx)),
-        uv=detected.reshape(-1, 2),
+    obs = Observations.of_views(
+        list(robot.joint_names), encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        np.arange(len(q_true), dtype=np.int64) + 10**6, [source] * len(q_true), camera, s_idx, np.array(ids)[t_idx],
+        detected,
     )
     return FloorScene(obs, views.places, q_true)
 
