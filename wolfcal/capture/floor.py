@@ -72,10 +72,10 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, chec
 
 
 def floor_script(robot: Robot, velocity: float, check: bool = False) -> PoseScript:
-    """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
-    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance); with
-    `check` in the stances of the held-out capture that checks a fit (`floor.check_stances`; `check_views` then
-    picks its views)."""
+    """The scripted floor capture, driven at `velocity` [rad/s]: in each stance in turn, standing legs and the head
+    aimed at each grid point of the floor (poses that round to the same ticks, where a limit stops the head, are
+    kept once per stance); with `check` in the stances of the held-out capture that checks a fit
+    (`floor.check_stances`; `check_views` then picks its views)."""
     all_targets = stance_targets(robot, check)
     stances = stance_poses(robot, check)
     poses = []
