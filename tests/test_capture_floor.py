@@ -203,3 +203,19 @@ def test_floor_capture_refuses_bad_input_before_anything_moves(tmp_path):
         run_capture(CaptureOptions(robot=tmp_path / "robot.yaml", out=out, camera="sim", port="/dev/null",
                                    floor=True), quiet())  # fmt: skip
     assert not list(tmp_path.glob("x.mcap*"))
+
+
+def test_the_check_capture_moves_the_legs_through_the_check_stances(robot, truth_file, tmp_path):
+    """`capture --floor --check`: one sample in each of `floor.check_stances` in turn, the legs at its readings to
+    the tick, a floor sample each."""
+    out = tmp_path / "check.mcap"
+    with emulator(robot, truth_file) as emu:
+        summary = run_capture(options(out, emu.port, samples=3, binning=4, floor_check=True), quiet())
+    assert summary.samples == 3
+    capture = read_capture(out, robot.config)
+    for sample, stance in zip(capture.samples, robot.config.floor_config().check_stances):
+        values = dict(zip(sample.joint_names, sample.positions, strict=True))
+        for joint, reading in stance.items():
+            assert values[joint] == ticks_to_rad(rad_to_ticks(reading)), joint
+    observations, _ = detect_observations(capture.samples, robot)
+    assert split_floor(robot, observations)[1] is not None
