@@ -147,7 +147,10 @@ def measured_ground_blocks(measured: dict | None) -> list[Block]:
 
     before, after = measured["models"]["before"]["rows"], measured["models"]["after"]["rows"]
     rows = [[f"{b['distance_m']:g} m", cell(b), cell(a)] for b, a in zip(before, after)]
-    text = (f"Measured without truth on {measured['views']} held-out views of the floor tags: the floor tags' "
+    size = measured.get("capture")
+    of = (f" ({size['samples']} samples in {size['stances']} stances, {size['layouts']} tag layout(s))" if size
+          else "")  # fmt: skip
+    text = (f"Measured without truth on {measured['views']} held-out views of the floor tags{of}: the floor tags' "
             "places, the real floor's tilt and height and the camera's turn are fitted so that every view shows "
             "each tag at its printed size; the ball is then placed through each model as above (worst of -30, 0, "
             "+30 deg; 1 sigma). A turn or shift of the whole floor is not seen.")
