@@ -199,3 +199,11 @@ def test_the_check_capture_goes_through_the_check_stances(tmp_path):
     np.testing.assert_allclose(knees, sorted(s["LKnee"] for s in stances), atol=1e-3)  # one sample per stance
     refused = CliRunner().invoke(app, ["simulate", "--check", "--out", str(tmp_path / "x.mcap")])
     assert refused.exit_code != 0 and "--check is the held-out floor capture: give it with --floor" in refused.output
+    data = wolfgang_with_other_tags()
+    del data["floor"]["check_stances"]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
+    refused = CliRunner().invoke(app, ["simulate", "--floor", "--check", "--robot", str(tmp_path / "robot.yaml"),
+                                       "--out", str(tmp_path / "y.mcap")])  # fmt: skip
+    text = " ".join(refused.output.split())
+    assert refused.exit_code != 0 and "'floor.check_stances', which the config does not give" in text, text
+    assert "Traceback" not in refused.output and not (tmp_path / "y.mcap").exists()

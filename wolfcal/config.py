@@ -516,9 +516,9 @@ class FloorConfig:
                 *((f"floor.check_stances[{i}]", s) for i, s in enumerate(self.check_stances))]
 
     def capture_stances(self, check: bool = False) -> tuple[dict[str, float], ...]:
-        """The stances a floor capture goes through: `floor_stances`, or with `check` `floor.check_stances`
-        (`floor_stances` when there are none)."""
-        return (self.check_stances or self.floor_stances) if check else self.floor_stances
+        """The stances a floor capture goes through: `floor_stances`, or with `check` `floor.check_stances` (() when
+        there are none)."""
+        return self.check_stances if check else self.floor_stances
 
     def tag(self, tag_id: int) -> FloorTagConfig:
         return _by_id(self.tags, tag_id)

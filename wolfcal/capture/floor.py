@@ -46,10 +46,9 @@ def stance_targets(robot: Robot, check: bool = False) -> list[dict[str, float]]:
 
 def stance_name(robot: Robot, k: int, check: bool = False) -> str:
     """How the config names stance k: 'floor.standing', 'floor.stances[k]' or (`check`) 'floor.check_stances[k]'."""
-    floor = robot.config.floor_config()
-    if check and floor.check_stances:
+    if check:
         return f"floor.check_stances[{k}]"
-    return f"floor.stances[{k}]" if floor.stances else "floor.standing"
+    return f"floor.stances[{k}]" if robot.config.floor_config().stances else "floor.standing"
 
 
 def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, check: bool = False) -> dict[str, float]:

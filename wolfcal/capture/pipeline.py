@@ -155,8 +155,7 @@ def _plan(
         legs = floor_joints(robot)[0]
         stances = [{j: q for j, q in t.items() if j in legs} for t in stance_targets(robot, options.floor_check)]
         if len(stances) > 1 and options.samples is None:
-            key = "floor.check_stances" if options.floor_check and robot.config.floor_config().check_stances else (
-                "floor.stances")
+            key = "floor.check_stances" if options.floor_check else "floor.stances"
             raise WolfcalError(f"{robot.config.path}: '{key}' lists {len(stances)} stances; a manual floor "
                                "capture takes an equal share of --samples in each: give --samples")  # fmt: skip
     elif options.floor:

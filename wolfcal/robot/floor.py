@@ -75,9 +75,14 @@ def standing_pose(robot: Robot) -> np.ndarray:
 
 def stance_poses(robot: Robot, check: bool = False) -> np.ndarray:
     """(K, J) encoder readings of the stances floor samples are taken in: the config's `floor.stances`, else
-    `floor.standing` alone; with `check` (the held-out capture that checks a fit) `floor.check_stances` where
-    given; other joints 0 [rad]."""
-    return stance_readings(robot.config.floor_config(FLOOR_NEEDED).capture_stances(check), robot.model)
+    `floor.standing` alone; with `check` (the held-out capture that checks a fit) `floor.check_stances`; other
+    joints 0 [rad]. A WolfcalError for `check` without `floor.check_stances`."""
+    stances = robot.config.floor_config(FLOOR_NEEDED).capture_stances(check)
+    if not stances:
+        raise WolfcalError(f"{robot.config.path}: --check takes the held-out floor capture in 'floor.check_stances', "
+                           "which the config does not give: list standing poses there, none of the fit's "
+                           "(README, \"The venue check\"; `wolfcal.robot.floor.moved_stance` makes them)")  # fmt: skip
+    return stance_readings(stances, robot.model)
 
 
 def camera_in_floor(
