@@ -207,6 +207,12 @@ def test_foreign_or_damaged_entries_are_not_used(capture, images, tmp_path, monk
     entry.write_bytes(entry.read_bytes()[:100])  # torn
     assert_same(cached_detect(path, "head", stamps, iter(images[::-1]), settings), fresh(images[::-1]))
     assert_same(cached_detect(path, "head", stamps, never(0), settings), fresh(images[::-1]))  # rewritten whole
+    # what a crash can leave of a file written without fsync: empty, or its blocks zeroed
+    whole = entry.read_bytes()
+    for left in (b"", whole[:-600] + bytes(600), whole[:200] + bytes(len(whole) - 400) + whole[-200:]):
+        entry.write_bytes(left)
+        assert_same(cached_detect(path, "head", stamps, iter(images), settings), fresh(images))
+        entry.write_bytes(whole)
 
 
 def test_no_cache_neither_reads_nor_writes(capture, images, tmp_path, monkeypatch):

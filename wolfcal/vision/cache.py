@@ -10,7 +10,9 @@ are not enough: an edited or re-recorded file can keep both), the camera name, a
 (families and ids, refinement, wolfcal's detector version, OpenCV's version). An entry stores its full key
 and the image stamps it was made for; it is used only if both match, so a stale or foreign entry (another
 file, other settings, another reader that kept other frames) is detected again and overwritten. Entries are
-written atomically (temporary file, rename). Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
+written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`: the two fsyncs of each
+of a first run's two writes waited 0.1-0.4 s for a shared disk); one that a crash left empty or torn fails
+`_load`'s checks and is detected again. Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
 so a file's digest is remembered beside the entries (`file_digest`) with the file's identity: device, inode, size,
 modification and status-change times [ns]. Any write to the file changes its status-change time (the kernel sets
 it; no tool can set it back), so the file is hashed again; and, as git does for its index, a digest taken less than
@@ -111,7 +113,7 @@ def file_digest(path: Path) -> str:
     digest = content_digest(path)
     if hashed_ns - before.st_ctime_ns >= RACY_NS:
         try:
-            with atomic_output(memo) as handle:
+            with atomic_output(memo, scratch=True) as handle:
                 handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
         except OSError:
             pass
@@ -148,7 +150,7 @@ def _save(path: Path, key: str, stamps: np.ndarray, detections: list[Detections]
     ids = [tag for found in detections for tag in sorted(found)]
     corners = [found[tag] for found in detections for tag in sorted(found)]
     try:
-        with atomic_output(path) as handle:
+        with atomic_output(path, scratch=True) as handle:
             np.savez(
                 handle,
                 key=np.array(key),
