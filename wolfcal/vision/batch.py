@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
@@ -129,7 +129,7 @@ def iter_detect_encoded(
     workers: int | None = None,
     batch: int | None = None,
     processes: bool = False,
-) -> Iterator[Detections | None]:
+) -> Generator[Detections | None, None, None]:
     """Detections of each encoded image in input order (None for an image that cannot be decoded).
 
     Tasks of `batch` images (default `task_size`); at most 2 * `workers` tasks are read ahead of the results.
@@ -188,12 +188,29 @@ def detect_encoded(
     """
     if total is None and hasattr(images, "__len__"):
         total = len(images)  # type: ignore[arg-type]
-    found: list[Detections] = []
-    for index, detections in enumerate(iter_detect_encoded(images, families, refine, workers, processes=processes)):
-        if detections is None:
-            name = labels(index) if labels else f"image {index}"
-            raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
-        found.append(detections)
-        if progress:
-            progress(index + 1, total)
-    return found
+    return list(iter_detect_checked(images, families, refine, workers, progress, total, labels, processes))
+
+
+def iter_detect_checked(
+    images: Iterable[bytes],
+    families: Families,
+    refine: str = "edges",
+    workers: int | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
+    total: int | None = None,
+    labels: Callable[[int], str] | None = None,
+    processes: bool = False,
+) -> Generator[Detections, None, None]:
+    """`detect_encoded` as a stream, for a caller that may stop early (close the generator: the tasks under way
+    are cancelled or finished, and no more images are read)."""
+    stream = iter_detect_encoded(images, families, refine, workers, processes=processes)
+    try:
+        for index, detections in enumerate(stream):
+            if detections is None:
+                name = labels(index) if labels else f"image {index}"
+                raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
+            yield detections
+            if progress:
+                progress(index + 1, total)
+    finally:
+        stream.close()
