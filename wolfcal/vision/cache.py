@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import threading
 import time
 import zipfile
 from collections.abc import Callable, Generator, Iterable, Mapping
@@ -92,11 +93,17 @@ def cache_enabled(enabled: bool):
         _enabled.reset(token)
 
 
-def content_digest(path: Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file's whole content."""
+class _Stopped(Exception):
+    """A hash given up (the detection beside it ended first, or failed)."""
+
+
+def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | None = None) -> str:
+    """SHA-256 hex digest of a file's whole content; _Stopped as soon as `stop` is set."""
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         while block := handle.read(chunk):
+            if stop is not None and stop.is_set():
+                raise _Stopped
             digest.update(block)
     return digest.hexdigest()
 
@@ -128,11 +135,11 @@ def remembered_digest(path: Path) -> tuple[str | None, bool]:
     return None, True
 
 
-def _hash_and_remember(path: Path) -> str:
+def _hash_and_remember(path: Path, stop: threading.Event | None = None) -> str:
     """`content_digest` of the file, remembered (trusted only if the file changed RACY_NS or more before)."""
     identity, memo = _identity_and_memo(path)
     hashed_ns = time.time_ns()
-    digest = content_digest(path)
+    digest = content_digest(path, stop=stop)
     try:  # remembered also when too recent to trust: `remembered_digest` then tells the path was hashed before
         with atomic_output(memo, scratch=True) as handle:
             handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
@@ -250,8 +257,9 @@ def _detect_while_hashing(
     the page cache) no longer waits before the detection; then saved. Should the digest find a whole entry (a
     copied or moved file), detection stops there and the entry answers (or after the last image, if the hash ends
     later: the same answer as hashing first). A file that cannot be hashed: no cache."""
+    stop = threading.Event()
     with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
-        hashing = hasher.submit(_hash_and_remember, path)
+        hashing = hasher.submit(_hash_and_remember, path, stop)
         looked = False
         found: list[Detections] = []
         stream = detect()
@@ -265,9 +273,12 @@ def _detect_while_hashing(
                         if progress:
                             progress(len(cached), len(cached))
                         return cached
+            found = _all(found, stamps)
+        except BaseException:  # an undecodable image, Ctrl-C: the hash of a long recording is not waited for
+            stop.set()
+            raise
         finally:
             stream.close()
-        found = _all(found, stamps)
         if not looked and (cached := _entry_of(hashing, camera_name, settings, stamps)) is not None:
             return cached  # the hash ended after the last image: its entry still answers, as it would have first
     try:
