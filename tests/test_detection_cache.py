@@ -159,13 +159,13 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
     path, _ = capture
     true_digest = cache.content_digest(path)
-    assert cache.file_digest(path) == true_digest
+    assert cache.hash_file(path) == true_digest
     assert cache.remembered_digest(path) == (None, True)  # just written: too recent to trust, but hashed before
     monkeypatch.setattr(cache, "RACY_NS", 0)
     assert cache.remembered_digest(path) == (true_digest, True)
     (memo,) = folder.glob("*.digest.json")
     memo.write_text(memo.read_text().replace(true_digest, "f" * 64))
-    assert cache.file_digest(path) == "f" * 64  # remembered, not hashed again
+    assert cache.remembered_digest(path) == ("f" * 64, True)  # remembered: not hashed again
     info = path.stat()
     data = bytearray(path.read_bytes())
     data[-1] ^= 0xFF
@@ -173,7 +173,8 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     replacement.write_bytes(bytes(data))
     os.utime(replacement, ns=(info.st_atime_ns, info.st_mtime_ns))
     replacement.replace(path)  # re-recorded: same name, size and mtime
-    assert cache.file_digest(path) == cache.content_digest(path) != true_digest
+    assert cache.remembered_digest(path) == (None, True)  # a new inode: hashed again
+    assert cache.hash_file(path) == cache.content_digest(path) != true_digest
 
 
 

@@ -13,10 +13,11 @@ file, other settings, another reader that kept other frames) is detected again a
 written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`: the two fsyncs of each
 of a first run's two writes waited 0.1-0.4 s for a shared disk); one that a crash left empty or torn fails
 `_load`'s checks and is detected again. Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
-so a file's digest is remembered beside the entries (`file_digest`) with the file's identity: device, inode, size,
-modification and status-change times [ns]. Any write to the file changes its status-change time (the kernel sets
-it; no tool can set it back), so the file is hashed again; and, as git does for its index, a digest taken less than
-2 s after the file's last change is not trusted (a write within the same clock tick could keep every time).
+so a file's digest is remembered beside the entries (`hash_file`, `remembered_digest`) with the file's identity:
+device, inode, size, modification and status-change times [ns]. Any write to the file changes its status-change
+time (the kernel sets it; no tool can set it back), so the file is hashed again; and, as git does for its index, a
+digest taken less than 2 s after the file's last change is not trusted (a write within the same clock tick could keep
+every time).
 A path never hashed before (a first run) is hashed on a thread beside the detection instead of before it; a
 path hashed before (an entry is likely) is hashed first, so a cache hit reads no image.
 """
@@ -108,11 +109,6 @@ def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | Non
     return digest.hexdigest()
 
 
-def file_digest(path: Path) -> str:
-    """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring)."""
-    return remembered_digest(path)[0] or _hash_and_remember(path)
-
-
 def _identity_and_memo(path: Path) -> tuple[list[int], Path]:
     info = os.stat(path)
     identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
@@ -135,8 +131,9 @@ def remembered_digest(path: Path) -> tuple[str | None, bool]:
     return None, True
 
 
-def _hash_and_remember(path: Path, stop: threading.Event | None = None) -> str:
-    """`content_digest` of the file, remembered (trusted only if the file changed RACY_NS or more before)."""
+def hash_file(path: Path, stop: threading.Event | None = None) -> str:
+    """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (trusted only if
+    the file changed RACY_NS or more before it was hashed)."""
     identity, memo = _identity_and_memo(path)
     hashed_ns = time.time_ns()
     digest = content_digest(path, stop=stop)
@@ -222,7 +219,7 @@ def cached_detect(
     if not seen:  # a path never hashed (a first run): hashed beside the detection
         return _detect_while_hashing(Path(path), camera_name, stamps_array, detect, settings, progress)
     try:
-        digest = digest or _hash_and_remember(Path(path))  # changed since, or too recent to trust: hashed first
+        digest = digest or hash_file(Path(path))  # changed since, or too recent to trust: hashed first
     except OSError:
         return _all(detect(), stamps)
     key = _entry_key(digest, camera_name, settings)
@@ -259,7 +256,7 @@ def _detect_while_hashing(
     later: the same answer as hashing first). A file that cannot be hashed: no cache."""
     stop = threading.Event()
     with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
-        hashing = hasher.submit(_hash_and_remember, path, stop)
+        hashing = hasher.submit(hash_file, path, stop)
         looked = False
         found: list[Detections] = []
         stream = detect()
