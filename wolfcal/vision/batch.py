@@ -23,10 +23,11 @@ from __future__ import annotations
 
 import os
 from collections import deque
-from collections.abc import Callable, Generator, Iterable, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping, Sized
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
+from typing import Any
 
 import numpy as np
 
@@ -170,25 +171,10 @@ def iter_detect_encoded(
             pool.shutdown()
 
 
-def detect_encoded(
-    images: Iterable[bytes],
-    families: Families,
-    refine: str = "edges",
-    workers: int | None = None,
-    progress: Callable[[int, int | None], None] | None = None,
-    total: int | None = None,
-    labels: Callable[[int], str] | None = None,
-    processes: bool = False,
-) -> list[Detections]:
+def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
     """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
-    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them (`processes`: see the module docstring).
-
-    `progress(done, total)` after each image (`total` as given, e.g. len(images)); an image that cannot be
-    decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
-    """
-    if total is None and hasattr(images, "__len__"):
-        total = len(images)  # type: ignore[arg-type]
-    return list(iter_detect_checked(images, families, refine, workers, progress, total, labels, processes))
+    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them; `options`: those of `iter_detect_checked`."""
+    return list(iter_detect_checked(images, families, **options))
 
 
 def iter_detect_checked(
@@ -202,7 +188,13 @@ def iter_detect_checked(
     processes: bool = False,
 ) -> Generator[Detections, None, None]:
     """`detect_encoded` as a stream, for a caller that may stop early (close the generator: the tasks under way
-    are cancelled or finished, and no more images are read)."""
+    are cancelled or finished, and no more images are read). `processes`: see the module docstring.
+
+    `progress(done, total)` after each image (`total` as given, default len(images) if it has one); an image that
+    cannot be decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
+    """
+    if total is None and isinstance(images, Sized):
+        total = len(images)
     stream = iter_detect_encoded(images, families, refine, workers, processes=processes)
     try:
         for index, detections in enumerate(stream):
