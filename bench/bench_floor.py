@@ -11,7 +11,7 @@ leg and head encoder offsets and the camera ~4 deg off. Per seed:
 The held-out floor capture: 16 samples all standing by default; --held-stances: in the fit's 5 stances;
 --held-new-stances N: in N check stances (`held_stances`, as `simulate --floor --check`); --held-samples in all,
 split between --held-layouts captures with the tags laid out anew in each; --held-distance NEAR FAR [m].
-The check (README, "The venue check"): --held-samples 32 --held-new-stances 16 --held-layouts 2.
+The check (README, "The venue check"): --held-samples 48 --held-new-stances 16 --held-layouts 3.
 Run: python bench/bench_floor.py [--seeds 4] [--first-seed 0] [--scenarios leg camera] [--keep DIR] [--stances]
      [--floor-tags 6] [--floor-samples 20] [--held-stances | --held-new-stances N] [--held-samples 16]
      [--held-layouts 1] [--held-distance 1 4]

@@ -54,14 +54,15 @@ STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "c
     # above the limit, within 2 sigma of it: refused all the same, with the advice to measure it more precisely
     ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm (--ground-limit"
      "-cm). The measurement is that uncertain: to measure it more precisely, take more held-out floor samples: "
-     "`wolfcal capture --floor --check` twice"),
+     "`wolfcal capture --floor --check` three times"),
     # the same from a held-out capture smaller than the check's: what it lacks is named
     ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02, "capture": {"samples": 16, "stances": 1, "layouts": 1}},
-     False, "uncertain: the held-out floor capture is smaller than the check needs: samples 16 (the check takes 32), "
-     "stances 1 (the check takes 16), layouts 1 (the check takes 2); take `wolfcal capture --floor --check` twice"),
-    ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "capture": {"samples": 40, "stances": 20, "layouts": 1}},
+     False, "uncertain: the held-out floor capture is smaller than the check needs: samples 16 (the check takes 48), "
+     "stances 1 (the check takes 16), layouts 1 (the check takes 3); take `wolfcal capture --floor --check` three "
+     "times"),
+    ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "capture": {"samples": 48, "stances": 20, "layouts": 1}},
      True, "cannot confirm that it is below the limit (5 cm); the held-out floor capture is smaller than the check "
-     "needs: layouts 1 (the check takes 2)"),
+     "needs: layouts 1 (the check takes 3)"),
     # below the limit, but its 2 sigma reaches past it: deployed, with a note that the limit is not confirmed
     ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02}, True, "measured ground error at 4.5 m 4.0 +- 2.0 cm"),
     # worse, but within the two measurements' uncertainty

@@ -122,8 +122,8 @@ def capture(
                                "pan/tilt grid, or turned by hand with --manual."),
     check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit "
                                "(`evaluate --capture`): the legs go through floor.check_stances, stances the fit's "
-                               "capture did not use, one head view each. Take it twice, the floor tags moved "
-                               "between."),
+                               "capture did not use, one head view each. Take it three times, the floor tags "
+                               "moved between."),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""

@@ -16,9 +16,9 @@ is rounded to an encoder tick: that rounding is an unknown too (prior `priors.en
 tick, so views of samples that read a joint at the same tick share it (the standing legs while the head looks
 around: their rounding moves the floor as the plane does, no view in that stance tells them apart, so it stays in
 the 1 sigma as its own part; held-out samples in several stances, none of the fit's, average it:
-`floor.check_stances`). A tag lies in one place per capture file (a check taken twice with the tags moved between:
-each place has its own corner bias, which the tag jackknife sees), and views far off (`outliers.FIT_VIEW_PX`) are
-left out."""
+`floor.check_stances`). A tag lies in one place per capture file (a check taken three times with the tags moved
+between: each place has its own corner bias, which the tag jackknife sees), and views far off
+(`outliers.FIT_VIEW_PX`) are left out."""
 
 from __future__ import annotations
 

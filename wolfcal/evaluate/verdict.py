@@ -39,9 +39,9 @@ FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the
 # The held-out floor capture that measures the ground error at 4.5 m to about 1 cm (README, "The venue check"):
 # the standing legs' shared tick rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's
 # corner bias only over the places it lies in (`tag_std_m`)
-CHECK_CAPTURE = {"samples": 32, "stances": 16, "layouts": 2}
-CHECK_HOW = ("`wolfcal capture --floor --check` twice (floor.check_stances: 16 stances none of the fit's, one head "
-             "view each), the floor tags moved between the two, and both given to `evaluate --capture`")
+CHECK_CAPTURE = {"samples": 48, "stances": 16, "layouts": 3}
+CHECK_HOW = ("`wolfcal capture --floor --check` three times (floor.check_stances: 16 stances none of the fit's, one "
+             "head view each), the floor tags moved between, and all three given to `evaluate --capture`")
 
 
 def more_precise(capture: dict | None) -> str:
