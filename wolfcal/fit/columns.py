@@ -72,11 +72,9 @@ class ColumnMatrix:
         new[1:] = (first_row[1:] != first_row[:-1]) | (length[1:] != length[:-1])  # a group's columns are consecutive
         head = np.flatnonzero(new)  # first column of each group
         width = np.diff(np.append(head, K))  # columns per group
-        shape = length[head] * (K + 1) + width  # (n, k) as one number
-        order = np.argsort(shape, kind="stable")
+        shapes, group_shape = np.unique(np.stack([length[head], width], axis=1), axis=0, return_inverse=True)
         out = []
-        for members in np.split(order, np.flatnonzero(np.diff(shape[order])) + 1):
-            heads, n, k = head[members], int(length[head[members[0]]]), int(width[members[0]])
+        for (n, k), heads in zip(shapes, (head[group_shape.ravel() == i] for i in range(len(shapes)))):
             columns = heads[:, None] + np.arange(k)  # (G, k)
             rows = self.indices[self.indptr[heads][:, None] + np.arange(n)]  # (G, n)
             values = self.data[self.indptr[columns][:, :, None] + np.arange(n)].swapaxes(1, 2)  # (G, n, k)
