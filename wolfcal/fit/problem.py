@@ -12,19 +12,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.columns import is_sparse
 from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.fit.uncertainty import triangular_factor
 from wolfcal.graph import connected_components
 from wolfcal.robot.parameters import ParameterSet
-
-if TYPE_CHECKING:
-    import scipy.sparse
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
 MAD_TO_SIGMA = 1.4826  # standard deviation of a normal distribution per median absolute deviation
@@ -207,11 +203,9 @@ class Problem:
             J = state.whiten(self._rows_jacobian(state, lin, np.arange(lin.residual.size)), split=robust)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
-                J = J.multiply(scale[:, None]).tocsr() if is_sparse(J) else np.multiply(J, scale[:, None], out=J)
+                J = scipy.sparse.diags(scale) @ J if scipy.sparse.issparse(J) else np.multiply(J, scale[:, None], out=J)
             parts.append(J)
         if len(self.params) > DENSE_LIMIT:
-            import scipy.sparse  # only for many unknowns: the dense fit path does not load it
-
             return scipy.sparse.vstack(parts).tocsr()
         return parts[0] if len(parts) == 1 else np.vstack(parts)
 
@@ -227,8 +221,8 @@ class Problem:
             for rows, part in state.noise_model.chunks(CHUNK_ROWS):
                 robust, slope = huber_sqrt(part.split(residual[rows], state.sigma), self.huber_k)
                 J = part.split(self._rows_jacobian(state, lin, rows), state.sigma)
-                if is_sparse(J):
-                    J = J.multiply(slope[:, None]).tocsr()
+                if scipy.sparse.issparse(J):
+                    J = scipy.sparse.diags(slope) @ J
                     H += (J.T @ J).toarray()
                 else:
                     J *= slope[:, None]
@@ -252,8 +246,6 @@ class Problem:
         dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
         if dense is not None:
             dense[:, : self.n_chain] = J_chain
-        else:
-            import scipy.sparse  # only for many unknowns: the dense fit path does not load it
         local = None
         if lin.jac_local is not None and lin.local_cols is not None:
             L = lin.jac_local.shape[-1]
