@@ -1,7 +1,7 @@
 """The `wolfcal` process as the entry point starts it (a fresh interpreter importing the CLI): numpy's BLAS on one
 thread (wolfcal.blas_threads: threads on tall thin products only contend on a busy machine, measured 20x slower; the
 variable must be set before numpy loads OpenBLAS), and the fit path loading neither OpenCV nor scipy's linear
-algebra (scipy.sparse.csgraph pulled in scipy.linalg and numpy.f2py) until a fit needs them."""
+algebra (scipy.sparse.csgraph pulled in scipy.linalg) until a fit needs them."""
 
 from __future__ import annotations
 
@@ -50,5 +50,5 @@ def test_fit_path_loads_neither_opencv_nor_scipy_linalg():
     loaded = {name.strip("'") for name in out.strip("[]\n").split(", ")}
     assert "wolfcal.fit.pipeline" in loaded and "numpy" in loaded  # the probe sees the modules
     assert "cv2" not in loaded
-    assert not loaded & {"scipy.linalg", "scipy.sparse.linalg", "scipy.sparse.csgraph", "numpy.f2py"}
+    assert not loaded & {"scipy.linalg", "scipy.sparse.linalg", "scipy.sparse.csgraph"}
     assert "wolfcal.io.mocap_load" not in loaded and "mcap.writer" not in loaded
