@@ -24,10 +24,7 @@ from wolfcal.io.mocap_samples import read_recording
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 T0 = 1_700_000_000_000_000_000
 RATE = 100.0
-MARKERS_DEF = """std_msgs/Header header
-uint32 frame_number
-mocap4r2_msgs/Marker[] markers
-================================================================================
+HEADER_DEFS = """================================================================================
 MSG: std_msgs/Header
 builtin_interfaces/Time stamp
 string frame_id
@@ -35,7 +32,11 @@ string frame_id
 MSG: builtin_interfaces/Time
 int32 sec
 uint32 nanosec
-================================================================================
+"""  # the definitions a message with a std_msgs/Header carries after its own, as ros2 writes them
+MARKERS_DEF = """std_msgs/Header header
+uint32 frame_number
+mocap4r2_msgs/Marker[] markers
+""" + HEADER_DEFS + """================================================================================
 MSG: mocap4r2_msgs/Marker
 int8 USE_NAME=0
 int8 USE_INDEX=1
@@ -55,15 +56,7 @@ string[] name
 float64[] position
 float64[] velocity
 float64[] effort
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-"""
+""" + HEADER_DEFS
 
 
 def session(n_poses: int = 4, seed: int = 0):

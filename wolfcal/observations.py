@@ -39,6 +39,16 @@ class Observations:
     uv: np.ndarray  # (M, 2) detected corner [px]
     camera_name: str = HEAD_CAMERA  # which camera saw these corners
 
+    @classmethod
+    def of_views(
+        cls, joint_names: list[str], q_measured: np.ndarray, stamps_ns: np.ndarray, sources: list[str],
+        camera: CameraModel, sample: np.ndarray, tag_ids: np.ndarray, uv: np.ndarray, camera_name: str = HEAD_CAMERA,
+    ) -> Observations:
+        """Observations of whole views: view v is tag `tag_ids[v]` in sample `sample[v]` (V,), its four corners
+        `uv` (V, 4, 2) [px] in aruco order; the sample fields as in the class."""
+        return cls(joint_names, q_measured, stamps_ns, sources, camera, np.repeat(sample, 4), np.repeat(tag_ids, 4),
+                   np.tile(np.arange(4), len(sample)), uv.reshape(-1, 2), camera_name)  # fmt: skip
+
     @property
     def n_samples(self) -> int:
         return int(self.q_measured.shape[0])

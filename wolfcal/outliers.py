@@ -1,5 +1,5 @@
-"""The one outlier rule of wolfcal: a unit (a view, a sample) is left out when it is far worse than the typical one
-AND off by more than a floor.
+"""The one outlier rule of wolfcal: a unit (a view, a sample, an edge point) is left out when it is far worse than
+the typical one AND off by more than a floor.
 
     outlier = (spread > factor * median(spread over all units)) & (size > floor)
 
@@ -34,6 +34,11 @@ class OutlierRule:
         with np.errstate(invalid="ignore"):
             return finite & (spread > limit) & (size > self.floor)
 
+    def limit(self, median_spread: np.ndarray) -> np.ndarray:
+        """Where spread = size (a plain distance), the largest a unit may be and not be an outlier:
+        max(floor, factor * median), per group of units given each group's median spread (any shape)."""
+        return np.maximum(self.floor, self.factor * median_spread)
+
 
 # The fit's tag views (one tag in one image): spread = whitened RMS under the view's own noise covariance (the
 # noise model knows the joint-reading error each view carries), size = per-axis RMS [px].
@@ -53,6 +58,11 @@ SOLE_CLOSURE_M = OutlierRule(factor=4.0, floor=0.005)
 # the fit's noise model whitens away (larger on far tags), so the floor is twice the fit's. The unit is the sample,
 # not the view: a stale joint reading or a blurred image spoils every tag of the sample.
 HELD_OUT_SAMPLE_PX = OutlierRule(factor=4.0, floor=1.0)
+
+# Sub-pixel points of one tag edge near a corner (`vision.edges`), per point: spread = size = its distance [px]
+# from the first fit of the edge, the median taken over the edge's points. A crisp edge's points lie a few
+# hundredths of a pixel off, so the floor keeps them all; dirt, glare or a wrong crossing lie further off.
+EDGE_POINT_PX = OutlierRule(factor=4.0, floor=0.3)
 
 # Intrinsics, per board view: spread = size = the per-POINT RMS [px] (sqrt(mean(du^2 + dv^2)), OpenCV's convention,
 # not per axis) of the view after OpenCV's calibration, applied to the worst view only and repeated after each

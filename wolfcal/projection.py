@@ -61,17 +61,10 @@ def observations_from_poses(
     uv = tag_corner_pixels(camera, T_camera_tag[s_idx, t_idx], corners)
     uv = uv + rng.normal(0.0, noise_px, size=uv.shape)
     n = len(q_true)
-    return Observations(
-        joint_names=list(robot.joint_names),
-        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        stamps_ns=np.arange(n, dtype=np.int64),
-        sources=sources or ["synthetic"] * n,
-        camera=camera,
-        sample_index=np.repeat(s_idx, 4),
-        tag_ids=np.repeat(np.array(tag_ids)[t_idx], 4),
-        corner_index=np.tile(np.arange(4), len(s_idx)),
-        uv=uv.reshape(-1, 2),
-        camera_name=camera_name,
+    return Observations.of_views(
+        list(robot.joint_names), encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        np.arange(n, dtype=np.int64), sources or ["synthetic"] * n, camera, s_idx, np.array(tag_ids)[t_idx], uv,
+        camera_name,
     )
 
 

@@ -64,8 +64,9 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0) -> d
 
 
 def floor_script(robot: Robot, velocity: float) -> PoseScript:
-    """The scripted floor capture: in each stance in turn, standing legs and the head aimed at each grid point of
-    the floor (poses that round to the same ticks, where a limit stops the head, are kept once per stance)."""
+    """The scripted floor capture, driven at `velocity` [rad/s]: in each stance in turn, standing legs and the head
+    aimed at each grid point of the floor (poses that round to the same ticks, where a limit stops the head, are
+    kept once per stance)."""
     all_targets = stance_targets(robot)
     stances = stance_poses(robot)
     poses = []

@@ -47,7 +47,8 @@ def torque_on(session: CaptureSession, joints: list[str], velocity: float) -> di
 
 
 def sample_until(session: CaptureSession, deadline: float) -> str | None:
-    """Try for a sample until one is taken (None) or the deadline passes (the last reason)."""
+    """Try for a sample until one is taken (None) or the deadline (`time.monotonic()` [s]) passes (the last
+    reason)."""
     while True:
         reason = session.try_sample()
         if reason is None or time.monotonic() > deadline:

@@ -29,7 +29,8 @@ DEPLOY_FILES = ("calibrated.urdf", "calibrated_folded.urdf", "joint_offsets.yaml
 
 
 def camera_correction(robot: Robot, corrections: Corrections) -> dict:
-    """T_uncalibrated_calibrated of the camera's optical frame as a static-transform description."""
+    """T_uncalibrated_calibrated of the camera's optical frame as a static-transform description: translation [m],
+    rotation as a quaternion and as URDF rpy [rad]."""
     frame = robot.config.head_camera().frame
     parent = f"{frame}_uncalibrated"
     T = transform_from_twist_params(corrections.frames.get(robot.camera_joint, np.zeros(6)))

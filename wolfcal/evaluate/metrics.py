@@ -43,7 +43,8 @@ class TagViews:
 
 
 def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
-    """Pose of every fully detected tag in the camera frame from its corners (IPPE square on undistorted points)."""
+    """Pose T_camera_tag [m] of every fully detected tag in the camera's optical frame from its corners alone (IPPE
+    square on undistorted points)."""
     samples, tags, poses = [], [], []
     labels, view_of_corner = obs.views()
     for k, (sample, tag_id) in enumerate(labels):
@@ -77,7 +78,8 @@ class ModelErrors:
 
 
 def model_errors(robot: Robot, obs: Observations, views: TagViews, corrections: Corrections) -> ModelErrors:
-    """Corner and tag-grid errors of the model `corrections` (on top of the robot's URDF)."""
+    """Corner [px] and tag-grid [m] errors of the model `corrections` (on top of the robot's URDF), predicted from
+    the encoder readings."""
     tag_ids = obs.observed_tag_ids
     column = {t: i for i, t in enumerate(tag_ids)}
     _, T_camera_tag = robot.camera_and_tag_poses(obs.q_measured, tag_ids, corrections)
@@ -101,6 +103,25 @@ def model_errors(robot: Robot, obs: Observations, views: TagViews, corrections: 
         if values.size:
             sample_grid[s] = float(values.mean())
     return ModelErrors(residuals, sample_rms, sample_max, grid, sample_grid)
+
+
+@dataclass
+class HeldOutErrors:
+    """Errors of the input URDF (before) and the calibration (after) on samples the judged model was not fitted on."""
+
+    before: ModelErrors
+    after: ModelErrors
+    after_of_sample: list[Corrections]  # (S,) the calibrated model that judged each sample
+    fold_of: np.ndarray | None  # (S,) cross-validation fold that left each sample out; None on held-out captures
+    mode_note: str  # the sentence saying which
+    outliers: np.ndarray  # (S,) bool: samples the better model does not explain, left out of the summaries
+    summary_before: dict  # `summary` of before over the inliers [px, mm]
+    summary_after: dict  # the same of after
+
+    @property
+    def folds(self) -> int | None:
+        """Number of cross-validation folds (None on held-out captures)."""
+        return None if self.fold_of is None else int(self.fold_of.max()) + 1
 
 
 def merge_folds(
@@ -129,7 +150,7 @@ def outlier_samples(before: ModelErrors, after: ModelErrors) -> np.ndarray:
 
 
 def summary(obs: Observations, views: TagViews, errors: ModelErrors, outliers: np.ndarray) -> dict:
-    """Headline numbers of one model over the inlier samples (SI units plus display units px and mm)."""
+    """Headline numbers of one model over the inlier samples, in display units (keys end in _px or _mm)."""
     corners = ~outliers[obs.sample_index]
     grid = errors.view_grid[~outliers[views.sample] & np.isfinite(errors.view_grid)]
     r = errors.residuals[corners]

@@ -1,7 +1,7 @@
 """`wolfcal evaluate`: a fit + held-out captures (or k-fold cross-validation) -> report and files to deploy.
 
 Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
-judged model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
+errors model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
 model explains the data, ground error) allows it, or with deploy_worse=True. This module only runs the steps;
 errors are `metrics` / `ground` / `crossval` / `structure`, the report's words `report_content`, its pictures
 `report_figures`, the files to deploy `deploy`.
@@ -26,6 +26,7 @@ from wolfcal.evaluate.external import external_metrics
 from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground import DISTANCES_M, VERDICT_DISTANCE_M, ground_errors, predicted_ground_std
 from wolfcal.evaluate.metrics import (
+    HeldOutErrors,
     ModelErrors,
     TagViews,
     measure_tag_views,
@@ -245,21 +246,6 @@ def _write_report(out_dir: Path, metrics: dict, figures: Figures) -> None:
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
 
 
-def run_evaluate(
-    fit_dir: Path,
-    captures: list[Path],
-    out_dir: Path,
-    deploy_worse: bool = False,
-    folds: int = 5,
-    say: Callable[[str], None] = print,
-    force: bool = False,
-    limits: VerdictLimits = VerdictLimits(),
-) -> dict:
-    """`_evaluate` with all its outputs written as one set: nothing of a failed run replaces an earlier one."""
-    with output_set():
-        return _evaluate(fit_dir, captures, out_dir, deploy_worse, folds, say, force, limits)
-
-
 PARAMETER_KEYS = ("name", "value", "std", "unit", "data_share", "display")  # of each fitted parameter in metrics
 
 
@@ -279,6 +265,27 @@ def _after(
     return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs.n_samples)
 
 
+def _judge(
+    robot: Robot, obs: Observations, result: FitResult, sources: list[Path], held_out: bool, folds: int,
+    say: Callable[[str], None],
+) -> HeldOutErrors:
+    """Errors before and after (see `_after`), the outlier samples and the summaries; more than MAX_LEFT_OUT of the
+    samples left out is refused (WolfcalError)."""
+    views = measure_tag_views(robot, obs)
+    before = model_errors(robot, obs, views, Corrections())
+    after, after_of_sample, fold_of, mode_note = _after(robot, obs, views, result, sources if held_out else None,
+                                                       folds, say)  # fmt: skip
+    outliers = outlier_samples(before, after)
+    check_left_out(
+        {"samples": (int(outliers.sum()), obs.n_samples)},
+        ", ".join(map(str, sources)),
+        "the evaluation refuses to judge on what is left: check these captures' joint readings and images, and "
+        "that they are of this robot and camera",
+    )
+    return HeldOutErrors(before, after, after_of_sample, fold_of, mode_note, outliers,
+                  summary(obs, views, before, outliers), summary(obs, views, after, outliers))  # fmt: skip
+
+
 def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: dict | None) -> dict:
     """metrics['ground']: the ground error rows of the standing robot and the one measured on floor views."""
     floor = robot.config.floor
@@ -291,7 +298,8 @@ def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: 
     }
 
 
-def _evaluate(
+@output_set()  # all outputs written as one set: nothing of a failed run replaces an earlier one
+def run_evaluate(
     fit_dir: Path,
     captures: list[Path],
     out_dir: Path,
@@ -304,10 +312,12 @@ def _evaluate(
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
     With `captures` empty, k-fold cross-validation over the fit's own captures. The deploy files are written only
-    when the calibration does not make held-out reprojection RMS worse, or with `deploy_worse`; check
-    `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table. Outputs of an
-    earlier run in out_dir are replaced only with `force`; all are written as one set. More than MAX_LEFT_OUT
-    of the samples left out as outliers is refused (WolfcalError).
+    when the deploy verdict allows it (`verdict.deploy_verdict`: held-out reprojection RMS, whether the free
+    parameters explain the held-out data, the measured ground error; held-out external-camera captures alone: each
+    camera's reprojection RMS), or with `deploy_worse`; check `metrics['deploy']['written']`.
+    `before_after_table(metrics)` gives the terminal table. Outputs of an earlier run in out_dir are replaced only
+    with `force`; all are written as one set (`output_set`). More than MAX_LEFT_OUT of the samples left out as
+    outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot = load_fit(fit_dir)
@@ -323,33 +333,19 @@ def _evaluate(
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
         return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
     samples, obs, tags, warnings, floor = _observe(robot, result, loaded, sources, say)
-    views = measure_tag_views(robot, obs)
-    before = model_errors(robot, obs, views, Corrections())
-    after, after_of_sample, fold_of, mode_note = _after(robot, obs, views, result, sources if held_out else None,
-                                                       folds, say)  # fmt: skip
-    outliers = outlier_samples(before, after)
-    check_left_out(
-        {"samples": (int(outliers.sum()), obs.n_samples)},
-        ", ".join(map(str, sources)),
-        "the evaluation refuses to judge on what is left: check these captures' joint readings and images, and "
-        "that they are of this robot and camera",
-    )
-    s_before, s_after = summary(obs, views, before, outliers), summary(obs, views, after, outliers)
+    errors = _judge(robot, obs, result, sources, held_out, folds, say)
     truth = _truth_reference(sources)
     ground_rows, no_ground = _ground_rows(robot, obs.camera, truth if truth is not None else fitted, fitted, say)
     if no_ground:
         warnings.append(no_ground)
-    structure = unexplained(robot, obs, fitted, after.residuals, ~outliers)
+    structure = unexplained(robot, obs, fitted, errors.after.residuals, ~errors.outliers)
     predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
     measured = _measured_ground(robot, floor, fitted, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0))
-    verdict = deploy_verdict(result.free, s_before["rms_px"], s_after["rms_px"], structure, _verdict_ground(measured),
-                             predicted,
-                             camera_turn(robot, fitted), limits)  # fmt: skip
+    verdict = deploy_verdict(result.free, errors.summary_before["rms_px"], errors.summary_after["rms_px"], structure,
+                             _verdict_ground(measured), predicted, camera_turn(robot, fitted), limits)  # fmt: skip
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
-    figures = report_figures(
-        robot, obs, sample_by_key, before, after, outliers, after_of_sample, result.covariance
-    )
+    figures = report_figures(robot, obs, sample_by_key, errors, result.covariance)
     out_dir.mkdir(parents=True, exist_ok=True)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
                                             deploy_worse)  # fmt: skip
@@ -361,15 +357,15 @@ def _evaluate(
         "robot_name": robot.config.name,
         "free": result.free,
         "mode": "held-out" if held_out else "cross-validation",
-        "mode_note": mode_note,
+        "mode_note": errors.mode_note,
         "captures": [str(p.resolve()) for p in sources],
-        "folds": None if fold_of is None else int(fold_of.max()) + 1,
+        "folds": errors.folds,
         "tags_used": tags,
         "n_samples": obs.n_samples,
-        "n_outliers": int(outliers.sum()),
+        "n_outliers": int(errors.outliers.sum()),
         "meanings": dict(MEANINGS),
-        "before": s_before,
-        "after": s_after,
+        "before": errors.summary_before,
+        "after": errors.summary_after,
         "ground": _ground_section(robot, truth is not None, ground_rows, measured),
         "verdict": verdict,
         "structure": structure,
@@ -377,7 +373,7 @@ def _evaluate(
         "camera_correction": camera_correction(robot, fitted),
         "parameters": [{k: getattr(p, k) for k in PARAMETER_KEYS} for p in result.parameters],
         "correlated_pairs": result.correlated_pairs,
-        "samples": sample_rows(obs, before, after, outliers, fold_of),
+        "samples": sample_rows(obs, errors),
         "figures": [{"file": f"figures/{name}", "caption": caption} for name, caption in figures[1]],
         "warnings": warnings,
     }

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.evaluate.metrics import ModelErrors
+from wolfcal.evaluate.metrics import HeldOutErrors
 from wolfcal.evaluate.report import Block, headline_rows
 from wolfcal.observations import Observations
 
@@ -60,15 +60,10 @@ def cross_validation_note(n_folds: int, n_samples: int) -> str:
     )
 
 
-def sample_rows(
-    obs: Observations,
-    before: ModelErrors,
-    after: ModelErrors,
-    outliers: np.ndarray,
-    fold_of: np.ndarray | None,
-) -> list[dict]:
+def sample_rows(obs: Observations, errors: HeldOutErrors) -> list[dict]:
     """One record per sample for metrics.json: errors in px (4 decimals) and tag-grid distance in mm (3 decimals,
     None without a fully seen tag)."""
+    before, after, outliers, fold_of = errors.before, errors.after, errors.outliers, errors.fold_of
 
     def mm(v: float) -> float | None:
         return round(float(v) * 1000, 3) if np.isfinite(v) else None

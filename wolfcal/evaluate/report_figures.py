@@ -12,7 +12,7 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate import figures as fig
-from wolfcal.evaluate.metrics import ModelErrors
+from wolfcal.evaluate.metrics import HeldOutErrors, ModelErrors
 from wolfcal.io.samples import Sample
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.projection import tag_corner_pixels, tag_corner_table
@@ -68,22 +68,20 @@ def report_figures(
     robot: Robot,
     obs: Observations,
     samples: dict[tuple[str, int], Sample],
-    before: ModelErrors,
-    after: ModelErrors,
-    outliers: np.ndarray,
-    after_of_sample: list[Corrections],
+    errors: HeldOutErrors,
     covariance: dict | None,
 ) -> Figures:
     """All pictures of the report: PNG bytes by file name, and (file name, caption) in report order.
 
-    samples: the captured samples by (source, stamp_ns), for their images; after_of_sample: the calibrated model
-    that judges each sample; covariance: the fit's {"names", "matrix"} (SI units), or None.
+    samples: the captured samples by (source, stamp_ns), for their images; errors: before and after on the held-out
+    samples (with the calibrated model that judges each); covariance: the fit's {"names", "matrix"} (SI units), or
+    None.
     """
     pngs: dict[str, bytes] = {}
     captions: list[tuple[str, str]] = []
     for part in (
-        _error_charts(obs, before, after, outliers),
-        _overlays(robot, obs, samples, before, after, outliers, after_of_sample),
+        _error_charts(obs, errors),
+        _overlays(robot, obs, samples, errors),
         _correlation(covariance),
     ):
         pngs.update(part[0])
@@ -91,8 +89,9 @@ def report_figures(
     return pngs, captions
 
 
-def _error_charts(obs: Observations, before: ModelErrors, after: ModelErrors, outliers: np.ndarray) -> Figures:
+def _error_charts(obs: Observations, errors: HeldOutErrors) -> Figures:
     """Histogram of the inlier corner errors and the per-sample RMS bars [px]."""
+    before, after, outliers = errors.before, errors.after, errors.outliers
     inlier_corners = ~outliers[obs.sample_index]
     pngs = {
         "corner_histogram.png": fig.histogram_png(
@@ -127,15 +126,10 @@ def _error_charts(obs: Observations, before: ModelErrors, after: ModelErrors, ou
 
 
 def _overlays(
-    robot: Robot,
-    obs: Observations,
-    samples: dict[tuple[str, int], Sample],
-    before: ModelErrors,
-    after: ModelErrors,
-    outliers: np.ndarray,
-    after_of_sample: list[Corrections],
+    robot: Robot, obs: Observations, samples: dict[tuple[str, int], Sample], errors: HeldOutErrors
 ) -> Figures:
     """Camera images of the `overlay_samples` with detected corners and both models' corners and skeleton."""
+    before, after, outliers = errors.before, errors.after, errors.outliers
     pngs: dict[str, bytes] = {}
     captions: list[tuple[str, str]] = []
     for k, s in enumerate(overlay_samples(outliers, after)):
@@ -143,7 +137,7 @@ def _overlays(
         if sample is None:
             continue
         name = f"overlay_{k + 1}.png"
-        models = {"before": Corrections(), "after": after_of_sample[s]}
+        models = {"before": Corrections(), "after": errors.after_of_sample[s]}
         pngs[name] = fig.overlay_png(
             sample.images[HEAD_CAMERA].decode(),
             obs.uv[obs.sample_index == s],

@@ -206,7 +206,8 @@ def draw_candidates(
     robot: Robot, camera: PlanCamera, tag_ids: list[int], n: int, rng: np.random.Generator,
     collisions: CollisionModel, margin: float = 0.1,
 ) -> Candidates:
-    """Up to n candidate poses (see the module docstring); a clear error when none shows the tags."""
+    """Up to n candidate poses (see the module docstring), the joints drawn within their limits shrunk by `margin`
+    [rad]; a clear error when none shows the tags."""
     joints = plan_joints(robot, camera, tag_ids)
     lo, hi = joint_bounds(robot, joints, margin)
     aim = [robot.model.column(j) for j in viewer_joints(robot, camera, joints)]

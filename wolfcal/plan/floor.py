@@ -112,7 +112,8 @@ def floor_views(robot: Robot, camera: PlanCamera, q: np.ndarray, places: dict[in
 
 def draw_floor_candidates(robot: Robot, camera: PlanCamera, places: dict[int, np.ndarray], n: int,
                           rng: np.random.Generator, collisions: CollisionModel, margin: float = 0.1) -> Candidates:
-    """Up to n standing poses with the head aimed at random, each showing a floor tag (module docstring)."""
+    """Up to n standing poses with the head aimed at random (pan/tilt within their limits shrunk by `margin` [rad]),
+    each showing a floor tag (module docstring)."""
     joints = aim_joints(robot)
     lo, hi = joint_bounds(robot, joints, margin)
     standing = standing_pose(robot)
@@ -169,11 +170,9 @@ class FloorPlanModel:
         T_camera_tag = _floor_tags_seen(self.robot, q, self.places)[2]
         s, t = np.nonzero(visible)
         corners = np.stack([tag_corners(floor.tag(i).size) for i in floor.tag_ids])[t]  # (V, 4, 3)
-        return Observations(
-            joint_names=list(self.robot.joint_names), q_measured=q, stamps_ns=np.arange(len(q), dtype=np.int64),
-            sources=["plan"] * len(q), camera=self.camera.model, sample_index=np.repeat(s, 4),
-            tag_ids=np.repeat(np.array(floor.tag_ids)[t], 4), corner_index=np.tile(np.arange(4), len(s)),
-            uv=tag_corner_pixels(self.camera.model, T_camera_tag[s, t], corners).reshape(-1, 2),
+        return Observations.of_views(
+            list(self.robot.joint_names), q, np.arange(len(q), dtype=np.int64), ["plan"] * len(q), self.camera.model,
+            s, np.array(floor.tag_ids)[t], tag_corner_pixels(self.camera.model, T_camera_tag[s, t], corners),
         )  # fmt: skip
 
     def chain(self) -> ParameterSet:

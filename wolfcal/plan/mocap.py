@@ -53,7 +53,8 @@ def marker_joints(robot: Robot, names: list[str]) -> list[str]:
 
 def draw_mocap_candidates(robot: Robot, names: list[str], n: int, rng: np.random.Generator,
                           collisions: CollisionModel, margin: float = 0.1) -> Candidates:  # fmt: skip
-    """Up to n collision-free poses of the markers' joints; visible (N, K): every marker of `names` (see above)."""
+    """Up to n collision-free poses of the markers' joints (within their limits shrunk by `margin` [rad]); visible
+    (N, K): every marker of `names` (see above)."""
     joints = marker_joints(robot, names)
     if not joints:
         raise WolfcalError(f"{robot.config.path}: no movable joint between {robot.config.base_link} and the markers' "

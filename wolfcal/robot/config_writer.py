@@ -16,8 +16,6 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.yamlfile import dump_yaml, read_yaml
 
-_PATH_KEYS = (("urdf",), ("camera", "intrinsics"))
-
 
 def _absolute(base: Path, value: str) -> str:
     path = Path(value).expanduser()

@@ -4,8 +4,10 @@ The robot stands at the true joint angles of its config's stances (`floor.stance
 samples spread evenly over them, one stance after the other); in each the soles of the true model lie on one plane,
 the floor, with the feet where they were; its encoders report those angles minus the true offsets. Floor tags lie
 face up at random places `distance` m ahead (within +-35 deg of the floor's x axis) with random yaw. Head pan/tilt
-(the two joints before the camera) are drawn so that each sample sees at least one floor tag whole, at least
-`min_edge_px` wide.
+(the two joints before the camera) are drawn so that each sample sees at least one floor tag whole, `margin_px`
+inside the image, each edge at least `min_edge_px` long: the project's one rule of a view
+(`wolfcal.projection.visible_in_view`) with no angle limit, as pose planning takes it (`wolfcal.plan.floor`), since
+a tag on the floor is seen at a grazing angle.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import tag_corners, transform_points
 from wolfcal.observations import Observations
+from wolfcal.projection import tag_corner_pixels, visible_in_view
 from wolfcal.robot.aim import aim_joints
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor, floor_tag_poses, stance_poses
@@ -44,7 +47,7 @@ def floor_corners(robot: Robot, places: dict[int, np.ndarray]) -> dict[int, np.n
 class FloorViews:
     places: dict[int, np.ndarray]  # true (x, y, yaw) of each floor tag in the true floor frame [m, rad]
     q_true: np.ndarray  # (S, J) [rad]
-    visible: np.ndarray  # (S, T) bool over config floor.tag_ids: the tag is whole in view, wide enough
+    visible: np.ndarray  # (S, T) bool over config floor.tag_ids: `visible_in_view` (module docstring)
     uv: np.ndarray  # (S, T, 4, 2) true corner pixels
     T_camera_floor: np.ndarray  # (S, 4, 4) true
 
@@ -54,13 +57,13 @@ def floor_views(
     distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
 ) -> FloorViews:
     """Places of the floor tags and n standing poses (the stances one after the other) with head pan/tilt that see
-    at least one of them whole."""
-    ids = robot.config.floor_config().tag_ids
+    at least one of them whole (module docstring); margin and edge in pixels."""
+    floor = robot.config.floor_config()
+    ids = floor.tag_ids
     r = rng.uniform(*distance, len(ids))
     bearing = rng.uniform(-0.6, 0.6, len(ids))
     places = {t: np.array([r[k] * np.cos(bearing[k]), r[k] * np.sin(bearing[k]), rng.uniform(-np.pi, np.pi)])
               for k, t in enumerate(ids)}  # fmt: skip
-    corners = floor_corners(robot, places)
     joints = [robot.model.joints[j] for j in aim_joints(robot)]
     columns = [robot.model.column(j.name) for j in joints]
     stances = stance_poses(robot)
@@ -70,13 +73,11 @@ def floor_views(
         q[:, col] = rng.uniform(max(j.lower, -1.2), min(j.upper, 1.2), len(q))
     T_floor_camera, _ = camera_in_floor(robot, q, Corrections(frames=truth.frames, tags=truth.tags))  # true angles
     T_camera_floor = np.linalg.inv(T_floor_camera)
-    all_corners = np.stack([corners[t] for t in ids])  # (T, 4, 3)
-    p = np.einsum("sij,tcj->stci", T_camera_floor[:, :3, :3], all_corners) + T_camera_floor[:, None, None, :3, 3]
-    uv = camera.project(p.reshape(-1, 3)).reshape(p.shape[:3] + (2,))
-    inside = (uv[..., 0] > margin_px) & (uv[..., 0] < camera.width - margin_px)
-    inside &= (uv[..., 1] > margin_px) & (uv[..., 1] < camera.height - margin_px) & (p[..., 2] > 0.1)
-    edge = np.linalg.norm(uv - np.roll(uv, 1, axis=2), axis=3).min(axis=2)
-    visible = inside.all(axis=2) & np.nan_to_num(edge > min_edge_px)  # (S, T)
+    tag_poses = floor_tag_poses(robot, places)
+    T_camera_tag = T_camera_floor[:, None] @ np.stack([tag_poses[t] for t in ids])[None]  # (S, T, 4, 4)
+    sizes = np.array([floor.tag(t).size for t in ids])
+    visible = visible_in_view(camera, T_camera_tag, sizes, margin_px, min_edge_px, np.pi / 2)  # (S, T)
+    uv = tag_corner_pixels(camera, T_camera_tag, np.stack([tag_corners(s) for s in sizes]))  # (S, T, 4, 2)
     picked = []
     for k, m in enumerate(np.diff(np.linspace(0, n, len(stances) + 1).round().astype(int))):  # n spread evenly
         candidates = np.flatnonzero(visible.any(axis=1) & (stance_of == k))
@@ -100,16 +101,10 @@ def simulate_floor(
     q_true, vis, uv = views.q_true, views.visible, views.uv
     s_idx, t_idx = np.nonzero(vis)
     detected = uv[s_idx, t_idx] + rng.normal(0.0, noise_px, (len(s_idx), 4, 2))
-    obs = Observations(
-        joint_names=list(robot.joint_names),
-        q_measured=encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        stamps_ns=np.arange(len(q_true), dtype=np.int64) + 10**6,
-        sources=[source] * len(q_true),
-        camera=camera,
-        sample_index=np.repeat(s_idx, 4),
-        tag_ids=np.repeat(np.array(ids)[t_idx], 4),
-        corner_index=np.tile(np.arange(4), len(s_idx)),
-        uv=detected.reshape(-1, 2),
+    obs = Observations.of_views(
+        list(robot.joint_names), encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        np.arange(len(q_true), dtype=np.int64) + 10**6, [source] * len(q_true), camera, s_idx, np.array(ids)[t_idx],
+        detected,
     )
     return FloorScene(obs, views.places, q_true)
 

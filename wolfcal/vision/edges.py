@@ -20,6 +20,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from wolfcal.outliers import EDGE_POINT_PX
+
 MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
 # Tags refined in one pass at most: more gain nothing (the per-call cost is shared by 8 already) and hold larger
@@ -125,14 +127,15 @@ def _tangents(d: np.ndarray, off: np.ndarray, good: np.ndarray) -> np.ndarray:
 
     A parabola when the points span more than 8 px (it absorbs the bend of the edge under lens distortion,
     which a line would extrapolate into a bias of ~curvature * span^2 / 12), a line otherwise. Points off the
-    first fit by more than max(0.3 px, 4 median deviations) (dirt, glare, a wrong crossing) are dropped.
+    first fit by more than max(0.3 px, 4 median deviations) (dirt, glare, a wrong crossing) are dropped: the one
+    outlier rule, `wolfcal.outliers.EDGE_POINT_PX`.
     """
     span = np.where(good, d, -np.inf).max(axis=1) - np.where(good, d, np.inf).min(axis=1)
     degree = np.where(span > 8.0, 2, 1)
     coeffs = _fit(d, off, good.astype(float), degree)
     fitted = coeffs[:, :1] + coeffs[:, 1:2] * d + coeffs[:, 2:3] * d * d
     residual = np.abs(np.where(good, off, 0.0) - fitted)
-    limit = np.maximum(0.3, 4.0 * _masked_median(residual, good))
+    limit = EDGE_POINT_PX.limit(_masked_median(residual, good))
     inlier = good & (residual <= limit[:, None])
     count = inlier.sum(axis=1)
     again = (count > degree + 2) & (count < good.sum(axis=1))

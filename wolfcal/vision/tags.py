@@ -6,7 +6,7 @@ printed face. Corners in aruco order: top-left (-s/2, s/2, 0), top-right (s/2, s
 the top-left pixel is (0, 0).
 
 Detection is OpenCV's aruco detector (minDistanceToBorder = 0: the default loses strongly distorted tags near
-the image border); its corners are then refined by `wolfcal.vision.edges.refine_edges` ("edges"): for each
+the image border); its corners are then refined by `wolfcal.vision.edges.refine_tags` ("edges"): for each
 corner, sub-pixel points of the two black-square edges next to it (area method on intensity profiles across
 the edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the
 corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected.
