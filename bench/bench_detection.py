@@ -6,7 +6,9 @@ Run: python bench/bench_detection.py [--views N] [--quick] [--before REV]. Print
    tests/edge_reference.py) and after (vectorised), and the corner error [px] median / 95th percentile of both;
    then the CPU per image, one thread, split into decoding the png, OpenCV's detector and the refinement (in tasks
    of `task_size` images, as the workers run it); with --before REV (a git revision) also the refinement of
-   wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px];
+   wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px]; with
+   --capture FILE (only this part) the same split on a capture's own images, beside the fit's detection of them
+   on all cores;
 2. a capture's worth of png images decoded and detected on all cores: serial, threads, worker processes
    (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker detector on all cores;
 3. the detection cache: first run (hash + detect + write) and second run (hash + read), and the cost of
@@ -165,6 +167,57 @@ def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
         cv2.setNumThreads(threads)
 
 
+def capture_split(path: Path, robot_dir: Path, repeat: int) -> None:
+    """Per-image CPU [ms] on a capture's own images: one thread, decode + OpenCV's detector (wolfcal's settings and
+    the bare default) + refinement, beside the fit's detection as it runs (`detect_encoded`, threads on all
+    cores, tasks of `task_size`): what the scheduling adds is the difference."""
+    from wolfcal.fit.pipeline import load_samples
+    from wolfcal.io.samples import encoded_images
+    from wolfcal.observations import HEAD_CAMERA
+    from wolfcal.robot.robot import load_robot
+
+    robot = load_robot(robot_dir)
+    samples, _ = load_samples(robot, [path], None)
+    data = list(encoded_images(s.images[HEAD_CAMERA] for s in samples if HEAD_CAMERA in s.images))
+    families: dict[str, set[int]] = {}
+    floor_tags = robot.config.floor.tags if robot.config.floor is not None else ()
+    for tag in [*robot.config.tags, *floor_tags]:
+        families.setdefault(tag.family, set()).add(tag.id)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        grays = [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data]
+        found = {f: [_found(g, f, ids, "edges") for g in grays] for f, ids in families.items()}
+        size = task_size(data[0], processes=False)
+        bare = {f: cv2.aruco.ArucoDetector(tags._dictionary(f)) for f in families}
+        functions = {
+            "decode": lambda: [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data],
+            "detector": lambda: [_found(g, f, ids, "edges") for g in grays for f, ids in families.items()],
+            "bare detector": lambda: [bare[f].detectMarkers(g) for g in grays for f in families],
+            "refinement": lambda: [refine_found(grays[i : i + size], found[f][i : i + size], f)
+                                   for f in families for i in range(0, len(grays), size)],  # fmt: skip
+        }
+
+        def as_in_the_fit(workers: int) -> None:  # OpenCV's own threads as the fit leaves them
+            cv2.setNumThreads(threads)
+            detect_encoded(data, families, workers=workers)
+            cv2.setNumThreads(1)
+
+        functions["fit, 1 thread"] = lambda: as_in_the_fit(1)
+        functions["fit"] = lambda: as_in_the_fit(cpu_count())
+        t = {k: 1e3 * v / len(data) for k, v in interleaved(functions, repeat, time.process_time).items()}
+    finally:
+        cv2.setNumThreads(threads)
+    n_tags = sum(len(x) for per in found.values() for x in per) / len(data)
+    total = t["decode"] + t["detector"] + t["refinement"]
+    height, width = grays[0].shape
+    print(f"  {path.name}: {len(data)} images at {width}x{height}, {n_tags:.2f} tags/image, {size} per task: decode "
+          f"{t['decode']:.2f} + detector {t['detector']:.2f} (bare default {t['bare detector']:.2f}) + refinement "
+          f"{t['refinement']:.2f} = {total:.2f} ms CPU/image on one thread; the fit's detection on one thread "
+          f"{t['fit, 1 thread']:.2f} ({t['fit, 1 thread'] / total:.2f}x), on {cpu_count()} threads {t['fit']:.2f} "
+          f"({t['fit'] / total:.2f}x)")
+
+
 def _floor_one(data: bytes) -> None:
     gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     _detector(FAMILY, "none").detectMarkers(_to_gray(gray))
@@ -297,10 +350,19 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer views and repetitions")
     parser.add_argument("--before", help="git revision whose refinement (wolfcal/vision/edges.py) to time beside")
     parser.add_argument("--only-split", action="store_true", help="only part 1b (the CPU split)")
+    parser.add_argument("--capture", type=Path, action="append", default=[],
+                        help="only the CPU split on this capture's head-camera images (repeatable), beside the "
+                             "fit's detection of them on all cores")  # fmt: skip
+    parser.add_argument("--robot", type=Path, default=ROOT / "configs" / "wolfgang", help="robot config of --capture")
     args = parser.parse_args()
     views = 12 if args.quick else args.views
     repeat = 1 if args.quick else 3
-    print(f"{cpu_count()} cores; OpenCV {cv2.__version__}")
+    print(f"{cpu_count()} cores; OpenCV {cv2.__version__}; load average {os.getloadavg()[0]:.1f}")
+    if args.capture:
+        print("\n1c. CPU per image of captures [ms CPU/image]: one thread split, and the fit's detection on all cores")
+        for path in args.capture:
+            capture_split(path, args.robot, 3 if args.quick else 5)
+        return
     by_camera = {"512x384": render_views(BINNED, views, seed=11), "2048x1536": render_views(FULL, views, seed=11)}
     if args.only_split:
         cpu_split(by_camera, args.before, 5 if args.quick else 9)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -18,7 +19,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from wolfcal.atomic import output_set, write_text_atomic
+from wolfcal.atomic import atomic_output, output_set, write_text_atomic
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.cli import app
@@ -246,6 +247,21 @@ def test_an_output_set_lands_whole_or_not_at_all(tmp_path):
         assert (tmp_path / "a.txt").read_text() == "old a"  # not before the set is complete
     assert (tmp_path / "a.txt").read_text() == "new a"
 
+
+
+def test_a_scratch_file_is_no_output_of_the_set(tmp_path, monkeypatch):
+    """A cache file (scratch) lands at once, even inside an output set that then fails, and waits for no fsync."""
+    synced: list[int] = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: synced.append(fd) or real_fsync(fd))
+    with pytest.raises(RuntimeError), output_set():
+        write_text_atomic(tmp_path / "result.txt", "output")
+        with atomic_output(tmp_path / "entry.bin", scratch=True) as handle:
+            handle.write(b"cached")
+        assert (tmp_path / "entry.bin").read_bytes() == b"cached"
+        raise RuntimeError("failed before the set was complete")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["entry.bin"]
+    assert len(synced) == 1  # the output's own fsync, none for the scratch file
 
 def test_intrinsics_board_and_tags_refuse_existing_outputs(tmp_path):
     (tmp_path / "camera.yaml").write_text("earlier calibration")

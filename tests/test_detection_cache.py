@@ -159,13 +159,13 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
     path, _ = capture
     true_digest = cache.content_digest(path)
-    assert cache.file_digest(path) == true_digest
-    assert list(folder.glob("*.digest.json")) == []  # just written: too recent to remember
+    assert cache.hash_file(path) == true_digest
+    assert cache.remembered_digest(path) == (None, True)  # just written: too recent to trust, but hashed before
     monkeypatch.setattr(cache, "RACY_NS", 0)
-    assert cache.file_digest(path) == true_digest
+    assert cache.remembered_digest(path) == (true_digest, True)
     (memo,) = folder.glob("*.digest.json")
     memo.write_text(memo.read_text().replace(true_digest, "f" * 64))
-    assert cache.file_digest(path) == "f" * 64  # remembered, not hashed again
+    assert cache.remembered_digest(path) == ("f" * 64, True)  # remembered: not hashed again
     info = path.stat()
     data = bytearray(path.read_bytes())
     data[-1] ^= 0xFF
@@ -173,8 +173,30 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     replacement.write_bytes(bytes(data))
     os.utime(replacement, ns=(info.st_atime_ns, info.st_mtime_ns))
     replacement.replace(path)  # re-recorded: same name, size and mtime
-    assert cache.file_digest(path) == cache.content_digest(path) != true_digest
+    assert cache.remembered_digest(path) == (None, True)  # a new inode: hashed again
+    assert cache.hash_file(path) == cache.content_digest(path) != true_digest
 
+
+
+def test_a_first_run_hashes_beside_the_detection_and_a_copied_capture_still_finds_its_entry(
+    capture, images, tmp_path, monkeypatch
+):
+    """A path never hashed is hashed while its images are detected: the same detections and entry as hashing
+    first; a copy of a cached capture (a new path, the same content) is answered by the entry, whatever its images
+    would have given (reversed here, so a fresh detection would show)."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
+    path, stamps = capture
+    settings = DetectorSettings.of(FAMILIES)
+    assert cache.remembered_digest(path) == (None, False)
+    assert_same(cached_detect(path, "head", stamps, iter(images), settings), fresh(images))
+    assert cache.remembered_digest(path)[1] and len(entries(folder)) == 1
+    assert_same(cached_detect(path, "head", stamps, never(0), settings), fresh(images))
+    copy = tmp_path / "moved" / "capture.mcap"
+    copy.parent.mkdir()
+    copy.write_bytes(path.read_bytes())
+    assert_same(cached_detect(copy, "head", stamps, iter(images[::-1]), settings), fresh(images))
+    assert len(entries(folder)) == 1
 
 def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))
@@ -207,6 +229,12 @@ def test_foreign_or_damaged_entries_are_not_used(capture, images, tmp_path, monk
     entry.write_bytes(entry.read_bytes()[:100])  # torn
     assert_same(cached_detect(path, "head", stamps, iter(images[::-1]), settings), fresh(images[::-1]))
     assert_same(cached_detect(path, "head", stamps, never(0), settings), fresh(images[::-1]))  # rewritten whole
+    # what a crash can leave of a file written without fsync: empty, or its blocks zeroed
+    whole = entry.read_bytes()
+    for left in (b"", whole[:-600] + bytes(600), whole[:200] + bytes(len(whole) - 400) + whole[-200:]):
+        entry.write_bytes(left)
+        assert_same(cached_detect(path, "head", stamps, iter(images), settings), fresh(images))
+        entry.write_bytes(whole)
 
 
 def test_no_cache_neither_reads_nor_writes(capture, images, tmp_path, monkeypatch):

@@ -1,5 +1,10 @@
 """Atomic file output: write to a temporary file in the target folder, fsync, rename over the target.
 
+Scratch files (`atomic_output(path, scratch=True)`: cache entries, which only save time) are renamed without
+fsync and at once, never staged in an output set: an fsync of the file and its folder waits for the disk (10-400 ms
+each on a shared machine, more than the rest of a cached fit), and a crash may then leave a scratch file empty or
+torn, which its reader must detect and ignore (`wolfcal.vision.cache` checks every entry whole and keyed).
+
 `output_set()` makes the outputs of one command a set: inside it, every atomic write (and `replace_file`,
 `remove_output`) is staged as a temporary file beside its target, and nothing replaces or removes a target
 until the block ends without an exception; then all staged files are renamed into place together. A command
@@ -92,10 +97,11 @@ def remove_output(path: Path) -> bool:
 
 
 @contextmanager
-def atomic_output(path: str | Path) -> Iterator[BinaryIO]:
+def atomic_output(path: str | Path, scratch: bool = False) -> Iterator[BinaryIO]:
     """A binary file that replaces `path` only when the block ends without an exception (and, inside
     `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one.
-    Mode 0666 & ~umask, like a plain open()."""
+    Mode 0666 & ~umask, like a plain open(). `scratch`: a cache file, not fsynced and renamed at once (module
+    docstring)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -103,10 +109,14 @@ def atomic_output(path: str | Path) -> Iterator[BinaryIO]:
     try:
         with os.fdopen(fd, "wb") as handle:
             yield handle
-            handle.flush()
-            os.fsync(handle.fileno())
+            if not scratch:
+                handle.flush()
+                os.fsync(handle.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
-        replace_file(tmp, path)
+        if scratch:
+            os.replace(tmp, path)
+        else:
+            replace_file(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -23,10 +23,11 @@ from __future__ import annotations
 
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping, Sized
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
+from typing import Any
 
 import numpy as np
 
@@ -129,7 +130,7 @@ def iter_detect_encoded(
     workers: int | None = None,
     batch: int | None = None,
     processes: bool = False,
-) -> Iterator[Detections | None]:
+) -> Generator[Detections | None, None, None]:
     """Detections of each encoded image in input order (None for an image that cannot be decoded).
 
     Tasks of `batch` images (default `task_size`); at most 2 * `workers` tasks are read ahead of the results.
@@ -170,7 +171,13 @@ def iter_detect_encoded(
             pool.shutdown()
 
 
-def detect_encoded(
+def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
+    """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
+    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them; `options`: those of `iter_detect_checked`."""
+    return list(iter_detect_checked(images, families, **options))
+
+
+def iter_detect_checked(
     images: Iterable[bytes],
     families: Families,
     refine: str = "edges",
@@ -179,21 +186,23 @@ def detect_encoded(
     total: int | None = None,
     labels: Callable[[int], str] | None = None,
     processes: bool = False,
-) -> list[Detections]:
-    """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
-    {tag id: (4, 2) corners [px]}, as `detect_tags` gives them (`processes`: see the module docstring).
+) -> Generator[Detections, None, None]:
+    """`detect_encoded` as a stream, for a caller that may stop early (close the generator: the tasks under way
+    are cancelled or finished, and no more images are read). `processes`: see the module docstring.
 
-    `progress(done, total)` after each image (`total` as given, e.g. len(images)); an image that cannot be
-    decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
+    `progress(done, total)` after each image (`total` as given, default len(images) if it has one); an image that
+    cannot be decoded is a WolfcalError that names it by `labels(index)` (default "image <index>").
     """
-    if total is None and hasattr(images, "__len__"):
-        total = len(images)  # type: ignore[arg-type]
-    found: list[Detections] = []
-    for index, detections in enumerate(iter_detect_encoded(images, families, refine, workers, processes=processes)):
-        if detections is None:
-            name = labels(index) if labels else f"image {index}"
-            raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
-        found.append(detections)
-        if progress:
-            progress(index + 1, total)
-    return found
+    if total is None and isinstance(images, Sized):
+        total = len(images)
+    stream = iter_detect_encoded(images, families, refine, workers, processes=processes)
+    try:
+        for index, detections in enumerate(stream):
+            if detections is None:
+                name = labels(index) if labels else f"image {index}"
+                raise WolfcalError(f"{name}: the image cannot be decoded (not a complete png or jpeg)")
+            yield detections
+            if progress:
+                progress(index + 1, total)
+    finally:
+        stream.close()

@@ -10,11 +10,16 @@ are not enough: an edited or re-recorded file can keep both), the camera name, a
 (families and ids, refinement, wolfcal's detector version, OpenCV's version). An entry stores its full key
 and the image stamps it was made for; it is used only if both match, so a stale or foreign entry (another
 file, other settings, another reader that kept other frames) is detected again and overwritten. Entries are
-written atomically (temporary file, rename). Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
-so a file's digest is remembered beside the entries (`file_digest`) with the file's identity: device, inode, size,
-modification and status-change times [ns]. Any write to the file changes its status-change time (the kernel sets
-it; no tool can set it back), so the file is hashed again; and, as git does for its index, a digest taken less than
-2 s after the file's last change is not trusted (a write within the same clock tick could keep every time).
+written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`: the two fsyncs of each
+of a first run's two writes waited 0.1-0.4 s for a shared disk); one that a crash left empty or torn fails
+`_load`'s checks and is detected again. Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
+so a file's digest is remembered beside the entries (`hash_file`, `remembered_digest`) with the file's identity:
+device, inode, size, modification and status-change times [ns]. Any write to the file changes its status-change
+time (the kernel sets it; no tool can set it back), so the file is hashed again; and, as git does for its index, a
+digest taken less than 2 s after the file's last change is not trusted (a write within the same clock tick could keep
+every time).
+A path never hashed before (a first run) is hashed on a thread beside the detection instead of before it; a
+path hashed before (an entry is likely) is hashed first, so a cache hit reads no image.
 """
 
 from __future__ import annotations
@@ -22,9 +27,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import threading
 import time
 import zipfile
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -33,13 +40,13 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.atomic import atomic_output
-from wolfcal.vision.batch import Detections, detect_encoded
+from wolfcal.vision.batch import Detections, iter_detect_checked
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners)
 DETECTOR_VERSION = 5
 FORMAT = 1  # entry layout
-RACY_NS = 2_000_000_000  # a digest taken this soon after the file's last change is not remembered [ns]
+RACY_NS = 2_000_000_000  # a digest taken this soon after the file's last change is not trusted [ns]
 _enabled: ContextVar[bool] = ContextVar("wolfcal_detection_cache", default=True)
 
 
@@ -87,34 +94,54 @@ def cache_enabled(enabled: bool):
         _enabled.reset(token)
 
 
-def content_digest(path: Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file's whole content."""
+class _Stopped(Exception):
+    """A hash given up (the detection beside it ended first, or failed)."""
+
+
+def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | None = None) -> str:
+    """SHA-256 hex digest of a file's whole content; _Stopped as soon as `stop` is set."""
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         while block := handle.read(chunk):
+            if stop is not None and stop.is_set():
+                raise _Stopped
             digest.update(block)
     return digest.hexdigest()
 
 
-def file_digest(path: Path) -> str:
-    """`content_digest` of a file, remembered in the cache folder by the file's identity (module docstring)."""
-    before = os.stat(path)
-    identity = [before.st_dev, before.st_ino, before.st_size, before.st_mtime_ns, before.st_ctime_ns]
-    memo = cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
+def _identity_and_memo(path: Path) -> tuple[list[int], Path]:
+    info = os.stat(path)
+    identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
+    return identity, cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
+
+
+def remembered_digest(path: Path) -> tuple[str | None, bool]:
+    """(the file's digest as remembered for its present identity, or None: never hashed, changed since, or hashed
+    too soon after a change; whether this path was hashed before at all); reads no more than the memo."""
+    identity, memo = _identity_and_memo(path)
     try:
         saved = json.loads(memo.read_text())
-        if saved["identity"] == identity and saved["hashed_ns"] - before.st_ctime_ns >= RACY_NS:
-            return str(saved["sha256"])
-    except (OSError, ValueError, KeyError, TypeError):  # none yet, torn or foreign
+    except (OSError, ValueError):  # none yet, or torn
+        return None, False
+    try:
+        if saved["identity"] == identity and saved["hashed_ns"] - identity[4] >= RACY_NS:
+            return str(saved["sha256"]), True
+    except (KeyError, TypeError):  # foreign
         pass
+    return None, True
+
+
+def hash_file(path: Path, stop: threading.Event | None = None) -> str:
+    """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (trusted only if
+    the file changed RACY_NS or more before it was hashed)."""
+    identity, memo = _identity_and_memo(path)
     hashed_ns = time.time_ns()
-    digest = content_digest(path)
-    if hashed_ns - before.st_ctime_ns >= RACY_NS:
-        try:
-            with atomic_output(memo) as handle:
-                handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
-        except OSError:
-            pass
+    digest = content_digest(path, stop=stop)
+    try:  # remembered also when too recent to trust: `remembered_digest` then tells the path was hashed before
+        with atomic_output(memo, scratch=True) as handle:
+            handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
+    except OSError:
+        pass
     return digest
 
 
@@ -148,7 +175,7 @@ def _save(path: Path, key: str, stamps: np.ndarray, detections: list[Detections]
     ids = [tag for found in detections for tag in sorted(found)]
     corners = [found[tag] for found in detections for tag in sorted(found)]
     try:
-        with atomic_output(path) as handle:
+        with atomic_output(path, scratch=True) as handle:
             np.savez(
                 handle,
                 key=np.array(key),
@@ -178,25 +205,96 @@ def cached_detect(
     (`workers` processes, default one per core; `labels(i)` names image i in errors).
     """
     stamps_array = np.asarray(stamps, dtype=np.int64)
-    use = _enabled.get() and bool(str(path)) and Path(path).is_file()  # samples made in memory have no file
-    if use:
-        try:
-            key = _entry_key(file_digest(Path(path)), camera_name, settings)
-        except OSError:
-            use = False
-    if use:
-        entry = _entry_path(key)
-        found = _load(entry, key, stamps_array)
-        if found is not None:
-            if progress:
-                progress(len(found), len(found))
-            return found
-    found = detect_encoded(images, settings.family_map(), settings.refine, workers, progress, len(stamps), labels)
+
+    def detect() -> Generator[Detections, None, None]:
+        return iter_detect_checked(images, settings.family_map(), settings.refine, workers, progress, len(stamps),
+                                   labels)  # fmt: skip
+
+    if not (_enabled.get() and bool(str(path)) and Path(path).is_file()):  # samples made in memory have no file
+        return _all(detect(), stamps)
+    try:
+        digest, seen = remembered_digest(Path(path))
+    except OSError:
+        return _all(detect(), stamps)
+    if not seen:  # a path never hashed (a first run): hashed beside the detection
+        return _detect_while_hashing(Path(path), camera_name, stamps_array, detect, settings, progress)
+    try:
+        digest = digest or hash_file(Path(path))  # changed since, or too recent to trust: hashed first
+    except OSError:
+        return _all(detect(), stamps)
+    key = _entry_key(digest, camera_name, settings)
+    found = _load(_entry_path(key), key, stamps_array)
+    if found is not None:
+        if progress:
+            progress(len(found), len(found))
+        return found
+    found = _all(detect(), stamps)
+    _save(_entry_path(key), key, stamps_array, found)
+    return found
+
+
+def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> list[Detections]:
+    """The detections as a list, one per stamp."""
+    found = list(detections)
     if len(found) != len(stamps):
         raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
-    if use:
-        _save(entry, key, stamps_array, found)
     return found
+
+
+def _detect_while_hashing(
+    path: Path,
+    camera_name: str,
+    stamps: np.ndarray,
+    detect: Callable[[], Generator[Detections, None, None]],
+    settings: DetectorSettings,
+    progress: Callable[[int, int | None], None] | None,
+) -> list[Detections]:
+    """Detections of a file's images (`detect()`) with the file hashed meanwhile on a thread of its own (hashlib
+    and the reads release the interpreter lock), so the hash (0.05-0.1 s per 70 MB, more when the file is not in
+    the page cache) no longer waits before the detection; then saved. Should the digest find a whole entry (a
+    copied or moved file), detection stops there and the entry answers (or after the last image, if the hash ends
+    later: the same answer as hashing first). A file that cannot be hashed: no cache."""
+    stop = threading.Event()
+    with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
+        hashing = hasher.submit(hash_file, path, stop)
+        looked = False
+        found: list[Detections] = []
+        stream = detect()
+        try:
+            for detections in stream:
+                found.append(detections)
+                if not looked and hashing.done():
+                    looked = True
+                    cached = _entry_of(hashing, camera_name, settings, stamps)
+                    if cached is not None:
+                        if progress:
+                            progress(len(cached), len(cached))
+                        return cached
+            found = _all(found, stamps)
+        except BaseException:  # an undecodable image, Ctrl-C: the hash of a long recording is not waited for
+            stop.set()
+            raise
+        finally:
+            stream.close()
+        if not looked and (cached := _entry_of(hashing, camera_name, settings, stamps)) is not None:
+            return cached  # the hash ended after the last image: its entry still answers, as it would have first
+    try:
+        key = _entry_key(hashing.result(), camera_name, settings)
+    except OSError:
+        return found
+    _save(_entry_path(key), key, stamps, found)
+    return found
+
+
+def _entry_of(
+    hashing: Future, camera_name: str, settings: DetectorSettings, stamps: np.ndarray
+) -> list[Detections] | None:
+    """The whole entry for the finished hash's digest (None without one, or if the file could not be read)."""
+    try:
+        key = _entry_key(hashing.result(), camera_name, settings)
+    except OSError:
+        return None
+    return _load(_entry_path(key), key, stamps)
 
 
 def detect_by_source(
