@@ -42,7 +42,7 @@ from wolfcal.encoders import encoder_readings  # noqa: E402
 from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
 from wolfcal.external_view import external_tag_poses  # noqa: E402
 from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
-from wolfcal.geometry import invert_transform, transform_from_xyz_rpy  # noqa: E402
+from wolfcal.geometry import invert_transform, tag_corners, transform_from_xyz_rpy  # noqa: E402
 from wolfcal.markers import MarkerObservations  # noqa: E402
 from wolfcal.observations import HEAD_CAMERA, Observations  # noqa: E402
 from wolfcal.plan.candidates import plan_camera  # noqa: E402
@@ -59,7 +59,6 @@ from wolfcal.robot.robot import load_robot  # noqa: E402
 from wolfcal.sim.mocap_scene import MocapNoise, measure, true_marker_positions  # noqa: E402
 from wolfcal.sim.simulate import offset_joints  # noqa: E402
 from wolfcal.sim.truth import TruthSpec, random_truth  # noqa: E402
-from wolfcal.vision.tags import tag_corners  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 SCENARIOS = {"leg": ("head", "leg", "all"), "head_camera": ("head", "head_camera", "head"),

@@ -20,9 +20,9 @@ import cv2
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
-from wolfcal.geometry import exp_so3, make_transform, transform_points
+from wolfcal.geometry import exp_so3, make_transform, tag_corners, transform_points
 from wolfcal.vision.render import PlanarTarget, render_targets
-from wolfcal.vision.tags import REFINEMENTS, detect_tags, tag_corners, tag_texture, tag_texture_width
+from wolfcal.vision.tags import REFINEMENTS, detect_tags, tag_texture, tag_texture_width
 
 FAMILY, SIZE = "tag36h11", 0.08
 FULL = CameraModel(

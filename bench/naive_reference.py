@@ -11,12 +11,11 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from wolfcal.geometry import axis_angle_matrix, invert_transform, transform_from_twist_params
+from wolfcal.geometry import axis_angle_matrix, invert_transform, tag_corners, transform_from_twist_params
 from wolfcal.observations import Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 
 def link_pose(robot: Robot, q: dict[str, float], link: str, corrections: Corrections) -> np.ndarray:

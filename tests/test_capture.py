@@ -29,6 +29,7 @@ from wolfcal.capture.gating import GateSettings, StillnessWindow, sharpness, why
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.capture.poses import load_poses
 from wolfcal.errors import WolfcalError
+from wolfcal.geometry import tag_corners
 from wolfcal.hardware.bus import BusError, DynamixelBus, JointState, rad_to_ticks, ticks_to_rad
 from wolfcal.hardware.camera import CameraError
 from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config, state_paths
@@ -38,7 +39,7 @@ from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.vision.observe import detect_observations
-from wolfcal.vision.tags import detect_tags, tag_corners, tag_texture
+from wolfcal.vision.tags import detect_tags, tag_texture
 
 WAIT_S = 60.0  # generous: tests must pass on a busy machine
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,6 +18,7 @@ from wolfcal.cli import app
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_tag_poses
+from wolfcal.geometry import tag_corners
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, group_by_stamp
@@ -29,7 +30,6 @@ from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.faulty import rewrite_capture, with_camera_info, with_damaged_image
 from wolfcal.vision.observe import detect_observations
-from wolfcal.vision.tags import tag_corners
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 T0 = 1_700_000_000_000_000_000  # [ns]

@@ -8,9 +8,9 @@ import pytest
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import exp_so3, make_transform, transform_points
+from wolfcal.geometry import exp_so3, make_transform, tag_corners, transform_points
 from wolfcal.vision.render import PlanarTarget, motion_blur, render_targets
-from wolfcal.vision.tags import FAMILIES, detect_tags, tag_corners, tag_texture, tag_texture_width
+from wolfcal.vision.tags import FAMILIES, detect_tags, tag_texture, tag_texture_width
 
 SIZE = 0.08
 CAMERA = CameraModel(

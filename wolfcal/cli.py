@@ -3,21 +3,15 @@
 from __future__ import annotations
 
 import functools
-import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import typer
 
+import wolfcal.blas_threads  # noqa: F401  (first of wolfcal's: one BLAS thread, set before numpy loads)
 from wolfcal.config import default_robot
 from wolfcal.errors import WolfcalError
-
-# The fit's matrices are tall and thin (thousands of rows, tens of columns): BLAS threads only contend, and with
-# another busy process on a 2-core machine a multi-threaded product became 20x slower (measured). Parallel work
-# (tag detection) uses processes. A user's own setting is kept. (Set before anything imports numpy.)
-for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_variable, "1")
 
 app = typer.Typer(
     help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.",

@@ -17,11 +17,10 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import invert_transform, transform_points
+from wolfcal.geometry import invert_transform, tag_corners, transform_points
 from wolfcal.projection import tag_corner_pixels, visible_in_view
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 MAX_ANGLE_RAD = np.deg2rad(55.0)
 SEPARATION = 0.3  # share of a tag's image size kept free around it

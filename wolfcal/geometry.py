@@ -152,3 +152,10 @@ def rigid_registration(p_b: np.ndarray, p_a: np.ndarray) -> np.ndarray:
     T[:3, :3] = U @ D @ Vt
     T[:3, 3] = c_a - T[:3, :3] @ c_b
     return T
+
+
+def tag_corners(size: float) -> np.ndarray:
+    """(4, 3) corners of a tag with black-square edge `size` [m] in the tag frame, aruco order (here, not in
+    `wolfcal.vision.tags`, so the fit's geometry does not load OpenCV)."""
+    h = size / 2.0
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])

@@ -29,26 +29,38 @@ def release_freed_memory() -> None:
         trim(0)
 
 
-M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
-MMAP_THRESHOLD = 128 * 1024  # [bytes] glibc's initial value
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameter numbers
+SOLVE_MMAP_THRESHOLD = 1024 * 1024  # [bytes] blocks from this size up get their own mapping during the solve
 MMAP_THRESHOLD_MAX = 32 * 1024 * 1024  # [bytes] the most glibc's own adjustment raises it to (64-bit)
+SOLVE_TRIM_THRESHOLD = 32 * 1024 * 1024  # [bytes] free heap top kept (not handed back) during the solve
 
 
 @contextmanager
 def large_blocks_mapped() -> Iterator[None]:
-    """Inside, blocks from MMAP_THRESHOLD up (numpy arrays of more than 16384 numbers) each get their own mapping,
-    handed back when freed. glibc starts there but raises the threshold (up to MMAP_THRESHOLD_MAX) whenever such a
-    block is freed, after which a long fit's large transient arrays land on the heap, fragment it and stay resident:
-    9 MB of the 6000-frame bench fit's peak (bench_stream, cached detections). Setting the threshold stops that
-    adjustment for good, so on leaving it is set to MMAP_THRESHOLD_MAX, where the adjustment would have taken it:
-    image buffers of later reading and detection (evaluate after fit in one process) come from the heap again
-    instead of being mapped and zeroed afresh each time (reading and detecting 600 frames at 2048x1536 took 9 s of
-    system time instead of 1 under the low threshold). Elsewhere (no glibc) this does nothing."""
+    """Inside, blocks from SOLVE_MMAP_THRESHOLD up (numpy arrays of more than 131072 numbers) each get their own
+    mapping, handed back when freed. glibc starts at 128 KB but raises the threshold (up to MMAP_THRESHOLD_MAX)
+    whenever such a block is freed, after which a long fit's large transient arrays land on the heap, fragment it and
+    stay resident: 9 MB of the 6000-frame bench fit's peak (bench_stream, cached detections). Setting the threshold
+    stops that adjustment for good, so on leaving it is set to MMAP_THRESHOLD_MAX, where the adjustment would have
+    taken it: image buffers of later reading and detection (evaluate after fit in one process) come from the heap
+    again instead of being mapped and zeroed afresh each time (reading and detecting 600 frames at 2048x1536 took
+    9 s of system time instead of 1 under the low threshold). 1 MB, not glibc's 128 KB: every fresh mapping is
+    zeroed page by page on first touch, and the solve's many arrays of 128 KB - 1 MB (Jacobian chunks, noise
+    factors) cost page faults: a cached 400-sample leg fit 150000 (0.3 s of system time, of 1.9 s in all) against
+    45000; the cached 600 / 6000-frame fits 0.46 / 5.2 s of system time against 0.23 / 4.4 s, their peaks 91 / 133
+    MB against 93 / 137 MB. The free top of the heap is kept up to SOLVE_TRIM_THRESHOLD: glibc hands back what
+    exceeds its trim threshold (128 KB unless its adjustment raised it before), and the solve's next arrays fault
+    the same pages in again: a cached 1000-sample leg fit made 245000 page faults (0.6 s of system time) instead of
+    36000 (0.2 s), peak 125 -> 128 MB (the cached 6000-frame fit's 143 -> 149 MB, below its detection's). On
+    leaving, the trim threshold is set to twice MMAP_THRESHOLD_MAX, where glibc's own adjustment puts it.
+    Elsewhere (no glibc) this does nothing."""
     mallopt = _libc("mallopt")
     if mallopt is not None:
-        mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+        mallopt(M_MMAP_THRESHOLD, SOLVE_MMAP_THRESHOLD)
+        mallopt(M_TRIM_THRESHOLD, SOLVE_TRIM_THRESHOLD)
     try:
         yield
     finally:
         if mallopt is not None:
             mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX)
+            mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)

@@ -32,7 +32,7 @@ from scipy.optimize import least_squares
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
 from wolfcal.fit.blocks import held_joint_groups
-from wolfcal.geometry import exp_so3, invert_transform
+from wolfcal.geometry import exp_so3, invert_transform, tag_corners
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX
 from wolfcal.projection import BEHIND_CAMERA_PX
@@ -41,7 +41,6 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_weight
-from wolfcal.vision.tags import tag_corners
 
 MIN_VIEWS = 6  # fewer floor-tag views than this measure no ground error
 # the sample jackknife leaves out one group of samples at a time, at most this many groups (one solve each): the

@@ -12,10 +12,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import scipy.sparse
-from scipy.sparse.csgraph import connected_components
 
 from wolfcal.encoders import RAD_PER_TICK
+from wolfcal.graph import connected_components
 from wolfcal.observations import Observations
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
@@ -72,8 +71,7 @@ class Block:
         n, S = int(same.max()) + 1 if len(same) else 0, len(ticks)
         near = np.flatnonzero(np.all(np.abs(np.diff(ticks, axis=0)) <= 1, axis=1))
         edges = np.concatenate([[same, n + np.arange(S)], [n + near, n + near + 1]], axis=1)
-        graph = scipy.sparse.coo_matrix((np.ones(edges.shape[1]), tuple(edges)), shape=(n + S, n + S))
-        group_of_sample = connected_components(graph, directed=False)[1][n:]
+        group_of_sample = connected_components(n + S, edges[0], edges[1])[n:]
         return group_of_sample[self.sample_of_unit]
 
     def joint_reading_groups(self) -> np.ndarray:

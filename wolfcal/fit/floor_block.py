@@ -26,7 +26,7 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
-from wolfcal.geometry import invert_transform
+from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
 from wolfcal.projection import BEHIND_CAMERA_PX, pixel_jacobian
@@ -44,7 +44,6 @@ from wolfcal.vision.corner_bias import (
     inset_directions,
     small_view_weight,
 )
-from wolfcal.vision.tags import tag_corners
 
 PLACE_PRIOR_M = 10.0  # weak priors of a floor tag's place: the data decide it [m]
 YAW_PRIOR_RAD = 10.0  # [rad]

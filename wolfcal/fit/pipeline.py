@@ -20,7 +20,6 @@ from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
 from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
-from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -323,6 +322,8 @@ def run_fit(
     warnings: list[str] = []
     observations: dict[str, Observations] = {}
     if options.system == "mocap" or mocap:
+        from wolfcal.io.mocap_load import load_marker_observations  # here: a camera fit does not load the mocap readers
+
         markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
         say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
             + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))

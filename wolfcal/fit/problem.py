@@ -15,11 +15,11 @@ from dataclasses import replace
 
 import numpy as np
 import scipy.sparse
-from scipy.sparse.csgraph import connected_components
 
 from wolfcal.fit.blocks import Block, Linearization
 from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.fit.uncertainty import triangular_factor
+from wolfcal.graph import connected_components
 from wolfcal.robot.parameters import ParameterSet
 
 DENSE_LIMIT = 300  # unknowns up to which the Jacobian is a dense matrix
@@ -103,11 +103,8 @@ class BlockState:
         if np.any(label >= 0):  # join reading groups linked by a shared detection error
             n_read = int(reading.max()) + 1
             linked = label >= 0
-            graph = scipy.sparse.coo_matrix(
-                (np.ones(int(linked.sum())), (reading[linked], n_read + label[linked])),
-                shape=(n_read + int(label.max()) + 1,) * 2,
-            )
-            group_of_unit = connected_components(graph, directed=False)[1][reading]
+            n_nodes = n_read + int(label.max()) + 1
+            group_of_unit = connected_components(n_nodes, reading[linked], n_read + label[linked])[reading]
         self.whitening = GroupedWhitening(
             row_groups(group_of_unit, self.block.dim, self.inlier_units), shared, self.row_scale
         )
@@ -276,5 +273,4 @@ def _one_group(reading: np.ndarray) -> np.ndarray:
     node = node.ravel() + n_units
     unit = np.repeat(np.arange(n_units), n_joints)
     n = int(node.max()) + 1
-    graph = scipy.sparse.coo_matrix((np.ones(len(unit)), (unit, node)), shape=(n, n))
-    return connected_components(graph, directed=False)[1][:n_units]
+    return connected_components(n, unit, node)[:n_units]

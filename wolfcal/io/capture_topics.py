@@ -16,8 +16,7 @@ from mcap.reader import McapReader
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import recover_hint
-from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE
-from wolfcal.io.writer import CAMERAS_METADATA, LIBRARY
+from wolfcal.io.msgdefs import CAMERA_INFO, CAMERAS_METADATA, COMPRESSED_IMAGE, JOINT_STATE, LIBRARY
 
 
 @dataclass(frozen=True)

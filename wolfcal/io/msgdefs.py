@@ -2,7 +2,8 @@
 
 Written from the ROS 2 interface specifications (rcl_interfaces/common_interfaces, Humble and later). Each
 definition is the message's own fields followed by every type it uses, each after a line of '=' and
-`MSG: pkg/Type`: the layout rosbag2 stores and mcap_ros2 parses. Also: header stamps <-> nanoseconds.
+`MSG: pkg/Type`: the layout rosbag2 stores and mcap_ros2 parses. Also: header stamps <-> nanoseconds, and the
+names of wolfcal's own records in a capture (attachments, metadata), which the reader needs without the writer.
 """
 
 from __future__ import annotations
@@ -11,6 +12,11 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 MARKERS = "mocap4r2_msgs/msg/Markers"  # MOCAP4ROS2's marker set (motion capture)
+
+URDF_ATTACHMENT = "robot.urdf"
+CONFIG_ATTACHMENT = "robot.yaml"
+CAMERAS_METADATA = "wolfcal.cameras"  # metadata record: camera name -> image topic
+LIBRARY = "wolfcal"
 
 _SEPARATOR = "=" * 80
 

@@ -37,13 +37,12 @@ from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
-from wolfcal.io.msgdefs import header_stamp_ns
+from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
-from wolfcal.io.writer import CONFIG_ATTACHMENT, URDF_ATTACHMENT
 
 
 def read_captures(

@@ -19,8 +19,7 @@ from mcap_ros2.decoder import DecoderFactory
 from wolfcal.atomic import atomic_output
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns
-from wolfcal.io.writer import LIBRARY
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, LIBRARY, header_stamp_ns
 from wolfcal.outputs import check_outputs
 
 

@@ -30,13 +30,19 @@ from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.images import encode_image
 from wolfcal.io.mcapfile import partial_path
-from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
+from wolfcal.io.msgdefs import (
+    CAMERA_INFO,
+    CAMERAS_METADATA,
+    COMPRESSED_IMAGE,
+    CONFIG_ATTACHMENT,
+    JOINT_STATE,
+    LIBRARY,
+    MSGDEFS,
+    URDF_ATTACHMENT,
+    stamp_dict,
+)
 from wolfcal.observations import HEAD_CAMERA
 
-URDF_ATTACHMENT = "robot.urdf"
-CONFIG_ATTACHMENT = "robot.yaml"
-CAMERAS_METADATA = "wolfcal.cameras"  # metadata record: camera name -> image topic
-LIBRARY = "wolfcal"
 CameraStreams = dict[str, tuple[CameraModel, tuple[int, int]]]  # camera name -> (full-resolution model, binning)
 # Chunks close only when a sample is complete (flush), never inside one: a torn file holds whole samples.
 _NEVER = 2**62

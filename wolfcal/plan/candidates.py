@@ -31,14 +31,13 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_pose_ok, external_visibility
-from wolfcal.geometry import invert_transform
+from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.placement import expected_placement, placement_from_text
 from wolfcal.projection import visible_in_view
 from wolfcal.robot.collision import CollisionModel, rest_configuration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 BATCH = 4000  # configurations of the joints that move the tags drawn at a time
 VIEWS_PER_BODY = 128  # head camera: configurations of the head drawn for each of them

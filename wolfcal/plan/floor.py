@@ -29,7 +29,7 @@ from wolfcal.fit.floor_block import FloorBlock, SoleClosure
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, floor_blocks
 from wolfcal.fit.problem import Problem
-from wolfcal.geometry import invert_transform
+from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.plan.candidates import (
     BATCH,
@@ -47,7 +47,6 @@ from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.floor import floor_frames, floor_tag_poses, standing_pose
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot
-from wolfcal.vision.tags import tag_corners
 
 MIN_EDGE_PX = 12.0  # shortest edge of a floor tag view [px] (as `wolfcal.sim.floor.floor_views`)
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0  # spreads the bearings of successive tags

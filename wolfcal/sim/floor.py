@@ -19,7 +19,7 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import transform_points
+from wolfcal.geometry import tag_corners, transform_points
 from wolfcal.observations import Observations
 from wolfcal.projection import tag_corner_pixels, visible_in_view
 from wolfcal.robot.aim import aim_joints
@@ -27,7 +27,7 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor, floor_tag_poses, stance_poses
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.render import PlanarTarget, render_targets
-from wolfcal.vision.tags import tag_corners, tag_texture, tag_texture_width
+from wolfcal.vision.tags import tag_texture, tag_texture_width
 
 
 @dataclass

@@ -69,12 +69,6 @@ def _dictionary(family: str) -> cv2.aruco.Dictionary:
     return cv2.aruco.getPredefinedDictionary(FAMILIES[family])
 
 
-def tag_corners(size: float) -> np.ndarray:
-    """(4, 3) corners of a tag with black-square edge `size` [m] in the tag frame, aruco order."""
-    h = size / 2.0
-    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-
-
 def tag_cells(family: str) -> int:
     """Cells across the black square: data bits plus the 1-cell black border (8 for tag36h11)."""
     return _dictionary(family).markerSize + 2
