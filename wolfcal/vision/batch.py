@@ -59,13 +59,9 @@ def _family_list(families: Families) -> FamilyList:
     return [(family, None if ids is None else frozenset(ids)) for family, ids in families.items()]
 
 
-def detect_encoded_one(data: bytes, families: FamilyList, refine: str) -> Detections | None:
-    """Decode one encoded image (png, jpeg, ...) and detect the tags of every family; None if undecodable."""
-    return _detect_batch([data], families, refine)[0]
-
-
 def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
-    """`detect_encoded_one` of each image, the corners of all of them refined together (one pass per family)."""
+    """Decode each encoded image (png, jpeg, ...; None if undecodable) and detect the tags of every family, the
+    corners of all of them refined together (one pass per family)."""
     import cv2
 
     from wolfcal.vision.tags import detect_tags_many
