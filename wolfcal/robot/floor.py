@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import exp_so3, invert_transform, log_so3
@@ -103,6 +102,8 @@ def moved_stance(robot: Robot, stance: Mapping[str, float], shift: Sequence[floa
     joints between the base and the soles solved by least squares (each sole's position [m] and rotation [rad]),
     within their URDF limits, in ten steps along the move; other joints as in `stance`. Rounded to 0.1 mrad. A
     WolfcalError when the soles cannot be kept within 1 mm and 1 mrad (beyond the legs' reach)."""
+    from scipy.optimize import least_squares  # a config-writing tool's, kept off the fit's import path
+
     model, base = robot.model, robot.config.base_link
     soles = list(robot.config.floor_config(FLOOR_NEEDED).soles)
     q0 = stance_readings([stance], model)
