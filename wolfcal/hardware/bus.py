@@ -8,6 +8,7 @@ joint and id and what to check.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import partial
@@ -223,12 +224,22 @@ class DynamixelBus:
 
     # --- reading --------------------------------------------------------------------------------------------
     def _sync_read(self, group: sdk.GroupSyncRead, what: str) -> None:
-        result, tried = _with_retries(group.txRxPacket, lambda result: result)
+        failed_at: Counter[int] = Counter()  # per servo, the attempts that failed at it
+
+        def attempt() -> int:
+            result = group.txRxPacket()
+            # the SDK stops at the first servo that failed; its data is left empty
+            culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
+            if result != sdk.COMM_SUCCESS and culprit is not None:
+                failed_at[culprit] += 1
+            return result
+
+        result, tried = _with_retries(attempt, lambda result: result)
         if result == sdk.COMM_SUCCESS:
             return
-        # the SDK stops at the first servo that failed; its data is left empty
-        culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
-        who = self._name(culprit) if culprit is not None else "a servo"
+        # the servo most attempts failed at: on a busy host one attempt can fail earlier, at a servo whose answer
+        # was merely slow, while the silent servo fails every other attempt
+        who = self._name(failed_at.most_common(1)[0][0]) if failed_at else "a servo"
         raise BusError(
             f"{self.port_name}: sync read of {what} failed at {who}: {self._comm_text(result, tried)}; "
             "check that servo's cable and power"
