@@ -1,7 +1,7 @@
 """`wolfcal evaluate`: a fit + held-out captures (or k-fold cross-validation) -> report and files to deploy.
 
 Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
-errors model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
+judged model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
 model explains the data, ground error) allows it, or with deploy_worse=True. This module only runs the steps;
 errors are `metrics` / `ground` / `crossval` / `structure`, the report's words `report_content`, its pictures
 `report_figures`, the files to deploy `deploy`.
@@ -283,7 +283,7 @@ def _judge(
         "that they are of this robot and camera",
     )
     return HeldOutErrors(before, after, after_of_sample, fold_of, mode_note, outliers,
-                  summary(obs, views, before, outliers), summary(obs, views, after, outliers))  # fmt: skip
+                         summary(obs, views, before, outliers), summary(obs, views, after, outliers))  # fmt: skip
 
 
 def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: dict | None) -> dict:

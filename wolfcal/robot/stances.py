@@ -68,4 +68,3 @@ def check_stances(config: RobotConfig, model: KinematicModel) -> None:
             f"{floor.soles[1]} are {np.rad2deg(tilt[i]):.1f} deg and {gap[i] * 100:.1f} cm from one plane under the "
             f"nominal model ({STANDING_RULE}); give readings [rad] that put both soles flat on the floor"
         )
-
