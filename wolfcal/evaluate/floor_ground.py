@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 from wolfcal.camera.model import CameraModel
 from wolfcal.evaluate.ground import BEARINGS_RAD, DISTANCES_M
 from wolfcal.fit.blocks import held_joint_groups
+from wolfcal.fit.problem import MAD_TO_SIGMA
 from wolfcal.geometry import exp_so3, invert_transform, tag_corners
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX
@@ -204,7 +205,7 @@ class _FloorFit:
         that scale [px]."""
         n_pixels = 8 * int(keep.sum())
         for _ in range(2):
-            scale = 1.4826 * float(np.median(np.abs(self.residuals(x, keep)[:n_pixels])))
+            scale = MAD_TO_SIGMA * float(np.median(np.abs(self.residuals(x, keep)[:n_pixels])))
             scale *= float(np.sqrt(n_pixels / max(n_pixels - len(x), 1)))
             x = self.solve(x, keep, scale)
         return x, scale
