@@ -108,6 +108,7 @@ def test_tags_moved_between_two_check_captures_lie_in_one_place_per_capture_file
     assert len(np.unique(placements)) == len(np.unique(first.tag_ids)) + len(np.unique(second.tag_ids))
     measured = measured_ground_errors(robot, both, {"after": model}, (4.5,))
     assert measured["capture"] == {"samples": 24, "stances": 1, "layouts": 2}
+    assert measured["check"] == {"samples": 48, "stances": 16, "layouts": 3}  # Wolfgang's 16 floor.check_stances
     row = measured["models"]["after"]["rows"][0]
     true = ground_errors(robot, camera, truth, {"after": model}, (4.5,))[0]["models"]["after"]["error_m"]
     assert abs(row["error_m"] - true) < max(2 * row["std_m"], 0.2 * true), (true, row)
@@ -128,3 +129,28 @@ def test_a_view_far_off_is_left_out_as_the_fit_leaves_it_out():
     assert floor["outlier_views"] == 1 and clean["outlier_views"] == 0
     assert floor["views"] == clean["views"]
     assert np.allclose(floor["unknowns"], clean["unknowns"], atol=1e-6), (floor["unknowns"], clean["unknowns"])
+
+
+@pytest.mark.slow
+def test_corners_slid_along_an_edge_are_left_out(monkeypatch):
+    """One corner in each of every fifth view slid 1.2 px along its edge (the detector on a small, strongly
+    foreshortened far tag; too little for the view rule, `outliers.FIT_VIEW_PX`): those corners are left out, and
+    the floor comes out as on the clean corners; kept in, they move it far more."""
+    robot = load_robot(WOLFGANG)
+    camera, truth, model, rng = _near_truth(robot, 6)
+    obs = simulate_floor(robot, camera, truth, 20, rng, distance=(0.5, 5.0), noise_px=0.1).obs
+    order = np.lexsort((obs.corner_index, obs.tag_ids, obs.sample_index))
+    ring = obs.uv[order].reshape(-1, 4, 2)
+    slid = ring.copy()
+    edge = ring[::5, 1] - ring[::5, 0]
+    slid[::5, 0] += 1.2 * edge / np.linalg.norm(edge, axis=1, keepdims=True)
+    uv = obs.uv.copy()
+    uv[order] = slid.reshape(-1, 2)
+    off = dataclasses.replace(obs, uv=uv)
+    clean, floor = real_floor(robot, obs, model), real_floor(robot, off, model)
+    assert floor["outlier_corners"] >= len(edge) and floor["outlier_views"] == 0, floor
+    monkeypatch.setattr("wolfcal.evaluate.floor_ground.CORNER_ROUNDS", 0)
+    kept = real_floor(robot, off, model)
+    lever = np.array([4.5, 4.5, 1.0])  # [m/rad, m/rad, m/m]: what the plane's tilt and height move at 4.5 m
+    change, kept_change = (np.linalg.norm(lever * (f["unknowns"][:3] - clean["unknowns"][:3])) for f in (floor, kept))
+    assert change < 0.3 * kept_change, (change, kept_change)

@@ -4,6 +4,7 @@ over the stances, captured in each, and modelled with one shared reading error p
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -181,7 +182,7 @@ def test_the_check_capture_goes_through_the_check_stances(tmp_path):
     script = floor_script(robot, 0.5, check=True)
     grid = len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
     assert len(script.poses) == len(stances) * grid
-    poses = check_views(script).poses
+    poses = check_views(robot, script).poses
     assert len(poses) == len(stances) * CHECK_VIEWS_PER_STANCE
     for k, stance in enumerate(stances):
         pose = poses[k * CHECK_VIEWS_PER_STANCE]
@@ -189,7 +190,10 @@ def test_the_check_capture_goes_through_the_check_stances(tmp_path):
         assert all(pose.joints[j] == v for j, v in stance.items())
     assert len({p.name.split(", ", 1)[1] for p in poses}) == grid  # the whole grid over the stances
     fewer = PoseScript([p for p in script.poses if "-30 deg" not in p.name], 0.5)  # as if left out for collisions
-    assert len(check_views(fewer).poses) == len(stances) * CHECK_VIEWS_PER_STANCE
+    assert len(check_views(robot, fewer).poses) == len(stances) * CHECK_VIEWS_PER_STANCE
+    # the stances are told by the legs' targets, not by the poses' names
+    renamed = PoseScript([replace(p, name=f"view {k}") for k, p in enumerate(script.poses)], 0.5)
+    assert check_views(robot, renamed).poses == [replace(p, name=f"view {script.poses.index(p)}") for p in poses]
     out = tmp_path / "check.mcap"
     result = CliRunner().invoke(app, ["simulate", "--floor", "--check", "--samples", "16", "--binning", "4",
                                       "--out", str(out)])  # fmt: skip

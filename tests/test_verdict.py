@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from conftest import wolfgang_with_other_tags
 from test_evaluate import quiet, split_capture
 from typer.testing import CliRunner
 
@@ -13,6 +15,8 @@ from wolfcal.evaluate.deploy import DEPLOY_FILES
 from wolfcal.evaluate.pipeline import run_evaluate
 from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
 from wolfcal.fit.pipeline import FitOptions, run_fit
+from wolfcal.robot.floor import check_size
+from wolfcal.robot.robot import load_robot
 from wolfcal.sim.simulate import SimOptions, simulate_capture
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -44,6 +48,7 @@ def test_camera_fit_on_a_robot_with_leg_offsets_is_refused(tmp_path, robot, came
 
 
 STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "corner_noise_px": 0.2}
+WOLFGANG_CHECK = {"samples": 48, "stances": 16, "layouts": 3}  # `check_size` of Wolfgang's robot.yaml
 
 
 @pytest.mark.parametrize("ground, deploy, words", [
@@ -53,14 +58,18 @@ STRUCTURE_OK = {"unexplained": False, "view_shift_rms_px": 0.2, "scale": 0.9, "c
     ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 +- 1.0 cm"),
     # above the limit, within 2 sigma of it: refused all the same, with the advice to measure it more precisely
     ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm (--ground-limit"
-     "-cm). The measurement is that uncertain: to measure it more precisely, take more held-out floor samples: "
-     "`wolfcal capture --floor --check` three times"),
+     "-cm). The measurement is that uncertain: to measure it more precisely, list standing poses none of the fit's "
+     "in the robot config's floor.check_stances"),
+    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02, "check": WOLFGANG_CHECK}, False, "uncertain: to "
+     "measure it more precisely, take more held-out floor samples: `wolfcal capture --floor --check` 3 times"),
     # the same from a held-out capture smaller than the check's: what it lacks is named
-    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02, "capture": {"samples": 16, "stances": 1, "layouts": 1}},
+    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02, "capture": {"samples": 16, "stances": 1, "layouts": 1},
+      "check": WOLFGANG_CHECK},
      False, "uncertain: the held-out floor capture is smaller than the check needs: samples 16 (the check takes 48), "
-     "stances 1 (the check takes 16), layouts 1 (the check takes 3); take `wolfcal capture --floor --check` three "
-     "times"),
-    ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "capture": {"samples": 48, "stances": 20, "layouts": 1}},
+     "stances 1 (the check takes 16), layouts 1 (the check takes 3); take `wolfcal capture --floor --check` 3 "
+     "times (floor.check_stances: 16 stances none of the fit's, 1 head view(s) each)"),
+    ({"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "capture": {"samples": 48, "stances": 20, "layouts": 1},
+      "check": WOLFGANG_CHECK},
      True, "cannot confirm that it is below the limit (5 cm); the held-out floor capture is smaller than the check "
      "needs: layouts 1 (the check takes 3)"),
     # below the limit, but its 2 sigma reaches past it: deployed, with a note that the limit is not confirmed
@@ -75,6 +84,25 @@ def test_measured_ground_error_decides(ground, deploy, words):
     assert not any("not measured" in n for n in v["notes"])
     confirmed = ground["after_m"] + 2 * ground["after_std_m"] <= 0.05
     assert any("cannot confirm" in n for n in v["notes"]) is (deploy and not confirmed)
+
+
+def test_the_check_the_advice_asks_for_is_the_robot_configs(tmp_path):
+    """A robot with 10 check stances: the check is 30 samples in 10 stances and 3 layouts, and a held-out capture
+    of that size lacks nothing of it."""
+    data = wolfgang_with_other_tags()
+    data["floor"]["check_stances"] = data["floor"]["check_stances"][:10]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
+    check = check_size(load_robot(tmp_path / "robot.yaml"))
+    assert check == {"samples": 30, "stances": 10, "layouts": 3}
+    assert check_size(load_robot(CONFIG / "robot.yaml")) == WOLFGANG_CHECK
+    taken = {"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "check": check}
+    v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, {**taken, "capture": {"samples": 30, "stances": 10,
+                                                                           "layouts": 3}}, None, 0.0)  # fmt: skip
+    assert "take more held-out floor samples: `wolfcal capture --floor --check` 3 times (floor.check_stances: 10 " \
+           "stances" in " ".join(v["notes"])
+    v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, {**taken, "capture": {"samples": 20, "stances": 10,
+                                                                           "layouts": 2}}, None, 0.0)  # fmt: skip
+    assert "samples 20 (the check takes 30), layouts 2 (the check takes 3)" in " ".join(v["notes"])
 
 
 def test_limits_are_options():

@@ -44,6 +44,12 @@ class OutlierRule:
 # noise model knows the joint-reading error each view carries), size = per-axis RMS [px].
 FIT_VIEW_PX = OutlierRule(factor=4.0, floor=0.5)
 
+# The measured ground error's floor-tag corners (`evaluate.floor_ground`), one corner of a held-out view: limit
+# (`OutlierRule.limit`) at this factor times the solve's robust residual scale (per axis), size = the corner's
+# distance from where the fitted floor puts it [px]. Per corner, not per view: on a small, strongly foreshortened
+# far tag one corner slides along an edge by 1-5 px while the view's other three fit.
+FLOOR_CORNER_PX = OutlierRule(factor=4.0, floor=0.3)
+
 # Motion-capture markers, one marker in one sample: spread = whitened RMS, size = per-axis RMS [m]. Tighter factor:
 # a reflection 2 mm away is 4-7 noise sigmas at 0.3 mm marker noise and must still be caught; the floor (1 mm) is
 # about three times the raw per-axis noise.

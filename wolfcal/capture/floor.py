@@ -22,12 +22,9 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import rad_to_ticks
 from wolfcal.robot.aim import AIM_BEARINGS_DEG, AIM_DISTANCES_M, aim_head, aim_joints, ball_position
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import stance_poses, standing_pose
+from wolfcal.robot.floor import CHECK_VIEWS_PER_STANCE, stance_poses, standing_pose
 from wolfcal.robot.robot import Robot
 
-# head views per stance of the held-out floor capture that checks a fit (`--check`): the standing legs' tick
-# rounding averages over stances, not over views in one stance (see README, "The venue check")
-CHECK_VIEWS_PER_STANCE = 1
 FLOOR_NEEDED_CAPTURE = "capture --floor needs the standing soles, the standing readings and the floor tags"
 
 
@@ -97,13 +94,14 @@ def floor_script(robot: Robot, velocity: float, check: bool = False) -> PoseScri
     return PoseScript(poses, velocity)
 
 
-def check_views(script: PoseScript) -> PoseScript:
+def check_views(robot: Robot, script: PoseScript) -> PoseScript:
     """The held-out check's views of a floor script (`floor_script(check=True)`, less any left out for
-    collisions): CHECK_VIEWS_PER_STANCE per stance, each stance's remaining grid views taken in turn over the
-    stances, so that the check sees the whole grid."""
-    by_stance: dict[str, list[Pose]] = {}
+    collisions): CHECK_VIEWS_PER_STANCE (`robot.floor`) per stance, each stance's remaining grid views taken in turn
+    over the stances, so that the check sees the whole grid. A stance is the standing legs' targets, in ticks."""
+    legs, _ = floor_joints(robot)
+    by_stance: dict[tuple[int, ...], list[Pose]] = {}
     for pose in script.poses:
-        by_stance.setdefault(pose.name.split("floor ", 1)[0], []).append(pose)
+        by_stance.setdefault(tuple(int(rad_to_ticks(pose.joints[j])) for j in legs), []).append(pose)
     picked = [views[(k * CHECK_VIEWS_PER_STANCE + i) % len(views)] for k, views in enumerate(by_stance.values())
               for i in range(min(CHECK_VIEWS_PER_STANCE, len(views)))]  # fmt: skip
     return PoseScript(picked, script.velocity)

@@ -107,7 +107,7 @@ def _checked_script(
     start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
     if options.floor:
         script, note = without_collisions(robot, script, start)
-        script = check_views(script) if options.floor_check else script
+        script = check_views(robot, script) if options.floor_check else script
         status.target = options.samples or len(script.poses)
     else:
         note = check_collisions(robot, script, options.poses or "", start)

@@ -35,14 +35,16 @@ from wolfcal.fit.blocks import held_joint_groups
 from wolfcal.fit.problem import MAD_TO_SIGMA
 from wolfcal.geometry import exp_so3, invert_transform, tag_corners
 from wolfcal.observations import Observations
-from wolfcal.outliers import FIT_VIEW_PX
+from wolfcal.outliers import FIT_VIEW_PX, FLOOR_CORNER_PX
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.aim import aim_head, ball_position
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import camera_in_floor
+from wolfcal.robot.floor import camera_in_floor, check_size
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.corner_bias import apparent_edges, inset_moves, small_view_weight
 
+# corners far off are left out, then the rest solved again, at most this many times (`outliers.FLOOR_CORNER_PX`)
+CORNER_ROUNDS = 4
 MIN_VIEWS = 6  # fewer floor-tag views than this measure no ground error
 # the sample jackknife leaves out one group of samples at a time, at most this many groups (one solve each): the
 # grouped jackknife's variance is as honest as delete-one's, for a solve per group rather than per sample
@@ -66,6 +68,7 @@ class FloorViews:
     weight: np.ndarray  # (V,) `corner_bias.small_view_weight`
     twists: np.ndarray  # (V, K, 6) the camera's motion per radian of each chain joint's reading (v, w), camera frame
     readings: np.ndarray  # (V, K) int: which reading error (`_reading_errors`) each chain joint of the view has
+    counted: np.ndarray  # (V, 4) bool: the corners the fit counts (not left out as far off, FLOOR_CORNER_PX)
 
 
 def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorViews:
@@ -82,7 +85,8 @@ def floor_views(robot: Robot, obs: Observations, model: Corrections) -> FloorVie
     _, source = np.unique(np.asarray(obs.sources, dtype=object).astype(str), return_inverse=True)
     _, placements = np.unique(np.stack([source.ravel()[s[start]], t[start]], axis=1), axis=0, return_inverse=True)
     return FloorViews(t[start], placements.ravel(), s[start], T_floor_camera[s[start]], ring, inward,
-                      small_view_weight(apparent_edges(ring)), twists, readings)  # fmt: skip
+                      small_view_weight(apparent_edges(ring)), twists, readings,
+                      np.ones((len(start), 4), dtype=bool))  # fmt: skip
 
 
 def _reading_errors(robot: Robot, q: np.ndarray, model: Corrections, sample_of_view: np.ndarray,
@@ -173,7 +177,21 @@ class _FloorFit:
         return np.concatenate([np.zeros(6), [self.inset[0]], np.nan_to_num(places).ravel(), np.zeros(self.n_readings)])
 
     def residuals(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
-        """Weighted corner residuals [px] of the views `keep` (V,) bool, then the priors' (inset, readings)."""
+        """Weighted residuals [px] of the counted corners (`FloorViews.counted`) of the views `keep` (V,) bool,
+        then the priors' (inset, readings)."""
+        v = self.views
+        off = self.offsets(x, keep) * v.weight[keep, None, None]
+        prior = self.scale * np.append((x[6] - self.inset[0]) / self.inset[1],
+                                       x[self.first_reading:] / self.encoder_noise)  # fmt: skip
+        return np.append(off[v.counted[keep]].ravel(), prior)
+
+    def n_pixels(self, keep: np.ndarray) -> int:
+        """How many corner residuals `residuals(x, keep)` has before the priors'."""
+        return 2 * int(self.views.counted[keep].sum())
+
+    def offsets(self, x: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """(V_keep, 4, 2) where the unknowns x put the corners of the views `keep` less where they were seen [px]
+        (BEHIND_CAMERA_PX for a corner behind the camera)."""
         v = self.views
         place = x[7:self.first_reading].reshape(-1, 3)[self.tag_of_view[keep]]
         c, s = np.cos(place[:, 2:3]), np.sin(place[:, 2:3])
@@ -186,9 +204,7 @@ class _FloorFit:
         T_camera_moved[:, :3, :3], T_camera_moved[:, :3, 3] = exp_so3(moved[:, 3:]), moved[:, :3]
         T_camera_real = invert_transform(_real_camera(x, v.T_floor_camera[keep] @ T_camera_moved))
         p_camera = np.einsum("vij,vcj->vci", T_camera_real[:, :3, :3], p_real) + T_camera_real[:, None, :3, 3]
-        r = (self.camera.project(p_camera) + x[6] * v.inward[keep] - v.uv[keep]) * v.weight[keep, None, None]
-        prior = self.scale * np.append((x[6] - self.inset[0]) / self.inset[1], errors / self.encoder_noise)
-        return np.append(np.nan_to_num(r, nan=BEHIND_CAMERA_PX).ravel(), prior)
+        return np.nan_to_num(self.camera.project(p_camera) + x[6] * v.inward[keep] - v.uv[keep], nan=BEHIND_CAMERA_PX)
 
     def carried(self, other: _FloorFit, x: np.ndarray) -> np.ndarray:
         """Unknowns for this fit (on a subset of `other`'s views) from `other`'s unknowns x: plane, turn, inset, the
@@ -201,9 +217,9 @@ class _FloorFit:
         return out
 
     def robust(self, x: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, float]:
-        """The unknowns solved robustly from x, at the scale of the residuals (dof-corrected median), twice, and
-        that scale [px]."""
-        n_pixels = 8 * int(keep.sum())
+        """The unknowns solved robustly from x, at the scale of the counted residuals (dof-corrected median), twice,
+        and that scale [px]."""
+        n_pixels = self.n_pixels(keep)
         for _ in range(2):
             scale = MAD_TO_SIGMA * float(np.median(np.abs(self.residuals(x, keep)[:n_pixels])))
             scale *= float(np.sqrt(n_pixels / max(n_pixels - len(x), 1)))
@@ -230,7 +246,8 @@ class _FloorFit:
         by_view[np.arange(len(view_columns))[:, None], view_columns] = True
         priors = np.zeros((1 + self.n_readings, n), dtype=bool)
         priors[np.arange(1 + self.n_readings), np.r_[6, np.arange(self.first_reading, n)]] = True
-        return np.concatenate([np.repeat(by_view, 8, axis=0), priors])
+        by_corner = np.repeat(by_view, 4, axis=0)[v.counted[keep].ravel()]
+        return np.concatenate([np.repeat(by_corner, 2, axis=0), priors])
 
 
 def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset: tuple[float, float] = (0.0, 0.0),
@@ -252,7 +269,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     fit.scale = robot.config.priors.pixel_noise
     x, scale = fit.robust(fit.solve(fit.start(), every), every)
     # views far off (a corner caught on something else) left out as the fit leaves them out; the rest solved again
-    outliers = FIT_VIEW_PX.flags(np.sqrt(np.mean(fit.residuals(x, every)[:8 * len(every)].reshape(-1, 8) ** 2, 1)))
+    off = fit.offsets(x, every) * views.weight[:, None, None]
+    outliers = FIT_VIEW_PX.flags(np.sqrt(np.mean(off.reshape(-1, 8) ** 2, axis=1)))
     if outliers.any():
         views = _subset(views, ~outliers)
         views = _subset(views, _seen_twice(views.placements))
@@ -261,13 +279,24 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
         first, fit = fit, _FloorFit(robot, views, camera or obs.camera, inset)
         every = np.ones(len(views.tags), dtype=bool)
         x, scale = fit.robust(fit.carried(first, x), every)
-    n_pixels = 8 * len(views.tags)
+    # corners far off (on small, strongly foreshortened far tags the detector's corner slides along an edge by 1-5
+    # px, on about one corner in ten; each pulls the plane its way, so the figure read high by up to 1.7 cm at
+    # 4.5 m): left out, the rest solved again, until none is left
+    left_out = 0
+    for _ in range(CORNER_ROUNDS):
+        bad = views.counted & (np.linalg.norm(fit.offsets(x, every), axis=2) > FLOOR_CORNER_PX.limit(np.array(scale)))
+        if not bad.any():
+            break
+        views.counted[bad] = False
+        left_out += int(bad.sum())
+        x, scale = fit.robust(x, every)
+    n_pixels = fit.n_pixels(every)
     r = fit.residuals(x, every)[:n_pixels]
     J = _jacobian(lambda u: fit.residuals(u, every), x)
     noise = max(float(r @ r) / max(n_pixels - len(x), 1), scale**2)  # [px^2] of the corners (the priors: scale^2)
     information = J[:n_pixels].T @ J[:n_pixels] / noise + J[n_pixels:].T @ J[n_pixels:] / scale**2
     covariance = np.linalg.pinv(information)
-    shared = np.flatnonzero(_shared_readings(views))
+    shared = np.flatnonzero(_shared_readings(views, fit.n_readings))
     kept = np.setdiff1d(np.arange(len(x)), fit.first_reading + shared)
     held = np.linalg.pinv(information[np.ix_(kept, kept)])[:7, :7]  # as if the shared readings' rounding were known
     samples, tags = np.unique(views.samples), np.unique(views.tags)
@@ -278,14 +307,14 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     by_tag = np.stack([fit.solve(x, views.tags != t, scale)[:7] for t in tags]) if len(tags) > 2 else None
     return {"unknowns": x[:7], "covariance": held, "rounding_covariance": covariance[:7, :7] - held,
             "jackknife_samples": by_sample, "jackknife_tags": by_tag, "views": len(views.tags),
-            "outlier_views": int(outliers.sum()), "scale_px": scale,
+            "outlier_views": int(outliers.sum()), "outlier_corners": left_out, "scale_px": scale,
             "noise_px": float(np.sqrt(noise)),
             "inset_px": float(x[6])}  # fmt: skip
 
 
-def _shared_readings(views: FloorViews) -> np.ndarray:
-    """(G,) bool: the reading errors shared by views of more than one sample (a joint held still)."""
-    n = int(views.readings.max()) + 1 if views.readings.size else 0
+def _shared_readings(views: FloorViews, n: int) -> np.ndarray:
+    """(n,) bool: which of the n reading errors (`_FloorFit.n_readings`) views of more than one sample share (a
+    joint held still)."""
     first, last = np.full(n, np.iinfo(np.int64).max), np.full(n, -1)
     samples = np.broadcast_to(views.samples[:, None], views.readings.shape)
     np.minimum.at(first, views.readings.ravel(), samples.ravel())
@@ -372,7 +401,8 @@ def measured_ground_errors(
     """Per model: per distance the measured ground error [m] (worst bearing; None: the ball lies above the model's
     horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count and the capture's size
     (`capture_size`). None when the floor views cannot
-    measure it (fewer than MIN_VIEWS views of tags seen twice). `corner_inset`: the fit's `floor.corner_inset` and
+    measure it (fewer than MIN_VIEWS views of tags seen twice); the check's size on this robot
+    (`robot.floor.check_size`). `corner_inset`: the fit's `floor.corner_inset` and
     its 1-sigma [px] (result.yaml; (0, 0) without one: then the inset's prior is MIN_INSET_STD_PX wide)."""
     out: dict = {"models": {}}
     for name, model in models.items():
@@ -391,6 +421,7 @@ def measured_ground_errors(
         out["models"][name] = {"rows": rows, "unknowns": [float(v) for v in floor["unknowns"]]}
         out["views"] = floor["views"]
     out["capture"] = capture_size(robot, obs)
+    out["check"] = check_size(robot)
     return out
 
 

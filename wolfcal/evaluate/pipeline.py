@@ -130,7 +130,8 @@ def _verdict_ground(measured: dict | None) -> dict | None:
     inf = float("inf")
     return {"before_m": inf if before["error_m"] is None else before["error_m"],
             "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"],
-            "before_std_m": before["std_m"] or 0.0, "capture": measured.get("capture")}
+            "before_std_m": before["std_m"] or 0.0, "capture": measured.get("capture"),
+            "check": measured.get("check")}
 
 
 def _run_external_evaluate(

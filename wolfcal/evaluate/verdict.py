@@ -36,22 +36,33 @@ LEGS_ADVICE = (
 )
 
 FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the legs with them (--free leg)"
-# The held-out floor capture that measures the ground error at 4.5 m to about 1 cm (README, "The venue check"):
-# the standing legs' shared tick rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's
-# corner bias only over the places it lies in (`tag_std_m`)
-CHECK_CAPTURE = {"samples": 48, "stances": 16, "layouts": 3}
-CHECK_HOW = ("`wolfcal capture --floor --check` three times (floor.check_stances: 16 stances none of the fit's, one "
-             "head view each), the floor tags moved between, and all three given to `evaluate --capture`")
+# The held-out floor capture that measures the ground error at 4.5 m to about 1 cm is the check (README, "The venue
+# check"; its size on a robot: `robot.floor.check_size`): the standing legs' shared tick rounding averages only over
+# stances (floor_ground's `rounding_std_m`), and a tag's corner bias only over the places it lies in (`tag_std_m`)
+NO_CHECK_STANCES = ("list standing poses none of the fit's in the robot config's floor.check_stances "
+                    "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check`, "
+                    "the floor tags moved between runs, and give all the runs to `evaluate --capture`")
 
 
-def more_precise(capture: dict | None) -> str:
-    """What to capture to measure the ground error more precisely, naming what the held-out floor capture
-    (`floor_ground.capture_size`) lacks of CHECK_CAPTURE."""
-    short = [f"{k} {capture[k]} (the check takes {v})" for k, v in CHECK_CAPTURE.items()
+def check_how(check: dict) -> str:
+    """How to take the check of size `check` (`robot.floor.check_size`: samples, stances, layouts)."""
+    views = check["samples"] // (check["stances"] * check["layouts"])
+    return (f"`wolfcal capture --floor --check` {check['layouts']} times (floor.check_stances: {check['stances']} "
+            f"stances none of the fit's, {views} head view(s) each), the floor tags moved between, and all "
+            f"{check['layouts']} given to `evaluate --capture`")
+
+
+def more_precise(capture: dict | None, check: dict | None) -> str:
+    """What to capture to measure the ground error more precisely: what the held-out floor capture
+    (`floor_ground.capture_size`) lacks of the check (`robot.floor.check_size`; None: the config lists no check
+    stances)."""
+    if check is None:
+        return f"to measure it more precisely, {NO_CHECK_STANCES}"
+    short = [f"{k} {capture[k]} (the check takes {v})" for k, v in check.items()
              if capture is not None and capture[k] < v]  # fmt: skip
     if not short:
-        return f"to measure it more precisely, take more held-out floor samples: {CHECK_HOW}"
-    return f"the held-out floor capture is smaller than the check needs: {', '.join(short)}; take {CHECK_HOW}"
+        return f"to measure it more precisely, take more held-out floor samples: {check_how(check)}"
+    return f"the held-out floor capture is smaller than the check needs: {', '.join(short)}; take {check_how(check)}"
 
 
 def deploy_verdict(
@@ -67,7 +78,8 @@ def deploy_verdict(
     """metrics.json's 'verdict': deploy (bool), worse (the pixel rule), refusals and notes (sentences), banner.
 
     measured_ground: {'before_m', 'after_m', 'after_std_m', optional 'before_std_m'} at 4.5 m from floor samples
-    [m] and optional 'capture' (`floor_ground.capture_size` of the held-out floor capture), or None;
+    [m], optional 'capture' (`floor_ground.capture_size` of the held-out floor capture) and 'check' (the check's
+    size on this robot, `robot.floor.check_size`; None: no check stances), or None;
     predicted_ground_m: 1-sigma ground error at 4.5 m from the fit's covariance [m], or None;
     camera_turn_rad: rotation angle of the fitted camera frame correction [rad].
     """
@@ -122,20 +134,19 @@ def _judge_measured_ground(
     b, a = measured_ground["before_m"] * 100, measured_ground["after_m"] * 100
     sa, sb = measured_ground["after_std_m"] * 100, measured_ground.get("before_std_m", 0.0) * 100
     advice = LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE
+    precise = more_precise(measured_ground.get("capture"), measured_ground.get("check"))
     if a - b > GROUND_SIGMAS * np.hypot(sa, sb):
         refusals.append((advice, f"The measured ground error at 4.5 m gets worse: {b:.1f} +- {sb:.1f} cm -> "
                                  f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
     elif a > limit_cm:
-        unsure = (f" The measurement is that uncertain: {more_precise(measured_ground.get('capture'))}."
-                  if a - GROUND_SIGMAS * sa <= limit_cm else "")  # fmt: skip
+        unsure = f" The measurement is that uncertain: {precise}." if a - GROUND_SIGMAS * sa <= limit_cm else ""
         refusals.append((advice, (
             f"The measured ground error at 4.5 m stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
             f"{limit_cm:g} cm (--ground-limit-cm).{unsure}")))
     elif a + GROUND_SIGMAS * sa > limit_cm:
         notes.append(
             f"The measured ground error at 4.5 m is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
-            f"cannot confirm that it is below the limit ({limit_cm:g} cm); "
-            f"{more_precise(measured_ground.get('capture'))}."
+            f"cannot confirm that it is below the limit ({limit_cm:g} cm); {precise}."
         )
 
 

@@ -16,6 +16,11 @@ from wolfcal.robot.stances import stance_readings
 
 # why `floor:` is needed, for the error that names the robot config when it is missing
 FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
+# The held-out floor capture that checks a fit (`capture --floor --check`, README "The venue check"): head views per
+# check stance (the standing legs' tick rounding averages over stances, not over views in one stance) and how many
+# times it is taken, the floor tags moved between (a tag's corner bias averages over the places it lies in)
+CHECK_VIEWS_PER_STANCE = 1
+CHECK_LAYOUTS = 3
 
 
 def floor_frames(sole_poses: np.ndarray) -> np.ndarray:
@@ -82,6 +87,17 @@ def stance_poses(robot: Robot, check: bool = False) -> np.ndarray:
                            "which the config does not give: list standing poses there, none of the fit's "
                            "(README, \"The venue check\"; `wolfcal.robot.floor.moved_stance` makes them)")  # fmt: skip
     return stance_readings(stances, robot.model)
+
+
+def check_size(robot: Robot) -> dict[str, int] | None:
+    """The check's samples, stances and tag layouts on this robot: its config's `floor.check_stances`,
+    CHECK_VIEWS_PER_STANCE head views in each, taken CHECK_LAYOUTS times; None when the config lists no check
+    stances."""
+    stances = len(robot.config.floor_config(FLOOR_NEEDED).check_stances)
+    if not stances:
+        return None
+    return {"samples": stances * CHECK_VIEWS_PER_STANCE * CHECK_LAYOUTS, "stances": stances,
+            "layouts": CHECK_LAYOUTS}
 
 
 def camera_in_floor(
