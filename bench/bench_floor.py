@@ -176,7 +176,8 @@ def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, 
                              ("formal_std_m", "sample_std_m", "tag_std_m", "rounding_std_m"))  # fmt: skip
             line += (f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
                      f"{(row['error_m'] - after) / row['std_m']:+.1f}; {'AGREES' if agrees else 'off'}; {parts}; "
-                     f"{measured['views']} views; inset {inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)")
+                     f"{measured['views']} views, {measured['outlier_corners']} corners left out; inset "
+                     f"{inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)")
     rng = np.random.default_rng(seed)
     soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
     line += (f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "

@@ -17,8 +17,9 @@ tick, so views of samples that read a joint at the same tick share it (the stand
 around: their rounding moves the floor as the plane does, no view in that stance tells them apart, so it stays in
 the 1 sigma as its own part; held-out samples in several stances, none of the fit's, average it:
 `floor.check_stances`). A tag lies in one place per capture file (a check taken three times with the tags moved
-between: each place has its own corner bias, which the tag jackknife sees), and views far off
-(`outliers.FIT_VIEW_PX`) are left out."""
+between: each place has its own corner bias, which the tag jackknife sees). Views far off (`outliers.FIT_VIEW_PX`)
+are left out, and so are single corners far off (`outliers.FLOOR_CORNER_PX`: on a small, strongly foreshortened far
+tag the detector's corner slides along an edge by pixels while the view's other corners fit)."""
 
 from __future__ import annotations
 
@@ -256,7 +257,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     covariance (7, 7) with the shared readings' rounding taken as known, the part that rounding adds (7, 7), the
     jackknife replicates deleting one group of samples (at most JACKKNIFE_GROUPS groups) and one tag (n, 7; None
     with fewer than 3 samples or tags); the
-    views' count (less `outlier_views`: off by far more than the others, `outliers.FIT_VIEW_PX`), the residual scale
+    views' count (less `outlier_views`: off by far more than the others, `outliers.FIT_VIEW_PX`), the corners left
+    out in them (`outlier_corners`, `outliers.FLOOR_CORNER_PX`, up to CORNER_ROUNDS times), the residual scale
     and the corners' rms [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
     seen twice. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
     views = floor_views(robot, obs, model)
@@ -399,10 +401,10 @@ def measured_ground_errors(
     corner_inset: tuple[float, float] = (0.0, 0.0),
 ) -> dict | None:
     """Per model: per distance the measured ground error [m] (worst bearing; None: the ball lies above the model's
-    horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count and the capture's size
-    (`capture_size`). None when the floor views cannot
-    measure it (fewer than MIN_VIEWS views of tags seen twice); the check's size on this robot
-    (`robot.floor.check_size`). `corner_inset`: the fit's `floor.corner_inset` and
+    horizon) and its 1-sigma [m] (`_spread`, with its parts); the views' count, the corners left out as far off
+    (`real_floor`'s `outlier_corners`), the capture's size (`capture_size`) and the check's size on this robot
+    (`robot.floor.check_size`). None when the floor views cannot measure it (fewer than MIN_VIEWS views of tags seen
+    twice). `corner_inset`: the fit's `floor.corner_inset` and
     its 1-sigma [px] (result.yaml; (0, 0) without one: then the inset's prior is MIN_INSET_STD_PX wide)."""
     out: dict = {"models": {}}
     for name, model in models.items():
@@ -419,7 +421,7 @@ def measured_ground_errors(
             worst = int(np.argmax(errors))
             rows.append({"distance_m": distance, "error_m": errors[worst], **_spread(offsets[worst], floor)})
         out["models"][name] = {"rows": rows, "unknowns": [float(v) for v in floor["unknowns"]]}
-        out["views"] = floor["views"]
+        out["views"], out["outlier_corners"] = floor["views"], floor["outlier_corners"]
     out["capture"] = capture_size(robot, obs)
     out["check"] = check_size(robot)
     return out
