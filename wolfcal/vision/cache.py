@@ -146,6 +146,7 @@ def hash_file(path: Path, stop: threading.Event | None = None) -> str:
 
 
 def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str:
+    """The key of a cache entry (JSON): the format, the file's content hash, the camera and the detector settings."""
     return json.dumps({"format": FORMAT, "content_sha256": digest, "camera": camera_name, **settings.describe()})
 
 
@@ -265,7 +266,8 @@ def _detect_while_hashing(
                 found.append(detections)
                 if not looked and hashing.done():
                     looked = True
-                    cached = _entry_of(hashing, camera_name, settings, stamps)
+                    key = _key_of(hashing, camera_name, settings)
+                    cached = _load(_entry_path(key), key, stamps) if key is not None else None
                     if cached is not None:
                         if progress:
                             progress(len(cached), len(cached))
@@ -276,25 +278,21 @@ def _detect_while_hashing(
             raise
         finally:
             stream.close()
-        if not looked and (cached := _entry_of(hashing, camera_name, settings, stamps)) is not None:
-            return cached  # the hash ended after the last image: its entry still answers, as it would have first
-    try:
-        key = _entry_key(hashing.result(), camera_name, settings)
-    except OSError:
+        key = _key_of(hashing, camera_name, settings)
+    if key is None:
         return found
+    if not looked and (cached := _load(_entry_path(key), key, stamps)) is not None:
+        return cached  # the hash ended after the last image: its entry still answers, as it would have first
     _save(_entry_path(key), key, stamps, found)
     return found
 
 
-def _entry_of(
-    hashing: Future, camera_name: str, settings: DetectorSettings, stamps: np.ndarray
-) -> list[Detections] | None:
-    """The whole entry for the finished hash's digest (None without one, or if the file could not be read)."""
+def _key_of(hashing: Future, camera_name: str, settings: DetectorSettings) -> str | None:
+    """The entry key for the finished hash's digest (None if the file could not be read)."""
     try:
-        key = _entry_key(hashing.result(), camera_name, settings)
+        return _entry_key(hashing.result(), camera_name, settings)
     except OSError:
         return None
-    return _load(_entry_path(key), key, stamps)
 
 
 def detect_by_source(
