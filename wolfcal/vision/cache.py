@@ -59,13 +59,16 @@ class DetectorSettings:
 
     @classmethod
     def of(cls, families: Mapping[str, set[int] | None], refine: str = "edges") -> DetectorSettings:
+        """The settings of {family: ids (None: all)} and `refine`, in a canonical order (families and ids sorted)."""
         items = sorted((f, None if ids is None else tuple(sorted(ids))) for f, ids in families.items())
         return cls(tuple(items), refine)
 
     def family_map(self) -> dict[str, set[int] | None]:
+        """{family: ids (None: all)}, as `of` takes it."""
         return {f: None if ids is None else set(ids) for f, ids in self.families}
 
     def describe(self) -> dict:
+        """The settings as the entry key states them, with wolfcal's detector version and OpenCV's version."""
         import cv2
 
         return {
@@ -110,6 +113,8 @@ def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | Non
 
 
 def _identity_and_memo(path: Path) -> tuple[list[int], Path]:
+    """The file's identity (device, inode, size, modification and status-change times [ns]) and the path of its
+    digest memo in the cache folder (named by the hash of its resolved path)."""
     info = os.stat(path)
     identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
     return identity, cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
@@ -151,6 +156,7 @@ def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str
 
 
 def _entry_path(key: str) -> Path:
+    """The entry's file in the cache folder, named by the hash of its key."""
     return cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
 
 
