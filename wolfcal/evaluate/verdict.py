@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.robot.floor import CHECK_LAYOUTS
+
 GROUND_LIMIT_M = 0.05  # largest measured ground error at 4.5 m that may be deployed [m]
 GROUND_SIGMAS = 2.0  # 'worse' and 'confirmed below the limit' need this many 1-sigmas of the measurement
 MOUNT_LIMIT_RAD = float(np.deg2rad(2.0))  # a camera correction beyond this is more than a mount moves [rad]
@@ -40,8 +42,9 @@ FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the
 # check"; its size on a robot: `robot.floor.check_size`): the standing legs' shared tick rounding averages only over
 # stances (floor_ground's `rounding_std_m`), and a tag's corner bias only over the places it lies in (`tag_std_m`)
 NO_CHECK_STANCES = ("list standing poses none of the fit's in the robot config's floor.check_stances "
-                    "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check`, "
-                    "the floor tags moved between runs, and give all the runs to `evaluate --capture`")
+                    "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check` "
+                    f"{CHECK_LAYOUTS} times, the floor tags moved between, and give all {CHECK_LAYOUTS} to "
+                    "`evaluate --capture`")
 
 
 def check_how(check: dict) -> str:
