@@ -299,7 +299,8 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
     their cumulative weight (piecewise linear) reaches half of the total. Unlike a plain weighted median (an order
     statistic, which jumps from one value to the next as the weights' order changes: 2 % of a noise level from 128
     rows, enough to move a fit's noise model and with it its estimates by a sizable fraction of a standard
-    deviation), a continuous function of the values; NaN for no values."""
+    deviation), a continuous function of the values where they lie closer than 2 `width` around the median; NaN
+    for no values."""
     if values.size == 0:
         return float("nan")
     edges = np.concatenate([values - width, values + width])
@@ -309,10 +310,16 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
     np.cumsum(slope, out=slope)  # the cumulative weight's slope after each edge
     cumulative = np.concatenate([[0.0], np.cumsum(slope[:-1] * np.diff(edges))])  # at each edge
     half = 0.5 * float(np.sum(weights))
-    k = min(int(np.searchsorted(cumulative, half)), len(edges) - 1)  # first edge at or above half
-    if k == 0 or slope[k - 1] <= 0.0:
-        return float(edges[k])
-    return float(edges[k - 1] + (half - cumulative[k - 1]) / slope[k - 1])
+
+    def at(level: float) -> float:  # where the cumulative weight reaches `level`
+        k = min(int(np.searchsorted(cumulative, level)), len(edges) - 1)  # first edge at or above it
+        if k == 0 or slope[k - 1] <= 0.0:
+            return float(edges[k])
+        return float(edges[k - 1] + (level - cumulative[k - 1]) / slope[k - 1])
+
+    # a stretch without values at exactly half (values further apart than 2 width): its middle, not the end that
+    # rounding picks
+    return 0.5 * (at(half * (1.0 - 1e-9)) + at(half * (1.0 + 1e-9)))
 
 
 def weighted_median_above(
