@@ -5,8 +5,10 @@ image: its residuals, whitened with the covariance of that view alone so that no
 above the other views' and off by more than the block's floor; they get zero weight) -> per block, estimate the
 noise level from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
 fixed), and the level of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker)
--> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then a full solve under
-the final noise model, and `uncertainty` at its solution.
+-> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then the final solves:
+converge fully (Newton steps on the Huber loss), re-estimate the outlier sets and noise levels at the solution, and
+solve again until they no longer change (a fixed point: the solution depends on the data, not on where a round's
+solve happened to stop), and `uncertainty` at the solution.
 """
 
 from __future__ import annotations
@@ -32,10 +34,13 @@ MAX_SIGMA = {"px": 50.0, "m": 0.1}
 # whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
 # linear arms would otherwise take many small steps. The solve after the last round converges fully.
 ROUND_COST_TOL = 1e-3
-# Every solve also stops once a step moves no unknown by more than this many of its standard deviations
-# (`levenberg_marquardt`'s std_tol): a round's by ROUND_STD_TOL, the last one by FINAL_STD_TOL. Along the Huber
-# loss's linear arms (a view far off while the noise sits at its floor) steps of one size otherwise zigzag for ~200
-# evaluations and move the solution by 0.03 standard deviations in all.
+# Every solve also stops once the undamped step moves no unknown by more than this many of its standard deviations
+# (`levenberg_marquardt`'s std_tol): a round's by ROUND_STD_TOL, a final one by FINAL_STD_TOL. Along the Huber
+# loss's linear arms (a view far off while the noise sits at its floor) the rounds' steps (J^T J of the square-root
+# residuals) fall short and zigzag for ~200 evaluations, moving the solution by 0.03 standard deviations in all; the
+# final solves take Newton steps on the loss itself (`Problem.normal_equations` with curvature) and converge in a
+# few. Their cost-change stop (FINAL_FTOL, relative) only guards against a stall: at 1e-8 it stopped a 400-sample
+# fit 0.03 standard deviations short.
 ROUND_STD_TOL = 0.1
 FINAL_STD_TOL = 0.003
 FINAL_FTOL = 1e-12
