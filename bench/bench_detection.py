@@ -9,8 +9,9 @@ Run: python bench/bench_detection.py [--views N] [--quick] [--before REV]. Print
    wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px]; with
    --capture FILE (only this part) the same split on a capture's own images, beside the fit's detection of them
    on all cores;
-2. a capture's worth of png images (stored, as wolfcal's captures hold them) decoded and detected on all cores: serial, threads, worker processes
-   (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker detector on all cores;
+2. a capture's worth of png images (stored, as wolfcal's captures hold them) decoded and detected on all cores:
+   serial, threads, worker processes (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker
+   detector on all cores;
 3. the detection cache: first run (hash + detect + write) and second run (hash + read), and the cost of
    hashing a 100 MB file;
 4. `wolfcal intrinsics` against a plain OpenCV script (bench/opencv_intrinsics.py) as whole processes: 50
