@@ -132,15 +132,15 @@ def test_file_is_a_ros2_mcap_with_statistics_schemas_and_attachments(tmp_path, c
     assert by_stamp[T0][config.camera.topic].format == "mono8; png compressed mono8"
 
 
-def _png_layout(data: bytes) -> tuple[tuple[int, ...], bytes]:
-    """(IHDR fields: width, height, bit depth, colour type, compression, filter, interlace), the joined IDAT data."""
+def _png_layout(data: bytes) -> tuple[tuple[int, ...], list[bytes]]:
+    """(IHDR fields: width, height, bit depth, colour type, compression, filter, interlace), the IDAT chunks' data."""
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    pos, header, idat = 8, (), b""
+    pos, header, idat = 8, (), []
     while pos < len(data):
         (length,) = struct.unpack(">I", data[pos : pos + 4])
         kind, payload = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + length]
         header = struct.unpack(">IIBBBBB", payload) if kind == b"IHDR" else header
-        idat += payload if kind == b"IDAT" else b""
+        idat += [payload] if kind == b"IDAT" else []
         pos += 12 + length
     return header, idat
 
@@ -160,9 +160,11 @@ def test_png_images_are_stored_unfiltered_and_decode_by_the_png_spec(tmp_path, c
     with path.open("rb") as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory()])
         (data,) = [m.data for _, _, _, m in reader.iter_decoded_messages(topics=[config.camera.topic])]
-    header, idat = _png_layout(data)
+    header, chunks = _png_layout(data)
     channels = 3 if colour else 1
     assert header == (width, height, 8, 2 if colour else 0, 0, 0, 0)  # 8-bit gray / RGB, not interlaced
+    assert len(chunks) == 1  # one IDAT chunk (up to 1 MiB), few checksums for the reader's damage check
+    idat = chunks[0]
     rows = zlib.decompress(idat)
     stride = 1 + width * channels
     assert len(rows) == height * stride and set(rows[::stride]) == {0}  # filter type "none" on every row
