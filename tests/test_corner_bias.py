@@ -10,7 +10,8 @@ from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.simulate import offset_joints
 from wolfcal.sim.truth import TruthSpec, random_truth
-from wolfcal.vision.corner_bias import edge_normals, inset_directions
+from wolfcal.vision.corner_bias import apparent_edges, edge_normals, inset_directions
+from wolfcal.vision.outline import mean_side
 
 CAMERA = OTHER_CAMERA
 
@@ -29,6 +30,18 @@ def test_inset_directions_move_both_edges_inward_by_one_pixel():
 
 
 @pytest.mark.slow
+def test_apparent_edge_is_the_mean_of_the_known_sides():
+    trapezoid = np.array([[0.0, 0.0], [40.0, 0.0], [30.0, 8.0], [10.0, 8.0]])  # sides 40, sqrt(164), 20, sqrt(164)
+    views = np.stack([trapezoid, trapezoid, trapezoid, trapezoid])
+    views[1, 2] = np.nan  # the two sides at corner 2 unknown: 40 and sqrt(164) remain
+    views[2, [0, 2]] = np.nan  # every side touches a missing corner
+    views[3] = np.nan
+    side = np.sqrt(164.0)
+    assert np.allclose(mean_side(views), [(60.0 + 2 * side) / 4, (40.0 + side) / 2, np.nan, np.nan], equal_nan=True)
+    assert np.allclose(apparent_edges(views), [(60.0 + 2 * side) / 4, (40.0 + side) / 2, REFERENCE_EDGE_PX,
+                                               REFERENCE_EDGE_PX])  # fmt: skip
+
+
 def test_fit_finds_a_known_corner_inset(tmp_path):
     robot = robot_with_floor_tags(tmp_path)
     rng = np.random.default_rng(2)

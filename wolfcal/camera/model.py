@@ -42,18 +42,22 @@ class CameraModel:
 
     @property
     def fx(self) -> float:
+        """Focal length along x [px]."""
         return float(self.K[0, 0])
 
     @property
     def fy(self) -> float:
+        """Focal length along y [px]."""
         return float(self.K[1, 1])
 
     @property
     def cx(self) -> float:
+        """Principal point x [px] (OpenCV: centre of the top-left pixel at 0)."""
         return float(self.K[0, 2])
 
     @property
     def cy(self) -> float:
+        """Principal point y [px] (OpenCV: centre of the top-left pixel at 0)."""
         return float(self.K[1, 2])
 
     def scaled(self, sx: float, sy: float, width: int, height: int) -> CameraModel:
@@ -111,12 +115,15 @@ class CameraModel:
 
     # --- pixels -------------------------------------------------------------------------------------------
     def normalized_to_pixels(self, xy_d: np.ndarray) -> np.ndarray:
+        """Distorted normalized image coordinates (..., 2) -> pixels (..., 2) [px] through K (with its skew)."""
         K = self.K
         u = K[0, 0] * xy_d[..., 0] + K[0, 1] * xy_d[..., 1] + K[0, 2]
         v = K[1, 1] * xy_d[..., 1] + K[1, 2]
         return np.stack([u, v], axis=-1)
 
     def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels (..., 2) [px] -> distorted normalized image coordinates (..., 2): the inverse of
+        `normalized_to_pixels`."""
         K = self.K
         y = (uv[..., 1] - K[1, 2]) / K[1, 1]
         x = (uv[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]

@@ -41,6 +41,8 @@ SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is esti
 
 @dataclass
 class Fit:
+    """A solved fit: the measurement blocks and their observations, the unknowns and the solution."""
+
     robot: Robot
     observations: dict[str, Observations]  # per camera, only the tags used
     blocks: list[Block]  # the measurement blocks (camera, floor, sole closure, motion capture)
@@ -55,12 +57,13 @@ class Fit:
 
     @property
     def tag_ids(self) -> list[int]:
+        """The ids of the tags on links that the fit's blocks observe (floor tags not included)."""
         return sorted({t for b in self.blocks if b.system != "floor" for t in getattr(b, "tag_ids", ())})
 
     @property
     def corrections(self) -> Corrections:
+        """The fitted corrections of the robot model (offsets [rad], frame and tag-mount vectors [m, rad])."""
         return self.chain.corrections(self.solution.values[: len(self.chain)])
-
 
 
 def in_system(camera: str, system: str | None) -> bool:
@@ -203,6 +206,8 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
         markers = markers.only_markers([n for n in markers.marker_names
                                         if config.marker(n).side in (options.side, None)])  # fmt: skip
     return MocapBlock(robot, markers, options.mocap_moving)
+
+
 def split_floor(
     robot: Robot, observations: dict[str, Observations]
 ) -> tuple[dict[str, Observations], Observations | None]:
@@ -312,36 +317,19 @@ def run_fit(
     mocap_offsets: Sequence[float] = (),
 ) -> FitResult:
     """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
-    Existing outputs in out_dir are replaced only with `force`; both files are written as one set. Motion capture
+    Existing outputs in out_dir are replaced only with `force`; the outputs are written as one set. Motion capture
     (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
-    (one per capture, clock offsets `mocap_offsets` or estimated)."""
+    (one per capture, clock offsets `mocap_offsets` [s] or estimated)."""
     robot = load_robot(robot_path)
-    inputs = [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
-    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
+    check_output_folder(out_dir, FIT_OUTPUTS, force, fit_inputs(robot, captures, mocap, intrinsics))
     markers: MarkerObservations | None = None
     warnings: list[str] = []
-    observations: dict[str, Observations] = {}
     if options.system == "mocap" or mocap:
-        from wolfcal.io.mocap_load import load_marker_observations  # here: a camera fit does not load the mocap readers
-
-        markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
-        say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
-            + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
-        warnings += [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
-                     ] if markers.unknown_names else []  # fmt: skip
+        markers, warnings = read_markers(robot, captures, mocap, mocap_offsets, say)
+    observations: dict[str, Observations] = {}
     if options.system != "mocap":
-        required = (HEAD_CAMERA,) if options.system == "head" else ()
-        samples, read_warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
-        warnings += read_warnings
-        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-        observations, detect_warnings = detect_observations(
-            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-        )
-        warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
-        release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
+        observations, camera_warnings = detect_captures(robot, captures, intrinsics, options, say)
+        warnings += camera_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
@@ -351,10 +339,72 @@ def run_fit(
         fit = fit_observations(robot, observations, options, say, markers)
         check_solution_left_out(fit, captures)
         result = fit_result(fit, options, captures, intrinsics, warnings)
-        with output_set():
-            write_result(out_dir / "result.yaml", result)
-            write_calibrated_urdf(robot.config.urdf, robot.model, fit.corrections, out_dir / "calibrated.urdf")
-            write_calibrated_config(robot, fit.corrections, out_dir / "calibrated_robot.yaml")
+        write_fit(out_dir, fit, result)
+    report_fit(result, fit, warnings, out_dir, say)
+    return result
+
+
+def fit_inputs(
+    robot: Robot, captures: Sequence[Path], mocap: Sequence[Path], intrinsics: Path | None
+) -> list[Path]:
+    """Every file a fit reads (captures, motion-capture files, robot config and URDF, intrinsics): none of them may
+    be an output (`check_output_folder`)."""
+    return [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
+
+
+def read_markers(
+    robot: Robot, captures: list[Path], mocap: Sequence[Path], mocap_offsets: Sequence[float],
+    say: Callable[[str], None],
+) -> tuple[MarkerObservations, list[str]]:
+    """The still samples' marker positions (motion-capture frame [m]) from the captures' Markers topic or the
+    `mocap` files (clock offsets `mocap_offsets` [s], or estimated), and a warning for marker labels the robot
+    config does not list."""
+    from wolfcal.io.mocap_load import load_marker_observations  # here: a camera fit does not load the mocap readers
+
+    markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
+    say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+        + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+    warnings = [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
+                ] if markers.unknown_names else []  # fmt: skip
+    return markers, warnings
+
+
+def detect_captures(
+    robot: Robot, captures: list[Path], intrinsics: Path | None, options: FitOptions, say: Callable[[str], None]
+) -> tuple[dict[str, Observations], list[str]]:
+    """The captures read and their tags detected in the images of the cameras --system takes: per camera, the
+    detected tag corners [px] with the joint readings of their samples; and the warnings of reading and detection
+    (frames skipped, repeated images)."""
+    required = (HEAD_CAMERA,) if options.system == "head" else ()
+    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+    release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
+    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+    observations, detect_warnings = detect_observations(
+        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+    )
+    warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
+    release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
+    return observations, warnings
+
+
+def write_fit(out_dir: Path, fit: Fit, result: FitResult) -> None:
+    """The fit's outputs (FIT_OUTPUTS), written as one set: result.yaml, the URDF with the fitted corrections
+    (`Corrections`: encoder offsets [rad], joint-frame corrections [m, rad]) and the robot config with the fitted
+    tag mounts (T_link_tag [m, rad])."""
+    urdf = fit.robot.config.urdf
+    with output_set():
+        write_result(out_dir / "result.yaml", result)
+        write_calibrated_urdf(urdf, fit.robot.model, fit.corrections, out_dir / "calibrated.urdf")
+        write_calibrated_config(fit.robot, fit.corrections, out_dir / "calibrated_robot.yaml")
+
+
+def report_fit(
+    result: FitResult, fit: Fit, warnings: list[str], out_dir: Path, say: Callable[[str], None]
+) -> None:
+    """Tell the user what was fitted: the summary, notes on what the data cannot tell apart, the warnings, and
+    where the outputs are."""
     for line in summary_lines(result):
         say(line)
     for line in explain(fit.params, fit.solution):
@@ -362,4 +412,3 @@ def run_fit(
     for line in warnings:
         say(f"warning: {line}")
     say(f"wrote {out_dir / 'result.yaml'}, {out_dir / 'calibrated.urdf'} and {out_dir / 'calibrated_robot.yaml'}")
-    return result

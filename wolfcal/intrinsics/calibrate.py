@@ -49,15 +49,18 @@ class Calibration:
 
     @property
     def rms_per_point(self) -> float:
+        """RMS reprojection error over all used points, Euclidean per point [px]."""
         r = np.concatenate(self.residuals)
         return float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
 
     @property
     def rms_per_axis(self) -> float:
+        """RMS reprojection error per image axis [px] (OpenCV's figure): `rms_per_point` / sqrt(2)."""
         return float(self.rms_per_point / np.sqrt(2.0))
 
     @property
     def n_points(self) -> int:
+        """Board corners used, over all views."""
         return int(sum(len(r) for r in self.residuals))
 
 

@@ -24,6 +24,7 @@ TOLERANCE = 1e-9  # relative improvement an exchange must bring
 
 
 def check_criterion(criterion: str) -> str:
+    """The --criterion in upper case; a clear error for one not in CRITERIA."""
     if criterion.upper() not in CRITERIA:
         raise WolfcalError(f"--criterion {criterion!r} must be one of {', '.join(CRITERIA)}")
     return criterion.upper()

@@ -87,6 +87,8 @@ class ParameterSet:
 
 
 def frame_parameters(prefix: str, kind: str, target: str, sigma_m: float, sigma_rad: float) -> list[Parameter]:
+    """The six parameters `prefix`.x|y|z [m] and .rx|ry|rz [rad] of a frame correction of `target`, with prior
+    sigmas `sigma_m` [m] and `sigma_rad` [rad]."""
     return [
         Parameter(f"{prefix}.{c}", kind, target, i, "m" if i < 3 else "rad", sigma_m if i < 3 else sigma_rad)
         for i, c in enumerate(COMPONENTS)
@@ -94,6 +96,7 @@ def frame_parameters(prefix: str, kind: str, target: str, sigma_m: float, sigma_
 
 
 def offset_parameter(joint: str, sigma: float) -> Parameter:
+    """The encoder offset [rad] of `joint`, with prior sigma `sigma` [rad]."""
     return Parameter(f"{joint}.offset", "offset", joint, 0, "rad", sigma)
 
 

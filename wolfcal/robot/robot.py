@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -101,21 +102,20 @@ def load_robot(config_path: str | Path) -> Robot:
                 f"{config.urdf}"
             )
     for system, ranges in config.sampling_ranges.items():
-        unknown = [j for j in ranges if j not in model.actuated_joint_names]
-        if unknown:
-            raise WolfcalError(
-                f"{where}: 'sampling_ranges.{system}' names joint(s) {', '.join(unknown)} that are not movable "
-                f"joints of {config.urdf}"
-            )
+        _check_movable(config, model, f"sampling_ranges.{system}", ranges)
     if config.servos is not None:
-        unknown = [j for j in config.servos.ids if j not in model.actuated_joint_names]
-        if unknown:
-            raise WolfcalError(
-                f"{where}: 'servos.ids' names joint(s) {', '.join(unknown)} that are not movable joints of "
-                f"{config.urdf}"
-            )
+        _check_movable(config, model, "servos.ids", config.servos.ids)
     _check_floor(config, model)
     return Robot(config=config, model=model)
+
+
+def _check_movable(config: RobotConfig, model: KinematicModel, key: str, joints: Iterable[str]) -> None:
+    """A WolfcalError naming the config's `key` when `joints` names joints that are not movable joints of the URDF."""
+    unknown = [j for j in joints if j not in model.actuated_joint_names]
+    if unknown:
+        raise WolfcalError(
+            f"{config.path}: '{key}' names joint(s) {', '.join(unknown)} that are not movable joints of {config.urdf}"
+        )
 
 
 def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
@@ -127,10 +127,5 @@ def _check_floor(config: RobotConfig, model: KinematicModel) -> None:
         if sole not in model.links:
             raise WolfcalError(f"{config.path}: 'floor.soles[{i}]' {sole!r} is not a link of {config.urdf}")
     for key, stance in config.floor.named_stances():
-        unknown = [j for j in stance if j not in model.actuated_joint_names]
-        if unknown:
-            raise WolfcalError(
-                f"{config.path}: '{key}' names joint(s) {', '.join(unknown)} that are not movable joints of "
-                f"{config.urdf}"
-            )
+        _check_movable(config, model, key, stance)
     check_stances(config, model)

@@ -68,6 +68,7 @@ class Board:
 
     @property
     def marker_length(self) -> float:
+        """Side of a ChArUco marker [m]: as given, else 0.75 of the square."""
         return self.marker if self.marker is not None else 0.75 * self.square
 
     @property
@@ -77,6 +78,7 @@ class Board:
 
     @property
     def n_corners(self) -> int:
+        """Inner corners of the board (cols x rows)."""
         return self.cols * self.rows
 
     def describe(self) -> str:

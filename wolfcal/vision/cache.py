@@ -59,13 +59,16 @@ class DetectorSettings:
 
     @classmethod
     def of(cls, families: Mapping[str, set[int] | None], refine: str = "edges") -> DetectorSettings:
+        """The settings of {family: ids (None: all)} and `refine`, in a canonical order (families and ids sorted)."""
         items = sorted((f, None if ids is None else tuple(sorted(ids))) for f, ids in families.items())
         return cls(tuple(items), refine)
 
     def family_map(self) -> dict[str, set[int] | None]:
+        """{family: ids (None: all)}, as `of` takes it."""
         return {f: None if ids is None else set(ids) for f, ids in self.families}
 
     def describe(self) -> dict:
+        """The settings as the entry key states them, with wolfcal's detector version and OpenCV's version."""
         import cv2
 
         return {
@@ -110,6 +113,8 @@ def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | Non
 
 
 def _identity_and_memo(path: Path) -> tuple[list[int], Path]:
+    """The file's identity (device, inode, size, modification and status-change times [ns]) and the path of its
+    digest memo in the cache folder (named by the hash of its resolved path)."""
     info = os.stat(path)
     identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
     return identity, cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
@@ -146,10 +151,12 @@ def hash_file(path: Path, stop: threading.Event | None = None) -> str:
 
 
 def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str:
+    """The key of a cache entry (JSON): the format, the file's content hash, the camera and the detector settings."""
     return json.dumps({"format": FORMAT, "content_sha256": digest, "camera": camera_name, **settings.describe()})
 
 
 def _entry_path(key: str) -> Path:
+    """The entry's file in the cache folder, named by the hash of its key."""
     return cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
 
 
@@ -265,7 +272,8 @@ def _detect_while_hashing(
                 found.append(detections)
                 if not looked and hashing.done():
                     looked = True
-                    cached = _entry_of(hashing, camera_name, settings, stamps)
+                    key = _key_of(hashing, camera_name, settings)
+                    cached = _load(_entry_path(key), key, stamps) if key is not None else None
                     if cached is not None:
                         if progress:
                             progress(len(cached), len(cached))
@@ -276,25 +284,21 @@ def _detect_while_hashing(
             raise
         finally:
             stream.close()
-        if not looked and (cached := _entry_of(hashing, camera_name, settings, stamps)) is not None:
-            return cached  # the hash ended after the last image: its entry still answers, as it would have first
-    try:
-        key = _entry_key(hashing.result(), camera_name, settings)
-    except OSError:
+        key = _key_of(hashing, camera_name, settings)
+    if key is None:
         return found
+    if not looked and (cached := _load(_entry_path(key), key, stamps)) is not None:
+        return cached  # the hash ended after the last image: its entry still answers, as it would have first
     _save(_entry_path(key), key, stamps, found)
     return found
 
 
-def _entry_of(
-    hashing: Future, camera_name: str, settings: DetectorSettings, stamps: np.ndarray
-) -> list[Detections] | None:
-    """The whole entry for the finished hash's digest (None without one, or if the file could not be read)."""
+def _key_of(hashing: Future, camera_name: str, settings: DetectorSettings) -> str | None:
+    """The entry key for the finished hash's digest (None if the file could not be read)."""
     try:
-        key = _entry_key(hashing.result(), camera_name, settings)
+        return _entry_key(hashing.result(), camera_name, settings)
     except OSError:
         return None
-    return _load(_entry_path(key), key, stamps)
 
 
 def detect_by_source(

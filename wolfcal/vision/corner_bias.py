@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wolfcal.vision.outline import mean_side
+
 REFERENCE_EDGE_PX = 40.0  # apparent tag edge [px] at which the inset is stated; smaller views count less
 CORNER_INSET = "floor.corner_inset"  # the fit's parameter name for the inset [px] (in result.yaml)
 
@@ -41,12 +43,10 @@ def inset_directions(ring: np.ndarray) -> np.ndarray:
 
 
 def apparent_edges(ring: np.ndarray) -> np.ndarray:
-    """(V,) mean edge length [px] of tag views `ring` (V, 4, 2), over the edges whose two corners are known
-    (REFERENCE_EDGE_PX for a view without a known edge)."""
-    lengths = np.linalg.norm(ring - np.roll(ring, 1, axis=1), axis=2)  # (V, 4), NaN next to a missing corner
-    known = np.isfinite(lengths)
-    return np.where(known.any(axis=1), np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1),
-                    REFERENCE_EDGE_PX)  # fmt: skip
+    """(V,) mean edge length [px] of tag views `ring` (V, 4, 2) [px], over the edges whose two corners are known
+    (`outline.mean_side`); REFERENCE_EDGE_PX for a view without a known edge."""
+    side = mean_side(ring)
+    return np.where(np.isnan(side), REFERENCE_EDGE_PX, side)
 
 
 def small_view_weight(edge: np.ndarray) -> np.ndarray:

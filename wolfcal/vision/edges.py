@@ -16,11 +16,13 @@ Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points a
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from wolfcal.outliers import EDGE_POINT_PX
+from wolfcal.vision.outline import mean_side
 
 MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
@@ -144,11 +146,6 @@ def _tangents(d: np.ndarray, off: np.ndarray, good: np.ndarray) -> np.ndarray:
     return coeffs[:, :2]
 
 
-def mean_side(corners: np.ndarray) -> np.ndarray:
-    """(T,) mean length [px] of the four sides of each tag's corners (T, 4, 2) [px]."""
-    return np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).mean(axis=1)
-
-
 def _grid(first: np.ndarray, stop: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Per row, np.arange(first, stop, step) padded (continued) to the longest row -> (values (T, N), lengths
     (T,)). The values are computed as np.arange computes them (first + i * ((first + step) - first))."""
@@ -184,19 +181,77 @@ def refine_tags(
     sizes get other grids: rows are padded to the longest and the padding is never used.
     """
     corners = np.array(corners, dtype=float).reshape(-1, 4, 2)
-    if len(corners) > TAGS_PER_PASS:  # tags of similar size together, so that little of the arrays is padding
-        size = mean_side(corners)
-        refined = np.empty_like(corners)
-        for part in np.array_split(np.argsort(size), -(-len(corners) // TAGS_PER_PASS)):
-            refined[part] = refine_tags(images, np.asarray(image_of_tag)[part], corners[part], cells, iterations)
-        return refined
-    start = np.repeat(np.arange(4), 2)  # edge 2k + j starts at corner k ...
-    end = (start + np.tile([1, -1], 4)) % 4  # ... and runs towards corner k + 1 (j = 0) or k - 1 (j = 1)
-    tag = np.repeat(np.arange(len(corners)), 8)  # the tag of each edge
-    image_of_edge = np.asarray(image_of_tag)[tag]
-    far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]  # (E, 2)
-    edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
+    if len(corners) > TAGS_PER_PASS:
+        return _refine_by_size(images, np.asarray(image_of_tag), corners, cells, iterations)
+    edges = _EdgeIndex.of(images, np.asarray(image_of_tag), len(corners))
     for _ in range(iterations):
+        grid = _ProfileGrid.of(corners, edges, cells)
+        profiles, keep = _sample_profiles(images, edges, grid)
+        tangent = _edge_tangents(profiles, keep, grid)
+        point = grid.c + tangent[:, :1] * grid.n  # (E, 2) on the edge at the corner
+        direction = grid.e + tangent[:, 1:] * grid.n
+        T = len(corners)
+        reach = 0.5 * grid.cell[::8] + 1.0  # (T,) how far a corner may move in one iteration [px]
+        corners = _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), reach)
+    return corners
+
+
+def _refine_by_size(
+    images: Sequence[np.ndarray], image_of_tag: np.ndarray, corners: np.ndarray, cells: int, iterations: int
+) -> np.ndarray:
+    """`refine_tags` of more than TAGS_PER_PASS tags (corners (T, 4, 2) [px]), in passes of tags of similar size,
+    so that little of the arrays is padding."""
+    size = mean_side(corners)
+    refined = np.empty_like(corners)
+    for part in np.array_split(np.argsort(size), -(-len(corners) // TAGS_PER_PASS)):
+        refined[part] = refine_tags(images, image_of_tag[part], corners[part], cells, iterations)
+    return refined
+
+
+@dataclass
+class _EdgeIndex:
+    """The E = 8 T edges of T tags (edge 2k + j starts at corner k and runs towards corner k + 1 (j = 0) or k - 1
+    (j = 1)) and the images they are seen in; the same for every iteration of a pass."""
+
+    start: np.ndarray  # (8,) the corner each edge of a tag starts at
+    end: np.ndarray  # (8,) the corner it runs towards
+    tag: np.ndarray  # (E,) the tag of each edge
+    far: np.ndarray  # (E, 2) the last pixel (x, y) [px] of each edge's image
+    edges_of_image: list[tuple[int, np.ndarray]]  # (image index, its edges)
+
+    @staticmethod
+    def of(images: Sequence[np.ndarray], image_of_tag: np.ndarray, n_tags: int) -> _EdgeIndex:
+        """The edges of `n_tags` tags, tag k seen in images[image_of_tag[k]]."""
+        start = np.repeat(np.arange(4), 2)
+        end = (start + np.tile([1, -1], 4)) % 4
+        tag = np.repeat(np.arange(n_tags), 8)
+        image_of_edge = image_of_tag[tag]
+        far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]
+        edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
+        return _EdgeIndex(start, end, tag, far, edges_of_image)
+
+
+@dataclass
+class _ProfileGrid:
+    """Where one iteration samples each edge (E edges, image frame, [px]): from its start corner c along the unit
+    direction e, profiles at distances d (E, M) across the outward unit normal n at offsets t (E, S); rows are
+    padded to the longest (n_d, n_t: the lengths of the rows)."""
+
+    cell: np.ndarray  # (E,) the tag's mean cell [px]
+    c: np.ndarray  # (E, 2) start corner [px]
+    e: np.ndarray  # (E, 2) unit direction towards the other corner
+    length: np.ndarray  # (E,) the edge's length [px]
+    n: np.ndarray  # (E, 2) outward unit normal (out of the tag)
+    window: np.ndarray  # (E,) half-width [px] of the window the edge is measured in
+    t: np.ndarray  # (E, S) offsets across the edge [px]
+    n_t: np.ndarray  # (E,) offsets used of each row
+    d: np.ndarray  # (E, M) distances along the edge from the corner [px]
+    n_d: np.ndarray  # (E,) distances used of each row
+
+    @staticmethod
+    def of(corners: np.ndarray, edges: _EdgeIndex, cells: int) -> _ProfileGrid:
+        """The grid of the `edges` of tags with `corners` (T, 4, 2) [px] of `cells` cells across."""
+        start, end, tag = edges.start, edges.end, edges.tag
         cell = (mean_side(corners) / cells)[tag]  # (E,)
         c = corners[:, start].reshape(-1, 2)
         e = corners[:, end].reshape(-1, 2) - c
@@ -210,34 +265,46 @@ def refine_tags(
         t, n_t = _grid(-half, half + 1e-9, 0.25)
         first = np.maximum(np.maximum(2.0, 0.3 * cell), _clear_of_other_edge(e, window))
         d, n_d = _grid(first, np.maximum(np.maximum(2.5 * cell, 4.0), first + 4.0) + 1e-9, 0.5)
-        E, M, S = len(tag), d.shape[1], t.shape[1]
-        base = c[:, None] + d[:, :, None] * e[:, None]  # (E, M, 2) on the edge
-        t_ends = np.stack([t[:, 0], t[np.arange(E), n_t - 1]], axis=1)  # (E, 2)
-        ends = base[:, :, None] + t_ends[:, None, :, None] * n[:, None, None]  # (E, M, 2, 2) profile ends
-        inside = (ends >= 0).all(axis=(2, 3)) & (ends <= far[:, None, None]).all(axis=(2, 3))  # the box is convex
-        keep = inside & (d < 0.45 * length[:, None]) & (np.arange(M) < n_d[:, None])  # (E, M): near the corner
-        # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
-        maps = [np.add(base[:, :, None, a], (t * n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
-                       dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
-        profiles = np.empty((E, M, S), np.float32)
-        for i, rows in edges_of_image:
-            x, y = (m[rows].reshape(-1, S) for m in maps)
-            profiles[rows] = cv2.remap(images[i], x, y, cv2.INTER_LINEAR).reshape(-1, M, S)
-        dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :])
-        usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
-        dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
-        off = edge_offsets(profiles, t[:, None], dark[:, None], light[:, None], window[:, None],
-                           np.broadcast_to(n_t[:, None], (E, M)))  # fmt: skip
-        good = keep & np.isfinite(off) & usable[:, None]
-        usable &= good.sum(axis=1) >= MIN_POINTS
-        tangent = np.full((E, 2), np.nan)
-        if usable.any():
-            tangent[usable] = _tangents(d[usable], off[usable], good[usable])
-        point = c + tangent[:, :1] * n  # (E, 2) on the edge at the corner
-        direction = e + tangent[:, 1:] * n
-        T = len(corners)
-        corners = _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), 0.5 * cell[::8] + 1.0)
-    return corners
+        return _ProfileGrid(cell, c, e, length, n, window, t, n_t, d, n_d)
+
+
+def _sample_profiles(
+    images: Sequence[np.ndarray], edges: _EdgeIndex, grid: _ProfileGrid
+) -> tuple[np.ndarray, np.ndarray]:
+    """The intensity profiles (E, M, S) across the edges on `grid` (one `cv2.remap` per image, bilinear), and which
+    profiles (E, M) to use: inside the image, within 0.45 of the edge's length from the corner, not padding."""
+    E, M, S = len(edges.tag), grid.d.shape[1], grid.t.shape[1]
+    base = grid.c[:, None] + grid.d[:, :, None] * grid.e[:, None]  # (E, M, 2) on the edge
+    t_ends = np.stack([grid.t[:, 0], grid.t[np.arange(E), grid.n_t - 1]], axis=1)  # (E, 2)
+    ends = base[:, :, None] + t_ends[:, None, :, None] * grid.n[:, None, None]  # (E, M, 2, 2) profile ends
+    inside = (ends >= 0).all(axis=(2, 3)) & (ends <= edges.far[:, None, None]).all(axis=(2, 3))  # the box is convex
+    keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
+    # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
+    maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
+                   dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
+    profiles = np.empty((E, M, S), np.float32)
+    for i, rows in edges.edges_of_image:
+        x, y = (m[rows].reshape(-1, S) for m in maps)
+        profiles[rows] = cv2.remap(images[i], x, y, cv2.INTER_LINEAR).reshape(-1, M, S)
+    return profiles, keep
+
+
+def _edge_tangents(profiles: np.ndarray, keep: np.ndarray, grid: _ProfileGrid) -> np.ndarray:
+    """(E, 2) offset [px] along the outward normal and slope [px/px] at the corner of each edge from its `profiles`
+    (E, M, S) where `keep` (E, M); NaN for an edge with fewer than MIN_POINTS measured points or less contrast than
+    MIN_CONTRAST."""
+    E, M, S = profiles.shape
+    dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < grid.n_t[:, None])[:, None, :])
+    usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
+    dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
+    off = edge_offsets(profiles, grid.t[:, None], dark[:, None], light[:, None], grid.window[:, None],
+                       np.broadcast_to(grid.n_t[:, None], (E, M)))  # fmt: skip
+    good = keep & np.isfinite(off) & usable[:, None]
+    usable &= good.sum(axis=1) >= MIN_POINTS
+    tangent = np.full((E, 2), np.nan)
+    if usable.any():
+        tangent[usable] = _tangents(grid.d[usable], off[usable], good[usable])
+    return tangent
 
 
 def _border_across(corners: np.ndarray, c: np.ndarray, n: np.ndarray, tag: np.ndarray, cells: int) -> np.ndarray:

@@ -45,7 +45,8 @@ import cv2
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.vision.edges import mean_side, refine_tags
+from wolfcal.vision.edges import refine_tags
+from wolfcal.vision.outline import mean_side
 
 FAMILIES = {
     "tag36h11": cv2.aruco.DICT_APRILTAG_36h11,
