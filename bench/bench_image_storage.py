@@ -6,7 +6,7 @@ noise-free render: its tags on a smooth background (a low-pass random field and 
 gray levels, which deflate compresses more like a real camera image than the simulator's flat background. Each image
 is encoded as png in several ways and decoded to 8-bit gray as the fit does (`cv2.imdecode`, one thread); every
 variant is lossless (checked). Prints size [KB], encode and decode CPU [ms] per image (best of 3 passes) and the
-raw size: `wolfcal.io.images.encode_image` writes the "stored, unfiltered" variant.
+raw size; "stored, unfiltered (now)" is `wolfcal.io.images.encode_image`, what captures hold.
 """
 
 from __future__ import annotations
@@ -14,24 +14,35 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from wolfcal.config import load_robot_config
+from wolfcal.io.images import encode_image
 from wolfcal.io.reader import read_capture
 from wolfcal.io.samples import encoded_images
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.sim.simulate import SimOptions, simulate_capture
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
-VARIANTS = {
+PNG_VARIANTS = {
     "deflate 1 (before)": [cv2.IMWRITE_PNG_COMPRESSION, 1],
     "deflate 1 unfiltered": [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE],
     "deflate 1 rle": [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE],
     "stored, filtered": [cv2.IMWRITE_PNG_COMPRESSION, 0],
-    "stored, unfiltered (now)": [cv2.IMWRITE_PNG_COMPRESSION, 0, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE],
+}
+
+
+def _png(params: list[int]) -> Callable[[np.ndarray], bytes]:
+    return lambda image: cv2.imencode(".png", image, params)[1].tobytes()
+
+
+VARIANTS: dict[str, Callable[[np.ndarray], bytes]] = {
+    **{name: _png(params) for name, params in PNG_VARIANTS.items()},
+    "stored, unfiltered (now)": lambda image: encode_image(image, "png")[0],  # what captures hold
 }
 
 
@@ -67,11 +78,11 @@ def best_cpu(function, repeat: int = 3) -> float:
 def measure(label: str, images: list[np.ndarray]) -> None:
     height, width = images[0].shape
     print(f"\n{label}, {width}x{height}, {len(images)} images; raw pixels {height * width / 1e3:.0f} KB")
-    for name, params in VARIANTS.items():
-        encoded = [cv2.imencode(".png", image, params)[1] for image in images]
+    for name, encode_one in VARIANTS.items():
+        encoded = [np.frombuffer(encode_one(image), np.uint8) for image in images]
         for data, image in zip(encoded, images):
             assert np.array_equal(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), image), f"{name} is not lossless"
-        encode = best_cpu(lambda p=params: [cv2.imencode(".png", image, p) for image in images]) / len(images)
+        encode = best_cpu(lambda e=encode_one: [e(image) for image in images]) / len(images)
         decode = best_cpu(lambda e=encoded: [cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) for data in e]) / len(images)
         size = np.mean([len(data) for data in encoded])
         print(f"  {name:26s} {size / 1e3:6.0f} KB  encode {1e3 * encode:6.2f} ms  decode {1e3 * decode:6.2f} ms")
