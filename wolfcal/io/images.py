@@ -13,10 +13,10 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SIGNATURE = b"\xff\xd8"
 JPEG_QUALITY = 95
 # png as wolfcal writes it: stored (zlib level 0), rows unfiltered. A standard png that any tool opens, the size of
-# the raw pixels (+0.2 %), decoded 7-10x faster than deflated (the fit decodes every image; inflating and
-# unfiltering was about a third of a first run's detection) and encoded 15-25x faster (bench/bench_image_storage.py:
-# 512x384 0.23 vs 1.87 ms to decode, 2048x1536 2.6 vs 25 ms; deflated files were 1.9-2.7x smaller on simulated and
-# photo-like images). Filtering alone costs most of a stored png's decoding (0.7 ms at 512x384 with it).
+# the raw pixels (+0.1 %), decoded 5-10x faster than deflated (the fit decodes every image: inflating and unfiltering
+# were a quarter to two fifths of a first run's detection) and encoded 10-25x faster (bench/bench_image_storage.py:
+# 512x384 0.15-0.26 vs 1.9 ms to decode, 2048x1536 2.6-3.8 vs 25-27 ms); deflated files were 1.9-2.8x smaller on
+# simulated and photo-like images. Filtering alone costs most of a stored png's decoding (0.7 ms at 512x384 with it).
 PNG_COMPRESSION = 0
 # IDAT chunks of up to 1 MiB (OpenCV's largest; 8 KiB by default): one chunk per 512x384 image instead of 25, so
 # `image_damage` checks a few checksums per image instead of hundreds (2048x1536: 4 chunks instead of 385)
