@@ -9,8 +9,9 @@ Run: python bench/bench_detection.py [--views N] [--quick] [--before REV]. Print
    wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px]; with
    --capture FILE (only this part) the same split on a capture's own images, beside the fit's detection of them
    on all cores;
-2. a capture's worth of png images decoded and detected on all cores: serial, threads, worker processes
-   (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker detector on all cores;
+2. a capture's worth of png images (stored, as wolfcal's captures hold them) decoded and detected on all cores:
+   serial, threads, worker processes (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker
+   detector on all cores;
 3. the detection cache: first run (hash + detect + write) and second run (hash + read), and the cost of
    hashing a 100 MB file;
 4. `wolfcal intrinsics` against a plain OpenCV script (bench/opencv_intrinsics.py) as whole processes: 50
@@ -46,6 +47,7 @@ from edge_reference import _refine_edges as refine_before  # noqa: E402
 from opencv_intrinsics import calibrate as plain_calibrate  # noqa: E402
 
 from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics  # noqa: E402
+from wolfcal.io.images import encode_image  # noqa: E402
 from wolfcal.vision import cache, tags  # noqa: E402
 from wolfcal.vision.batch import cpu_count, detect_encoded, task_size  # noqa: E402
 from wolfcal.vision.tags import _detector, _found, _to_gray, detect_tags, refine_found, tag_cells  # noqa: E402
@@ -138,7 +140,7 @@ def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
     old = edges_at(before) if before else None
     try:
         for label, views in views_by_camera.items():
-            data = [cv2.imencode(".png", im, [cv2.IMWRITE_PNG_COMPRESSION, 1])[1].tobytes() for _, im, _ in views]
+            data = [encode_image(im, "png")[0] for _, im, _ in views]  # as captures store them
             grays = [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data]
             found = [_found(g, FAMILY, None, "edges") for g in grays]
             size = task_size(data[0], processes=False)
@@ -228,7 +230,7 @@ def all_cores(views_by_camera: dict, copies: int) -> dict[str, list[bytes]]:
     print(f"\n2. decode + detect a capture's png images on all {cores} cores [ms/image]")
     encoded = {}
     for label, views in views_by_camera.items():
-        data = [cv2.imencode(".png", im, [cv2.IMWRITE_PNG_COMPRESSION, 1])[1].tobytes() for _, im, _ in views]
+        data = [encode_image(im, "png")[0] for _, im, _ in views]  # as captures store them
         encoded[label] = (data * copies)[: max(len(data), 48)]
         _all_cores_row(label, encoded[label], cores)
     return encoded

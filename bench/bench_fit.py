@@ -1,9 +1,19 @@
 """Fit speed: the leg preset (both sides) with the head camera on 25, 100, 400 and 1000 synthetic samples, and with an
-external camera on 30 and 120 samples.
+external camera on 30 and 120 samples. With --stability: how far the fit moves under changes that should not matter.
 
 Run: python bench/bench_fit.py. Prints the solve's wall and CPU time (median of 3; reading and tag detection
 excluded: observations are projected without images) and the number of linearisations. BLAS runs on one thread,
 as in the `wolfcal` command.
+
+python bench/bench_fit.py --stability [--floor-dir DIR] [CASE ...]: per case, the largest |change| of a chain
+parameter in its reported standard deviations (and the largest relative change of a std) when the samples come in
+another order (2 orders, corner rows shuffled too), when 1e-7 px is added to every corner (1e-10 m to every marker;
+2 draws), when BLAS runs another kernel (OPENBLAS_CORETYPE=Sandybridge: other summation orders; a subprocess), and
+when the solver's rounds stop elsewhere (ROUND_STD_TOL 0.03 and ROUND_COST_TOL 1e-4, or 0.3 and 1e-2); with the
+solve's CPU time and linearisations. Cases: the shipped demo captures (`wolfcal demo`'s two fits, the external
+camera demo), synthetic corners (head camera 25/100/400 samples with outliers, external camera 30/120), a motion-capture
+session (tests/mocap_session.py), bench_table's cached captures when present (24, 40, 400 samples) and, with
+--floor-dir (a `bench_floor.py --keep` folder), its feet + floor fits.
 """
 
 from __future__ import annotations
@@ -12,18 +22,30 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import argparse  # noqa: E402
+import json  # noqa: E402
+import pickle  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from wolfcal.camera.camera_info import load_camera_info  # noqa: E402
 from wolfcal.camera.model import CameraModel  # noqa: E402
-from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
+from wolfcal.fit import solver  # noqa: E402
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples  # noqa: E402
 from wolfcal.robot.robot import load_robot  # noqa: E402
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario  # noqa: E402
+from wolfcal.vision.observe import detect_observations  # noqa: E402
 
-CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "wolfgang"
+BENCH_TABLE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
 TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5], [0, 0, 1]]), np.zeros(5))
 
 
@@ -37,7 +59,7 @@ def timed(robot, obs, options: FitOptions) -> tuple[float, float, object]:
     return float(np.median(wall)), float(np.median(cpu)), fit
 
 
-def main() -> None:
+def speed() -> None:
     robot = load_robot(CONFIG)
     camera = load_camera_info(CONFIG / "basler_acA2040.yaml")
     for n in (25, 100, 400, 1000):
@@ -52,6 +74,154 @@ def main() -> None:
         print(f"external camera{' (moving)' if moving else ''}, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d}"
               f" corners, {len(fit.params)} unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), "
               f"{fit.solution.evaluations} linearisations")
+
+
+Case = Callable[[], tuple]  # -> (robot, observations by camera, markers or None, options)
+
+
+def from_captures(config: Path, captures: list[Path], **options) -> Case:
+    def load() -> tuple:
+        robot = load_robot(config)
+        samples, _ = load_samples(robot, captures, None, cameras=())
+        return robot, detect_observations(samples, robot)[0], None, FitOptions(**options)
+    return load
+
+
+def synthetic(n: int, noise_px: float, outliers: float | None) -> Case:
+    def load() -> tuple:
+        robot = load_robot(CONFIG)
+        if outliers is None:
+            obs = synthetic_external_scenario(robot, TRIPOD, n=n, seed=n, noise_px=noise_px).obs
+            return robot, {obs.camera_name: obs}, None, FitOptions(free="leg")
+        camera = load_camera_info(CONFIG / "basler_acA2040.yaml")
+        obs = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all", noise_px=noise_px,
+                                 outlier_fraction=outliers).obs  # fmt: skip
+        return robot, {obs.camera_name: obs}, None, FitOptions(free="leg", side="both")
+    return load
+
+
+def mocap_session() -> tuple:
+    sys.path.insert(0, str(ROOT / "tests"))
+    from mocap_session import STRIDER, write_session
+
+    from wolfcal.io.mocap_load import load_marker_observations
+
+    robot = load_robot(STRIDER)
+    with tempfile.TemporaryDirectory() as folder:
+        write_session(Path(folder), 0)
+        markers = load_marker_observations(robot.config, robot.joint_names, [Path(folder) / "markers.mcap"], [])
+    return robot, {}, markers, FitOptions(free="leg", system="mocap")
+
+
+def cases(floor_dir: Path | None) -> dict[str, Case]:
+    out: dict[str, Case] = {
+        "demo venue": from_captures(CONFIG, [ROOT / "captures/demo.mcap", ROOT / "captures/floor_demo.mcap"],
+                                    free="camera"),
+        "demo legs": from_captures(CONFIG, [ROOT / "captures/legs_demo.mcap"], free="camera"),
+        "external demo": from_captures(CONFIG, [ROOT / "captures/external_demo.mcap"], free="leg"),
+        "synthetic 25": synthetic(25, 0.3, 0.1), "synthetic 100": synthetic(100, 0.15, 0.1),
+        "synthetic 400": synthetic(400, 0.15, 0.05), "external 30": synthetic(30, 0.15, None),
+        "external 120": synthetic(120, 0.4, None), "mocap": mocap_session,
+    }  # fmt: skip
+    for name, free in (("sim_24_b1_none_s1", {"free": "camera"}), ("sim_40_b1_all_s2", {"free": "leg", "side": "both"}),
+                       ("sim_400_b4_all_s400", {"free": "leg", "side": "both"})):
+        if (BENCH_TABLE / f"{name}.mcap").is_file():
+            out[f"bench {name.split('_')[1]}"] = from_captures(CONFIG, [BENCH_TABLE / f"{name}.mcap"], **free)
+    for folder in sorted(floor_dir.glob("*_tags*")) if floor_dir else []:
+        free = {"free": folder.name.split("_")[0], "side": "both"}
+        out[f"floor {folder.name}"] = from_captures(folder / "robot_standing.yaml",
+                                                    [folder / "feet.mcap", folder / "floor.mcap"], **free)
+    return out
+
+
+def permuted(observations: dict, markers, seed: int) -> tuple[dict, object]:
+    """The same data with the samples in another order (and the corner rows shuffled)."""
+    out = {}
+    for name, obs in observations.items():
+        p = obs.subset(np.random.default_rng(seed).permutation(obs.n_samples))
+        rows = np.random.default_rng(seed + 1).permutation(len(p.uv))
+        out[name] = replace(p, sample_index=p.sample_index[rows], tag_ids=p.tag_ids[rows],
+                            corner_index=p.corner_index[rows], uv=p.uv[rows])  # fmt: skip
+    if markers is not None:
+        markers = markers.subset(np.random.default_rng(seed).permutation(markers.n_samples))
+    return out, markers
+
+
+def jittered(observations: dict, markers, seed: int) -> tuple[dict, object]:
+    """The same data with 1e-7 px on every corner, 1e-10 m on every marker."""
+    out = {k: replace(o, uv=o.uv + 1e-7 * np.random.default_rng(seed).standard_normal(o.uv.shape))
+           for k, o in observations.items()}  # fmt: skip
+    if markers is not None:
+        markers = replace(markers, xyz=markers.xyz + 1e-10 * np.random.default_rng(seed).standard_normal(
+            markers.xyz.shape))
+    return out, markers
+
+
+def chain_fit(robot, observations, markers, options) -> dict:
+    start = time.process_time()
+    fit = fit_observations(robot, observations, options, markers=markers)
+    cpu = time.process_time() - start
+    n = len(fit.chain)
+    return {"values": fit.solution.values[:n].tolist(), "std": fit.solution.std[:n].tolist(),
+            "evaluations": fit.solution.evaluations, "cpu": cpu}  # fmt: skip
+
+
+def change(a: dict, b: dict) -> tuple[float, float]:
+    std = np.array(a["std"])
+    moved = np.abs(np.array(a["values"]) - np.array(b["values"])) / std
+    return float(np.max(moved)), float(np.max(np.abs(np.array(b["std"]) / std - 1.0)))
+
+
+def with_rounds(std_tol: float, cost_tol: float, fit: Callable[[], dict]) -> dict:
+    saved = solver.ROUND_STD_TOL, solver.ROUND_COST_TOL
+    solver.ROUND_STD_TOL, solver.ROUND_COST_TOL = std_tol, cost_tol
+    try:
+        return fit()
+    finally:
+        solver.ROUND_STD_TOL, solver.ROUND_COST_TOL = saved
+
+
+def stability(names: list[str], floor_dir: Path | None) -> None:
+    known = cases(floor_dir)
+    for name in names or list(known):
+        robot, observations, markers, options = known[name]()
+        base = chain_fit(robot, observations, markers, options)
+        others: dict[str, list[dict]] = {
+            "order": [chain_fit(robot, *permuted(observations, markers, s), options) for s in (1, 3)],
+            "1e-7 px": [chain_fit(robot, *jittered(observations, markers, s), options) for s in (1, 2)],
+            "rounds": [with_rounds(t, c, lambda: chain_fit(robot, observations, markers, options))  # noqa: B023
+                       for t, c in ((0.03, 1e-4), (0.3, 1e-2))],
+        }  # fmt: skip
+        with tempfile.TemporaryDirectory() as folder:  # the same data, fitted in a process with another BLAS kernel
+            data = Path(folder) / "case.pickle"
+            data.write_bytes(pickle.dumps((robot.config.path, observations, markers, options)))
+            env = {**os.environ, "OPENBLAS_CORETYPE": "Sandybridge"}
+            dumped = subprocess.run([sys.executable, __file__, "--dump", str(data)], env=env, capture_output=True,
+                                    text=True, check=True).stdout  # fmt: skip
+        others["BLAS kernel"] = [json.loads(dumped.splitlines()[-1])]
+        parts = []
+        for label, fits in others.items():
+            moved, std = np.max([change(base, f) for f in fits], axis=0)
+            parts.append(f"{label} {moved:.1e} ({std:.0e})")
+        print(f"{name:34s} {len(base['values']):3d} unknowns, {base['evaluations']:3d} linearisations, "
+              f"{base['cpu']:.2f} s CPU | largest change / std (std's relative change): " + ", ".join(parts),
+              flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--stability", action="store_true")
+    parser.add_argument("--floor-dir", type=Path, default=None)
+    parser.add_argument("--dump", type=Path, help=argparse.SUPPRESS)  # a pickled case's fit as JSON
+    parser.add_argument("cases", nargs="*")
+    args = parser.parse_args()
+    if args.dump:
+        config, observations, markers, options = pickle.loads(args.dump.read_bytes())
+        print(json.dumps(chain_fit(load_robot(config), observations, markers, options)))
+    elif args.stability:
+        stability(args.cases, args.floor_dir)
+    else:
+        speed()
 
 
 if __name__ == "__main__":

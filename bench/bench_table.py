@@ -1,7 +1,8 @@
 """Issue 13's table in one run: wolfcal side by side with the bare detector and a naive reference solver.
 
-Run: python bench/bench_table.py [--views 30] [--parts camera,leg,large,accuracy]. Simulated captures are cached in
-the temp folder (the first run renders them: about 1-2 minutes); each fit gets a fresh detection cache folder.
+Run: python bench/bench_table.py [--views 30] [--parts camera,leg,large,accuracy] [--captures DIR]. Simulated
+captures are cached in the temp folder, or DIR (the first run renders them: about 1-2 minutes; after a change of
+how captures are written, give a fresh DIR to compare); each fit gets a fresh detection cache folder.
 Prints, with units:
 1. End to end (`run_fit` in this process: read, detect, solve, uncertainty, write) on 2048x1536 captures, camera
    fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU; the floor (reading the images,
@@ -61,11 +62,11 @@ def quiet(_: str) -> None:
     pass
 
 
-def capture(samples: int, binning: int, offsets: str, seed: int) -> Path:
-    """A simulated capture (cached in the temp folder)."""
-    path = CACHE / f"sim_{samples}_b{binning}_{offsets}_s{seed}.mcap"
+def capture(folder: Path, samples: int, binning: int, offsets: str, seed: int) -> Path:
+    """A simulated capture, made in `folder` when it is not there yet."""
+    path = folder / f"sim_{samples}_b{binning}_{offsets}_s{seed}.mcap"
     if not path.is_file():
-        CACHE.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
         simulate_capture(CONFIG, path, SimOptions(samples=samples, seed=seed, binning=binning, offsets=offsets),
                          say=quiet, force=True)  # fmt: skip
@@ -149,8 +150,7 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
           f"{process_cpu:.2f} s CPU -> {naive_total / process_cpu:.1f}x")
 
 
-def large_leg_fit(samples: int, limit: float) -> None:
-    path = capture(samples, 4, "all", seed=samples)
+def large_leg_fit(path: Path, limit: float) -> None:
     options = FitOptions(free="leg", side="both")
     robot = load_robot(CONFIG)
     load = os.getloadavg()[0]
@@ -168,9 +168,10 @@ def large_leg_fit(samples: int, limit: float) -> None:
         process_wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         process_cpu = after.ru_utime + after.ru_stime - usage.ru_utime - usage.ru_stime
-    print(f"  {samples:4d} samples: {wall:.2f} s wall ({cpu:.2f} s CPU) in this process, {process_wall:.2f} s wall "
-          f"({process_cpu:.2f} s CPU) as a `wolfcal fit` process (target < {limit:g} s wall); the solve alone "
-          f"{solve_wall:.2f} s wall ({solve_cpu:.2f} s CPU); load average {load:.1f} -> {os.getloadavg()[0]:.1f}")
+    print(f"  {len(samples_read):4d} samples: {wall:.2f} s wall ({cpu:.2f} s CPU) in this process, "
+          f"{process_wall:.2f} s wall ({process_cpu:.2f} s CPU) as a `wolfcal fit` process (target < {limit:g} s "
+          f"wall); the solve alone {solve_wall:.2f} s wall ({solve_cpu:.2f} s CPU); load average {load:.1f} -> "
+          f"{os.getloadavg()[0]:.1f}")
 
 
 def detection_accuracy(views: int) -> None:
@@ -186,20 +187,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=30)
     parser.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {', '.join(PARTS)}")
+    parser.add_argument("--captures", type=Path, default=CACHE,
+                        help="folder of the simulated captures (made there when missing)")
     args = parser.parse_args()
+    folder = args.captures
     parts = args.parts.split(",")
     print(f"issue 13 table, {cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     if "camera" in parts:
-        end_to_end("camera fit, 24 samples at 2048x1536", capture(24, 1, "none", seed=1), FitOptions(free="camera"),
+        camera_capture = capture(folder, 24, 1, "none", seed=1)
+        end_to_end("camera fit, 24 samples at 2048x1536", camera_capture, FitOptions(free="camera"),
                    ["--free", "camera"])
     if "leg" in parts:
-        leg_capture = capture(40, 1, "all", seed=2)
+        leg_capture = capture(folder, 40, 1, "all", seed=2)
         end_to_end("leg fit, 40 samples at 2048x1536", leg_capture, FitOptions(free="leg", side="both"),
                    ["--free", "leg", "--side", "both"])
     if "large" in parts:
         print("\nleg fit at 512x384, end to end, first run (no cache)")
-        large_leg_fit(400, 2.0)
-        large_leg_fit(1000, 5.0)
+        large_leg_fit(capture(folder, 400, 4, "all", seed=400), 2.0)
+        large_leg_fit(capture(folder, 1000, 4, "all", seed=1000), 5.0)
     if "accuracy" in parts:
         detection_accuracy(args.views)
     print(f"load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())}")

@@ -5,11 +5,14 @@ from __future__ import annotations
 import os
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import textwrap
+import zlib
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -128,6 +131,49 @@ def test_file_is_a_ros2_mcap_with_statistics_schemas_and_attachments(tmp_path, c
     assert (info.width, info.height, info.binning_x, info.binning_y) == (2048, 1536, 4, 4)
     assert np.allclose(info.k, camera.K.ravel())
     assert by_stamp[T0][config.camera.topic].format == "mono8; png compressed mono8"
+
+
+def _png_layout(data: bytes) -> tuple[tuple[int, ...], list[bytes]]:
+    """(IHDR fields: width, height, bit depth, colour type, compression, filter, interlace), the IDAT chunks' data."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pos, header, idat = 8, (), []
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        kind, payload = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + length]
+        header = struct.unpack(">IIBBBBB", payload) if kind == b"IHDR" else header
+        idat += [payload] if kind == b"IDAT" else []
+        pos += 12 + length
+    return header, idat
+
+
+@pytest.mark.parametrize("colour", [False, True])
+def test_png_images_are_stored_unfiltered_and_decode_by_the_png_spec(tmp_path, config, camera, colour):
+    """wolfcal's own captures store pngs uncompressed and unfiltered (fast to decode), still standard pngs: decoded
+    here by the png specification alone (chunks, zlib, filter bytes), the pixels are the image's. A smooth image,
+    which deflate would make ~100x smaller, is stored at its raw size."""
+    height, width = 96, 128
+    image = np.add.outer(np.arange(height), np.arange(width)).astype(np.uint8)
+    if colour:
+        image = np.stack([image, image[::-1], 255 - image], axis=2)
+    path = tmp_path / "capture.mcap"
+    with CaptureWriter(path, config, {HEAD_CAMERA: (camera, (16, 16))}) as writer:
+        writer.add_sample(T0, JOINTS, np.zeros(4), None, {HEAD_CAMERA: image})
+    with path.open("rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        (data,) = [m.data for _, _, _, m in reader.iter_decoded_messages(topics=[config.camera.topic])]
+    header, chunks = _png_layout(data)
+    channels = 3 if colour else 1
+    assert header == (width, height, 8, 2 if colour else 0, 0, 0, 0)  # 8-bit gray / RGB, not interlaced
+    idat = b"".join(chunks)
+    rows = zlib.decompress(idat)
+    stride = 1 + width * channels
+    assert len(rows) == height * stride and len(idat) >= len(rows)  # stored, not deflated
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # recent OpenCV (older ones let libpng filter the rows)
+        assert set(rows[::stride]) == {0}  # filter type "none" on every row
+        assert len(chunks) == 1  # one IDAT chunk (up to 1 MiB), few checksums for the reader's damage check
+        pixels = np.frombuffer(rows, np.uint8).reshape(height, stride)[:, 1:].reshape(image.shape)
+        assert np.array_equal(pixels, image[..., ::-1] if colour else image)  # png holds RGB, wolfcal's images BGR
+    assert np.array_equal(read_capture(path, config).samples[0].images[HEAD_CAMERA].decode(), image)
 
 
 def test_exception_inside_with_keeps_every_sample(tmp_path, config, camera):

@@ -19,8 +19,8 @@ class LMResult:
     x: np.ndarray
     cost: float  # 0.5 * sum of squared residuals at x
     nfev: int
-    status: int  # > 0 converged (1: small step, 2: small cost change, 3: small gradient, 4: step within the
-    # noise), 0: iteration limit
+    status: int  # > 0 converged (1: small step, 2: small cost change, 3: small gradient, 4: the undamped step
+    # within the noise), 0: iteration limit
 
 
 def levenberg_marquardt(
@@ -33,23 +33,26 @@ def levenberg_marquardt(
     gtol: float = 1e-8,
     cost_tol: float = 0.0,
     std_tol: float = 0.0,
+    std: np.ndarray | None = None,
 ) -> LMResult:
-    """Minimise 0.5 * |fun(x)|^2 given normal(x) = (J^T J (P, P), J^T fun(x) (P,)) of its Jacobian J at x
-    (solved densely: P up to a few thousand). Stops when a step lowers the cost by less than ftol * cost or
-    cost_tol (absolute, the cost's unit), or (std_tol > 0, residuals whitened: J^T J is the inverse covariance of
-    x) once an accepted step moves every unknown by at most std_tol times its standard deviation,
-    sqrt(diag((J^T J)^-1)) at the step's start: the steps left are below what the data can tell,
-    e.g. a robust loss's linear arms, along which steps of one size zigzag for a hundred evaluations while the
-    solution moves by hundredths of its standard deviation."""
+    """Minimise 0.5 * |fun(x)|^2 given normal(x) = (H (P, P), g (P,)): the cost's curvature (J^T J of fun's
+    Jacobian J, or a better one) and its gradient J^T fun(x) at x (solved densely: P up to a few thousand). Stops
+    when a step lowers the cost by less than ftol * cost or cost_tol (absolute, the cost's unit), or (std_tol > 0,
+    residuals whitened) once the undamped step -H^-1 g from x moves every unknown by at most std_tol times its
+    standard deviation (`std` (P,), else sqrt(diag(H^-1))): the optimum of the local model lies within what the
+    data can tell."""
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
     cost, nfev = float(r @ r), 1
     H, g = normal(x)
     scale = np.maximum(np.diag(H), 1e-12)
-    mu, nu = 1e-4, 2.0
+    mu, nu, fresh = 1e-4, 2.0, True  # fresh: H, g were computed at x since the last check
     for _ in range(max_iterations):
         if np.max(np.abs(g)) < gtol:
             return LMResult(x, 0.5 * cost, nfev, 3)
+        if fresh and std_tol > 0 and _within_noise(H, g, std_tol, std):
+            return LMResult(x, 0.5 * cost, nfev, 4)
+        fresh = False
         try:
             dx = np.linalg.solve(H + mu * np.diag(scale), -g)
         except np.linalg.LinAlgError:
@@ -65,13 +68,11 @@ def levenberg_marquardt(
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if rho > 0 and np.isfinite(cost_new):
             small_change = cost - cost_new < max(ftol * cost, 2.0 * cost_tol, 1e-300)
-            within_noise = std_tol > 0 and bool(np.all(np.abs(dx) <= std_tol * _marginal_std(H)))
             x, cost = x_new, cost_new
             if small_change:  # returned before the normal equations at x, which nothing would use
                 return LMResult(x, 0.5 * cost, nfev, 2)
-            if within_noise:
-                return LMResult(x, 0.5 * cost, nfev, 4)
             H, g = normal(x)
+            fresh = True
             scale = np.maximum(scale, np.diag(H))
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
@@ -80,9 +81,14 @@ def levenberg_marquardt(
     return LMResult(x, 0.5 * cost, nfev, 0)
 
 
-def _marginal_std(H: np.ndarray) -> np.ndarray:
-    """sqrt(diag(H^-1)) of the normal matrix (0 where H is singular: no step counts as within the noise)."""
+def _within_noise(H: np.ndarray, g: np.ndarray, std_tol: float, std: np.ndarray | None) -> bool:
+    """Whether the undamped step from here, -H^-1 g, moves every unknown by at most std_tol times its standard
+    deviation (`std`, else sqrt(diag(H^-1))): the model's optimum lies within the noise. (The damped step is no
+    measure of that: under heavy damping it is short far from the optimum.) False where H is singular."""
     try:
-        return np.sqrt(np.maximum(np.diag(np.linalg.inv(H)), 0.0))
+        covariance = np.linalg.inv(H)
     except np.linalg.LinAlgError:
-        return np.zeros(len(H))
+        return False
+    if std is None:
+        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    return bool(np.all(np.abs(covariance @ g) <= std_tol * std))

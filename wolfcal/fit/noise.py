@@ -24,6 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 
+# Half-width over which `weighted_median` spreads each value's weight, in the values' unit: for standardised residuals
+# (median 0.67 when the noise model fits) it shifts the median of a normal sample by about 1e-4 of itself, and it
+# spans several neighbouring values around the median of a block of 100 rows or more.
+MEDIAN_WIDTH = 0.05
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
 EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
 # Entries of the shared-error matrices U_g decomposed in one batched call (a long recording's groups in batches: a
@@ -290,11 +294,40 @@ class GroupedWhitening:
         return independent + shared
 
 
-def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    """The value below which half of the total weight lies (the lower one at a tie); NaN for no values."""
+def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDIAN_WIDTH) -> float:
+    """The median of the weighted values with each value's weight spread evenly over +- `width` around it: where
+    their cumulative weight (piecewise linear) reaches half of the total. Unlike a plain weighted median (an order
+    statistic, which jumps from one value to the next as the weights' order changes: 2 % of a noise level from 128
+    rows, enough to move a fit's noise model and with it its estimates by a sizable fraction of a standard
+    deviation), a continuous function of the values where they lie closer than 2 `width` around the median; NaN
+    for no values."""
     if values.size == 0:
         return float("nan")
-    order = np.argsort(values)
-    cumulative = weights[order]
-    np.cumsum(cumulative, out=cumulative)  # in place, and no sorted copy of the values: a long fit's transient
-    return float(values[order[np.searchsorted(cumulative, 0.5 * cumulative[-1])]])
+    edges = np.concatenate([values - width, values + width])
+    order = np.argsort(edges)
+    slope = np.concatenate([weights, -weights])[order] / (2.0 * width)
+    edges = edges[order]
+    np.cumsum(slope, out=slope)  # the cumulative weight's slope after each edge
+    cumulative = np.concatenate([[0.0], np.cumsum(slope[:-1] * np.diff(edges))])  # at each edge
+    half = 0.5 * float(np.sum(weights))
+
+    def at(level: float) -> float:  # where the cumulative weight reaches `level`
+        k = min(int(np.searchsorted(cumulative, level)), len(edges) - 1)  # first edge at or above it
+        if k == 0 or slope[k - 1] <= 0.0:
+            return float(edges[k])
+        return float(edges[k - 1] + (level - cumulative[k - 1]) / slope[k - 1])
+
+    # a stretch without values at exactly half (values further apart than 2 width): its middle, not the end that
+    # rounding picks
+    return 0.5 * (at(half * (1.0 - 1e-9)) + at(half * (1.0 + 1e-9)))
+
+
+def weighted_median_above(
+    values: np.ndarray, weights: np.ndarray, threshold: float, width: float = MEDIAN_WIDTH
+) -> bool:
+    """Whether `weighted_median(values, weights, width)` exceeds `threshold`, without sorting (one pass over the
+    values: a noise-level search asks this many times): less than half of the weight lies below it."""
+    if values.size == 0:
+        return False
+    below = np.clip((threshold - values) / (2.0 * width) + 0.5, 0.0, 1.0)
+    return float(below @ weights) <= 0.5 * float(np.sum(weights))

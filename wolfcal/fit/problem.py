@@ -209,18 +209,30 @@ class Problem:
             return scipy.sparse.vstack(parts).tocsr()
         return parts[0] if len(parts) == 1 else np.vstack(parts)
 
-    def information(self, z: np.ndarray, triangular: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def information(
+        self, z: np.ndarray, triangular: bool = False, curvature: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """J^T J (P, P) and J^T r (P,) of the robust whitened data residuals at z (J: `data_jacobian`, r: their
         part of `residuals`), summed over a few whole noise groups at a time (CHUNK_ROWS): the whole whitened
         Jacobian of a long recording is never in memory. With `triangular` (dense J only), also J's triangular
-        factor R (J = Q R, (P, P)), updated chunk by chunk, else None."""
+        factor R (J = Q R, (P, P)), updated chunk by chunk, else None. With `curvature`, the first is instead the
+        Huber loss's own second derivative (the whitened rows' J^T J over the rows within huber_k: the loss is
+        linear beyond), what a Newton step needs: J^T J of the square-root residuals counts a far row as if its
+        loss curved, and steps along such rows then fall short by up to 10x, converging by a few percent per step."""
         n = len(self.params)
         H, g, R = np.zeros((n, n)), np.zeros(n), np.zeros((0, n)) if triangular and n <= DENSE_LIMIT else None
         for state, lin in zip(self.states, self.evaluate(z)):
             residual = lin.residual.ravel()
             for rows, part in state.noise_model.chunks(CHUNK_ROWS):
-                robust, slope = huber_sqrt(part.split(residual[rows], state.sigma), self.huber_k)
+                whitened = part.split(residual[rows], state.sigma)
+                robust, slope = huber_sqrt(whitened, self.huber_k)
                 J = part.split(self._rows_jacobian(state, lin, rows), state.sigma)
+                if curvature:
+                    g += J.T @ (slope * robust)  # the Huber loss's derivative, clip(w, -k, k)
+                    inside = (np.abs(whitened) <= self.huber_k).astype(float)
+                    J = scipy.sparse.diags(inside) @ J if scipy.sparse.issparse(J) else J * inside[:, None]
+                    H += (J.T @ J).toarray() if scipy.sparse.issparse(J) else J.T @ J
+                    continue
                 if scipy.sparse.issparse(J):
                     J = scipy.sparse.diags(slope) @ J
                     H += (J.T @ J).toarray()
@@ -232,9 +244,10 @@ class Problem:
                 g += J.T @ robust
         return H, g, R
 
-    def normal_equations(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """J^T J and J^T r of every residual (`residuals`: the data's, `information`, then the priors z)."""
-        H, g, _ = self.information(z)
+    def normal_equations(self, z: np.ndarray, curvature: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """J^T J and J^T r of every residual (`residuals`: the data's, `information` (with `curvature`: the Huber
+        loss's own second derivative), then the priors z)."""
+        H, g, _ = self.information(z, curvature=curvature)
         H[np.diag_indices_from(H)] += 1.0
         return H, g + np.asarray(z, dtype=float)
 

@@ -5,8 +5,10 @@ image: its residuals, whitened with the covariance of that view alone so that no
 above the other views' and off by more than the block's floor; they get zero weight) -> per block, estimate the
 noise level from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
 fixed), and the level of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker)
--> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then a full solve under
-the final noise model, and `uncertainty` at its solution.
+-> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then the final solves:
+converge fully (Newton steps on the Huber loss), re-estimate the outlier sets and noise levels at the solution, and
+solve again until they no longer change (a fixed point: the solution depends on the data, not on where a round's
+solve happened to stop), and `uncertainty` at the solution.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt
-from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median
+from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median, weighted_median_above
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, information_uncertainty
@@ -32,20 +34,33 @@ MAX_SIGMA = {"px": 50.0, "m": 0.1}
 # whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
 # linear arms would otherwise take many small steps. The solve after the last round converges fully.
 ROUND_COST_TOL = 1e-3
-# Every solve also stops once a step moves no unknown by more than this many of its standard deviations
-# (`levenberg_marquardt`'s std_tol): a round's by ROUND_STD_TOL, the last one by FINAL_STD_TOL. Along the Huber
-# loss's linear arms (a view far off while the noise sits at its floor) steps of one size otherwise zigzag for ~200
-# evaluations and move the solution by 0.03 standard deviations in all.
+# Every solve also stops once the undamped step moves no unknown by more than this many of its standard deviations
+# (`levenberg_marquardt`'s std_tol): a round's by ROUND_STD_TOL, a final one by FINAL_STD_TOL. Along the Huber
+# loss's linear arms (a view far off while the noise sits at its floor) the rounds' steps (J^T J of the square-root
+# residuals) fall short and zigzag for ~200 evaluations, moving the solution by 0.03 standard deviations in all; the
+# final solves take Newton steps on the loss itself (`Problem.normal_equations` with curvature) and converge in a
+# few. Their cost-change stop (FINAL_FTOL, relative) only guards against a stall: at 1e-8 it stopped a 400-sample
+# fit 0.03 standard deviations short.
 ROUND_STD_TOL = 0.1
-FINAL_STD_TOL = 0.01
-# A block's noise classes (e.g. its motion-capture markers) each get their own level relative to the block's: the
-# RMS of the class's standardised residuals within CLASS_CUT of their median-based spread (a reflection does not
-# count, a noisy marker's own scatter does), drawn towards the block's level as if CLASS_PRIOR_ROWS residuals had
-# it (25 samples' 75 numbers scatter by 8 % in RMS: one marker weighted up by chance pulls the fit to itself and
-# shrinks its residuals further), only from at least MIN_CLASS_UNITS units (else the block's level), and never
-# below CLASS_SCALE_FLOOR of the block's level.
+FINAL_STD_TOL = 0.003
+FINAL_FTOL = 1e-12
+# The rounds end once no outlier set changed and no noise level moved by ROUND_NOISE_TOL (relative). The final
+# solve is then repeated under the noise model re-estimated at its solution until no outlier set changes and no
+# level moves by FIXED_POINT_TOL (a level 0.1 % off moves the estimates by far less than 0.01 standard deviations),
+# at most MAX_FINAL_SOLVES times (an outlier set flip-flopping between two solutions: the last solve stands).
+ROUND_NOISE_TOL = 0.1
+FIXED_POINT_TOL = 1e-3
+MAX_FINAL_SOLVES = 4
+# A block's noise classes (e.g. its motion-capture markers) each get their own level relative to the block's
+# (`_class_level`): the one at which the class's standardised residuals within CLASS_CUT of their median-based spread
+# (a reflection does not count, a noisy marker's own scatter does; rows up to CLASS_FADE beyond it count in part)
+# have unit RMS, drawn towards the block's level as if CLASS_PRIOR_ROWS residuals had it (25 samples' 75 numbers
+# scatter by 8 % in RMS: one marker weighted up by chance pulls the fit to itself and shrinks its residuals further),
+# only from at least MIN_CLASS_UNITS units (else the block's level), and never below CLASS_SCALE_FLOOR of the
+# block's level.
 MIN_CLASS_UNITS = 8
 CLASS_CUT = 3.5
+CLASS_FADE = 1.0
 CLASS_PRIOR_ROWS = 30
 CLASS_SCALE_FLOOR = 1.0
 
@@ -112,13 +127,12 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
 
 
 def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
-    """Whether `residual_scale` of these standardised numbers exceeds 1, without sorting them: the weighted median
-    lies above a value exactly when less than half of the weight lies at or below it."""
+    """Whether `residual_scale` of these standardised numbers exceeds 1, without sorting them
+    (`weighted_median_above`)."""
     n = float(np.sum(dof))
     if n <= n_params:
         return False
-    at_most_one = MAD_TO_SIGMA * np.abs(w) * np.sqrt(n / (n - n_params)) <= 1.0
-    return bool(np.sum(dof[at_most_one]) < 0.5 * n)
+    return weighted_median_above(np.abs(w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
 
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
@@ -148,20 +162,52 @@ def estimate_class_scales(state: BlockState, lin: Linearization, problem: Proble
         return 0.0
     dim = state.block.dim
     A = lin.joint_sensitivity.reshape(-1, lin.joint_sensitivity.shape[-1])
-    variance = (state.sigma * state.row_scale) ** 2 + state.sigma_q**2 * np.sum(A**2, axis=1)
-    z = np.abs(lin.residual.ravel()) / np.sqrt(variance * (1.0 - _leverages(state, lin, problem, variance)))
+    reading = state.sigma_q**2 * np.sum(A**2, axis=1)  # (R,) the joint readings' share of each row's variance
+    variance = (state.sigma * state.row_scale) ** 2 + reading
+    absorbed = 1.0 - _leverages(state, lin, problem, variance)
+    z = np.abs(lin.residual.ravel()) / np.sqrt(variance * absorbed)
     row_class = np.repeat(classes, dim)
-    factor = np.ones(int(classes.max()) + 1)
-    for c in range(len(factor)):
-        zc = z[row_class == c]
+    level = np.ones(int(classes.max()) + 1)
+    for c in range(len(level)):
+        rows = row_class == c
+        zc = z[rows]
         if zc.size >= MIN_CLASS_UNITS * dim:
-            zc = zc[zc < CLASS_CUT * MAD_TO_SIGMA * float(np.median(zc))]  # the class's own outliers apart
-            factor[c] = np.sqrt((np.sum(zc**2) + CLASS_PRIOR_ROWS) / (zc.size + CLASS_PRIOR_ROWS))
-    scale = state.unit_scale * factor[classes]
+            # the class's own outliers apart, rows past the cut fading out over CLASS_FADE (a hard cut would jump
+            # by a whole row's square as its residual crosses it: the levels would never settle)
+            spread = MAD_TO_SIGMA * float(np.median(zc))
+            weight = np.clip((CLASS_CUT + CLASS_FADE - zc / spread) / CLASS_FADE, 0.0, 1.0)
+            level[c] = _class_level(weight * lin.residual.ravel()[rows] ** 2 / absorbed[rows], state.sigma**2,
+                                    reading[rows], float(np.sum(weight)))
+    scale = level[classes]
     scale = np.maximum(scale / np.median(scale), CLASS_SCALE_FLOOR)
     change = float(np.max(np.abs(scale / state.unit_scale - 1.0)))
     state.unit_scale = scale
     return change
+
+
+def _class_level(weighted_sq: np.ndarray, sigma2: float, reading: np.ndarray, rows: float) -> float:
+    """The level s of one noise class relative to the block's noise sigma (sigma2 = sigma^2) at which its rows'
+    weighted squared residuals (weighted_sq (R,), divided by 1 - leverage) are as large as their variance says,
+    sigma^2 s^2 + the joint readings' share `reading` (R,), with CLASS_PRIOR_ROWS more rows at the block's level:
+    sum(weighted_sq / (sigma^2 s^2 + reading)) + CLASS_PRIOR_ROWS / s^2 = rows + CLASS_PRIOR_ROWS, by bisection on
+    log s (the left side falls as s grows). Solved outright rather than moved by the ratio of residual to modelled
+    variance once per round: where the joint readings make up most of a row's variance that ratio moves the level
+    by a few percent of the way per round, and the solution would depend on the round the solver stopped at."""
+    lo, hi = np.log(1e-3), np.log(1e3)
+    target = rows + CLASS_PRIOR_ROWS
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        s2 = float(np.exp(2.0 * mid))
+        if float(np.sum(weighted_sq / (sigma2 * s2 + reading))) + CLASS_PRIOR_ROWS / s2 > target:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.exp(0.5 * (lo + hi)))
+
+
+def _marginal_std(H: np.ndarray) -> np.ndarray:
+    """(P,) sqrt(diag(H^-1)) of a normal matrix (priors included: invertible)."""
+    return np.sqrt(np.maximum(np.diag(np.linalg.inv(H)), 0.0))
 
 
 def _leverages(state: BlockState, lin: Linearization, problem: Problem, variance: np.ndarray) -> np.ndarray:
@@ -227,10 +273,10 @@ def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
 
 def _update_noise(
     problem: Problem, lins: list[Linearization], n_params: int, rows_total: int, min_sigma: dict[str, float]
-) -> tuple[bool, list[str]]:
-    """Re-estimate each block's noise level (its share of the free parameters by rows); whether every level
-    settled (changed by less than 10 %), and one progress note per block."""
-    settled, notes = True, []
+) -> tuple[float, list[str]]:
+    """Re-estimate each block's noise level (its share of the free parameters by rows); the largest relative change
+    of a block's level or of a unit's level within it, and one progress note per block."""
+    largest, notes = 0.0, []
     for state, lin in zip(problem.states, lins):
         previous = state.sigma
         share = n_params * lin.residual.size / rows_total
@@ -239,26 +285,26 @@ def _update_noise(
         if change > 0.0:  # the noise model changed shape: decompose again, then the block's level
             state.rebuild(lin)
             scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
-        settled &= abs(state.sigma / previous - 1.0) < 0.1 and change < 0.1
+        largest = max(largest, abs(state.sigma / previous - 1.0), change)
         notes.append(
             f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"
         )
-    return settled, notes
+    return largest, notes
 
 
 def _update_round(
     problem: Problem, z: np.ndarray, rows_total: int, min_sigma: dict[str, float]
-) -> tuple[bool, bool, list[str]]:
-    """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`); the linearisations
-    live only here."""
+) -> tuple[bool, float, list[str]]:
+    """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`): whether an outlier
+    set changed, the largest relative change of a noise level, progress notes. The linearisations live only here."""
     lins = problem.evaluate(z)
     for state in problem.states:  # rebuilt below: not kept beside the per-view noise models of the outlier flags
         state.whitening = None
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
-    settled, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
-    return changed, settled, notes
+    change, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
+    return changed, change, notes
 
 
 def solve(
@@ -275,12 +321,29 @@ def solve(
         result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL,
                                      std_tol=ROUND_STD_TOL)
         z, evaluations = result.x, evaluations + result.nfev
-        changed, settled, notes = _update_round(problem, z, rows_total, min_sigma)
+        changed, change, notes = _update_round(problem, z, rows_total, min_sigma)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
-        if not changed and settled:
+        if not changed and change < ROUND_NOISE_TOL:
             break
-    result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, std_tol=FINAL_STD_TOL)
-    z, evaluations = result.x, evaluations + result.nfev
+    # The final solves: converge under the noise model, then re-estimate it at the converged point, until it is
+    # the one the solution was solved under (a fixed point: the estimate no longer depends on where a round stopped).
+    def newton(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return problem.normal_equations(z, curvature=True)
+
+    std = _marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
+    for final_index in range(MAX_FINAL_SOLVES):
+        result = levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL,
+                                     std_tol=FINAL_STD_TOL, std=std)
+        z, evaluations = result.x, evaluations + result.nfev
+        if final_index == MAX_FINAL_SOLVES - 1:
+            say(f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
+                f"{'an outlier set' if changed else f'noise {change:.1%}'}); the solution is the last solve's")
+            break
+        changed, change, notes = _update_round(problem, z, rows_total, min_sigma)
+        if not changed and change < FIXED_POINT_TOL:
+            break
+        say(f"final solve {final_index + 1}: the noise model at its solution differs ("
+            f"{'outlier set changed' if changed else f'noise {change:.2%}'}): " + "; ".join(notes) + "; solving again")
     after = problem.raw_residuals(z)
     information, _, triangular = problem.information(z, triangular=True)
     return Solution(

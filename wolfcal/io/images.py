@@ -12,8 +12,15 @@ from wolfcal.errors import WolfcalError
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SIGNATURE = b"\xff\xd8"
 JPEG_QUALITY = 95
-# zlib level 1: a noisy 2048x1536 image barely gets smaller at higher levels but takes several times longer
-PNG_COMPRESSION = 1
+# png as wolfcal writes it: stored (zlib level 0), rows unfiltered. A standard png that any tool opens, the size of
+# the raw pixels (+0.1 %), decoded 5-10x faster than deflated (the fit decodes every image: inflating and unfiltering
+# were a quarter to two fifths of a first run's detection) and encoded 10-25x faster (bench/bench_image_storage.py:
+# 512x384 0.15-0.26 vs 1.9 ms to decode, 2048x1536 2.6-3.8 vs 25-27 ms); deflated files were 1.9-2.8x smaller on
+# simulated and photo-like images. Filtering alone costs most of a stored png's decoding (0.7 ms at 512x384 with it).
+PNG_COMPRESSION = 0
+# IDAT chunks of up to 1 MiB (OpenCV's largest; 8 KiB by default): one chunk per 512x384 image instead of 25, so
+# `image_damage` checks a few checksums per image instead of hundreds (2048x1536: 4 chunks instead of 385)
+PNG_CHUNK_BYTES = 1 << 20
 # JPEG start-of-frame markers (baseline, progressive, lossless, ...): they carry the image size
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
@@ -32,7 +39,11 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
 
     encoding = "mono8" if image.ndim == 2 else "bgr8"
     if image_format == "png":
-        ok, buffer = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+        params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION]
+        if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # recent OpenCV; older: libpng filters (0.7 ms at 512x384)
+            params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE,
+                       cv2.IMWRITE_PNG_ZLIBBUFFER_SIZE, PNG_CHUNK_BYTES]  # fmt: skip
+        ok, buffer = cv2.imencode(".png", image, params)
     elif image_format == "jpeg":
         ok, buffer = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
     else:

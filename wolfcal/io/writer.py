@@ -1,4 +1,5 @@
-"""Write capture files: one still sample = a JointState plus, for each camera that took part, a CompressedImage and a
+"""Write capture files: one still sample = a JointState plus, for each camera that took part, a CompressedImage (a png
+stored without compression or filters, quick to decode, or a jpeg: `wolfcal.io.images.encode_image`) and a
 CameraInfo, all with one header stamp. Cameras are the head camera (`HEAD_CAMERA`, topics `camera.topic` /
 `camera.info_topic`) and external cameras (their `image_topic` / `info_topic`); the file's metadata record
 `wolfcal.cameras` maps each recorded camera name to its image topic, so a reader can tell a camera the robot config
