@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -179,3 +181,19 @@ def test_motion_blur_spreads_along_its_direction():
     assert (horizontal[20, 16:25] > 0).all() and horizontal[20, 10] == 0 and horizontal[15, 20] == 0
     vertical = motion_blur(image, 9.0, np.pi / 2)
     assert (vertical[16:25, 20] > 0).all() and vertical[20, 15] == 0
+
+
+def test_a_plane_reaching_the_camera_plane_is_rendered_without_an_overflowing_pixel_box():
+    """A floor-like plane whose near edge lies just in front of the camera: its border projects to ~1e29 px under
+    the lens model, which an integer pixel box cannot hold (NumPy's 'invalid value encountered in cast', and the
+    plane was dropped from the image). It is rendered, without a warning, where it is seen: the image's bottom."""
+    R_camera_target = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # target y along the view, its normal up
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R_camera_target, [0.0, 0.3, 2.0 + 2e-6]  # 4 m deep: from 2e-6 m to 4 m ahead
+    white = np.full((8, 8), 255, np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        image = render_targets(CAMERA, [PlanarTarget(T, white, 4.0, 4.0)], background=np.full((1536, 2048), 60.0),
+                               supersample=1)
+    assert image[-10:, CAMERA.width // 2].min() == 255  # the floor below the centre
+    assert image[10, CAMERA.width // 2] == 60  # the sky above it stays background

@@ -58,14 +58,13 @@ def _pixel_box(camera: CameraModel, target: PlanarTarget) -> tuple[int, int, int
     in_front = p[:, 2] > 1e-6
     if not in_front.any():
         return None
-    if in_front.all():
-        uv = camera.project(p)
-        u0, v0 = np.floor(uv.min(axis=0)).astype(int) - 1
-        u1, v1 = np.ceil(uv.max(axis=0)).astype(int) + 2
-    else:  # the plane crosses the camera plane: its image is unbounded, test every pixel
+    size = np.array([camera.width, camera.height], float)
+    uv = camera.project(p) if in_front.all() else np.full((1, 2), np.nan)
+    if np.isfinite(uv).all():  # clipped before the cast: a border point far off-axis can lie at 1e30 px
+        u0, v0 = np.clip(np.floor(uv.min(axis=0)) - 1, 0, size).astype(int)
+        u1, v1 = np.clip(np.ceil(uv.max(axis=0)) + 2, 0, size).astype(int)
+    else:  # the plane crosses the camera plane, or the lens model overflows: test every pixel
         u0, v0, u1, v1 = 0, 0, camera.width, camera.height
-    u0, v0 = max(u0, 0), max(v0, 0)
-    u1, v1 = min(u1, camera.width), min(v1, camera.height)
     if u0 >= u1 or v0 >= v1:
         return None
     return int(u0), int(u1), int(v0), int(v1)
