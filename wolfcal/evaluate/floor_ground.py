@@ -228,13 +228,26 @@ class _FloorFit:
         return x, scale
 
     def solve(self, x0: np.ndarray, keep: np.ndarray, scale: float | None = None) -> np.ndarray:
-        """The unknowns fitted to the views `keep`; with a residual `scale` [px] robustly (Huber at 2 scale)."""
+        """The unknowns fitted to the views `keep`; with a residual `scale` [px] robustly (Huber at 2 scale). Unknowns
+        no kept corner depends on (a left-out tag's place, a reading seen only in left-out views) keep their x0:
+        with only a prior, which the Huber loss takes in too, nothing curbs their steps (a reading error reached
+        4e9 in a jackknife solve, and least_squares' SVD failed)."""
         if scale is not None:
             self.scale = scale
         loss = {} if scale is None else {"loss": "huber", "f_scale": 2.0 * scale}
-        columns = _column_groups(self.sparsity(keep))
-        return least_squares(self.residuals, x0, lambda x, k: _grouped_jacobian(self.residuals, x, columns, k),
-                             x_scale="jac", args=(keep,), **loss).x  # fmt: skip
+        pattern = self.sparsity(keep)
+        free = pattern[: self.n_pixels(keep)].any(axis=0)
+        columns = _column_groups(pattern[:, free])
+
+        def residuals(x_free: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[free] = x_free
+            return self.residuals(x, keep)
+
+        x = x0.copy()
+        x[free] = least_squares(residuals, x0[free], lambda u: _grouped_jacobian(residuals, u, columns),
+                                x_scale="jac", **loss).x  # fmt: skip
+        return x
 
     def sparsity(self, keep: np.ndarray) -> np.ndarray:
         """(R, N) bool: which unknowns each residual of `residuals(x, keep)` depends on: a view's 8 on the plane,
