@@ -44,10 +44,13 @@ class OutlierRule:
 # noise model knows the joint-reading error each view carries), size = per-axis RMS [px].
 FIT_VIEW_PX = OutlierRule(factor=4.0, floor=0.5)
 
-# The measured ground error's floor-tag corners (`evaluate.floor_ground`), one corner of a held-out view: limit
-# (`OutlierRule.limit`) at this factor times the solve's robust residual scale (per axis), size = the corner's
-# distance from where the fitted floor puts it [px]. Per corner, not per view: on a small, strongly foreshortened
-# far tag one corner slides along an edge by 1-5 px while the view's other three fit.
+# Floor-tag corners, one corner of a view (the views kept by the view rule): limit (`OutlierRule.limit`) at this
+# factor times the robust residual scale (per axis) of the corners counted, size = the corner's distance from where
+# the fitted floor puts it, the view's joint-reading errors taken into account [px]. Per corner, not per view: on a
+# small, strongly foreshortened far tag one corner slides along an edge by 1-5 px while the view's other three fit.
+# Used by the measured ground error (`evaluate.floor_ground`: raw pixels, the readings' errors fitted as unknowns)
+# and by the fit's floor block (`Block.unit_rule`, `fit.solver.flag_units`: the block's residual, distances from
+# the edges' lines, less the view's share of the readings' errors under the noise model).
 FLOOR_CORNER_PX = OutlierRule(factor=4.0, floor=0.3)
 
 # Motion-capture markers, one marker in one sample: spread = whitened RMS, size = per-axis RMS [m]. Tighter factor:

@@ -47,6 +47,9 @@ class Block:
     unit: str  # 'px' | 'm'
     dim: int  # measured numbers per unit
     outlier_rule: OutlierRule  # which views are left out (`wolfcal.outliers`; floor in the block's unit)
+    # which single units of the views kept are left out (None: none; `OutlierRule.limit` of the robust scale of the
+    # units' conditional residuals, `solver.flag_units`)
+    unit_rule: OutlierRule | None = None
     nuisance: ParameterSet  # the block's own unknowns
     sample_of_unit: np.ndarray  # (U,) sample index of each unit
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit

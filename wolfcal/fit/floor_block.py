@@ -10,7 +10,8 @@ small counts as much as one seen REFERENCE_EDGE_PX wide, no more, and that bias 
 `floor.corner_inset` [px]: every edge of a tag view moved inward by it at REFERENCE_EDGE_PX apparent edge, by
 inset * REFERENCE_EDGE_PX / edge above (d_corner: `vision.corner_bias.inset_directions`), so that it does not read
 as a smaller, farther tag and a tilted floor. Height and tilt of every tag come from the standing soles, so the
-block measures the camera relative to the floor through the standing legs.
+block measures the camera relative to the floor through the standing legs. Besides whole views (`FIT_VIEW_PX`), single
+corners far off are left out (`unit_rule`, `outliers.FLOOR_CORNER_PX`, as the measured ground error leaves them out).
 
 `SoleClosure`: both standing soles lie on the floor. Residual per floor sample [m]: the height of each sole's origin
 above the other sole's plane (2 numbers) and the tilt between the soles' z axes as a displacement at SOLE_LEVER_M
@@ -28,7 +29,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
 from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import Observations
-from wolfcal.outliers import FIT_VIEW_PX, SOLE_CLOSURE_M
+from wolfcal.outliers import FIT_VIEW_PX, FLOOR_CORNER_PX, SOLE_CLOSURE_M
 from wolfcal.projection import BEHIND_CAMERA_PX, pixel_jacobian
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, cross, point_motion
@@ -86,6 +87,7 @@ class FloorBlock(Block):
 
     system, unit, dim = "floor", "px", 2
     outlier_rule = FIT_VIEW_PX
+    unit_rule = FLOOR_CORNER_PX
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()

@@ -47,7 +47,8 @@ class BlockState:
         # tag mount and the camera pose absorb it. Its size is the configured detection noise (priors.pixel_noise),
         # or the estimated noise level when that is larger (`shared_size`).
         self.shared_floor = sigma
-        self.excluded = np.zeros(block.n_views, dtype=bool)
+        self.excluded = np.zeros(block.n_views, dtype=bool)  # (V,) views left out
+        self.excluded_units = np.zeros(block.n_units, dtype=bool)  # (U,) single units left out (`Block.unit_rule`)
         self.groups = block.joint_reading_groups()  # (U, J) fixed: derived once
         self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.classes = block.noise_classes()  # (U,) fixed: derived once
@@ -65,7 +66,7 @@ class BlockState:
 
     @property
     def inlier_units(self) -> np.ndarray:
-        return ~self.excluded[self.block.view_of_unit]
+        return ~self.excluded[self.block.view_of_unit] & ~self.excluded_units
 
     def shared_errors(self, lin: Linearization) -> SharedErrors:
         """The errors the block's rows share at this linearisation (see `SharedErrors`); a repeating detection

@@ -2,7 +2,8 @@
 
 Rounds: robust Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
 image: its residuals, whitened with the covariance of that view alone so that no other view's error leaks in, far
-above the other views' and off by more than the block's floor; they get zero weight) -> per block, estimate the
+above the other views' and off by more than the block's floor; they get zero weight; then in the views kept, single
+units far off where the block has a unit rule: floor-tag corners, `flag_units`) -> per block, estimate the
 noise level from the whitened inlier residuals (the encoder noise is a known property of the servos and stays
 fixed), and the level of each noise class relative to it (`estimate_class_scales`: one per motion-capture marker)
 -> rebuild the weights at the new estimate; until the outlier sets and noise levels settle. Then the final solves:
@@ -113,6 +114,38 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     block, residual = state.block, lin.residual
     size = rms_by(block.view_of_unit, residual, block.n_views)
     return block.outlier_rule.flags(view_rms(state, lin), size)
+
+
+def conditional_residuals(state: BlockState, lin: Linearization) -> np.ndarray:
+    """(U, dim) each unit's residual less what the view's share of the joint-reading errors explains [unit]: the
+    noise part of the best estimate of the view's errors under the covariance of that view alone,
+    sigma^2 D C_v^-1 D^-1 r (D: the rows' own noise levels, `BlockState.row_scale`; C_v: the view's covariance in
+    the whitened rows' scale). What floor_ground's measurement leaves of a corner once it fits each sample's reading
+    errors as unknowns: where the fitted model puts the corner, the view's reading errors taken into account."""
+    block, r = state.block, lin.residual.ravel()
+    views = row_groups(block.view_of_unit, block.dim)
+    w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
+    D = state.row_scale
+    return (state.sigma**2 * D * w.apply(D * w.apply(r, state.sigma), state.sigma)).reshape(-1, block.dim)
+
+
+def flag_units(state: BlockState, lin: Linearization) -> np.ndarray:
+    """(U,) single units of the views kept that are off by more than the block's `unit_rule` allows: size = the
+    norm of the unit's `conditional_residuals` [unit], limit = `OutlierRule.limit` of their robust per-axis scale
+    (MAD of the units kept). None flagged without a unit rule. On a small, strongly foreshortened far floor tag one
+    corner slides along an edge by pixels while the view's other corners fit: too little for the view rule."""
+    block = state.block
+    flags = np.zeros(block.n_units, dtype=bool)
+    if block.unit_rule is None:
+        return flags
+    kept_view = ~state.excluded[block.view_of_unit]
+    e = conditional_residuals(state, lin)
+    counted = kept_view & ~state.excluded_units
+    if not counted.any():
+        return flags
+    scale = MAD_TO_SIGMA * float(np.median(np.abs(e[counted])))
+    flags[kept_view] = np.linalg.norm(e[kept_view], axis=1) > block.unit_rule.limit(np.array(scale))
+    return flags
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
@@ -262,12 +295,16 @@ def _class_scale(state: BlockState) -> np.ndarray:
 
 
 def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
-    """Flag each block's outlier views at these linearisations; whether any outlier set changed."""
+    """Flag each block's outlier views at these linearisations, then the single units left out of the views kept
+    (`flag_units`); whether any outlier set changed."""
     changed = False
     for state, lin in zip(problem.states, lins):
         outliers = flag_outliers(state, lin)
         changed |= not np.array_equal(outliers, state.excluded)
         state.excluded = outliers
+        units = flag_units(state, lin)
+        changed |= not np.array_equal(units, state.excluded_units)
+        state.excluded_units = units
     return changed
 
 
@@ -287,7 +324,9 @@ def _update_noise(
             scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
         largest = max(largest, abs(state.sigma / previous - 1.0), change)
         notes.append(
-            f"{state.block.name}: {int(state.excluded.sum())} outlier view(s), noise {state.sigma:.3g} "
+            f"{state.block.name}: {int(state.excluded.sum())} outlier view(s)"
+            + (f" and {int(state.excluded_units.sum())} unit(s)" if state.excluded_units.any() else "")
+            + f", noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"
         )
     return largest, notes
