@@ -19,6 +19,7 @@ with a note naming camera, index and time (an error when more than 20 % of a cam
 
 from __future__ import annotations
 
+import time
 from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
+from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
@@ -118,6 +120,39 @@ class _PassOne:
     pairing: Pairing
     stamps: dict[str, np.ndarray]  # camera -> (N,) int64 header stamps of all its images [ns], sorted
     infos: dict[str, list[tuple[int, InfoModel | None]]]
+    checks: _Checks  # the damage found (or taken from the file's memo)
+
+
+# The reader's memo of a file's image checks (`wolfcal.io.filememo`, kind 'images'); bump when `image_damage` or the
+# messages it is applied to change
+CHECKS_VERSION = 1
+_CheckKey = tuple[str, int, int, int]  # (topic, log time [ns], header stamp [ns], index among the image messages read)
+
+
+@dataclass
+class _Checks:
+    """`image_damage` of each image message of a file: the damaged ones by key, and how many messages were checked."""
+
+    damaged: dict[_CheckKey, str]
+    images: int = 0
+
+    @classmethod
+    def remembered(cls, path: Path) -> _Checks | None:
+        """The checks remembered of this file as it is now (`read_memo`), None when there are none to trust."""
+        memo = read_memo(path, "images")
+        if memo is None or memo.get("version") != CHECKS_VERSION:
+            return None
+        try:
+            damaged = {(str(t), int(lt), int(st), int(n)): str(why) for t, lt, st, n, why in memo["damaged"]}
+            return cls(damaged, int(memo["images"]))
+        except (KeyError, TypeError, ValueError):  # foreign
+            return None
+
+    def remember(self, path: Path, identity: list[int], taken_ns: int) -> None:
+        """Write these checks as the file's memo (the file had `identity` when they began, at `taken_ns`)."""
+        damaged = [[*key, why] for key, why in self.damaged.items()]
+        write_memo(path, "images", identity, taken_ns, {"version": CHECKS_VERSION, "images": self.images,
+                                                       "damaged": damaged})  # fmt: skip
 
 
 def _pass_one(
@@ -128,8 +163,14 @@ def _pass_one(
     info_cameras: set[str],
     progress: ProgressCallback | None,
     disorder_ns: int | None,
+    known: _Checks | None = None,
 ) -> _PassOne:
-    """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models."""
+    """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models.
+
+    `known`: the file's image checks from its memo; then `image_damage` is not applied again: the memo holds its
+    outcome for this very content (the file is unchanged since, `read_memo`), so the images left out and the notes
+    naming them are the same. Otherwise every png and jpeg image is checked (its checksums: the one cost of this
+    pass that grows with the images' bytes)."""
     image_topics = {config.camera_topics(n)[0]: n for n in cameras}
     info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
     pairer = FramePairer(disorder_ns)
@@ -137,6 +178,7 @@ def _pass_one(
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
     sizes: dict[tuple[int, int] | None, tuple[int, int] | None] = {None: None}  # one tuple per image size
+    checks = _Checks({})
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
     for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
@@ -150,7 +192,14 @@ def _pass_one(
             kind, data = image_kind(decoded.data), decoded.data
             size = image_size(data)
             size = sizes.setdefault(size, size)
-            header = _Header(stamp, kind, size, image_damage(data) if kind else None, message.log_time)
+            damage = None
+            if kind:
+                check_key = (channel.topic, message.log_time, stamp, checks.images)
+                damage = known.damaged.get(check_key) if known is not None else image_damage(data)
+                if damage:
+                    checks.damaged[check_key] = damage
+            checks.images += 1
+            header = _Header(stamp, kind, size, damage, message.log_time)
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
         else:
@@ -162,7 +211,7 @@ def _pass_one(
     pairing = pairer.finish()
     if progress is not None:
         progress(total, total)
-    return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos)
+    return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos, checks)
 
 
 def _read(
@@ -177,10 +226,19 @@ def _read(
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
-    try:
-        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS)
-    except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None)
+    identity, _ = identity_and_memo(path, "images")
+    taken_ns = time.time_ns()
+    known = _Checks.remembered(path) if caching() else None
+    for checks in (known, None) if known is not None else (None,):
+        try:
+            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, checks)
+        except Disorder:  # stamps further out of order than the window allows: pair on the whole log
+            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None, checks)
+        if checks is None or read.checks.images == checks.images:
+            break
+        known = None  # the memo counted other images: not the file it was taken of; checked again
+    if known is None and caching():
+        read.checks.remember(path, identity, taken_ns)
     pairing = read.pairing
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,
