@@ -124,3 +124,27 @@ def test_a_memo_that_does_not_fit_the_file_is_not_used(good, tmp_path, config, c
     checks.clear()
     assert read(path, config) == first  # the memo was written again, right
     assert checks == []
+
+
+@pytest.mark.parametrize("frame_id", ["", "c", "cam", "camera", "head_camera_optical"])
+@pytest.mark.parametrize("image_format", ["", "png", "mono8; png compressed mono8", "jpeg"])
+def test_compressed_image_layout_reads_as_the_ros_decoder(frame_id, image_format):
+    """The reader takes a CompressedImage's stamp and image bytes from the CDR layout (no copy of the image):
+    the same as the general ROS 2 decoder for every padding of the two strings before the image."""
+    from types import SimpleNamespace
+
+    from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+
+    from wolfcal.io.msgdefs import COMPRESSED_IMAGE, MSGDEFS
+
+    encode = serialize_dynamic(COMPRESSED_IMAGE, MSGDEFS[COMPRESSED_IMAGE])[COMPRESSED_IMAGE]
+    decode = generate_dynamic(COMPRESSED_IMAGE, MSGDEFS[COMPRESSED_IMAGE])[COMPRESSED_IMAGE]
+    for payload in (b"", b"\x89PNG\r\n\x1a\n" + bytes(range(61)), bytes(5)):
+        data = encode({"header": {"stamp": {"sec": 1_700_000_123, "nanosec": 456_789}, "frame_id": frame_id},
+                       "format": image_format, "data": payload})  # fmt: skip
+        decoded = decode(data)
+        stamp, image = reader_module._compressed_image(data, SimpleNamespace(name=COMPRESSED_IMAGE))
+        assert stamp == decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec
+        assert bytes(image) == bytes(decoded.data) == payload
+        assert reader_module._compressed_image(data[:-1], SimpleNamespace(name=COMPRESSED_IMAGE)) is None
+        assert reader_module._compressed_image(data, SimpleNamespace(name="sensor_msgs/msg/Image")) is None

@@ -19,6 +19,7 @@ with a note naming camera, index and time (an error when more than 20 % of a cam
 
 from __future__ import annotations
 
+import struct
 import time
 from array import array
 from collections.abc import Callable, Iterable
@@ -36,10 +37,10 @@ from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
-from wolfcal.io.images import image_damage, image_kind, image_size
+from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
-from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
@@ -181,15 +182,20 @@ def _pass_one(
     checks = _Checks({})
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
-    for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
+    decoders: dict[int, Callable] = {}
+    for count, (schema, channel, message) in enumerate(reader.iter_messages(topics=topics)):
         if progress is not None and count % 200 == 0:
             progress(count, total)
-        stamp = header_stamp_ns(decoded.header, message.log_time)
-        if channel.topic == config.joint_states_topic:
-            pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
-        elif channel.topic in image_topics:
+        if channel.topic in image_topics:
+            image = _compressed_image(message.data, schema)
+            if image is None:  # not as `_compressed_image` reads it: the general decoder
+                decoded = _decoder(path, decoders, channel, schema)(message.data)
+                image = (header_stamp_ns(decoded.header, 0), memoryview(decoded.data))
+            stamp = image[0] or message.log_time  # a publisher that left the stamp at zero: the log time
             name = image_topics[channel.topic]
-            kind, data = image_kind(decoded.data), decoded.data
+            whole = known is None  # the checksums need every byte; else the header is enough (png)
+            data = bytes(image[1] if whole or image[1][:2] == JPEG_SIGNATURE else image[1][:_PNG_HEAD])
+            kind = image_kind(data)
             size = image_size(data)
             size = sizes.setdefault(size, size)
             damage = None
@@ -202,6 +208,11 @@ def _pass_one(
             header = _Header(stamp, kind, size, damage, message.log_time)
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
+            continue
+        decoded = _decoder(path, decoders, channel, schema)(message.data)
+        stamp = header_stamp_ns(decoded.header, message.log_time)
+        if channel.topic == config.joint_states_topic:
+            pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
         else:
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
@@ -212,6 +223,42 @@ def _pass_one(
     if progress is not None:
         progress(total, total)
     return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos, checks)
+
+
+_PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
+
+
+def _compressed_image(data: bytes, schema) -> tuple[int, memoryview] | None:
+    """(header stamp [ns], 0 when unset; the encoded image, a view into `data`) of a little-endian CDR
+    sensor_msgs/CompressedImage message, read from its layout without copying the image; None for anything else
+    (the caller decodes it with the general decoder)."""
+    if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
+        return None
+    try:
+        sec, nanosec, length = struct.unpack_from("<iII", data, 4)
+        pos = 4 + 12 + length  # after header.frame_id (CDR offsets count from the end of the 4-byte encapsulation)
+        pos += -(pos - 4) % 4
+        (length,) = struct.unpack_from("<I", data, pos)
+        pos += 4 + length  # after format
+        pos += -(pos - 4) % 4
+        (length,) = struct.unpack_from("<I", data, pos)
+    except struct.error:
+        return None
+    if pos + 4 + length > len(data):
+        return None
+    return sec * 1_000_000_000 + nanosec, memoryview(data)[pos + 4 : pos + 4 + length]
+
+
+def _decoder(path: Path, decoders: dict[int, Callable], channel, schema) -> Callable:
+    """The ROS 2 decoder of the channel's messages (one per channel, made once); WolfcalError naming the file and
+    topic when there is none."""
+    if channel.id not in decoders:
+        decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+        if decoder is None:
+            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} messages "
+                               "(wolfcal reads ROS 2 CDR recordings)")  # fmt: skip
+        decoders[channel.id] = decoder
+    return decoders[channel.id]
 
 
 def _read(
@@ -231,9 +278,9 @@ def _read(
     known = _Checks.remembered(path) if caching() else None
     for checks in (known, None) if known is not None else (None,):
         try:
-            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, checks)
+            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, known=checks)
         except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None, checks)
+            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None, known=checks)
         if checks is None or read.checks.images == checks.images:
             break
         known = None  # the memo counted other images: not the file it was taken of; checked again
