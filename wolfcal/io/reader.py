@@ -39,7 +39,7 @@ from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
+from wolfcal.io.mcapfile import check_mcap, is_finished, iter_message_heads, message_count, recover_hint, torn_error
 from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
@@ -164,6 +164,8 @@ def _pass_one(
     info_cameras: set[str],
     progress: ProgressCallback | None,
     disorder_ns: int | None,
+    *,
+    handle: IO[bytes],
     known: _Checks | None = None,
 ) -> _PassOne:
     """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models.
@@ -183,12 +185,14 @@ def _pass_one(
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
     decoders: dict[int, Callable] = {}
-    for count, (schema, channel, message) in enumerate(reader.iter_messages(topics=topics)):
+    # with the checks remembered, of a png only its header is read from the file (`_png_head`)
+    messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
+    for count, (schema, channel, message, complete) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
-            image = _compressed_image(message.data, schema)
-            if image is None:  # not as `_compressed_image` reads it: the general decoder
+            image = _compressed_image(message.data, schema, complete)
+            if image is None:  # not as `_compressed_image` reads it: the general decoder (a whole message)
                 decoded = _decoder(path, decoders, channel, schema)(message.data)
                 image = (header_stamp_ns(decoded.header, 0), memoryview(decoded.data))
             stamp = image[0] or message.log_time  # a publisher that left the stamp at zero: the log time
@@ -228,10 +232,21 @@ def _pass_one(
 _PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
 
 
-def _compressed_image(data: bytes, schema) -> tuple[int, memoryview] | None:
+_HEAD_BYTES = 4096  # of an image message, read first: the CDR header, format and a png's header
+
+
+def _png_head(schema, head: bytes) -> bool:
+    """Whether the first bytes of an image message hold all the reader needs when the image checks are remembered:
+    its stamp and a png's kind and size (else the whole message is read)."""
+    image = _compressed_image(head, schema, complete=False)
+    return image is not None and image_kind(bytes(image[1][:_PNG_HEAD])) == "png"
+
+
+def _compressed_image(data: bytes, schema, complete: bool = True) -> tuple[int, memoryview] | None:
     """(header stamp [ns], 0 when unset; the encoded image, a view into `data`) of a little-endian CDR
     sensor_msgs/CompressedImage message, read from its layout without copying the image; None for anything else
-    (the caller decodes it with the general decoder)."""
+    (the caller decodes it with the general decoder). `complete` False: `data` is the message's first bytes only;
+    the view holds the image's bytes among them (at least a png's header, else None)."""
     if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
         return None
     try:
@@ -244,7 +259,7 @@ def _compressed_image(data: bytes, schema) -> tuple[int, memoryview] | None:
         (length,) = struct.unpack_from("<I", data, pos)
     except struct.error:
         return None
-    if pos + 4 + length > len(data):
+    if pos + 4 + (length if complete else min(length, _PNG_HEAD)) > len(data):
         return None
     return sec * 1_000_000_000 + nanosec, memoryview(data)[pos + 4 : pos + 4 + length]
 
@@ -278,9 +293,13 @@ def _read(
     known = _Checks.remembered(path) if caching() else None
     for checks in (known, None) if known is not None else (None,):
         try:
-            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, known=checks)
+            read = _pass_one(
+                path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, handle=handle, known=checks
+            )
         except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-            read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None, known=checks)
+            read = _pass_one(
+                path, reader, config, found.cameras, info_cameras, progress, None, handle=handle, known=checks
+            )
         if checks is None or read.checks.images == checks.images:
             break
         known = None  # the memo counted other images: not the file it was taken of; checked again
