@@ -10,6 +10,9 @@ camera only). One pass: frames are paired with the joint states as they are read
 of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
 log) and kept from stamps and image headers; a kept image holds only its location in the file (`wolfcal.io.stream`),
 its bytes are read back when they are detected or drawn. Memory does not grow with the images or the joint states.
+The images' checks are remembered beside the detection cache (`_Checks`, `wolfcal.io.filememo`): a second read of an
+unchanged file takes them from there and reads only the first bytes of each png image message (`iter_message_heads`),
+so a fit from cached detections reads no image.
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
