@@ -8,7 +8,7 @@ Prints, with units:
    fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU; the floor (reading the images,
    decoding them and OpenCV's bare aruco detector on all cores, wall); the naive reference in CPU (the same
    detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second run (cache), in this process
-   and as a whole `wolfcal fit` process.
+   (the median of SECOND_RUNS runs) and as a whole `wolfcal fit` process.
 2. The solve alone (`fit_observations` on the same detections) vs the naive solve, CPU.
 3. Leg fits of 400 and 1000 samples at 512x384 (2048x1536 binned 4x4), end to end, first run: wall and CPU, in
    this process and as a `wolfcal fit` process (start-up and imports included); the solve alone; the load average
@@ -55,6 +55,7 @@ from wolfcal.vision.observe import detect_observations  # noqa: E402
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CACHE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
 PARTS = ("camera", "leg", "large", "accuracy")
+SECOND_RUNS = 3  # cached runs after the first, in process
 README_ACCURACY = {"2048x1536": (0.02, 0.13), "512x384": (0.04, 0.13)}  # median, p95 [px] before issue 13
 
 
@@ -124,7 +125,8 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
     robot = load_robot(CONFIG)
     with tempfile.TemporaryDirectory() as cache_dir:
         first_wall, first_cpu = fit_run(path, options, Path(cache_dir))
-        second_wall, second_cpu = fit_run(path, options, Path(cache_dir))
+        seconds = sorted((fit_run(path, options, Path(cache_dir)) for _ in range(SECOND_RUNS)), key=lambda r: r[1])
+        second_wall, second_cpu = seconds[len(seconds) // 2]  # the median in CPU: one run of 0.1-0.2 s is noisy
         process_wall, process_cpu = process_run(path, free, Path(cache_dir))
     bare, bare_cpu = floor(path)
     with cache_enabled(False):  # the detection's own cost, the naive reference uses the same detections
@@ -142,8 +144,9 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
           f"wall (target <= 1.3), {first_cpu / bare_cpu:.2f}x in CPU")
     print(f"  naive reference {naive_total:6.2f} s CPU (detection {detect_cpu:.2f} + naive solve {naive_cpu:.2f}) "
           f"-> wolfcal {naive_total / first_cpu:.1f}x faster in CPU (target >= 3)")
-    print(f"  second run     {second_wall:6.2f} s wall, {second_cpu:6.2f} s CPU (cache) -> "
-          f"{naive_total / second_cpu:.1f}x faster than the naive reference in CPU (target >= 20)")
+    print(f"  second run     {second_wall:6.2f} s wall, {second_cpu:6.2f} s CPU (cache; median of {SECOND_RUNS} runs, "
+          f"{seconds[0][1]:.2f}-{seconds[-1][1]:.2f} s CPU) -> {naive_total / second_cpu:.1f}x faster than the naive "
+          f"reference in CPU (target >= 20)")
     print(f"  solve alone    {solve_wall:6.2f} s wall, {solve_cpu:6.2f} s CPU; naive solve {naive_wall:.2f} s wall, "
           f"{naive_cpu:.2f} s CPU -> {naive_cpu / solve_cpu:.1f}x (target >= 10)")
     print(f"  second run as a `wolfcal fit` process (start-up and imports included) {process_wall:.2f} s wall, "

@@ -103,9 +103,9 @@ def read_both(path: Path, monkeypatch) -> tuple[Capture, Capture, list[int | Non
     passes: list[int | None] = []
     pass_one = reader_module._pass_one
 
-    def spy(*args):
+    def spy(*args, **kwargs):
         passes.append(args[-1])
-        return pass_one(*args)
+        return pass_one(*args, **kwargs)
 
     monkeypatch.setattr(reader_module, "_pass_one", spy)
     streamed = read_capture(path, config)

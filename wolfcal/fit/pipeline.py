@@ -233,8 +233,14 @@ def load_captures(
     camera = load_camera_info(intrinsics) if intrinsics else None
     progress = (lambda path: Progress(say, f"reading {Path(path).name}", "messages")) if say else (lambda path: None)
     loaded = [read_capture(path, robot.config, camera, progress(path)) for path in captures]
+    try:
+        own_text: str | None = robot.config.path.read_text(encoding="utf-8", errors="replace")  # as attachments
+    except OSError:
+        own_text = None
     for capture in loaded:
-        name = attached_robot_name(capture.robot_config_text)
+        # the robot's own config attached (a capture of this robot with this config): its name, without parsing
+        same = own_text is not None and capture.robot_config_text == own_text
+        name = robot.config.name if same else attached_robot_name(capture.robot_config_text)
         if name is not None and name != robot.config.name:
             raise WolfcalError(
                 f"{capture.path}: captured with robot '{name}', but --robot is '{robot.config.name}' "

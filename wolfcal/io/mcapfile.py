@@ -1,10 +1,18 @@
-"""Checks on an MCAP file before reading it: present, an MCAP file at all, finished (has its footer)."""
+"""Checks on an MCAP file before reading it (present, an MCAP file at all, finished: has its footer), and reading
+only the first bytes of large messages (`iter_message_heads`)."""
 
 from __future__ import annotations
 
+import heapq
+import io
+import struct
+from collections.abc import Callable, Container, Iterator
 from pathlib import Path
+from typing import IO, NamedTuple
 
+from mcap.exceptions import McapError
 from mcap.reader import McapReader
+from mcap.records import Channel, ChunkIndex, Message, Schema
 
 from wolfcal.errors import WolfcalError
 
@@ -69,3 +77,96 @@ def message_count(reader: McapReader, topics: list[str]) -> int:
     counts = summary.statistics.channel_message_counts
     return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic in topics)
 
+
+class Head(NamedTuple):
+    """A message of `iter_message_heads`: its data may be only the first bytes (`complete` False)."""
+
+    schema: Schema | None
+    channel: Channel
+    message: Message
+    complete: bool
+
+
+def iter_message_heads(
+    reader: McapReader,
+    handle: IO[bytes],
+    topics: list[str],
+    heads: Container[str],
+    head_bytes: int,
+    enough: Callable[[Schema | None, bytes], bool],
+) -> Iterator[Head]:
+    """`reader.iter_messages(topics)`: the same messages in the same order (log time, then place in the file), but
+    of a message on one of the `heads` topics in an uncompressed chunk only the first `head_bytes` of its data are
+    read when `enough(schema, those bytes)` says so (e.g. an image whose header is all a reader needs): its other
+    bytes are skipped, not read from the file. Files without a chunk index or with compressed chunks are read
+    whole (`iter_messages`). `handle`: the file `reader` reads."""
+    summary = reader.get_summary()
+    wanted = {c.id for c in summary.channels.values() if c.topic in topics} if summary else set()
+    chunks = [c for c in summary.chunk_indexes if wanted & c.message_index_offsets.keys()] if summary else []
+    if summary is None or not chunks or any(c.compression for c in chunks):
+        for schema, channel, message in reader.iter_messages(topics=topics):
+            yield Head(schema, channel, message, True)
+        return
+    # the order of `iter_messages`: by log time, then chunk offset, then place in the chunk; a chunk is read when
+    # its first log time comes up
+    queue: list[tuple[int, int, int, Head | ChunkIndex]] = [(c.message_start_time, c.chunk_start_offset, -1, c)
+                                                            for c in chunks]  # fmt: skip
+    heapq.heapify(queue)
+    while queue:
+        _, _, _, item = heapq.heappop(queue)
+        if isinstance(item, Head):
+            yield item
+            continue
+        for index, head in _chunk_heads(handle, item, summary, wanted, heads, head_bytes, enough):
+            heapq.heappush(queue, (head.message.log_time, item.chunk_start_offset, index, head))
+
+
+_CHUNK_FIXED = struct.Struct("<QQQI")  # message start and end time, uncompressed size, uncompressed crc
+_MESSAGE_FIXED = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_OPCODE_MESSAGE = 0x05
+
+
+def _chunk_heads(
+    handle: IO[bytes],
+    chunk: ChunkIndex,
+    summary,
+    wanted: set[int],
+    heads: Container[str],
+    head_bytes: int,
+    enough: Callable[[Schema | None, bytes], bool],
+) -> Iterator[tuple[int, Head]]:
+    """(index of the record in the chunk, message) of the wanted messages of one uncompressed chunk, read record by
+    record (see `iter_message_heads`)."""
+    handle.seek(chunk.chunk_start_offset + 1 + 8 + _CHUNK_FIXED.size)
+    (length,) = struct.unpack("<I", _exactly(handle, 4))
+    handle.seek(length, io.SEEK_CUR)  # the compression's name ('')
+    (records,) = struct.unpack("<Q", _exactly(handle, 8))
+    position, end = handle.tell(), handle.tell() + records
+    index = 0
+    while position < end:
+        opcode, length = struct.unpack("<BQ", _exactly(handle, 9))
+        position += 9 + length
+        if opcode == _OPCODE_MESSAGE:
+            channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(_exactly(handle, _MESSAGE_FIXED.size))
+            size = length - _MESSAGE_FIXED.size
+            if channel_id in wanted:
+                channel = summary.channels[channel_id]
+                schema = summary.schemas.get(channel.schema_id)
+                data = _exactly(handle, min(size, head_bytes) if channel.topic in heads else size)
+                complete = len(data) == size
+                if not complete and not enough(schema, data):
+                    data += _exactly(handle, size - len(data))
+                    complete = True
+                fields = {"channel_id": channel_id, "sequence": sequence, "log_time": log_time}
+                message = Message(**fields, publish_time=publish_time, data=data)
+                yield index, Head(schema, channel, message, complete)
+        handle.seek(position)
+        index += 1
+
+
+def _exactly(handle: IO[bytes], count: int) -> bytes:
+    """`count` bytes from `handle`; McapError when the file ends first."""
+    data = handle.read(count)
+    if len(data) != count:
+        raise McapError(f"a chunk record ends {count - len(data)} byte(s) early")
+    return data

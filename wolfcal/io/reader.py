@@ -10,6 +10,9 @@ camera only). One pass: frames are paired with the joint states as they are read
 of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
 log) and kept from stamps and image headers; a kept image holds only its location in the file (`wolfcal.io.stream`),
 its bytes are read back when they are detected or drawn. Memory does not grow with the images or the joint states.
+The images' checks are remembered beside the detection cache (`_Checks`, `wolfcal.io.filememo`): a second read of an
+unchanged file takes them from there and reads only the first bytes of each png image message (`iter_message_heads`),
+so a fit from cached detections reads no image.
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
@@ -19,6 +22,8 @@ with a note naming camera, index and time (an error when more than 20 % of a cam
 
 from __future__ import annotations
 
+import struct
+import time
 from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -34,10 +39,11 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
-from wolfcal.io.images import image_damage, image_kind, image_size
+from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
+from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import check_mcap, is_finished, message_count, recover_hint, torn_error
-from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
+from wolfcal.io.mcapfile import check_mcap, is_finished, iter_message_heads, message_count, recover_hint, torn_error
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
@@ -118,6 +124,39 @@ class _PassOne:
     pairing: Pairing
     stamps: dict[str, np.ndarray]  # camera -> (N,) int64 header stamps of all its images [ns], sorted
     infos: dict[str, list[tuple[int, InfoModel | None]]]
+    checks: _Checks  # the damage found (or taken from the file's memo)
+
+
+# The reader's memo of a file's image checks (`wolfcal.io.filememo`, kind 'images'); bump when `image_damage` or the
+# messages it is applied to change
+CHECKS_VERSION = 1
+_CheckKey = tuple[str, int, int, int]  # (topic, log time [ns], header stamp [ns], index among the image messages read)
+
+
+@dataclass
+class _Checks:
+    """`image_damage` of each image message of a file: the damaged ones by key, and how many messages were checked."""
+
+    damaged: dict[_CheckKey, str]
+    images: int = 0
+
+    @classmethod
+    def remembered(cls, path: Path) -> _Checks | None:
+        """The checks remembered of this file as it is now (`read_memo`), None when there are none to trust."""
+        memo = read_memo(path, "images")
+        if memo is None or memo.get("version") != CHECKS_VERSION:
+            return None
+        try:
+            damaged = {(str(t), int(lt), int(st), int(n)): str(why) for t, lt, st, n, why in memo["damaged"]}
+            return cls(damaged, int(memo["images"]))
+        except (KeyError, TypeError, ValueError):  # foreign
+            return None
+
+    def remember(self, path: Path, identity: list[int], taken_ns: int) -> None:
+        """Write these checks as the file's memo (the file had `identity` when they began, at `taken_ns`)."""
+        damaged = [[*key, why] for key, why in self.damaged.items()]
+        write_memo(path, "images", identity, taken_ns, {"version": CHECKS_VERSION, "images": self.images,
+                                                       "damaged": damaged})  # fmt: skip
 
 
 def _pass_one(
@@ -128,8 +167,16 @@ def _pass_one(
     info_cameras: set[str],
     progress: ProgressCallback | None,
     disorder_ns: int | None,
+    *,
+    handle: IO[bytes],
+    known: _Checks | None = None,
 ) -> _PassOne:
-    """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models."""
+    """Joint states and image headers paired as they are read (`FramePairer`), per-camera CameraInfo models.
+
+    `known`: the file's image checks from its memo; then `image_damage` is not applied again: the memo holds its
+    outcome for this very content (the file is unchanged since, `read_memo`), so the images left out and the notes
+    naming them are the same. Otherwise every png and jpeg image is checked (its checksums: the one cost of this
+    pass that grows with the images' bytes)."""
     image_topics = {config.camera_topics(n)[0]: n for n in cameras}
     info_topics = {config.camera_topics(n)[1]: n for n in info_cameras}
     pairer = FramePairer(disorder_ns)
@@ -137,22 +184,42 @@ def _pass_one(
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
     models: dict[tuple, InfoModel | None] = {}
     sizes: dict[tuple[int, int] | None, tuple[int, int] | None] = {None: None}  # one tuple per image size
+    checks = _Checks({})
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
-    for count, (_, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=topics)):
+    decoders: dict[int, Callable] = {}
+    # with the checks remembered, of a png only its header is read from the file (`_png_head`)
+    messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
+    for count, (schema, channel, message, complete) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
+        if channel.topic in image_topics:
+            image = _compressed_image(message.data, schema, complete)
+            if image is None:  # not as `_compressed_image` reads it: the general decoder (a whole message)
+                decoded = _decoder(path, decoders, channel, schema)(message.data)
+                image = (header_stamp_ns(decoded.header, 0), memoryview(decoded.data))
+            stamp = image[0] or message.log_time  # a publisher that left the stamp at zero: the log time
+            name = image_topics[channel.topic]
+            whole = known is None  # the checksums need every byte; else the header is enough (png)
+            data = bytes(image[1] if whole or image[1][:2] == JPEG_SIGNATURE else image[1][:_PNG_HEAD])
+            kind = image_kind(data)
+            size = image_size(data)
+            size = sizes.setdefault(size, size)
+            damage = None
+            if kind:
+                check_key = (channel.topic, message.log_time, stamp, checks.images)
+                damage = known.damaged.get(check_key) if known is not None else image_damage(data)
+                if damage:
+                    checks.damaged[check_key] = damage
+            checks.images += 1
+            header = _Header(stamp, kind, size, damage, message.log_time)
+            stamps[name].append(stamp)
+            pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
+            continue
+        decoded = _decoder(path, decoders, channel, schema)(message.data)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
             pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
-        elif channel.topic in image_topics:
-            name = image_topics[channel.topic]
-            kind, data = image_kind(decoded.data), decoded.data
-            size = image_size(data)
-            size = sizes.setdefault(size, size)
-            header = _Header(stamp, kind, size, image_damage(data) if kind else None, message.log_time)
-            stamps[name].append(stamp)
-            pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
         else:
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
@@ -162,7 +229,54 @@ def _pass_one(
     pairing = pairer.finish()
     if progress is not None:
         progress(total, total)
-    return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos)
+    return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos, checks)
+
+
+_PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
+
+
+_HEAD_BYTES = 4096  # of an image message, read first: the CDR header, format and a png's header
+
+
+def _png_head(schema, head: bytes) -> bool:
+    """Whether the first bytes of an image message hold all the reader needs when the image checks are remembered:
+    its stamp and a png's kind and size (else the whole message is read)."""
+    image = _compressed_image(head, schema, complete=False)
+    return image is not None and image_kind(bytes(image[1][:_PNG_HEAD])) == "png"
+
+
+def _compressed_image(data: bytes, schema, complete: bool = True) -> tuple[int, memoryview] | None:
+    """(header stamp [ns], 0 when unset; the encoded image, a view into `data`) of a little-endian CDR
+    sensor_msgs/CompressedImage message, read from its layout without copying the image; None for anything else
+    (the caller decodes it with the general decoder). `complete` False: `data` is the message's first bytes only;
+    the view holds the image's bytes among them (at least a png's header, else None)."""
+    if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
+        return None
+    try:
+        sec, nanosec, length = struct.unpack_from("<iII", data, 4)
+        pos = 4 + 12 + length  # after header.frame_id (CDR offsets count from the end of the 4-byte encapsulation)
+        pos += -(pos - 4) % 4
+        (length,) = struct.unpack_from("<I", data, pos)
+        pos += 4 + length  # after format
+        pos += -(pos - 4) % 4
+        (length,) = struct.unpack_from("<I", data, pos)
+    except struct.error:
+        return None
+    if pos + 4 + (length if complete else min(length, _PNG_HEAD)) > len(data):
+        return None
+    return sec * 1_000_000_000 + nanosec, memoryview(data)[pos + 4 : pos + 4 + length]
+
+
+def _decoder(path: Path, decoders: dict[int, Callable], channel, schema) -> Callable:
+    """The ROS 2 decoder of the channel's messages (one per channel, made once); WolfcalError naming the file and
+    topic when there is none."""
+    if channel.id not in decoders:
+        decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+        if decoder is None:
+            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} messages "
+                               "(wolfcal reads ROS 2 CDR recordings)")  # fmt: skip
+        decoders[channel.id] = decoder
+    return decoders[channel.id]
 
 
 def _read(
@@ -177,10 +291,23 @@ def _read(
     reader = make_reader(handle, decoder_factories=[DecoderFactory()])
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
-    try:
-        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS)
-    except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-        read = _pass_one(path, reader, config, found.cameras, info_cameras, progress, None)
+    identity, _ = identity_and_memo(path, "images")
+    taken_ns = time.time_ns()
+    known = _Checks.remembered(path) if caching() else None
+    for checks in (known, None) if known is not None else (None,):
+        try:
+            read = _pass_one(
+                path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, handle=handle, known=checks
+            )
+        except Disorder:  # stamps further out of order than the window allows: pair on the whole log
+            read = _pass_one(
+                path, reader, config, found.cameras, info_cameras, progress, None, handle=handle, known=checks
+            )
+        if checks is None or read.checks.images == checks.images:
+            break
+        known = None  # the memo counted other images: not the file it was taken of; checked again
+    if known is None and caching():
+        read.checks.remember(path, identity, taken_ns)
     pairing = read.pairing
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,

@@ -26,28 +26,25 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import threading
 import time
 import zipfile
 from collections.abc import Callable, Generator, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from wolfcal.atomic import atomic_output
+from wolfcal.io.filememo import RACY_NS, cache_dir, caching, identity_and_memo
+from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
 from wolfcal.vision.batch import Detections, iter_detect_checked
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners)
 DETECTOR_VERSION = 5
 FORMAT = 1  # entry layout
-RACY_NS = 2_000_000_000  # a digest taken this soon after the file's last change is not trusted [ns]
-_enabled: ContextVar[bool] = ContextVar("wolfcal_detection_cache", default=True)
 
 
 @dataclass(frozen=True)
@@ -79,24 +76,6 @@ class DetectorSettings:
         }
 
 
-def cache_dir() -> Path:
-    """The cache folder (see the module docstring)."""
-    if os.environ.get("WOLFCAL_CACHE_DIR"):
-        return Path(os.environ["WOLFCAL_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "wolfcal" / "detections"
-
-
-@contextmanager
-def cache_enabled(enabled: bool):
-    """Within the block, `cached_detect` reads and writes the cache only if `enabled` (CLI `--no-cache`)."""
-    token = _enabled.set(enabled)
-    try:
-        yield
-    finally:
-        _enabled.reset(token)
-
-
 class _Stopped(Exception):
     """A hash given up (the detection beside it ended first, or failed)."""
 
@@ -112,18 +91,10 @@ def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | Non
     return digest.hexdigest()
 
 
-def _identity_and_memo(path: Path) -> tuple[list[int], Path]:
-    """The file's identity (device, inode, size, modification and status-change times [ns]) and the path of its
-    digest memo in the cache folder (named by the hash of its resolved path)."""
-    info = os.stat(path)
-    identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
-    return identity, cache_dir() / f"{hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]}.digest.json"
-
-
 def remembered_digest(path: Path) -> tuple[str | None, bool]:
     """(the file's digest as remembered for its present identity, or None: never hashed, changed since, or hashed
     too soon after a change; whether this path was hashed before at all); reads no more than the memo."""
-    identity, memo = _identity_and_memo(path)
+    identity, memo = identity_and_memo(path, "digest")
     try:
         saved = json.loads(memo.read_text())
     except (OSError, ValueError):  # none yet, or torn
@@ -139,7 +110,7 @@ def remembered_digest(path: Path) -> tuple[str | None, bool]:
 def hash_file(path: Path, stop: threading.Event | None = None) -> str:
     """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (trusted only if
     the file changed RACY_NS or more before it was hashed)."""
-    identity, memo = _identity_and_memo(path)
+    identity, memo = identity_and_memo(path, "digest")
     hashed_ns = time.time_ns()
     digest = content_digest(path, stop=stop)
     try:  # remembered also when too recent to trust: `remembered_digest` then tells the path was hashed before
@@ -217,7 +188,7 @@ def cached_detect(
         return iter_detect_checked(images, settings.family_map(), settings.refine, workers, progress, len(stamps),
                                    labels)  # fmt: skip
 
-    if not (_enabled.get() and bool(str(path)) and Path(path).is_file()):  # samples made in memory have no file
+    if not (caching() and bool(str(path)) and Path(path).is_file()):  # samples made in memory have no file
         return _all(detect(), stamps)
     try:
         digest, seen = remembered_digest(Path(path))
