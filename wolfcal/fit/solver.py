@@ -325,7 +325,8 @@ def _update_noise(
         largest = max(largest, abs(state.sigma / previous - 1.0), change)
         notes.append(
             f"{state.block.name}: {int(state.excluded.sum())} outlier view(s)"
-            + (f" and {int(state.excluded_units.sum())} unit(s)" if state.excluded_units.any() else "")
+            + (f" and {int(state.excluded_units.sum())} single {'corner' if state.block.unit == 'px' else 'marker'}(s)"
+               if state.excluded_units.any() else "")
             + f", noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"
         )
