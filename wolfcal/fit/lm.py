@@ -90,5 +90,15 @@ def _within_noise(H: np.ndarray, g: np.ndarray, std_tol: float, std: np.ndarray 
     except np.linalg.LinAlgError:
         return False
     if std is None:
-        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+        std = _diagonal_std(covariance)
     return bool(np.all(np.abs(covariance @ g) <= std_tol * std))
+
+
+def marginal_std(H: np.ndarray) -> np.ndarray:
+    """(P,) sqrt(diag(H^-1)) of a normal matrix (P, P) (priors included: invertible): each unknown's standard
+    deviation, what `levenberg_marquardt`'s std_tol counts in."""
+    return _diagonal_std(np.linalg.inv(H))
+
+
+def _diagonal_std(covariance: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.maximum(np.diag(covariance), 0.0))

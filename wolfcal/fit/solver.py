@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.fit.blocks import Linearization
-from wolfcal.fit.lm import levenberg_marquardt
+from wolfcal.fit.lm import levenberg_marquardt, marginal_std
 from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median, weighted_median_above
 from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
@@ -238,11 +238,6 @@ def _class_level(weighted_sq: np.ndarray, sigma2: float, reading: np.ndarray, ro
     return float(np.exp(0.5 * (lo + hi)))
 
 
-def _marginal_std(H: np.ndarray) -> np.ndarray:
-    """(P,) sqrt(diag(H^-1)) of a normal matrix (priors included: invertible)."""
-    return np.sqrt(np.maximum(np.diag(np.linalg.inv(H)), 0.0))
-
-
 def _leverages(state: BlockState, lin: Linearization, problem: Problem, variance: np.ndarray) -> np.ndarray:
     """(R,) leverage of each residual row of the block on the chain and the block's own unknowns, rows weighted by
     1 / variance (R,) (their correlation through the joint readings left aside), priors included; left-out rows
@@ -370,7 +365,7 @@ def solve(
     def newton(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return problem.normal_equations(z, curvature=True)
 
-    std = _marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
+    std = marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
     for final_index in range(MAX_FINAL_SOLVES):
         result = levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL,
                                      std_tol=FINAL_STD_TOL, std=std)
