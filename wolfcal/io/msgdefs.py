@@ -111,5 +111,10 @@ def stamp_dict(stamp_ns: int) -> dict:
 
 def header_stamp_ns(header, log_time: int) -> int:
     """Stamp of a decoded std_msgs/Header [ns]; the message's log time when the publisher left it at zero."""
-    stamp = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-    return stamp or int(log_time)
+    return stamp_ns(header.stamp.sec, header.stamp.nanosec, log_time)
+
+
+def stamp_ns(sec: int, nanosec: int, log_time: int) -> int:
+    """A header stamp (sec, nanosec) in nanoseconds; the message's log time [ns] when the publisher left it at
+    zero."""
+    return int(sec) * 1_000_000_000 + int(nanosec) or int(log_time)

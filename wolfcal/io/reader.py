@@ -43,7 +43,7 @@ from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_mem
 from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import check_mcap, is_finished, iter_message_heads, message_count, recover_hint, torn_error
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns, stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
@@ -194,11 +194,11 @@ def _pass_one(
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
-            image = _compressed_image(message.data, schema, complete)
+            image = _compressed_image(message.data, schema, message.log_time, complete)
             if image is None:  # not as `_compressed_image` reads it: the general decoder (a whole message)
                 decoded = _decoder(path, decoders, channel, schema)(message.data)
-                image = (header_stamp_ns(decoded.header, 0), memoryview(decoded.data))
-            stamp = image[0] or message.log_time  # a publisher that left the stamp at zero: the log time
+                image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
+            stamp = image[0]
             name = image_topics[channel.topic]
             whole = known is None  # the checksums need every byte; else the header is enough (png)
             data = bytes(image[1] if whole or image[1][:2] == JPEG_SIGNATURE else image[1][:_PNG_HEAD])
@@ -241,15 +241,15 @@ _HEAD_BYTES = 4096  # of an image message, read first: the CDR header, format an
 def _png_head(schema, head: bytes) -> bool:
     """Whether the first bytes of an image message hold all the reader needs when the image checks are remembered:
     its stamp and a png's kind and size (else the whole message is read)."""
-    image = _compressed_image(head, schema, complete=False)
+    image = _compressed_image(head, schema, 0, complete=False)
     return image is not None and image_kind(bytes(image[1][:_PNG_HEAD])) == "png"
 
 
-def _compressed_image(data: bytes, schema, complete: bool = True) -> tuple[int, memoryview] | None:
-    """(header stamp [ns], 0 when unset; the encoded image, a view into `data`) of a little-endian CDR
-    sensor_msgs/CompressedImage message, read from its layout without copying the image; None for anything else
-    (the caller decodes it with the general decoder). `complete` False: `data` is the message's first bytes only;
-    the view holds the image's bytes among them (at least a png's header, else None)."""
+def _compressed_image(data: bytes, schema, log_time: int, complete: bool = True) -> tuple[int, memoryview] | None:
+    """(header stamp [ns], `log_time` when unset (`msgdefs.stamp_ns`); the encoded image, a view into `data`) of a
+    little-endian CDR sensor_msgs/CompressedImage message, read from its layout without copying the image; None for
+    anything else (the caller decodes it with the general decoder). `complete` False: `data` is the message's first
+    bytes only; the view holds the image's bytes among them (at least a png's header, else None)."""
     if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
         return None
     try:
@@ -264,7 +264,7 @@ def _compressed_image(data: bytes, schema, complete: bool = True) -> tuple[int, 
         return None
     if pos + 4 + (length if complete else min(length, _PNG_HEAD)) > len(data):
         return None
-    return sec * 1_000_000_000 + nanosec, memoryview(data)[pos + 4 : pos + 4 + length]
+    return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
 
 
 def _decoder(path: Path, decoders: dict[int, Callable], channel, schema) -> Callable:
