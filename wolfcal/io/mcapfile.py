@@ -1,5 +1,5 @@
-"""Checks on an MCAP file before reading it (present, an MCAP file at all, finished: has its footer), and reading
-only the first bytes of large messages (`iter_message_heads`)."""
+"""Checks on an MCAP file before reading it (present, an MCAP file at all, finished: has its footer), the ROS 2
+decoder of a channel (`channel_decoder`), and reading only the first bytes of large messages (`iter_message_heads`)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from typing import IO, NamedTuple
 from mcap.exceptions import McapError
 from mcap.reader import McapReader
 from mcap.records import Channel, ChunkIndex, Message, Schema
+from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
 
@@ -76,6 +77,18 @@ def message_count(reader: McapReader, topics: list[str]) -> int:
         return 0
     counts = summary.statistics.channel_message_counts
     return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic in topics)
+
+
+def channel_decoder(path: Path, decoders: dict[int, Callable], channel: Channel, schema: Schema | None) -> Callable:
+    """The ROS 2 decoder of the channel's messages, made once per channel (kept in `decoders`, channel id ->
+    decoder); a WolfcalError naming the file and topic when there is none (not a ROS 2 CDR recording)."""
+    if channel.id not in decoders:
+        decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+        if decoder is None:
+            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} messages "
+                               "(wolfcal reads ROS 2 CDR recordings)")  # fmt: skip
+        decoders[channel.id] = decoder
+    return decoders[channel.id]
 
 
 class Head(NamedTuple):

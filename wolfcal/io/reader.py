@@ -42,7 +42,15 @@ from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import check_mcap, is_finished, iter_message_heads, message_count, recover_hint, torn_error
+from wolfcal.io.mcapfile import (
+    channel_decoder,
+    check_mcap,
+    is_finished,
+    iter_message_heads,
+    message_count,
+    recover_hint,
+    torn_error,
+)
 from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns, stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
@@ -196,7 +204,7 @@ def _pass_one(
         if channel.topic in image_topics:
             image = _compressed_image(message.data, schema, message.log_time, complete)
             if image is None:  # not as `_compressed_image` reads it: the general decoder (a whole message)
-                decoded = _decoder(path, decoders, channel, schema)(message.data)
+                decoded = channel_decoder(path, decoders, channel, schema)(message.data)
                 image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
             stamp = image[0]
             name = image_topics[channel.topic]
@@ -216,7 +224,7 @@ def _pass_one(
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
             continue
-        decoded = _decoder(path, decoders, channel, schema)(message.data)
+        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
         stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
             pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
@@ -266,17 +274,6 @@ def _compressed_image(data: bytes, schema, log_time: int, complete: bool = True)
         return None
     return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
 
-
-def _decoder(path: Path, decoders: dict[int, Callable], channel, schema) -> Callable:
-    """The ROS 2 decoder of the channel's messages (one per channel, made once); WolfcalError naming the file and
-    topic when there is none."""
-    if channel.id not in decoders:
-        decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
-        if decoder is None:
-            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} messages "
-                               "(wolfcal reads ROS 2 CDR recordings)")  # fmt: skip
-        decoders[channel.id] = decoder
-    return decoders[channel.id]
 
 
 def _read(

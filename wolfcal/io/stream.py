@@ -7,16 +7,16 @@ bytes handed on and then dropped, so a long recording's images never sit in memo
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from itertools import groupby, islice
 from pathlib import Path
 
 from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
+from wolfcal.io.mcapfile import channel_decoder
 from wolfcal.io.msgdefs import header_stamp_ns
 
 
@@ -46,19 +46,19 @@ def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
 
 
 def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]:
-    factory = DecoderFactory()
+    decoders: dict[int, Callable] = {}  # channel id -> its decoder
     run = iter(wanted)
     try:
         with path.open("rb") as handle:
             reader = make_reader(handle)
             while window := list(islice(run, WINDOW)):
-                yield from _stream_window(path, reader, factory, window)
+                yield from _stream_window(path, reader, decoders, window)
     except (OSError, McapError) as exc:
         raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
 
 
 def _stream_window(
-    path: Path, reader: McapReader, factory: DecoderFactory, wanted: list[ImageLocation]
+    path: Path, reader: McapReader, decoders: dict[int, Callable], wanted: list[ImageLocation]
 ) -> Iterator[bytes]:
     """The images at `wanted` (one file), in that order, from one pass over the time span they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
@@ -76,11 +76,7 @@ def _stream_window(
     for schema, channel, message in messages:
         if (channel.topic, message.log_time) not in times:
             continue
-        decoder = factory.decoder_for(channel.message_encoding, schema)
-        if decoder is None:
-            raise WolfcalError(f"{path}: topic {channel.topic}: no decoder for its {channel.message_encoding} "
-                               "messages (wolfcal reads ROS 2 CDR recordings)")
-        decoded = decoder(message.data)
+        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
         key = (channel.topic, message.log_time, header_stamp_ns(decoded.header, message.log_time))
         if not remaining.get(key) or key in waiting:
             continue
