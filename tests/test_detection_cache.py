@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
+from wolfcal.io import filememo
 from wolfcal.vision import cache
 from wolfcal.vision.batch import detect_encoded, iter_detect_encoded, task_size
 from wolfcal.vision.cache import DetectorSettings, cache_enabled, cached_detect
@@ -161,7 +162,7 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     true_digest = cache.content_digest(path)
     assert cache.hash_file(path) == true_digest
     assert cache.remembered_digest(path) == (None, True)  # just written: too recent to trust, but hashed before
-    monkeypatch.setattr(cache, "RACY_NS", 0)
+    monkeypatch.setattr(filememo, "RACY_NS", 0)
     assert cache.remembered_digest(path) == (true_digest, True)
     (memo,) = folder.glob("*.digest.json")
     memo.write_text(memo.read_text().replace(true_digest, "f" * 64))

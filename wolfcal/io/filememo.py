@@ -59,22 +59,34 @@ def identity_and_memo(path: Path, kind: str) -> tuple[list[int], Path]:
 
 def read_memo(path: Path, kind: str) -> dict | None:
     """The memo of `kind` of the file, if one was taken of the file as it is now, RACY_NS or more after its last
-    change; None otherwise (none, torn, foreign, the file changed, or taken too soon)."""
+    change; None otherwise (none, torn, foreign, the file changed or cannot be looked at, or taken too soon)."""
     try:
-        identity, memo = identity_and_memo(path, kind)
+        return recall(path, kind)[0]
+    except OSError:
+        return None
+
+
+def recall(path: Path, kind: str) -> tuple[dict | None, bool]:
+    """(`read_memo`, whether a memo of `kind` was taken of this path at all, trusted or not: none or torn is
+    False, one of another file there or too recent is True). OSError when the file cannot be looked at."""
+    identity, memo = identity_and_memo(path, kind)
+    try:
         saved = json.loads(memo.read_text())
+    except (OSError, ValueError):  # none yet, or torn
+        return None, False
+    try:
         if saved["identity"] == identity and saved["taken_ns"] - identity[4] >= RACY_NS:
-            return saved["memo"] if isinstance(saved["memo"], dict) else None
-    except (OSError, ValueError, KeyError, TypeError):
+            return (saved["memo"] if isinstance(saved["memo"], dict) else None), True
+    except (KeyError, TypeError):  # foreign
         pass
-    return None
+    return None, True
 
 
 def write_memo(path: Path, kind: str, identity: list[int], taken_ns: int, memo: dict) -> None:
     """Remember `memo` of the file whose identity was `identity` when the memo was begun at `taken_ns` (time.time_ns);
     atomic, without fsync (a scratch file); skipped when the cache folder cannot be written (a memo only saves time)."""
-    _, where = identity_and_memo(path, kind)
     try:
+        _, where = identity_and_memo(path, kind)
         with atomic_output(where, scratch=True) as handle:
             handle.write(json.dumps({"identity": identity, "taken_ns": taken_ns, "memo": memo}).encode())
     except OSError:

@@ -13,11 +13,9 @@ file, other settings, another reader that kept other frames) is detected again a
 written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`: the two fsyncs of each
 of a first run's two writes waited 0.1-0.4 s for a shared disk); one that a crash left empty or torn fails
 `_load`'s checks and is detected again. Hashing costs about 0.07-0.15 s per 100 MB (bench/bench_detection.py),
-so a file's digest is remembered beside the entries (`hash_file`, `remembered_digest`) with the file's identity:
-device, inode, size, modification and status-change times [ns]. Any write to the file changes its status-change
-time (the kernel sets it; no tool can set it back), so the file is hashed again; and, as git does for its index, a
-digest taken less than 2 s after the file's last change is not trusted (a write within the same clock tick could keep
-every time).
+so a file's digest is remembered beside the entries (`hash_file`, `remembered_digest`) as a memo tied to the file's
+identity (`wolfcal.io.filememo`: a file changed since is hashed again, a digest taken less than 2 s after the file's
+last change is not trusted).
 A path never hashed before (a first run) is hashed on a thread beside the detection instead of before it; a
 path hashed before (an entry is likely) is hashed first, so a cache hit reads no image.
 """
@@ -37,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.atomic import atomic_output
-from wolfcal.io.filememo import RACY_NS, cache_dir, caching, identity_and_memo
+from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, recall, write_memo
 from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
 from wolfcal.vision.batch import Detections, iter_detect_checked
 
@@ -93,31 +91,21 @@ def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | Non
 
 def remembered_digest(path: Path) -> tuple[str | None, bool]:
     """(the file's digest as remembered for its present identity, or None: never hashed, changed since, or hashed
-    too soon after a change; whether this path was hashed before at all); reads no more than the memo."""
-    identity, memo = identity_and_memo(path, "digest")
-    try:
-        saved = json.loads(memo.read_text())
-    except (OSError, ValueError):  # none yet, or torn
-        return None, False
-    try:
-        if saved["identity"] == identity and saved["hashed_ns"] - identity[4] >= RACY_NS:
-            return str(saved["sha256"]), True
-    except (KeyError, TypeError):  # foreign
-        pass
-    return None, True
+    too soon after a change; whether this path was hashed before at all); reads no more than the memo
+    (`filememo.recall`)."""
+    memo, seen = recall(path, "digest")
+    digest = memo.get("sha256") if memo is not None else None
+    return (str(digest) if digest is not None else None), seen
 
 
 def hash_file(path: Path, stop: threading.Event | None = None) -> str:
-    """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (trusted only if
-    the file changed RACY_NS or more before it was hashed)."""
-    identity, memo = identity_and_memo(path, "digest")
+    """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (`filememo`:
+    trusted only if the file changed RACY_NS or more before it was hashed; remembered also when too recent to
+    trust, so that `remembered_digest` tells the path was hashed before)."""
+    identity, _ = identity_and_memo(path, "digest")
     hashed_ns = time.time_ns()
     digest = content_digest(path, stop=stop)
-    try:  # remembered also when too recent to trust: `remembered_digest` then tells the path was hashed before
-        with atomic_output(memo, scratch=True) as handle:
-            handle.write(json.dumps({"identity": identity, "hashed_ns": hashed_ns, "sha256": digest}).encode())
-    except OSError:
-        pass
+    write_memo(path, "digest", identity, hashed_ns, {"sha256": digest})
     return digest
 
 
