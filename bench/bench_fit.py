@@ -40,6 +40,7 @@ from wolfcal.camera.model import CameraModel  # noqa: E402
 from wolfcal.fit import solver  # noqa: E402
 from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples  # noqa: E402
 from wolfcal.robot.robot import load_robot  # noqa: E402
+from wolfcal.sim.observations import reordered  # noqa: E402
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario  # noqa: E402
 from wolfcal.vision.observe import detect_observations  # noqa: E402
 
@@ -136,12 +137,7 @@ def cases(floor_dir: Path | None) -> dict[str, Case]:
 
 def permuted(observations: dict, markers, seed: int) -> tuple[dict, object]:
     """The same data with the samples in another order (and the corner rows shuffled)."""
-    out = {}
-    for name, obs in observations.items():
-        p = obs.subset(np.random.default_rng(seed).permutation(obs.n_samples))
-        rows = np.random.default_rng(seed + 1).permutation(len(p.uv))
-        out[name] = replace(p, sample_index=p.sample_index[rows], tag_ids=p.tag_ids[rows],
-                            corner_index=p.corner_index[rows], uv=p.uv[rows])  # fmt: skip
+    out = {name: reordered(obs, seed) for name, obs in observations.items()}
     if markers is not None:
         markers = markers.subset(np.random.default_rng(seed).permutation(markers.n_samples))
     return out, markers
