@@ -90,12 +90,20 @@ class GroupedWhitening:
         self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
         sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
         self.Q, self.s2, self.group_of_column = self._thin_factors(sizes) if factors is None else factors
+        self._chunks: tuple[int, list[tuple[np.ndarray, GroupedWhitening]]] | None = None
 
-    def chunks(self, max_rows: int) -> Iterator[tuple[np.ndarray, GroupedWhitening]]:
+    def chunks(self, max_rows: int) -> list[tuple[np.ndarray, GroupedWhitening]]:
         """The grouped rows a few whole groups at a time (consecutive groups up to `max_rows` rows; a larger group
         alone): each chunk's rows (R_c,) and the whitening of those rows alone, numerically the same as this one's
         on them (rows in no group carry no weight and are in no chunk). For sums over rows (normal equations)
-        without whitening every row at once."""
+        without whitening every row at once. Made once per `max_rows` and kept (a solve sums the normal equations
+        at every step under one noise model: splitting the factors anew took 5 % of a 1000-sample fit's CPU)."""
+        if self._chunks is None or self._chunks[0] != max_rows:
+            self._chunks = (max_rows, list(self._split_chunks(max_rows)))
+        return self._chunks[1]
+
+    def _split_chunks(self, max_rows: int) -> Iterator[tuple[np.ndarray, GroupedWhitening]]:
+        """`chunks`, made."""
         sizes = np.bincount(self.group_of_row[self.rows], minlength=self.n_groups)
         ends = np.concatenate([[0], np.cumsum(sizes)])  # in `rows`, of groups 0 .. n_groups
         position = np.zeros(self.n_rows, dtype=np.int64)

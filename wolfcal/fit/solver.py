@@ -14,6 +14,7 @@ solve happened to stop), and `uncertainty` at the solution.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -152,7 +153,11 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     """Robust scale of the whitened inlier residuals (1 when the noise model fits): the median over their degrees of
     freedom of the standardised numbers (`GroupedWhitening.standardized`: what the robust fit weighs, independent of
     how a group is decomposed), corrected for the degrees of freedom the free parameters take."""
-    w, dof = state.noise_model.standardized(residual.ravel(), sigma)
+    return _robust_scale(*state.noise_model.standardized(residual.ravel(), sigma), n_params)
+
+
+def _robust_scale(w: np.ndarray, dof: np.ndarray, n_params: float) -> float:
+    """`residual_scale` of the standardised numbers w with their degrees of freedom dof."""
     n = float(np.sum(dof))
     if n <= n_params:
         return 1.0
@@ -170,7 +175,9 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
-    not below `floor` [unit]); returns the residual scale reached."""
+    not below `floor` [unit]); returns the residual scale reached (`residual_scale`, from the search's own
+    standardised numbers unless setting the level decomposed the groups again)."""
+    model = weakref.ref(state.noise_model)  # not kept alive while set_sigma may build another
     standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     for _ in range(30):
@@ -179,9 +186,13 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
             lo = mid
         else:
             hi = mid
+    sigma = float(np.exp(hi))
+    reached = standardized(sigma)
     del standardized  # its arrays are not kept while set_sigma may decompose the groups again
-    state.set_sigma(float(np.exp(hi)))
-    return residual_scale(state, residual, state.sigma, n_params)
+    state.set_sigma(sigma)
+    if state.noise_model is not model():
+        return residual_scale(state, residual, state.sigma, n_params)
+    return _robust_scale(*reached, n_params)
 
 
 def estimate_class_scales(state: BlockState, lin: Linearization, problem: Problem) -> float:
