@@ -180,9 +180,12 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
     model = weakref.ref(state.noise_model)  # not kept alive while set_sigma may build another
     standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
+    # The scale falls as the level grows: at or below 1 at the floor, every step of the search goes down (the same
+    # steps, without evaluating them; the level of a block more precise than the floor, e.g. rendered captures).
+    at_floor = not _scale_above_one(*standardized(float(np.exp(lo))), n_params)
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if _scale_above_one(*standardized(float(np.exp(mid))), n_params):
+        if not at_floor and _scale_above_one(*standardized(float(np.exp(mid))), n_params):
             lo = mid
         else:
             hi = mid
