@@ -231,6 +231,31 @@ class GroupedWhitening:
         own *= keep if M.ndim == 1 else keep[:, None]
         return np.concatenate([own, t * (scale if M.ndim == 1 else scale[:, None])])
 
+    def split_normal(self, M: np.ndarray, sigma: float, weight: np.ndarray,
+                     v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(W_s M)^T diag(weight) W_s M (P, P) and (W_s M)^T v (P,) of dense rows M (R, P) (W_s: `split`; weight
+        and v (R + K,): one number per split row), without forming W_s M when every row is in a group (a `chunks`
+        part) and few measured rows have a weight other than 1. With N = D^-1 M and T = Q^T N, the measured rows'
+        part (I - Q Q^T) N / sigma has the Gram matrix (N^T N - T^T T) / sigma^2 (Q^T Q = I); the rows weighted
+        otherwise add (weight - 1) times their own outer product. Equal to the explicit sum to rounding (the
+        cancellation in N^T N - T^T T costs ~1e-13 of it where the shared errors dominate); symmetric. Half the CPU
+        of forming the split rows (a copy of R + K rows and two sparse products per column)."""
+        R = self.n_rows
+        odd = np.flatnonzero(weight[:R] != 1.0)
+        if not self.in_group.all() or 4 * len(odd) > R:
+            J = self.split(M, sigma)
+            H = J.T @ (weight[:, None] * J)
+            return 0.5 * (H + H.T), J.T @ v
+        N = M / self.row_scale[:, None]
+        T = self.QT @ N
+        shared = 1.0 / (sigma**2 + self.s2)
+        H = N.T @ N / sigma**2 + T.T @ ((shared * weight[R:] - 1.0 / sigma**2)[:, None] * T)
+        if len(odd):
+            own = (N[odd] - self.Q[odd] @ T) / sigma
+            H += own.T @ ((weight[odd] - 1.0)[:, None] * own)
+        g = (N.T @ v[:R] - T.T @ (self.QT @ v[:R])) / sigma + T.T @ (np.sqrt(shared) * v[R:])
+        return 0.5 * (H + H.T), g
+
     def standardized(self, r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
         """Numbers of the grouped rows that are each N(0, 1) when the model fits, and the degrees of freedom each
         carries (for robust scale estimates, `weighted_median`), independent of how a group's covariance is
