@@ -46,6 +46,7 @@ ROUND_COST_TOL = 1e-3
 ROUND_STD_TOL = 0.1
 FINAL_STD_TOL = 0.003
 FINAL_FTOL = 1e-12
+FINAL_DAMPING = 1e-9
 # The rounds end once no outlier set changed and no noise level moved by ROUND_NOISE_TOL (relative). The final
 # solve is then repeated under the noise model re-estimated at its solution until no outlier set changes and no
 # level moves by FIXED_POINT_TOL (a level 0.1 % off moves the estimates by far less than 0.01 standard deviations),
@@ -382,7 +383,7 @@ def solve(
     std = marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
     for final_index in range(MAX_FINAL_SOLVES):
         result = levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL,
-                                     std_tol=FINAL_STD_TOL, std=std)
+                                     std_tol=FINAL_STD_TOL, std=std, damping=FINAL_DAMPING)
         z, evaluations = result.x, evaluations + result.nfev
         if final_index == MAX_FINAL_SOLVES - 1:
             say(f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
