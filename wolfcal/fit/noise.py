@@ -29,6 +29,9 @@ import scipy.sparse
 # spans several neighbouring values around the median of a block of 100 rows or more.
 MEDIAN_WIDTH = 0.05
 RANK_TOLERANCE = 1e-12  # singular values below this fraction of a group's largest are dropped (no shared error)
+# The same from the eigenvalues of U U^T, which rounding blurs by ~1e-15 of the largest: a singular value below 1e-6
+# of the group's largest adds less than 1e-12 of its share to the covariance
+GRAM_RANK_TOLERANCE = 1e-12
 EIGEN_TOLERANCE = 1e-9  # squared singular values closer than this fraction of a group's largest are one eigenvalue
 # Entries of the shared-error matrices U_g decomposed in one batched call (a long recording's groups in batches: a
 # few MB at a time)
@@ -42,6 +45,21 @@ def row_groups(labels: np.ndarray, dim: int, keep: np.ndarray | None = None) -> 
     group = np.full(len(labels), -1)
     group[units] = np.unique(labels[units], return_inverse=True)[1].ravel()
     return np.repeat(group, dim)
+
+
+def _left_factors(U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Left singular vectors Q (G, n, r) and squared singular values (G, r), largest first, of a batch of factors
+    U (G, n, k), and which are kept (G, r): those above the rank tolerance of each group's largest. A group with no
+    more rows than columns (a view's or a pose's few corners against the joints) from the eigenvectors of U U^T (half
+    the time of an SVD; orthonormal to rounding, the squares to rounding of the largest: kept above
+    GRAM_RANK_TOLERANCE of it), else by SVD (a long still pose: never an n x n matrix)."""
+    n, k = U.shape[1:]
+    if n <= k:
+        s2, Q = np.linalg.eigh(U @ np.swapaxes(U, 1, 2))
+        s2, Q = np.maximum(s2[:, ::-1], 0.0), Q[:, :, ::-1]
+        return Q, s2, s2 > GRAM_RANK_TOLERANCE * s2[:, :1]
+    Q, s, _ = np.linalg.svd(U, full_matrices=False)
+    return Q, s**2, s > RANK_TOLERANCE * s[:, :1]
 
 
 @dataclass
@@ -180,12 +198,12 @@ class GroupedWhitening:
                 U[has, first + slot[at][has]] = shared.sigma_q * shared.A[unit, moving[j]] / self.row_scale[unit]
             has = np.flatnonzero(label_slot[at] >= 0)
             U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
-            Q, s, _ = np.linalg.svd(U.reshape(len(members), n, k), full_matrices=False)
-            g, c = np.nonzero(s > RANK_TOLERANCE * s[:, :1])
+            Q, s_squared, kept = _left_factors(U.reshape(len(members), n, k))
+            g, c = np.nonzero(kept)
             data.append(Q[g, :, c].ravel())
             row_idx.append(rows[at].reshape(len(members), n)[g].ravel().astype(np.int32))
             col_len.append(np.full(len(g), n))
-            s2.append(s[g, c] ** 2)
+            s2.append(s_squared[g, c])
             group_of_column.append(members[g])
             K += len(g)
         if not data:
