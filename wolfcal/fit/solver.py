@@ -395,10 +395,11 @@ def solve(
         say(f"final solve {final_index + 1}: the noise model at its solution differs ("
             f"{'outlier set changed' if changed else f'noise {change:.2%}'}): " + "; ".join(notes) + "; solving again")
     after = problem.raw_residuals(z)
-    information, _, triangular = problem.information(z, triangular=True)
+    information, _, _ = problem.information(z)
     return Solution(
         values=problem.values(z),
-        uncertainty=information_uncertainty(information, problem.params.prior_sigmas, triangular),
+        uncertainty=information_uncertainty(information, problem.params.prior_sigmas,
+                                            lambda: problem.information(z, triangular=True)[2]),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,
