@@ -149,7 +149,10 @@ class ChainDerivatives:
         out = np.empty((self._n, 6, len(cols)))
         for k, c in enumerate(cols):
             a, b = _summed(mine.get(c, [])), _summed(theirs.get(c, []))
-            out[:, :, k] = -b if a is None else a if b is None else a - b
+            if a is None and b is not None:
+                out[:, :, k] = -b
+            elif a is not None:
+                out[:, :, k] = a if b is None else a - b
         return np.array(cols, dtype=int), out
 
 
