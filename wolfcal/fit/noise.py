@@ -351,18 +351,30 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
     statistic, which jumps from one value to the next as the weights' order changes: 2 % of a noise level from 128
     rows, enough to move a fit's noise model and with it its estimates by a sizable fraction of a standard
     deviation), a continuous function of the values where they lie closer than 2 `width` around the median; NaN
-    for no values."""
+    for no values. Found within a window around the values' plain median that holds it (a few passes over the
+    values), sorting only the values whose spread reaches into the window (a 1000-sample fit's 150k standardised
+    numbers: sorting them all took 5x as long)."""
     if values.size == 0:
         return float("nan")
-    by_value = np.argsort(values)
-    values, weights = values[by_value], weights[by_value]
-    edges = np.concatenate([values - width, values + width])
-    order = np.argsort(edges, kind="stable")  # two sorted runs: merged (sorting 2N edges anew took twice as long)
-    slope = np.concatenate([weights, -weights])[order] / (2.0 * width)
-    edges = edges[order]
-    np.cumsum(slope, out=slope)  # the cumulative weight's slope after each edge
-    cumulative = np.concatenate([[0.0], np.cumsum(slope[:-1] * np.diff(edges))])  # at each edge
     half = 0.5 * float(np.sum(weights))
+    levels = (half * (1.0 - 1e-9), half * (1.0 + 1e-9))
+    center, reach = float(np.median(values)), 4.0 * width
+    low, high = float(values.min()) - width, float(values.max()) + width
+    while True:  # the window [a, b]: the cumulative weight below both levels at a, above both at b
+        a, b = max(center - reach, low), min(center + reach, high)
+        below_a = _weight_below(values, weights, a, width)
+        if (below_a < levels[0] and _weight_below(values, weights, b, width) > levels[1]) or (a, b) == (low, high):
+            break
+        reach *= 4.0
+    near = (values > a - width) & (values < b + width)  # the values whose spread reaches into the window
+    spread = np.concatenate([values[near] - width, values[near] + width])
+    step = np.concatenate([weights[near], -weights[near]]) / (2.0 * width)  # the slope's change at each edge
+    inside = (spread > a) & (spread < b)
+    order = np.argsort(spread[inside])
+    edges = np.concatenate([[a], spread[inside][order], [b]])
+    slope = np.concatenate([[float(np.sum(step[spread <= a]))], step[inside][order], [0.0]])
+    np.cumsum(slope, out=slope)  # the cumulative weight's slope after each edge
+    cumulative = below_a + np.concatenate([[0.0], np.cumsum(slope[:-1] * np.diff(edges))])  # at each edge
 
     def at(level: float) -> float:  # where the cumulative weight reaches `level`
         k = min(int(np.searchsorted(cumulative, level)), len(edges) - 1)  # first edge at or above it
@@ -372,7 +384,12 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
 
     # a stretch without values at exactly half (values further apart than 2 width): its middle, not the end that
     # rounding picks
-    return 0.5 * (at(half * (1.0 - 1e-9)) + at(half * (1.0 + 1e-9)))
+    return 0.5 * (at(levels[0]) + at(levels[1]))
+
+
+def _weight_below(values: np.ndarray, weights: np.ndarray, x: float, width: float) -> float:
+    """The cumulative weight of `weighted_median` at x: each value's weight spread over +- width, the part below x."""
+    return float(np.clip((x - values) / (2.0 * width) + 0.5, 0.0, 1.0) @ weights)
 
 
 def weighted_median_above(
@@ -382,5 +399,4 @@ def weighted_median_above(
     values: a noise-level search asks this many times): less than half of the weight lies below it."""
     if values.size == 0:
         return False
-    below = np.clip((threshold - values) / (2.0 * width) + 0.5, 0.0, 1.0)
-    return float(below @ weights) <= 0.5 * float(np.sum(weights))
+    return _weight_below(values, weights, threshold, width) <= 0.5 * float(np.sum(weights))
