@@ -102,6 +102,7 @@ class GroupedWhitening:
         """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
         self.group_of_row, self.shared = group_of_row, shared
         self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
+        self.at_level = bool(np.all(self.row_scale == 1.0))  # every row at the block's level: D = I
         self.in_group = group_of_row >= 0
         self.n_rows, self.n_groups = len(shared.A), int(group_of_row.max()) + 1 if self.in_group.any() else 0
         grouped = np.flatnonzero(self.in_group)
@@ -264,7 +265,7 @@ class GroupedWhitening:
             J = self.split(M, sigma)
             H = J.T @ (weight[:, None] * J)
             return 0.5 * (H + H.T), J.T @ v
-        N = M / self.row_scale[:, None]
+        N = M if self.at_level else M / self.row_scale[:, None]
         T = self.QT @ N
         shared = 1.0 / (sigma**2 + self.s2)
         H = N.T @ N / sigma**2 + T.T @ ((shared * weight[R:] - 1.0 / sigma**2)[:, None] * T)

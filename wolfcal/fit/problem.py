@@ -264,6 +264,8 @@ class Problem:
         DENSE_LIMIT unknowns, sparse."""
         n, sig = len(self.params), self.params.prior_sigmas
         J_chain = lin.jac_chain.reshape(lin.residual.size, self.n_chain)[rows] * sig[: self.n_chain]
+        if n == self.n_chain:  # no block brings unknowns: the chain's columns are all
+            return J_chain if n <= DENSE_LIMIT else scipy.sparse.csr_matrix(J_chain)
         dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
         if dense is not None:
             dense[:, : self.n_chain] = J_chain
