@@ -193,10 +193,17 @@ class GroupedWhitening:
             k = k_reading + int(labels[members].max())
             at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
             U = np.zeros((len(members) * n, k))
-            for j, (slot, first) in enumerate(zip(slots, np.cumsum([0, *widths[:-1]]))):
-                has = np.flatnonzero(slot[at] >= 0)
+            firsts = np.cumsum([0, *widths[:-1]])
+            if all(slot is slots[0] for slot in slots):  # one reading per row: every joint's column at its slot
+                has = np.flatnonzero(slots[0][at] >= 0)
                 unit = rows[at][has]
-                U[has, first + slot[at][has]] = shared.sigma_q * shared.A[unit, moving[j]] / self.row_scale[unit]
+                U[has[:, None], firsts + slots[0][at][has][:, None]] = (
+                    shared.sigma_q * shared.A[unit][:, moving] / self.row_scale[unit][:, None])
+            else:
+                for j, (slot, first) in enumerate(zip(slots, firsts)):
+                    has = np.flatnonzero(slot[at] >= 0)
+                    unit = rows[at][has]
+                    U[has, first + slot[at][has]] = shared.sigma_q * shared.A[unit, moving[j]] / self.row_scale[unit]
             has = np.flatnonzero(label_slot[at] >= 0)
             U[has, k_reading + label_slot[at][has]] = shared.tau / self.row_scale[rows[at][has]]
             Q, s_squared, kept = _left_factors(U.reshape(len(members), n, k))
