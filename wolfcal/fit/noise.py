@@ -194,7 +194,7 @@ class GroupedWhitening:
             at = (starts[members][:, None] + np.arange(n)).ravel()  # positions in `rows`, (G * n,)
             U = np.zeros((len(members) * n, k))
             firsts = np.cumsum([0, *widths[:-1]])
-            if all(slot is slots[0] for slot in slots):  # one reading per row: every joint's column at its slot
+            if slots and all(slot is slots[0] for slot in slots):  # one reading per row: each joint at its slot
                 has = np.flatnonzero(slots[0][at] >= 0)
                 unit = rows[at][has]
                 U[has[:, None], firsts + slots[0][at][has][:, None]] = (
