@@ -222,6 +222,7 @@ def _refine_by_size(
     size = mean_side(corners)
     refined = np.empty_like(corners)
     for part in np.array_split(np.argsort(size), -(-len(corners) // TAGS_PER_PASS)):
+        part = part[np.argsort(image_of_tag[part], kind="stable")]  # each image's tags in a row
         refined[part] = refine_tags(images, image_of_tag[part], corners[part], cells, iterations)
     return refined
 
@@ -235,7 +236,7 @@ class _EdgeIndex:
     end: np.ndarray  # (8,) the corner it runs towards
     tag: np.ndarray  # (E,) the tag of each edge
     far: np.ndarray  # (E, 2) the last pixel (x, y) [px] of each edge's image
-    edges_of_image: list[tuple[int, np.ndarray]]  # (image index, its edges)
+    edges_of_image: list[tuple[int, slice | np.ndarray]]  # (image index, its edges: a slice where they are in a row)
 
     @staticmethod
     def of(images: Sequence[np.ndarray], image_of_tag: np.ndarray, n_tags: int) -> _EdgeIndex:
@@ -245,7 +246,11 @@ class _EdgeIndex:
         tag = np.repeat(np.arange(n_tags), 8)
         image_of_edge = image_of_tag[tag]
         far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]
-        edges_of_image = [(i, np.flatnonzero(image_of_edge == i)) for i in np.unique(image_of_edge)]
+        edges_of_image: list[tuple[int, slice | np.ndarray]] = []
+        for i in np.unique(image_of_edge):
+            rows = np.flatnonzero(image_of_edge == i)
+            in_a_row = rows[-1] - rows[0] + 1 == len(rows)  # no copy of their sample points for cv2.remap
+            edges_of_image.append((int(i), slice(rows[0], rows[-1] + 1) if in_a_row else rows))
         return _EdgeIndex(start, end, tag, far, edges_of_image)
 
 
@@ -312,24 +317,17 @@ def _binned(profiles: np.ndarray, keep: np.ndarray, grid: _ProfileGrid) -> tuple
     consecutive profiles -> (profiles (E, B, S), keep (E, B): bins with a kept profile, d (E, B): the mean distance
     [px] of each bin's kept profiles). The edge position is linear in the profile within its window, so a bin's
     profile gives about the mean of its profiles' offsets, and the bins keep their averaging over the pixel grid."""
-    E, M, S = profiles.shape
+    M = profiles.shape[1]
     k = np.maximum(1, keep.sum(axis=1) // PROFILES)  # (E,)
     if (k == 1).all():
         return profiles, keep, grid.d
-    bins = -(-grid.n_d // k)
-    edge, j = np.nonzero(np.arange(bins.max()) < bins[:, None])
-    starts = edge * M + j * k[edge]  # each bin runs to the next bin's start (padding of an edge is not kept)
-    count = np.add.reduceat(keep.reshape(-1), starts)
-    total = np.add.reduceat(np.where(keep[..., None], profiles, 0.0).reshape(E * M, S), starts, axis=0)
-    d_total = np.add.reduceat(np.where(keep, grid.d, 0.0).reshape(-1), starts)
-    out = np.zeros((E, bins.max(), S), np.float32)
-    out_keep = np.zeros((E, bins.max()), bool)
-    out_d = np.zeros((E, bins.max()))
-    n = np.maximum(count, 1)
-    out[edge, j] = total / n[:, None]
-    out_keep[edge, j] = count > 0
-    out_d[edge, j] = np.where(count > 0, d_total / n, grid.d[edge, j * k[edge]])
-    return out, out_keep, out_d
+    bins = int((-(-grid.n_d // k)).max())
+    member = (np.arange(M) // k[:, None])[:, None, :] == np.arange(bins)[:, None]  # (E, B, M) profile m in bin b
+    member &= keep[:, None, :]
+    count = member.sum(axis=2)  # (E, B)
+    weight = member.astype(np.float32)
+    weight /= np.maximum(count, 1)[..., None]
+    return np.matmul(weight, profiles), count > 0, np.matmul(weight, grid.d[..., None])[..., 0]
 
 
 def _edge_tangents(profiles: np.ndarray, keep: np.ndarray, d: np.ndarray, grid: _ProfileGrid) -> np.ndarray:
