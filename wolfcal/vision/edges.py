@@ -55,29 +55,31 @@ def edge_offsets(
     """
     lead, S = profiles.shape[:-1], profiles.shape[-1]
     t = np.broadcast_to(t, (*lead, S))
-    length = np.broadcast_to(S if length is None else np.asarray(length), lead)
-    dark, light = np.asarray(dark)[..., None], np.asarray(light)[..., None]
-    step = t[..., 1] - t[..., 0]
-    above = profiles >= 0.5 * (dark + light)
+    n = np.asarray(S if length is None else length)  # broadcast against lead only where needed: small arrays
+    dark, light = np.asarray(dark), np.asarray(light)
+    t0, step = t[..., 0], t[..., 1] - t[..., 0]  # t rises evenly along each row
     gaps = np.arange(S - 1)
-    change = above[..., 1:] & ~above[..., :-1] & (gaps < length[..., None] - 1)  # dark -> light between k and k + 1
+    above = profiles >= (0.5 * (dark + light))[..., None]
+    change = above[..., 1:] > above[..., :-1]  # dark -> light between k and k + 1
+    change &= gaps < n[..., None] - 1
     # the crossing nearest the profile centre (length - 1) / 2, by twice its distance |2 k + 2 - length| in small
     # integers (exact; the first of equals)
     small = np.min_scalar_type(-2 * S - 2)  # holds -2 S .. 2 S (int8 for the refinement's S <= 49)
-    twice = np.abs((2 * gaps + 2).astype(small) - np.asarray(length, small)[..., None])
-    k = np.argmin(np.where(change, twice, small.type(2 * S)), axis=-1)[..., None]
-    ok = np.take_along_axis(change, k, axis=-1)[..., 0]
-    cross = np.take_along_axis(t, k, axis=-1)[..., 0] + step / 2
-    last = np.take_along_axis(t, length[..., None] - 1, axis=-1)[..., 0]
-    reach = np.minimum(window, np.minimum(cross - t[..., 0], last - cross) - step)  # inside the profile
+    twice = np.abs((2 * gaps + 2).astype(small) - n.astype(small)[..., None])
+    k = np.argmin(np.where(change, twice, small.type(2 * S)), axis=-1)
+    ok = np.take_along_axis(change, k[..., None], axis=-1)[..., 0]
+    cross = t0 + k * step + step / 2
+    reach = np.minimum(window, np.minimum(cross - t0, t0 + (n - 1) * step - cross) - step)  # inside the profile
     ok &= reach >= 0.75
-    inside = np.abs(t - cross[..., None]) <= reach[..., None]
-    # t rises along each row: the window starts at its first sample
-    start = np.take_along_axis(t, np.argmax(inside, axis=-1)[..., None], axis=-1)[..., 0] - step / 2
-    dark_part = np.subtract(light, profiles, dtype=np.float64)  # in place from here: no temporaries
-    dark_part /= light - dark
-    np.clip(dark_part, -0.5, 1.5, out=dark_part)
-    edge = start + np.sum(dark_part, axis=-1, where=inside) * step
+    # the window |t - cross| <= reach: samples lo..hi (1 <= lo, hi <= length - 2 where ok)
+    lo = np.clip(np.ceil((cross - reach - t0) / step - 1e-9), 1, S - 1).astype(np.intp)
+    hi = np.clip(np.floor((cross + reach - t0) / step + 1e-9), 1, S - 1).astype(np.intp)
+    share = np.subtract(light[..., None], profiles, dtype=np.float32)  # the dark share of each sample
+    share *= (1.0 / (light - dark))[..., None].astype(np.float32)
+    np.clip(share, -0.5, 1.5, out=share)
+    total = np.cumsum(share, axis=-1)
+    inside = np.take_along_axis(total, hi[..., None], axis=-1) - np.take_along_axis(total, lo[..., None] - 1, axis=-1)
+    edge = t0 + (lo - 0.5) * step + inside[..., 0] * step
     return np.where(ok, edge, np.nan)
 
 
