@@ -304,9 +304,9 @@ def _sample_profiles(
     ends = base[:, :, None] + t_ends[:, None, :, None] * grid.n[:, None, None]  # (E, M, 2, 2) profile ends
     inside = (ends >= 0).all(axis=(2, 3)) & (ends <= edges.far[:, None, None]).all(axis=(2, 3))  # the box is convex
     keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
-    # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
-    maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
-                   dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
+    # sample points base + t n (E, M, S), x and y apart, in float32 for cv2.remap (~1e-4 px at 2048 px)
+    base32, across = base.astype(np.float32), (grid.t[:, :, None] * grid.n[:, None]).astype(np.float32)  # (E, S, 2)
+    maps = [np.add(base32[:, :, None, a], across[:, None, :, a]) for a in (0, 1)]
     profiles = np.empty((E, M, S), np.float32)
     for i, rows in edges.edges_of_image:
         x, y = (m[rows].reshape(-1, S) for m in maps)
