@@ -286,8 +286,8 @@ class _ProfileGrid:
         n = np.stack([-e[:, 1], e[:, 0]], axis=1)
         n *= np.where(np.einsum("ei,ei->e", n, c - corners.mean(axis=1)[tag]) >= 0, 1.0, -1.0)[:, None]  # outwards
         across = _border_across(corners, c, n, tag, cells)
-        half = np.clip(across, 2.0, 6.0)
         window = np.clip(0.5 * across, 1.0, 2.5)  # keep clear of the data bits and what lies beyond the margin
+        half = np.minimum(np.clip(across, 2.0, 6.0), window + 2.0)  # 2 px beyond the window: room for the crossing
         t, n_t = _grid(-half, half + 1e-9, 0.25)
         first = np.maximum(np.maximum(2.0, 0.3 * cell), _clear_of_other_edge(e, window))
         d, n_d = _grid(first, np.maximum(np.maximum(2.5 * cell, 4.0), first + 4.0) + 1e-9, 0.5)
@@ -305,9 +305,9 @@ def _sample_profiles(
     ends = base[:, :, None] + t_ends[:, None, :, None] * grid.n[:, None, None]  # (E, M, 2, 2) profile ends
     inside = (ends >= 0).all(axis=(2, 3)) & (ends <= edges.far[:, None, None]).all(axis=(2, 3))  # the box is convex
     keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
-    # sample points base + t n (E, M, S), x and y apart, in float32 for cv2.remap (~1e-4 px at 2048 px)
-    base32, across = base.astype(np.float32), (grid.t[:, :, None] * grid.n[:, None]).astype(np.float32)  # (E, S, 2)
-    maps = [np.add(base32[:, :, None, a], across[:, None, :, a]) for a in (0, 1)]
+    # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
+    maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
+                   dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
     profiles = np.empty((E, M, S), np.float32)
     for i, rows in edges.edges_of_image:
         x, y = (m[rows].reshape(-1, S) for m in maps)
