@@ -28,7 +28,7 @@ MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
 # Tags refined in one pass at most: more gain nothing (the per-call cost is shared by 8 already) and hold larger
 # arrays (~2 MB per tag of 100 px at 512x384)
-TAGS_PER_PASS = 8
+TAGS_PER_PASS = 16
 # Kept profiles per edge from which they are averaged in bins of k = n // PROFILES (PROFILES to 2 PROFILES - 1 bins):
 # a large cell's edge has 100-200 profiles 0.5 px apart. Binned, the corners move by ~0.01 px (bench_vision: median
 # and 95th percentile error within 0.001 px; 12 bins: +0.005 px at the 95th percentile on 16x16 renders). The fine
