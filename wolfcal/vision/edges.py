@@ -10,7 +10,7 @@ replaced to ~1e-6 px, tests/test_edges.py compares the two). A call costs ~0.5-1
 number of tags (numpy's per-operation cost), so `refine_tags` takes the tags of several images at once. The
 edges of large cells have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled
 after one iteration is not iterated again (SETTLED). CPU per tag, one thread, the bench captures' own tags:
-about 1.3 ms at 2048x1536 (4.5-5.5 ms before the bins and the settled rule) and 0.8 ms at 512x384 (1.0 ms).
+about 1.4 ms at 2048x1536 (4.1-4.8 ms before the bins and the settled rule) and 0.85 ms at 512x384 (0.94 ms).
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j), M points along an edge at distances
 `d` [px] from the corner, S samples across it at offsets `t` [px] (positive out of the tag).
