@@ -32,16 +32,6 @@ class CaptureCamera:
     source: CameraSource | None = None  # opened by `open_sources`
 
 
-def _binned(name: str, camera: CameraModel, binning: int) -> CameraModel:
-    if binning < 1 or camera.width % binning or camera.height % binning:
-        raise WolfcalError(
-            f"--binning {binning}: must divide the size {camera.width}x{camera.height} of camera '{name}'"
-        )
-    if binning == 1:
-        return camera
-    return camera.scaled(1 / binning, 1 / binning, camera.width // binning, camera.height // binning)
-
-
 def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCamera]:
     """The cameras to record by name ('head' first), checked against the config; nothing opened yet."""
     sources: dict[str, str] = {}
@@ -67,7 +57,7 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
                 )
         model = load_camera_info(Path(path))
         binning = options.binning or ((4 if name == HEAD_CAMERA else 2) if source == "sim" else 1)
-        cameras[name] = CaptureCamera(model, _binned(name, model, binning), binning, source)
+        cameras[name] = CaptureCamera(model, model.binned(binning, name), binning, source)
     return cameras
 
 

@@ -24,6 +24,7 @@ from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.errors import WolfcalError
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.writer import camera_info_message
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.poses import random_visible_poses
@@ -106,8 +107,7 @@ def simulate_recording(
     intrinsics = robot.config.head_camera().intrinsics
     if intrinsics is None:
         raise WolfcalError(f"{robot.config.path}: 'camera.intrinsics' is needed to simulate the head camera")
-    full = load_camera_info(intrinsics)
-    camera = full.scaled(1 / binning, 1 / binning, full.width // binning, full.height // binning)
+    camera = load_camera_info(intrinsics).binned(binning, HEAD_CAMERA)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
     q_still = random_visible_poses(robot, camera, truth, poses, rng)[0]
     write_recording(path, robot, truth, camera, q_still, options)

@@ -84,12 +84,6 @@ def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
     return {"none": (), "head": head, "legs": legs, "all": everything}[which]
 
 
-def _binned(camera: CameraModel, b: int) -> CameraModel:
-    if camera.width % b or camera.height % b:
-        raise WolfcalError(f"--binning {b}: must divide the camera size {camera.width}x{camera.height}")
-    return camera if b == 1 else camera.scaled(1 / b, 1 / b, camera.width // b, camera.height // b)
-
-
 def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dict[str, _SimCamera]:
     """The simulated cameras by name, without placements yet."""
     cameras: dict[str, _SimCamera] = {}
@@ -99,7 +93,7 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
             if intrinsics is None:
                 raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
             head = load_camera_info(intrinsics)
-        cameras[HEAD_CAMERA] = _SimCamera(head, _binned(head, options.binning))
+        cameras[HEAD_CAMERA] = _SimCamera(head, head.binned(options.binning, HEAD_CAMERA))
     if options.system in ("external", "all"):
         if not robot.config.external_cameras:
             raise WolfcalError(
@@ -111,7 +105,7 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
         if intrinsics is None:
             raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML) to simulate camera '{name}'")
         model = load_camera_info(intrinsics)
-        cameras[name] = _SimCamera(model, _binned(model, options.binning))
+        cameras[name] = _SimCamera(model, model.binned(options.binning, name))
     return cameras
 
 
