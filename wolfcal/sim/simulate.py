@@ -89,10 +89,7 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
     cameras: dict[str, _SimCamera] = {}
     if options.system in ("head", "all"):
         if head is None:
-            intrinsics = robot.config.head_camera().intrinsics
-            if intrinsics is None:
-                raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
-            head = load_camera_info(intrinsics)
+            head = load_camera_info(robot.config.intrinsics_file(HEAD_CAMERA, "simulating", "pass --intrinsics FILE"))
         cameras[HEAD_CAMERA] = _SimCamera(head, head.binned(options.binning, HEAD_CAMERA))
     if options.system in ("external", "all"):
         if not robot.config.external_cameras:
@@ -101,10 +98,7 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
                 "'external_cameras:' (name, image_topic, info_topic, intrinsics)"
             )
         name = options.external or robot.config.external_cameras[0].name
-        intrinsics, key = robot.config.camera_intrinsics(name)
-        if intrinsics is None:
-            raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML) to simulate camera '{name}'")
-        model = load_camera_info(intrinsics)
+        model = load_camera_info(robot.config.intrinsics_file(name, "simulating"))
         cameras[name] = _SimCamera(model, model.binned(options.binning, name))
     return cameras
 
