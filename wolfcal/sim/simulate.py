@@ -280,9 +280,4 @@ def planned_readings(robot: Robot, path: Path) -> np.ndarray:
     """(S, J) joint readings [rad] of a poses file, checked as `capture --poses` checks it: each joint at its
     latest target, joints never named at the rest pose (`rest_pose:`, others 0)."""
     script = load_poses(path, joint_limits(robot, robot.joint_names))
-    targets = dict(robot.config.planning.rest_pose)
-    rows = []
-    for pose in script.poses:
-        targets.update(pose.joints)
-        rows.append([targets.get(j, 0.0) for j in robot.joint_names])
-    return np.array(rows)
+    return script.readings(robot.joint_names, robot.config.planning.rest_pose)
