@@ -114,7 +114,8 @@ def _block_dict(fit: Fit, k: int) -> dict:
     outlier_tags: dict[int, list[int]] = {}
     for s, t in sorted(b.outlier_views):
         outlier_tags.setdefault(s, []).append(t)
-    corners = _outlier_corners(fit, k)
+    rule = block.unit_rule  # single corners left out one by one (None: the block has no such rule)
+    corners = _outlier_corners(fit, k) if rule is not None else None
     samples = []
     for i in range(obs.n_samples):
         samples.append({
@@ -128,7 +129,11 @@ def _block_dict(fit: Fit, k: int) -> dict:
             "outlier_tags": outlier_tags.get(i, []),
             **({"outlier_corners": corners.get(i, [])} if corners is not None else {}),
         })  # fmt: skip
-    rule = block.unit_rule
+    corner_keys = {} if rule is None or corners is None else {
+        # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
+        "n_outlier_corners": sum(len(c) for c in corners.values()),
+        "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
+    }
     return {
         "name": b.name,
         "system": b.system,
@@ -144,11 +149,7 @@ def _block_dict(fit: Fit, k: int) -> dict:
         "n_samples": obs.n_samples,
         "n_outlier_samples": sum(s["outlier"] for s in samples),
         "n_outlier_views": len(b.outlier_views),
-        **({
-            # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
-            "n_outlier_corners": sum(len(c) for c in corners.values()),
-            "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
-        } if corners is not None and rule is not None else {}),
+        **corner_keys,
         "n_units_used": b.n_units,
         "samples": samples,
     }
@@ -161,14 +162,11 @@ CORNER_RULE_MEANING = (
 )
 
 
-def _outlier_corners(fit: Fit, k: int) -> dict[int, list[list[int]]] | None:
+def _outlier_corners(fit: Fit, k: int) -> dict[int, list[list[int]]]:
     """Sample -> [tag id, corner index] of each single corner the fit left out of block k's views kept
-    (`Block.unit_rule`, e.g. `outliers.FLOOR_CORNER_PX`; the solver's final outlier sets); None for a block without
-    a corner rule (its units are not tag corners, or none are left out one by one)."""
-    block, state = fit.blocks[k], fit.problem.states[k]
-    if block.unit_rule is None:
-        return None
-    obs = cast(TagViewBlock, block).obs  # a block with a corner rule has one unit per detected corner
+    (`Block.unit_rule`, e.g. `outliers.FLOOR_CORNER_PX`; the solver's final outlier sets). Only for a block with a
+    unit rule: its units are the detected corners, one per row of its observations."""
+    obs, state = cast(TagViewBlock, fit.blocks[k]).obs, fit.problem.states[k]
     out: dict[int, list[list[int]]] = {}
     for m in np.flatnonzero(state.excluded_units):
         out.setdefault(int(obs.sample_index[m]), []).append([int(obs.tag_ids[m]), int(obs.corner_index[m])])
