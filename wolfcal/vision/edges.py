@@ -71,7 +71,8 @@ def edge_offsets(
     small = np.min_scalar_type(-2 * S - 2)  # holds -2 S .. 2 S (int8 for the refinement's S <= 49)
     twice = np.abs((2 * gaps + 2).astype(small) - n.astype(small)[..., None])
     k = np.argmin(np.where(change, twice, small.type(2 * S)), axis=-1)
-    ok = np.take_along_axis(change, k[..., None], axis=-1)[..., 0]
+    row = np.arange(0, change.size, S - 1).reshape(k.shape)  # each profile's first gap in change's flat order
+    ok = change.reshape(-1)[row + k]
     cross = t0 + k * step + step / 2
     reach = np.minimum(window, np.minimum(cross - t0, t0 + (n - 1) * step - cross) - step)  # inside the profile
     ok &= reach >= 0.75
@@ -81,9 +82,11 @@ def edge_offsets(
     share = np.subtract(light[..., None], profiles, dtype=np.float32)  # the dark share of each sample
     share *= (1.0 / (light - dark))[..., None].astype(np.float32)
     np.clip(share, -0.5, 1.5, out=share)
-    total = np.cumsum(share, axis=-1)
-    inside = np.take_along_axis(total, hi[..., None], axis=-1) - np.take_along_axis(total, lo[..., None] - 1, axis=-1)
-    edge = t0 + (lo - 0.5) * step + inside[..., 0] * step
+    # the window's sum, one segment [lo, hi] of the flat shares per profile (ends past the array only where not ok)
+    first = np.arange(0, share.size, S).reshape(lo.shape)
+    bounds = np.stack([first + lo, np.minimum(first + hi + 1, share.size - 1)], axis=-1)
+    inside = np.add.reduceat(share.reshape(-1), bounds.reshape(-1))[::2].reshape(lo.shape)
+    edge = t0 + (lo - 0.5) * step + inside * step
     return np.where(ok, edge, np.nan)
 
 
