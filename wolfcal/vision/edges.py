@@ -90,25 +90,25 @@ def edge_offsets(
     return np.where(ok, edge, np.nan)
 
 
-def _dark_light(profiles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(E,) 10th and 90th percentile grey level of each edge's kept samples of profiles (E, M, S) [`keep`
-    (E, M, S)], as np.percentile (linear interpolation) gives them; NaN for an edge without kept samples. One
-    sort for both."""
-    E = len(profiles)
-    ordered = np.where(keep, profiles, np.inf).reshape(E, -1)
+def _dark_light(profiles: np.ndarray, keep: np.ndarray, n_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(E,) 10th and 90th percentile grey level of each edge's kept samples of profiles (E, M, S) (the first n_t
+    (E,) samples of the profiles where `keep` (E, M)), as np.percentile (linear interpolation) gives them; NaN for
+    an edge without kept samples. One sort for both."""
+    E, M, S = profiles.shape
+    used = keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :]
+    ordered = np.where(used, profiles, np.inf).reshape(E, -1)
     ordered.sort(axis=1)  # in place: a fresh array
-    count = np.count_nonzero(keep.reshape(E, -1), axis=1)
+    count = np.count_nonzero(keep, axis=1) * n_t
     last = np.maximum(count - 1, 0)
-    rows = np.arange(E)
     seen = count > 0
-    out = []
-    for q in (0.10, 0.90):
-        pos = q * last
-        lo = np.floor(pos).astype(int)
-        a, b = ordered[rows, lo], ordered[rows, np.minimum(lo + 1, last)]
-        with np.errstate(invalid="ignore"):
-            out.append(np.where(seen, a + (b - a) * (pos - lo), np.nan))
-    return out[0], out[1]
+    pos = np.array([[0.10], [0.90]]) * last  # (2, E)
+    lo = np.floor(pos).astype(np.intp)
+    rows = np.arange(0, ordered.size, ordered.shape[1])
+    flat = ordered.reshape(-1)
+    a, b = flat[rows + lo], flat[rows + np.minimum(lo + 1, last)]
+    with np.errstate(invalid="ignore"):
+        dark, light = np.where(seen, a + (b - a) * (pos - lo), np.nan)
+    return dark, light
 
 
 def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -350,11 +350,11 @@ def _edge_tangents(profiles: np.ndarray, keep: np.ndarray, d: np.ndarray, grid: 
     (E, M, S) where `keep` (E, M); NaN for an edge with fewer than MIN_POINTS measured points or less contrast than
     MIN_CONTRAST."""
     E, M, S = profiles.shape
-    dark, light = _dark_light(profiles, keep[..., None] & (np.arange(S) < grid.n_t[:, None])[:, None, :])
+    dark, light = _dark_light(profiles, keep, grid.n_t)
     usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
     dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
     off = edge_offsets(profiles, grid.t[:, None], dark[:, None], light[:, None], grid.window[:, None],
-                       np.broadcast_to(grid.n_t[:, None], (E, M)))  # fmt: skip
+                       grid.n_t[:, None])  # fmt: skip
     good = keep & np.isfinite(off) & usable[:, None]
     usable &= good.sum(axis=1) >= MIN_POINTS
     tangent = np.full((E, 2), np.nan)
