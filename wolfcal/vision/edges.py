@@ -127,15 +127,24 @@ def _fit(d: np.ndarray, off: np.ndarray, weight: np.ndarray, degree: np.ndarray)
     coefficients (constant, linear, quadratic; quadratic 0 for lines). d is scaled per edge for conditioning."""
     scale = np.maximum(np.abs(np.where(weight > 0, d, 0.0)).max(axis=1), 1e-9)[:, None]  # (E, 1)
     x = d / scale
-    quadratic = (degree == 2)[:, None]
-    A = np.stack([np.ones_like(x), x, x * x * quadratic], axis=2) * weight[..., None]  # (E, M, 3)
-    AtA = np.matmul(A.transpose(0, 2, 1), A)
-    Atb = np.matmul(A.transpose(0, 2, 1), np.where(weight > 0, off, 0.0)[..., None])[..., 0]
-    AtA[~quadratic[:, 0], 2, 2] = 1.0  # lines: no quadratic column, so its coefficient solves to 0
-    ok = np.abs(np.linalg.det(AtA)) > 1e-12
-    AtA[~ok] = np.eye(3)
-    coeffs = np.linalg.solve(AtA, Atb[..., None])[..., 0]
-    coeffs[~ok] = np.nan
+    powers = np.empty((len(d), 5, d.shape[1]))  # w x^k, k = 0..4
+    powers[:, 0] = weight
+    for k in range(1, 5):
+        np.multiply(powers[:, k - 1], x, out=powers[:, k])
+    s = powers.sum(axis=2)  # (E, 5) sums of w x^k: the normal matrix [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]]
+    rhs = np.matmul(powers[:, :3], np.where(weight > 0, off, 0.0)[..., None])[..., 0]  # (E, 3) sums of w x^k off
+    line = degree != 2  # no quadratic column: its coefficient solves to 0
+    a, b, d2 = s[:, 0], s[:, 1], s[:, 2]
+    c, e, f = np.where(line, 0.0, s[:, 2]), np.where(line, 0.0, s[:, 3]), np.where(line, 1.0, s[:, 4])
+    rhs[line, 2] = 0.0
+    # the symmetric 3x3 solve in closed form (adjugate over determinant)
+    adjugate = np.stack([d2 * f - e * e, c * e - b * f, b * e - c * d2,
+                         c * e - b * f, a * f - c * c, b * c - a * e,
+                         b * e - c * d2, b * c - a * e, a * d2 - b * b], axis=1).reshape(-1, 3, 3)  # fmt: skip
+    det = a * adjugate[:, 0, 0] + b * adjugate[:, 0, 1] + c * adjugate[:, 0, 2]
+    ok = np.abs(det) > 1e-12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        coeffs = np.matmul(adjugate, rhs[..., None])[..., 0] / np.where(ok, det, np.nan)[:, None]
     return coeffs / np.concatenate([np.ones_like(scale), scale, scale * scale], axis=1)
 
 
