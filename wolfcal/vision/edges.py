@@ -323,8 +323,10 @@ def _sample_profiles(
     E, M, S = len(edges.tag), grid.d.shape[1], grid.t.shape[1]
     base = grid.c[:, None] + grid.d[:, :, None] * grid.e[:, None]  # (E, M, 2) on the edge
     t_ends = np.stack([grid.t[:, 0], grid.t[np.arange(E), grid.n_t - 1]], axis=1)  # (E, 2)
-    ends = base[:, :, None] + t_ends[:, None, :, None] * grid.n[:, None, None]  # (E, M, 2, 2) profile ends
-    inside = (ends >= 0).all(axis=(2, 3)) & (ends <= edges.far[:, None, None]).all(axis=(2, 3))  # the box is convex
+    ends = t_ends[:, :, None] * grid.n[:, None]  # (E, 2, 2) profile ends (first, last) from the edge point
+    low, high = ends.min(axis=1), ends.max(axis=1)  # (E, 2) per coordinate: the ends' (x, y) are base + these
+    inside = (base[..., 0] + low[:, None, 0] >= 0) & (base[..., 1] + low[:, None, 1] >= 0)  # the box is convex
+    inside &= (base[..., 0] + high[:, None, 0] <= edges.far[:, None, 0]) & (base[..., 1] + high[:, None, 1] <= edges.far[:, None, 1])
     keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
     # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
     maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
