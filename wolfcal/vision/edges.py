@@ -218,16 +218,19 @@ def refine_tags(
     for _ in range(iterations):
         edges = _EdgeIndex.of(images, image_of_tag[active], len(active))
         before = corners[active]
-        after = _refined_once(images, edges, before, cells)
+        after, cell = _refined_once(images, edges, before, cells)
         corners[active] = after
-        active = active[np.linalg.norm(after - before, axis=2).max(axis=1) > SETTLED * mean_side(before) / cells]
+        active = active[np.linalg.norm(after - before, axis=2).max(axis=1) > SETTLED * cell]
         if not len(active):
             break
     return corners
 
 
-def _refined_once(images: Sequence[np.ndarray], edges: _EdgeIndex, corners: np.ndarray, cells: int) -> np.ndarray:
-    """One iteration of `refine_tags`: corners (T, 4, 2) [px] -> the intersections of the edges' tangents."""
+def _refined_once(
+    images: Sequence[np.ndarray], edges: _EdgeIndex, corners: np.ndarray, cells: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """One iteration of `refine_tags`: corners (T, 4, 2) [px] -> (the intersections of the edges' tangents (T, 4, 2)
+    [px], each tag's mean cell (T,) [px] before)."""
     grid = _ProfileGrid.of(corners, edges, cells)
     profiles, keep, d = _binned(*_sample_profiles(images, edges, grid), grid)
     tangent = _edge_tangents(profiles, keep, d, grid)
@@ -235,7 +238,7 @@ def _refined_once(images: Sequence[np.ndarray], edges: _EdgeIndex, corners: np.n
     direction = grid.e + tangent[:, 1:] * grid.n
     T = len(corners)
     reach = 0.5 * grid.cell[::8] + 1.0  # (T,) how far a corner may move in one iteration [px]
-    return _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), reach)
+    return _intersect_pairs(corners, point.reshape(T, 8, 2), direction.reshape(T, 8, 2), reach), grid.cell[::8]
 
 
 def _refine_by_size(
@@ -271,10 +274,15 @@ class _EdgeIndex:
         image_of_edge = image_of_tag[tag]
         far = np.array([(im.shape[1] - 1, im.shape[0] - 1) for im in images], dtype=float)[image_of_edge]
         edges_of_image: list[tuple[int, slice | np.ndarray]] = []
-        for i in np.unique(image_of_edge):
-            rows = np.flatnonzero(image_of_edge == i)
-            in_a_row = rows[-1] - rows[0] + 1 == len(rows)  # no copy of their sample points for cv2.remap
-            edges_of_image.append((int(i), slice(rows[0], rows[-1] + 1) if in_a_row else rows))
+        if n_tags and (image_of_tag[1:] >= image_of_tag[:-1]).all():  # each image's tags in a row: no copy for remap
+            bounds = [0, *(np.flatnonzero(image_of_tag[1:] != image_of_tag[:-1]) + 1), n_tags]
+            for first, stop in zip(bounds[:-1], bounds[1:]):
+                edges_of_image.append((int(image_of_tag[first]), slice(8 * first, 8 * stop)))
+        else:
+            for i in np.unique(image_of_edge):
+                rows = np.flatnonzero(image_of_edge == i)
+                in_a_row = rows[-1] - rows[0] + 1 == len(rows)
+                edges_of_image.append((int(i), slice(rows[0], rows[-1] + 1) if in_a_row else rows))
         return _EdgeIndex(start, end, tag, far, edges_of_image)
 
 
@@ -326,7 +334,8 @@ def _sample_profiles(
     ends = t_ends[:, :, None] * grid.n[:, None]  # (E, 2, 2) profile ends (first, last) from the edge point
     low, high = ends.min(axis=1), ends.max(axis=1)  # (E, 2) per coordinate: the ends' (x, y) are base + these
     inside = (base[..., 0] + low[:, None, 0] >= 0) & (base[..., 1] + low[:, None, 1] >= 0)  # the box is convex
-    inside &= (base[..., 0] + high[:, None, 0] <= edges.far[:, None, 0]) & (base[..., 1] + high[:, None, 1] <= edges.far[:, None, 1])
+    inside &= base[..., 0] + high[:, None, 0] <= edges.far[:, None, 0]
+    inside &= base[..., 1] + high[:, None, 1] <= edges.far[:, None, 1]
     keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
     # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
     maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
