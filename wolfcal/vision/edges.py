@@ -351,18 +351,25 @@ def _binned(profiles: np.ndarray, keep: np.ndarray, grid: _ProfileGrid) -> tuple
     """The profiles (E, M, S) [`keep` (E, M)] of an edge with k PROFILES or more kept ones averaged in bins of k
     consecutive profiles -> (profiles (E, B, S), keep (E, B): bins with a kept profile, d (E, B): the mean distance
     [px] of each bin's kept profiles). The edge position is linear in the profile within its window, so a bin's
-    profile gives about the mean of its profiles' offsets, and the bins keep their averaging over the pixel grid."""
-    M = profiles.shape[1]
+    profile gives about the mean of its profiles' offsets, and the bins keep their averaging over the pixel grid.
+    Sets the profiles not kept to 0 when it bins them."""
+    E, M, S = profiles.shape
     k = np.maximum(1, keep.sum(axis=1) // PROFILES)  # (E,)
     if (k == 1).all():
         return profiles, keep, grid.d
     bins = int((-(-grid.n_d // k)).max())
-    member = (np.arange(M) // k[:, None])[:, None, :] == np.arange(bins)[:, None]  # (E, B, M) profile m in bin b
-    member &= keep[:, None, :]
-    count = member.sum(axis=2)  # (E, B)
-    weight = member.astype(np.float32)
-    weight /= np.maximum(count, 1)[..., None]
-    return np.matmul(weight, profiles), count > 0, np.matmul(weight, grid.d[..., None])[..., 0]
+    first = np.arange(bins) * k[:, None]  # (E, B) the first profile of each bin
+    real = first < M  # the bins that hold profiles: consecutive rows of the flat (E M) profiles from their first
+    starts = (first + M * np.arange(E)[:, None])[real]
+    np.multiply(profiles, keep[..., None], out=profiles)  # the others count nothing
+    count = np.zeros((E, bins), np.intp)
+    count[real] = np.add.reduceat(keep.reshape(-1), starts, dtype=np.intp)
+    binned = np.zeros((E, bins, S), np.float32)
+    binned[real] = np.add.reduceat(profiles.reshape(-1, S), starts, axis=0)
+    d = np.zeros((E, bins))
+    d[real] = np.add.reduceat(np.where(keep, grid.d, 0.0).reshape(-1), starts)
+    size = np.maximum(count, 1)
+    return binned / size[..., None].astype(np.float32), count > 0, d / size
 
 
 def _edge_tangents(profiles: np.ndarray, keep: np.ndarray, d: np.ndarray, grid: _ProfileGrid) -> np.ndarray:
