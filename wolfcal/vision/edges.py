@@ -91,14 +91,16 @@ def edge_offsets(
 
 
 def _dark_light(profiles: np.ndarray, keep: np.ndarray, n_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(E,) 10th and 90th percentile grey level of each edge's kept samples of profiles (E, M, S) (the first n_t
-    (E,) samples of the profiles where `keep` (E, M)), as np.percentile (linear interpolation) gives them; NaN for
-    an edge without kept samples. One sort for both."""
-    E, M, S = profiles.shape
-    used = keep[..., None] & (np.arange(S) < n_t[:, None])[:, None, :]
-    ordered = np.where(used, profiles, np.inf).reshape(E, -1)
-    ordered.sort(axis=1)  # in place: a fresh array
+    """(E,) 10th and 90th percentile grey level of each edge's samples in `profiles` (P, S) (those where `keep`
+    (E, M), edge by edge; the first n_t (E,) samples of each), as np.percentile (linear interpolation) gives them;
+    NaN for an edge without samples. One sort for both."""
+    E, S = len(keep), profiles.shape[1]
+    edge = np.nonzero(keep)[0]
     count = np.count_nonzero(keep, axis=1) * n_t
+    values = profiles[np.arange(S) < n_t[edge][:, None]]  # edge by edge
+    ordered = np.full((E, max(int(count.max()), 1)), np.inf, np.float32)
+    ordered[np.arange(ordered.shape[1]) < count[:, None]] = values
+    ordered.sort(axis=1)
     last = np.maximum(count - 1, 0)
     seen = count > 0
     pos = np.array([[0.10], [0.90]]) * last  # (2, E)
@@ -326,8 +328,9 @@ class _ProfileGrid:
 def _sample_profiles(
     images: Sequence[np.ndarray], edges: _EdgeIndex, grid: _ProfileGrid
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The intensity profiles (E, M, S) across the edges on `grid` (one `cv2.remap` per image, bilinear), and which
-    profiles (E, M) to use: inside the image, within 0.45 of the edge's length from the corner, not padding."""
+    """Which profiles (E, M) of `grid` to use (inside the image, within 0.45 of the edge's length from the corner,
+    not padding) and their intensities (P, S) (P: those used, edge by edge; one `cv2.remap` per image, bilinear).
+    -> (profiles (P, S), keep (E, M))."""
     E, M, S = len(edges.tag), grid.d.shape[1], grid.t.shape[1]
     base = grid.c[:, None] + grid.d[:, :, None] * grid.e[:, None]  # (E, M, 2) on the edge
     t_ends = np.stack([grid.t[:, 0], grid.t[np.arange(E), grid.n_t - 1]], axis=1)  # (E, 2)
@@ -337,51 +340,57 @@ def _sample_profiles(
     inside &= base[..., 0] + high[:, None, 0] <= edges.far[:, None, 0]
     inside &= base[..., 1] + high[:, None, 1] <= edges.far[:, None, 1]
     keep = inside & (grid.d < 0.45 * grid.length[:, None]) & (np.arange(M) < grid.n_d[:, None])  # (E, M)
-    # sample points base + t n (E, M, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
-    maps = [np.add(base[:, :, None, a], (grid.t * grid.n[:, a : a + 1])[:, None], out=np.empty((E, M, S), np.float32),
-                   dtype=np.float64, casting="same_kind") for a in (0, 1)]  # fmt: skip
-    profiles = np.empty((E, M, S), np.float32)
+    edge = np.nonzero(keep)[0]  # (P,) the edge of each profile used
+    per_edge = np.count_nonzero(keep, axis=1)
+    # sample points base + t n (P, S), x and y apart, computed in float64 and stored as float32 for cv2.remap
+    maps = [np.add(base[keep][:, a : a + 1], np.repeat(grid.t * grid.n[:, a : a + 1], per_edge, axis=0),
+                   out=np.empty((len(edge), S), np.float32), dtype=np.float64, casting="same_kind")
+            for a in (0, 1)]  # fmt: skip
+    profiles = np.empty((len(edge), S), np.float32)
     for i, rows in edges.edges_of_image:
-        x, y = (m[rows].reshape(-1, S) for m in maps)
-        profiles[rows] = cv2.remap(images[i], x, y, cv2.INTER_LINEAR).reshape(-1, M, S)
+        if isinstance(rows, slice):  # the image's profiles in a row
+            used: slice | np.ndarray = slice(*np.searchsorted(edge, [rows.start, rows.stop]))
+        else:
+            used = np.isin(edge, rows)
+        profiles[used] = cv2.remap(images[i], maps[0][used], maps[1][used], cv2.INTER_LINEAR)
     return profiles, keep
 
 
 def _binned(profiles: np.ndarray, keep: np.ndarray, grid: _ProfileGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The profiles (E, M, S) [`keep` (E, M)] of an edge with k PROFILES or more kept ones averaged in bins of k
-    consecutive profiles -> (profiles (E, B, S), keep (E, B): bins with a kept profile, d (E, B): the mean distance
-    [px] of each bin's kept profiles). The edge position is linear in the profile within its window, so a bin's
-    profile gives about the mean of its profiles' offsets, and the bins keep their averaging over the pixel grid.
-    Sets the profiles not kept to 0 when it bins them."""
-    E, M, S = profiles.shape
+    """The profiles (P, S) used of the grid's (E, M) (where `keep`) of an edge with k PROFILES or more of them
+    averaged in bins of k consecutive profiles of the grid -> (profiles (P', S) of the bins, keep (E, B): bins with a
+    profile used, d (E, B): the mean distance [px] of each bin's profiles). The edge position is linear in the
+    profile within its window, so a bin's profile gives about the mean of its profiles' offsets, and the bins keep
+    their averaging over the pixel grid."""
+    E, M = keep.shape
     k = np.maximum(1, keep.sum(axis=1) // PROFILES)  # (E,)
     if (k == 1).all():
         return profiles, keep, grid.d
     bins = int((-(-grid.n_d // k)).max())
-    first = np.arange(bins) * k[:, None]  # (E, B) the first profile of each bin
-    real = first < M  # the bins that hold profiles: consecutive rows of the flat (E M) profiles from their first
-    starts = (first + M * np.arange(E)[:, None])[real]
-    np.multiply(profiles, keep[..., None], out=profiles)  # the others count nothing
-    count = np.zeros((E, bins), np.intp)
-    count[real] = np.add.reduceat(keep.reshape(-1), starts, dtype=np.intp)
-    binned = np.zeros((E, bins, S), np.float32)
-    binned[real] = np.add.reduceat(profiles.reshape(-1, S), starts, axis=0)
-    d = np.zeros((E, bins))
-    d[real] = np.add.reduceat(np.where(keep, grid.d, 0.0).reshape(-1), starts)
-    size = np.maximum(count, 1)
-    return binned / size[..., None].astype(np.float32), count > 0, d / size
+    edge, m = np.nonzero(keep)
+    of_bin = edge * bins + m // k[edge]  # (P,) the flat (E, B) bin of each profile: non-decreasing
+    starts = np.flatnonzero(np.r_[True, of_bin[1:] != of_bin[:-1]])
+    count = np.diff(np.r_[starts, len(of_bin)])
+    binned = np.add.reduceat(profiles, starts, axis=0) / count[:, None].astype(np.float32)
+    full = np.zeros(E * bins, bool)
+    full[of_bin[starts]] = True
+    d = np.zeros(E * bins)
+    d[full] = np.add.reduceat(grid.d[keep], starts) / count
+    return binned, full.reshape(E, bins), d.reshape(E, bins)
 
 
 def _edge_tangents(profiles: np.ndarray, keep: np.ndarray, d: np.ndarray, grid: _ProfileGrid) -> np.ndarray:
     """(E, 2) offset [px] along the outward normal and slope [px/px] at the corner of each edge from its `profiles`
-    (E, M, S) where `keep` (E, M); NaN for an edge with fewer than MIN_POINTS measured points or less contrast than
-    MIN_CONTRAST."""
-    E, M, S = profiles.shape
+    (P, S) (those where `keep` (E, M), edge by edge); NaN for an edge with fewer than MIN_POINTS measured points or
+    less contrast than MIN_CONTRAST."""
+    E = len(keep)
+    edge = np.nonzero(keep)[0]  # (P,)
     dark, light = _dark_light(profiles, keep, grid.n_t)
     usable = (keep.sum(axis=1) >= MIN_POINTS) & (light - dark >= MIN_CONTRAST)
     dark, light = np.where(usable, dark, 0.0), np.where(usable, light, 255.0)
-    off = edge_offsets(profiles, grid.t[:, None], dark[:, None], light[:, None], grid.window[:, None],
-                       grid.n_t[:, None])  # fmt: skip
+    off = np.full(keep.shape, np.nan)
+    t = np.repeat(grid.t, np.count_nonzero(keep, axis=1), axis=0)  # (P, S) the offsets of each profile's samples
+    off[keep] = edge_offsets(profiles, t, dark[edge], light[edge], grid.window[edge], grid.n_t[edge])
     good = keep & np.isfinite(off) & usable[:, None]
     usable &= good.sum(axis=1) >= MIN_POINTS
     tangent = np.full((E, 2), np.nan)
