@@ -57,6 +57,7 @@ from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
+from wolfcal.memory import buffers_from_heap
 
 
 def read_captures(
@@ -84,6 +85,7 @@ def read_capture(
     check_mcap(path)
     if not is_finished(path):
         raise torn_error(path)
+    buffers_from_heap()  # the file's chunks and image messages: not mapped afresh each (`wolfcal.memory`)
     try:
         with path.open("rb") as handle:
             return _read(path, handle, robot_config, intrinsics, progress)
