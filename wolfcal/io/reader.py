@@ -40,7 +40,7 @@ from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
-from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
+from wolfcal.io.images import image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import (
     channel_decoder,
@@ -210,15 +210,15 @@ def _pass_one(
                 image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
             stamp = image[0]
             name = image_topics[channel.topic]
-            whole = known is None  # the checksums need every byte; else the header is enough (png)
-            data = bytes(image[1] if whole or image[1][:2] == JPEG_SIGNATURE else image[1][:_PNG_HEAD])
-            kind = image_kind(data)
-            size = image_size(data)
+            # the checksums (known None) read the image where it lies, without a copy; kind and size come from a
+            # png's first bytes, a jpeg's from anywhere in its header segments
+            kind = image_kind(image[1])
+            size = image_size(image[1][:_PNG_HEAD] if kind == "png" else image[1])
             size = sizes.setdefault(size, size)
             damage = None
             if kind:
                 check_key = (channel.topic, message.log_time, stamp, checks.images)
-                damage = known.damaged.get(check_key) if known is not None else image_damage(data)
+                damage = known.damaged.get(check_key) if known is not None else image_damage(image[1])
                 if damage:
                     checks.damaged[check_key] = damage
             checks.images += 1
