@@ -21,7 +21,7 @@ from wolfcal.fit.pipeline import repeat_warnings
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture
-from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_frame
+from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_exact, pair_frame
 from wolfcal.io.samples import Capture
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.faulty import rewrite_capture
@@ -226,3 +226,33 @@ def test_frames_repeating_one_image_are_counted_and_warned_about(simulated, tmp_
     warning = repeat_warnings({"head": observations["head"]}, 0.05)
     assert len(warning) == 1 and f"head camera: {counts[repeated][0]} of {counts[repeated][1]} sample(s)" in warning[0]
     assert "stays at its floor (0.05 px)" in warning[0]
+
+
+def test_capture_frames_paired_at_once_as_one_by_one():
+    """`pair_exact` (a capture file's frames, all at once) gives what `pair_frame(exact=True)` gives frame by frame:
+    the readings stamped like the frame, velocities only where every joint reported one, and for a frame without a
+    state of its stamp the first joint (in name order) that lacks one; joints published in two groups, one group
+    without velocities in one message, one missing a stamp."""
+    rng = np.random.default_rng(5)
+    stamps = np.arange(1, 9) * 1_000 * MS
+    messages = []
+    for k, stamp in enumerate(stamps):
+        legs = rng.normal(size=3)
+        messages.append((int(stamp), ["a", "b", "c"], legs.tolist(), [] if k == 2 else (legs / 10).tolist()))
+        if k != 5:  # the head group lacks the sixth stamp
+            messages.append((int(stamp), ["d", "e"], rng.normal(size=2).tolist(), [0.0, 0.0]))
+    states = JointStates.from_messages(messages)
+    frames = np.array([*stamps, stamps[3] + 1, 0], dtype=np.int64)  # and two stamps no joint state has
+    expected = [pair_frame(states, int(stamp), exact=True) for stamp in frames]
+    got = pair_exact(states, frames)
+    assert [isinstance(r, str) for r in expected] == [False] * 5 + [True] + [False] * 2 + [True, True]
+    for want, have in zip(expected, got, strict=True):
+        if isinstance(want, str):
+            assert have == want
+        else:
+            assert isinstance(have, Paired)
+            np.testing.assert_array_equal(have.positions, want.positions)
+            assert (have.velocities is None) == (want.velocities is None)
+            if want.velocities is not None:
+                np.testing.assert_array_equal(have.velocities, want.velocities)
+    assert got[2].velocities is None and got[5] == "no joint state of d with the image's stamp"  # type: ignore[union-attr]
