@@ -256,3 +256,40 @@ def test_capture_frames_paired_at_once_as_one_by_one():
             if want.velocities is not None:
                 np.testing.assert_array_equal(have.velocities, want.velocities)
     assert got[2].velocities is None and got[5] == "no joint state of d with the image's stamp"  # type: ignore[union-attr]
+
+
+def test_joint_states_read_from_their_layout_as_the_decoder_reads_them():
+    """The reader's JointState layout reading (`_joint_state`) gives the stamp, names, positions and velocities the
+    general ROS 2 decoder gives, for frame ids and names of every length modulo 4 (the CDR padding), empty velocity
+    and effort lists, no joints, a zero stamp (the log time) and a non-ASCII name; a message cut short is left to the
+    decoder (None)."""
+    from mcap_ros2._dynamic import generate_dynamic
+
+    from wolfcal.io.msgdefs import JOINT_STATE, MSGDEFS
+
+    encode = serialize_dynamic(JOINT_STATE, MSGDEFS[JOINT_STATE])[JOINT_STATE]
+    decode = generate_dynamic(JOINT_STATE, MSGDEFS[JOINT_STATE])[JOINT_STATE]
+
+    class Schema:
+        name = JOINT_STATE
+
+    cases = [
+        ("", ["a"], [0.5], [0.1], [1.0], (3, 7)),
+        ("b", ["ab", "abc", "abcd", "abcde"], [1.0, -2.0, 3.5, 1e-9], [], [], (12, 999_999_999)),
+        ("base", [], [], [], [], (1, 0)),
+        ("fr_3", ["knee_ä", "x"], [np.pi, -np.pi], [0.0, float("nan")], [2.0, 3.0], (0, 0)),
+    ]
+    names_seen: dict[bytes, list[str]] = {}
+    for frame_id, names, positions, velocities, effort, (sec, nanosec) in cases:
+        data = encode({"header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id}, "name": names,
+                       "position": positions, "velocity": velocities, "effort": effort})  # fmt: skip
+        want = decode(data)
+        got = reader_module._joint_state(data, Schema, 42, names_seen)
+        assert got is not None
+        assert got[0] == header_stamp_ns(want.header, 42) == (sec * 10**9 + nanosec or 42)
+        assert got[1] == list(want.name) == names
+        np.testing.assert_array_equal(got[2], want.position)
+        np.testing.assert_array_equal(got[3], want.velocity)
+        assert reader_module._joint_state(data[:12], Schema, 42, {}) is None  # within the header
+        if len(positions) == 4:  # the last 12 bytes of the positions and the empty lists' counts missing
+            assert reader_module._joint_state(data[:-20], Schema, 42, {}) is None

@@ -51,7 +51,14 @@ from wolfcal.io.mcapfile import (
     recover_hint,
     torn_error,
 )
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns, stamp_ns
+from wolfcal.io.msgdefs import (
+    COMPRESSED_IMAGE,
+    CONFIG_ATTACHMENT,
+    JOINT_STATE,
+    URDF_ATTACHMENT,
+    header_stamp_ns,
+    stamp_ns,
+)
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
@@ -198,6 +205,7 @@ def _pass_one(
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
     decoders: dict[int, Callable] = {}
+    names_seen: dict[bytes, list[str]] = {}  # a JointState's name list by its bytes (`_joint_state`)
     # with the checks remembered, of a png only its header is read from the file (`_png_head`)
     messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
     for count, (schema, channel, message, complete) in enumerate(messages):
@@ -226,11 +234,16 @@ def _pass_one(
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
             continue
-        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-        stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
-            pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
+            joints = _joint_state(message.data, schema, message.log_time, names_seen)
+            if joints is None:  # not as `_joint_state` reads it: the general decoder
+                decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+                joints = (header_stamp_ns(decoded.header, message.log_time), decoded.name, decoded.position,
+                          decoded.velocity)  # fmt: skip
+            pairer.add_joints(*joints)
         else:
+            decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+            stamp = header_stamp_ns(decoded.header, message.log_time)
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
             if key not in models:  # one model per distinct CameraInfo
@@ -276,6 +289,56 @@ def _compressed_image(data: bytes, schema, log_time: int, complete: bool = True)
         return None
     return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
 
+
+
+def _joint_state(
+    data: bytes, schema, log_time: int, names_seen: dict[bytes, list[str]]
+) -> tuple[int, list[str], tuple[float, ...], tuple[float, ...]] | None:
+    """(header stamp [ns] (`msgdefs.stamp_ns`), names, positions [rad], velocities [rad/s]) of a little-endian CDR
+    sensor_msgs/JointState message, read from its layout (the general decoder took 0.1 ms a message, a quarter of
+    reading a capture of 1000 samples); None for anything else (the caller decodes it with the general decoder).
+    `names_seen`: the name lists read so far by their bytes (a recording repeats one or two lists)."""
+    if schema is None or schema.name != JOINT_STATE or data[:2] != b"\x00\x01":
+        return None
+    try:
+        sec, nanosec, length = struct.unpack_from("<iII", data, 4)
+        pos = 16 + length  # after header.frame_id (CDR offsets count from the end of the 4-byte encapsulation)
+        pos += -(pos - 4) % 4
+        start = pos
+        (count,) = struct.unpack_from("<I", data, pos)
+        pos += 4
+        for _ in range(count):
+            pos += -(pos - 4) % 4
+            (length,) = struct.unpack_from("<I", data, pos)
+            pos += 4 + length
+        key = bytes(data[start:pos])
+        names = names_seen.get(key)
+        if names is None:
+            names = names_seen[key] = _cdr_strings(key, count)
+        arrays = []
+        for _ in range(2):  # position, velocity (effort is not read)
+            pos += -(pos - 4) % 4
+            (count,) = struct.unpack_from("<I", data, pos)
+            pos += 4
+            if count:
+                pos += -(pos - 4) % 8
+            arrays.append(struct.unpack_from(f"<{count}d", data, pos))
+            pos += 8 * count
+    except (struct.error, UnicodeDecodeError):
+        return None
+    return stamp_ns(sec, nanosec, log_time), names, arrays[0], arrays[1]
+
+
+def _cdr_strings(data: bytes, count: int) -> list[str]:
+    """The `count` strings of a CDR string sequence (`data` from its count, aligned as at a 4-byte boundary)."""
+    strings = []
+    pos = 4
+    for _ in range(count):
+        pos += -pos % 4
+        (length,) = struct.unpack_from("<I", data, pos)
+        strings.append(data[pos + 4 : pos + 3 + length].decode("utf-8"))
+        pos += 4 + length
+    return strings
 
 
 def _read(
