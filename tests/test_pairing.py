@@ -18,6 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 import wolfcal.io.reader as reader_module
 from wolfcal.config import load_robot_config
 from wolfcal.fit.pipeline import repeat_warnings
+from wolfcal.io.cdr import joint_state
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture
@@ -259,7 +260,7 @@ def test_capture_frames_paired_at_once_as_one_by_one():
 
 
 def test_joint_states_read_from_their_layout_as_the_decoder_reads_them():
-    """The reader's JointState layout reading (`_joint_state`) gives the stamp, names, positions and velocities the
+    """`wolfcal.io.cdr.joint_state` (the reader's layout reading) gives the stamp, names, positions and velocities the
     general ROS 2 decoder gives, for frame ids and names of every length modulo 4 (the CDR padding), empty velocity
     and effort lists, no joints, a zero stamp (the log time) and a non-ASCII name; a message cut short is left to the
     decoder (None)."""
@@ -284,12 +285,12 @@ def test_joint_states_read_from_their_layout_as_the_decoder_reads_them():
         data = encode({"header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id}, "name": names,
                        "position": positions, "velocity": velocities, "effort": effort})  # fmt: skip
         want = decode(data)
-        got = reader_module._joint_state(data, Schema, 42, names_seen)
+        got = joint_state(data, Schema, 42, names_seen)
         assert got is not None
         assert got[0] == header_stamp_ns(want.header, 42) == (sec * 10**9 + nanosec or 42)
         assert got[1] == list(want.name) == names
         np.testing.assert_array_equal(got[2], want.position)
         np.testing.assert_array_equal(got[3], want.velocity)
-        assert reader_module._joint_state(data[:12], Schema, 42, {}) is None  # within the header
+        assert joint_state(data[:12], Schema, 42, {}) is None  # within the header
         if len(positions) == 4:  # the last 12 bytes of the positions and the empty lists' counts missing
-            assert reader_module._joint_state(data[:-20], Schema, 42, {}) is None
+            assert joint_state(data[:-20], Schema, 42, {}) is None

@@ -11,6 +11,7 @@ from wolfcal.errors import WolfcalError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SIGNATURE = b"\xff\xd8"
+PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
 JPEG_QUALITY = 95
 # png as wolfcal writes it: stored (zlib level 0), rows unfiltered. A standard png that any tool opens, the size of
 # the raw pixels (+0.1 %), decoded 5-10x faster than deflated (the fit decodes every image: inflating and unfiltering
