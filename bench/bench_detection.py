@@ -117,6 +117,7 @@ def edges_at(revision: str) -> types.ModuleType:
     source = subprocess.run(["git", "-C", str(ROOT), "show", f"{revision}:wolfcal/vision/edges.py"],
                             capture_output=True, text=True, check=True).stdout  # fmt: skip
     module = types.ModuleType(f"edges_at_{revision}")
+    sys.modules[module.__name__] = module  # dataclasses look their module up
     exec(compile(source, f"{revision}:wolfcal/vision/edges.py", "exec"), module.__dict__)
     return module
 

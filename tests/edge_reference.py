@@ -78,8 +78,9 @@ def _refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: 
 
     Edge profiles start max(2 px, 0.3 cell) from the corner (clear of where blur rounds the corner off; at an
     acute corner further, so that they stay clear of the other edge), reach along the edge for 2.5 cells and
-    across it for one cell across that edge (2-6 px) each way; the edge is measured within half that cell
-    (1-2.5 px) of it, so it sees the black border and the white quiet zone only. The fit
+    across it for one cell across that edge (2-6 px, at most 2 px beyond the window) each way; the edge is
+    measured within half that cell (1-2.5 px) of it, so it sees the black border and the white quiet zone only.
+    Every profile on its own, two iterations (the vectorised version's bins and settled tags aside). The fit
     is local (a parabola per edge), which keeps the corner exact under lens distortion that bends whole
     edges. A corner whose edges cannot be measured (image border, low contrast) keeps its previous estimate.
     """
@@ -99,9 +100,9 @@ def _refine_edges(img: np.ndarray, corners: np.ndarray, cells: int, iterations: 
                 n = np.array([-e[1], e[0]])
                 n = n if np.dot(n, c - centre) >= 0 else -n
                 across = max(np.dot(c - q, n) for q in corners) / cells  # one cell across this edge [px]
-                half = float(np.clip(across, 2.0, 6.0))
-                t = np.arange(-half, half + 1e-9, 0.25)
                 window = float(np.clip(0.5 * across, 1.0, 2.5))  # keep clear of data bits and background
+                half = min(float(np.clip(across, 2.0, 6.0)), window + 2.0)
+                t = np.arange(-half, half + 1e-9, 0.25)
                 cos = float(np.dot(e, f))
                 clear = (1.0 + (window + 1.0) * max(cos, 0.0)) / np.sqrt(max(1.0 - cos * cos, 1e-6))
                 first = max(2.0, 0.3 * cell, clear)  # acute corner: profiles clear of the other edge

@@ -371,3 +371,23 @@ def test_the_bad_inputs_script_passes_every_case():
                             text=True, timeout=1800)  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert re.search(r"(\d+) of \1 cases pass", result.stdout)
+
+
+def test_a_missing_camera_intrinsics_key_is_named_with_what_needs_it(tmp_path):
+    """A robot config whose head camera has no intrinsics: simulate, capture and plan name the file, the key to set
+    and their other way to give it (`RobotConfig.intrinsics_file`), before any output is written."""
+    robot = tmp_path / "robot"
+    shutil.copytree(ROBOT, robot)
+    config = robot / "robot.yaml"
+    config.write_text("".join(line for line in config.read_text().splitlines(keepends=True)
+                              if not line.startswith("  intrinsics:")))  # fmt: skip
+    key = "needs the intrinsics of camera 'head': set 'camera.intrinsics' to its camera_info YAML "
+    key += "(`wolfcal intrinsics` makes one)"
+    for args, out, needs in (
+        (("simulate", "--samples", 2), "s.mcap", f"simulating {key} or pass --intrinsics FILE"),
+        (("capture", "--camera", "sim", "--manual"), "c.mcap", f"capturing {key} or pass --intrinsics FILE"),
+        (("plan",), "plan.yaml", f"the plan {key}"),
+    ):
+        code, output = cli(*args, "--robot", robot, "--out", tmp_path / out)
+        assert code != 0 and f"{config}: {needs}" in " ".join(output.split()), output
+        assert not (tmp_path / out).exists()

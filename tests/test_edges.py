@@ -15,8 +15,11 @@ from wolfcal.vision.tags import _detector, _found, _to_gray, detect_tags, tag_ce
 
 
 @pytest.mark.parametrize("camera", [CAMERA, CAMERA.scaled(0.25, 0.25, 512, 384)], ids=["full", "binned"])
-def test_vectorised_refinement_equals_the_reference(camera):
-    """Same starting corners (aruco's), same image: the corners agree to 1e-6 px, for large and small tags."""
+def test_vectorised_refinement_equals_the_reference(camera, monkeypatch):
+    """Same starting corners (aruco's), same image: the corners agree to 1e-6 px, for large and small tags (every
+    profile on its own and two iterations, as the reference loop does them)."""
+    monkeypatch.setattr(edges, "PROFILES", 10**6)
+    monkeypatch.setattr(edges, "SETTLED", 0.0)
     rng = np.random.default_rng(7)
     compared = 0
     for _ in range(6):
@@ -92,3 +95,24 @@ def test_edge_offsets_of_a_box_filtered_step():
     profiles = np.stack([20 + 200 * profile, 50 + 100 * profile])
     found = edge_offsets(profiles, t, np.array([20.0, 50.0]), np.array([220.0, 150.0]), 2.0)
     np.testing.assert_allclose(found, edge, atol=0.01)
+
+
+def test_binned_profiles_and_settled_tags_keep_the_corners(monkeypatch):
+    """Large tags (cells of 12-40 px: 100-200 profiles an edge, averaged in bins; most settled after one iteration)
+    get the corners of every profile on its own and two iterations to 0.05 px, and the truth to 0.15 px."""
+    rng = np.random.default_rng(5)
+    views = [make_transform(FACING, [x, y, z]) for x, y, z in ((-0.2, -0.1, 0.3), (0.1, 0.1, 0.5), (0.3, -0.05, 0.9))]
+    image = render_targets(CAMERA, [tag_target("tag36h11", i, T) for i, T in enumerate(views)], noise_sigma=2.0,
+                           rng=rng)  # fmt: skip
+    found = _found(image, "tag36h11", None, "edges")
+    assert sorted(found) == [0, 1, 2]
+    start = np.stack([found[k] for k in range(3)])
+    img = image.astype(np.float32)
+    binned = refine_edges(img, start, tag_cells("tag36h11"))
+    monkeypatch.setattr(edges, "PROFILES", 10**6)
+    monkeypatch.setattr(edges, "SETTLED", 0.0)
+    every = refine_edges(img, start, tag_cells("tag36h11"))
+    assert np.abs(binned - every).max() < 0.05
+    assert 0.0 < np.abs(binned - every).max()  # the bins are used
+    for tag_id, corners in enumerate(binned):
+        assert np.linalg.norm(corners - truth(CAMERA, views[tag_id]), axis=1).max() < 0.15

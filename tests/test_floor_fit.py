@@ -12,7 +12,9 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.floor_block import check_floor_samples
 from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.result import fit_result, load_result, summary_lines, write_result
 from wolfcal.observations import Observations
+from wolfcal.outliers import FLOOR_CORNER_PX
 from wolfcal.robot.corrections import Corrections
 from wolfcal.sim.floor import simulate_floor
 from wolfcal.sim.scenario import synthetic_scenario
@@ -97,3 +99,32 @@ def test_single_floor_corner_far_off_does_not_tilt_the_fitted_floor(robot):
     floor_result = next(b for b in off.solution.blocks if b.name == "floor")
     assert floor_result.n_units <= len(obs.uv) - len(views) + 2  # the moved corners are left out
     assert ground_4_5(robot, clean.corrections, off.corrections) < 0.0015  # [m] at 4.5 m
+
+
+def test_result_yaml_names_the_single_floor_corners_left_out(robot, tmp_path):
+    """One floor corner moved 2 px (image down) in a clean simulated capture: the fit leaves it out on its own
+    (`outliers.FLOOR_CORNER_PX`) and result.yaml says so, in the floor block's count, the sample's row
+    (tag id, corner index), the top-level count and the summary; the clean capture does not list it."""
+    feet, floor = scene(robot, 1, offsets="none")
+    obs, options = floor.obs, FitOptions(free="camera")
+    clean = fit_result(fit_observations(robot, {"head": joined(feet.obs, obs)}, options), options, [], None, [])
+    row = 37
+    sample, corner = int(obs.sample_index[row]), [int(obs.tag_ids[row]), int(obs.corner_index[row])]
+    moved = obs.subset(np.arange(obs.n_samples))
+    moved.uv[row, 1] += 2.0
+    fit = fit_observations(robot, {"head": joined(feet.obs, moved)}, options)
+    write_result(tmp_path / "result.yaml", fit_result(fit, options, [], None, []))
+    result = load_result(tmp_path)
+
+    def floor_block(r):
+        return next(b for b in r.blocks if b["name"] == "floor")
+
+    before, after = floor_block(clean), floor_block(result)
+    assert corner not in before["samples"][sample]["outlier_corners"]
+    assert corner in after["samples"][sample]["outlier_corners"]
+    listed = sum(len(s["outlier_corners"]) for s in after["samples"])
+    assert after["n_outlier_corners"] == listed == result.n_outlier_corners >= 1
+    assert after["corner_rule"]["factor"] == FLOOR_CORNER_PX.factor
+    assert after["n_units_used"] == len(obs.uv) - listed  # no floor view left out here: every other corner counts
+    assert all("outlier_corners" not in s for s in result.samples)  # the head camera's views have no corner rule
+    assert f"{listed} single corner(s) far off" in "\n".join(summary_lines(result))

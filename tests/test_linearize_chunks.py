@@ -13,6 +13,7 @@ from test_external_fit import WEBCAM, other_robot  # noqa: F401 (fixture)
 from wolfcal.fit import camera_block
 from wolfcal.fit.camera_block import CameraBlock
 from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.robot.derivatives import ChainDerivatives, tag_key
 from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
 
 
@@ -65,3 +66,21 @@ def test_corners_in_any_order_or_missing_get_their_numbers(robot, camera):
         x, y = getattr(whole, f.name), getattr(other, f.name)
         if x is not None:
             np.testing.assert_allclose(y, x[order], rtol=1e-12, atol=1e-9 * np.abs(x).max(), err_msg=f.name)
+
+
+def test_relative_twists_are_the_dense_twists_difference(robot, camera):
+    """`ChainDerivatives.relative` (what the camera block multiplies) holds the numbers of twist(frame) -
+    twist(viewer) in its columns, and every column it leaves out is exactly 0 there (joints above both), for the joint
+    readings and for the chain parameters (joint offsets, the camera's frame, tag mounts)."""
+    scenario = synthetic_scenario(robot, camera, n=12, seed=5, offsets="all")
+    fit = fit_observations(robot, scenario.obs, FitOptions(free="leg", side="both"))
+    block = fit.blocks[0]
+    corrections = fit.chain.corrections(fit.solution.values[: len(fit.chain)])
+    d = ChainDerivatives(robot, block.q_measured, corrections, fit.chain, [block.viewer], block.tag_ids)
+    for key in [tag_key(t) for t in block.tag_ids]:
+        for joints, dense in ((True, d.twist_q), (False, d.twist_p)):
+            cols, twists = d.relative(key, block.viewer, joints)
+            difference = np.swapaxes(dense(key) - dense(block.viewer), 1, 2)  # (S, 6, K)
+            assert 0 < len(cols) < difference.shape[2]
+            assert np.array_equal(twists, difference[:, :, cols])
+            assert not np.any(np.delete(difference, cols, axis=2))

@@ -103,6 +103,29 @@ def test_whitening_is_the_symmetric_inverse_square_root_of_each_groups_covarianc
             assert np.all(whitening.apply(r, sigma)[left_out] == 0.0)
 
 
+def test_split_normal_is_the_weighted_sum_over_the_split_rows():
+    """The normal equations of the split rows summed without forming them (`split_normal`) agree with the sums written
+    out over `split`'s rows: rows weighted 1, a few weighted otherwise (a robust fit's far rows, 0 for the Newton
+    steps' rows beyond the loss's bend), many weighted otherwise (then formed), and with rows in no group."""
+    rng = np.random.default_rng(8)
+    for tau, scale in ((0.0, np.ones(120)), (0.4, np.repeat(rng.uniform(1, 3, 60), 2))):
+        shared, pose = shared_errors(rng, 60, tau)
+        for keep in (np.ones(60, dtype=bool), rng.random(60) > 0.1):
+            whitening = GroupedWhitening(row_groups(pose, 2, keep), shared, scale)
+            M = rng.normal(0, 1.0, (120, 7))
+            for sigma in (0.05, 0.3):
+                J = whitening.split(M, sigma)
+                v = rng.normal(0, 1.0, len(J))
+                for odd in (0, 5, 80):
+                    weight = np.ones(len(J))
+                    weight[rng.choice(len(J), odd, replace=False)] = rng.choice([0.0, 0.3], odd)
+                    H, g = whitening.split_normal(M, sigma, weight, v)
+                    H_ref, g_ref = J.T @ (weight[:, None] * J), J.T @ v
+                    np.testing.assert_allclose(H, H_ref, rtol=1e-9, atol=1e-10 * np.abs(H_ref).max())
+                    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-10 * np.abs(g_ref).max())
+                    assert np.array_equal(H, H.T)
+
+
 def test_a_long_still_pose_is_never_a_dense_block():
     """A still pose of 8000 rows (4000 corners: 100 frames of 40): the factors stay thin (rows x shared errors)
     and whitening it agrees with the definition on the part that can be checked densely (a group of the same
@@ -204,6 +227,10 @@ class DenseWhitening:
 
     def chunks(self, max_rows: int):
         yield np.arange(len(self.group_of_row)), self  # one chunk: rows in no group are zero rows
+
+    def split_normal(self, M: np.ndarray, sigma: float, weight: np.ndarray, v: np.ndarray):
+        J = self.split(M, sigma)  # the definition: the weighted sums over the split rows written out
+        return J.T @ (weight[:, None] * J), J.T @ v
 
     def standardizer(self, r: np.ndarray):
         return lambda sigma: self.standardized(r, sigma)

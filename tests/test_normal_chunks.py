@@ -11,6 +11,7 @@ from test_noise import TRIPOD, repeated_frames
 
 from wolfcal.fit import problem
 from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.uncertainty import EIGEN_CONDITION_LIMIT, information_uncertainty, triangular_factor
 from wolfcal.sim.scenario import synthetic_external_scenario
 
 SLOW = pytest.mark.slow
@@ -58,3 +59,23 @@ def test_a_fit_in_tiny_chunks_is_the_fit_in_one(robot, camera, monkeypatch):
                                atol=1e-6 * float(np.min(whole.solution.std)))  # fmt: skip
     np.testing.assert_allclose(chunked.solution.std, whole.solution.std, rtol=1e-6)
     assert [b.outlier_views for b in chunked.solution.blocks] == [b.outlier_views for b in whole.solution.blocks]
+
+
+def test_the_condition_number_from_the_eigenvalues_unless_nearly_singular():
+    """Below EIGEN_CONDITION_LIMIT the information's eigenvalues give the condition number the triangular factor
+    gives, without asking for the factor; above it (two columns nearly alike) the factor is asked for and used: the
+    eigenvalues would lose the smallest singular value (1e-9 of the largest here)."""
+    rng = np.random.default_rng(3)
+    for spread, nearly_singular in ((1e-2, False), (1e-9, True)):
+        J = rng.normal(0.0, 1.0, (400, 6)) * np.array([1.0, 10.0, 0.1, 3.0, 1.0, 1.0])
+        J[:, 5] = J[:, 4] + spread * rng.normal(0.0, 1.0, 400)
+        asked: list[bool] = []
+
+        def factor(J: np.ndarray = J, asked: list[bool] = asked) -> np.ndarray:
+            asked.append(True)
+            return triangular_factor(J)
+
+        exact = information_uncertainty(J.T @ J, np.ones(6), triangular_factor(J)).condition_number
+        lazy = information_uncertainty(J.T @ J, np.ones(6), factor)
+        assert bool(asked) == nearly_singular == (exact >= EIGEN_CONDITION_LIMIT)
+        assert lazy.condition_number == pytest.approx(exact, rel=1e-7)

@@ -50,6 +50,39 @@ def test_the_threshold_test_agrees_with_the_median():
     assert weighted_median(big, np.ones_like(big)) == pytest.approx(np.median(big), rel=2e-3)  # the spread's bias
 
 
+def sorted_weighted_median(values: np.ndarray, weights: np.ndarray, width: float = 0.05) -> float:
+    """`weighted_median` by its definition over every value: all 2N edges of the spread weights sorted, the
+    piecewise-linear cumulative weight walked from the lowest (the middle of a flat stretch at half)."""
+    edges = np.concatenate([values - width, values + width])
+    order = np.argsort(edges, kind="stable")
+    slope = np.cumsum(np.concatenate([weights, -weights])[order] / (2.0 * width))
+    edges = edges[order]
+    cumulative = np.concatenate([[0.0], np.cumsum(slope[:-1] * np.diff(edges))])
+    half = 0.5 * float(np.sum(weights))
+
+    def at(level: float) -> float:
+        k = min(int(np.searchsorted(cumulative, level)), len(edges) - 1)
+        return float(edges[k]) if k == 0 or slope[k - 1] <= 0.0 else float(
+            edges[k - 1] + (level - cumulative[k - 1]) / slope[k - 1])
+
+    return 0.5 * (at(half * (1.0 - 1e-9)) + at(half * (1.0 + 1e-9)))
+
+
+def test_the_median_found_in_a_window_is_the_median_over_all_values():
+    """`weighted_median` sorts only the values near the plain median: the same number as the definition walked over
+    all of them, for standardised numbers with their shares as weights (many values, heavy tails, an offset plain
+    median), values far apart (a flat stretch at half), ties, one value and no weight."""
+    rng = np.random.default_rng(4)
+    cases = [(np.abs(rng.standard_t(3, 20_000)), rng.uniform(0.0, 1.0, 20_000)),
+             (np.abs(rng.normal(size=3000)), np.where(rng.random(3000) < 0.3, 5.0, 0.1)),
+             (np.array([1.0, 2.0, 3.0, 4.0]), np.ones(4)), (np.array([0.5, 0.5, 0.5, 2.0]), np.array([1.0, 1, 1, 3])),
+             (np.array([0.7]), np.array([0.4])), (np.array([0.2, 0.9]), np.zeros(2))]
+    cases += [(np.round(np.abs(rng.normal(size=400)), 1), rng.uniform(0.1, 2.0, 400)) for _ in range(20)]
+    for values, weights in cases:
+        assert weighted_median(values, weights) == pytest.approx(sorted_weighted_median(values, weights),
+                                                                 rel=1e-12, abs=1e-12)
+
+
 @pytest.fixture(scope="module")
 def legs_demo():
     robot = load_robot(ROOT / "configs" / "wolfgang")

@@ -138,6 +138,17 @@ class RobotConfig:
         index = [c.name for c in self.external_cameras].index(self.external_camera(name).name)
         return self.external_cameras[index].intrinsics, f"external_cameras[{index}].intrinsics"
 
+    def intrinsics_file(self, name: str, purpose: str, alternative: str = "") -> Path:
+        """The configured camera_info YAML of camera `name`; a WolfcalError naming the key to set when there is none
+        (`purpose`: what needs it, e.g. 'simulating'; `alternative`: another way to give it, e.g. a command option)."""
+        path, key = self.camera_intrinsics(name)
+        if path is None:
+            raise WolfcalError(
+                f"{self.path}: {purpose} needs the intrinsics of camera '{name}': set '{key}' to its camera_info YAML "
+                f"(`wolfcal intrinsics` makes one){f' or {alternative}' if alternative else ''}"
+            )
+        return path
+
     @property
     def camera_names(self) -> list[str]:
         """'head' (when the config has a head camera) and the names of the external cameras, in config order."""

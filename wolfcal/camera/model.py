@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wolfcal.errors import WolfcalError
+
 MODELS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
 
 
@@ -69,6 +71,15 @@ class CameraModel:
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
         return CameraModel(width, height, K, self.D.copy(), self.distortion_model, self.name)
+
+    def binned(self, b: int, name: str | None = None) -> CameraModel:
+        """The same lens in images binned b x b (b = 1: this model). A WolfcalError naming `--binning` and the camera
+        (`name`, else the model's) when b does not divide the size."""
+        if b < 1 or self.width % b or self.height % b:
+            raise WolfcalError(
+                f"--binning {b}: must divide the size {self.width}x{self.height} of camera '{name or self.name}'"
+            )
+        return self if b == 1 else self.scaled(1 / b, 1 / b, self.width // b, self.height // b)
 
     # --- distortion on normalised coordinates -------------------------------------------------------------
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:

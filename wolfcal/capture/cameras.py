@@ -17,7 +17,6 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.capture.options import CaptureOptions, parse_external
 from wolfcal.capture.sim_camera import SimCamera
-from wolfcal.errors import WolfcalError
 from wolfcal.hardware.camera import CameraSource, open_camera
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot
@@ -32,16 +31,6 @@ class CaptureCamera:
     source: CameraSource | None = None  # opened by `open_sources`
 
 
-def _binned(name: str, camera: CameraModel, binning: int) -> CameraModel:
-    if binning < 1 or camera.width % binning or camera.height % binning:
-        raise WolfcalError(
-            f"--binning {binning}: must divide the size {camera.width}x{camera.height} of camera '{name}'"
-        )
-    if binning == 1:
-        return camera
-    return camera.scaled(1 / binning, 1 / binning, camera.width // binning, camera.height // binning)
-
-
 def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCamera]:
     """The cameras to record by name ('head' first), checked against the config; nothing opened yet."""
     sources: dict[str, str] = {}
@@ -54,20 +43,12 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
         sources[name] = source
     cameras = {}
     for name, source in sources.items():
-        if name == HEAD_CAMERA:
-            path = options.intrinsics or robot.config.head_camera().intrinsics
-            if path is None:
-                raise WolfcalError(f"{robot.config.path}: no 'camera.intrinsics'; pass --intrinsics camera_info.yaml")
-        else:
-            path, key = robot.config.camera_intrinsics(name)
-            if path is None:
-                raise WolfcalError(
-                    f"{robot.config.path}: no '{key}' for external camera '{name}'; set it to the camera's "
-                    "camera_info YAML (`wolfcal intrinsics` makes one)"
-                )
-        model = load_camera_info(Path(path))
+        head = name == HEAD_CAMERA
+        path = (Path(options.intrinsics) if head and options.intrinsics
+                else robot.config.intrinsics_file(name, "capturing", "pass --intrinsics FILE" if head else ""))
+        model = load_camera_info(path)
         binning = options.binning or ((4 if name == HEAD_CAMERA else 2) if source == "sim" else 1)
-        cameras[name] = CaptureCamera(model, _binned(name, model, binning), binning, source)
+        cameras[name] = CaptureCamera(model, model.binned(binning, name), binning, source)
     return cameras
 
 

@@ -14,7 +14,7 @@ A joint not named in a pose keeps its previous target (at the start: where it st
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,6 +46,16 @@ class PoseScript:
         for pose in self.poses:
             seen.update(dict.fromkeys(pose.joints))
         return list(seen)
+
+    def readings(self, joint_names: list[str], start: Mapping[str, float]) -> np.ndarray:
+        """(S, J) the readings [rad] of `joint_names` at each pose as the script drives them: each joint at its
+        latest target, a joint no pose has named yet at `start` (others 0)."""
+        targets = dict(start)
+        rows = []
+        for pose in self.poses:
+            targets.update(pose.joints)
+            rows.append([targets.get(j, 0.0) for j in joint_names])
+        return np.array(rows)
 
 
 def joint_limits(robot: Robot, joints: Iterable[str]) -> dict[str, tuple[float, float]]:
@@ -124,11 +134,7 @@ def colliding_poses(robot: Robot, script: PoseScript, start: dict[str, float]) -
     model = optional_collision_model(robot)
     if model is None:
         return None
-    targets = {**robot.config.planning.rest_pose, **start}
-    q = []
-    for pose in script.poses:
-        targets.update(pose.joints)
-        q.append([targets.get(j, 0.0) for j in robot.joint_names])
-    clearance = model.clearance(np.array(q))
-    return {pose.name: model.colliding_pair(np.array(row)) or ("?", "?")
+    q = script.readings(robot.joint_names, {**robot.config.planning.rest_pose, **start})
+    clearance = model.clearance(q)
+    return {pose.name: model.colliding_pair(row) or ("?", "?")
             for pose, row, c in zip(script.poses, q, clearance) if c < 0}  # fmt: skip

@@ -274,9 +274,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     out in them (`outlier_corners`, `outliers.FLOOR_CORNER_PX`, up to CORNER_ROUNDS times), the residual scale
     and the corners' rms [px] and the fitted inset [px]. None with fewer than MIN_VIEWS views of tags
     seen twice. `corner_inset`: the fit's `floor.corner_inset` and its 1-sigma [px]."""
-    views = floor_views(robot, obs, model)
-    views = _subset(views, _seen_twice(views.placements))
-    if len(views.tags) < MIN_VIEWS:
+    views = _measurable(floor_views(robot, obs, model))
+    if views is None:
         return None
     inset = (corner_inset[0], max(corner_inset[1], INSET_SPREAD * abs(corner_inset[0]), MIN_INSET_STD_PX))
     fit = _FloorFit(robot, views, camera or obs.camera, inset)
@@ -287,9 +286,8 @@ def real_floor(robot: Robot, obs: Observations, model: Corrections, corner_inset
     off = fit.offsets(x, every) * views.weight[:, None, None]
     outliers = FIT_VIEW_PX.flags(np.sqrt(np.mean(off.reshape(-1, 8) ** 2, axis=1)))
     if outliers.any():
-        views = _subset(views, ~outliers)
-        views = _subset(views, _seen_twice(views.placements))
-        if len(views.tags) < MIN_VIEWS:
+        views = _measurable(_subset(views, ~outliers))
+        if views is None:
             return None
         first, fit = fit, _FloorFit(robot, views, camera or obs.camera, inset)
         every = np.ones(len(views.tags), dtype=bool)
@@ -341,6 +339,12 @@ def _seen_twice(placements: np.ndarray) -> np.ndarray:
     """(V,) bool: the views of tag places seen in at least two views (a place is unknown: one view is no data)."""
     ids, inverse, counts = np.unique(placements, return_inverse=True, return_counts=True)
     return (counts >= 2)[inverse.ravel()]
+
+
+def _measurable(views: FloorViews) -> FloorViews | None:
+    """The views of tag places seen at least twice (`_seen_twice`); None when fewer than MIN_VIEWS are left."""
+    views = _subset(views, _seen_twice(views.placements))
+    return views if len(views.tags) >= MIN_VIEWS else None
 
 
 def _subset(views: FloorViews, keep: np.ndarray) -> FloorViews:

@@ -156,22 +156,30 @@ class CameraBlock(Block):
         n_units = len(view_of_unit)
         regular = n_units == 4 * len(views) and np.array_equal(view_of_unit, np.arange(n_units) // 4)
 
-        def chain_rule(tag_twists: list[np.ndarray], viewer_twists: np.ndarray) -> np.ndarray:
-            """(M, 2, K) d(pixel)/d(unknowns) from the tags' and the viewer's twists (S, K, 6)."""
-            relative = np.empty((len(views), 6, viewer_twists.shape[1]))  # (V, 6, K)
-            for col, tag_twist in enumerate(tag_twists):
-                mine = np.flatnonzero(view_tag == col)
-                relative[mine] = np.swapaxes(tag_twist[view_sample[mine]] - viewer_twists[view_sample[mine]], 1, 2)
-            if regular:  # each view's four corners in a row (whole tags): one product per view
-                return (D_twist.reshape(len(views), 8, 6) @ relative).reshape(n_units, 2, -1)
-            return D_twist @ relative[view_of_unit.ravel()]
+        def chain_rule(joints: bool, width: int) -> np.ndarray:
+            """(M, 2, width) d(pixel)/d(the joint readings or the chain parameters) from each tag's twists relative
+            to the viewer's (`ChainDerivatives.relative`: only the columns that do not cancel; the others are 0)."""
+            out = np.zeros((n_units, 2, width))
+            per_view = out.reshape(len(views), 8, width) if regular else out
+            for col, key in enumerate(keys):
+                cols, relative = d.relative(key, self.viewer, joints)  # (C,), (S, 6, C)
+                if not len(cols):
+                    continue
+                if regular:  # each view's four corners in a row (whole tags): one product per view
+                    mine = np.flatnonzero(view_tag == col)
+                    part = D_twist.reshape(len(views), 8, 6)[mine] @ relative[view_sample[mine]]  # (n, 8, C)
+                else:
+                    mine = np.flatnonzero(t == col)
+                    part = D_twist[mine] @ relative[s[mine]]  # (n, 2, C)
+                per_view[mine[:, None], :, cols] = np.swapaxes(part, 1, 2)
+            return out
 
         return Linearization(
             residual=residual,
-            jac_chain=chain_rule([d.twist_p(k) for k in keys], d.twist_p(self.viewer)),
+            jac_chain=chain_rule(False, len(chain)),
             jac_local=None if jac_local is None else D @ jac_local,
             local_cols=local_cols,
-            joint_sensitivity=chain_rule([d.twist_q(k) for k in keys], d.twist_q(self.viewer)),
+            joint_sensitivity=chain_rule(True, len(self.robot.joint_names)),
         )
 
     def _through_camera_pose(self, pose_values: np.ndarray, k: np.ndarray, p_base: np.ndarray):

@@ -34,6 +34,7 @@ def levenberg_marquardt(
     cost_tol: float = 0.0,
     std_tol: float = 0.0,
     std: np.ndarray | None = None,
+    damping: float = 1e-4,
 ) -> LMResult:
     """Minimise 0.5 * |fun(x)|^2 given normal(x) = (H (P, P), g (P,)): the cost's curvature (J^T J of fun's
     Jacobian J, or a better one) and its gradient J^T fun(x) at x (solved densely: P up to a few thousand). Stops
@@ -46,7 +47,7 @@ def levenberg_marquardt(
     cost, nfev = float(r @ r), 1
     H, g = normal(x)
     scale = np.maximum(np.diag(H), 1e-12)
-    mu, nu, fresh = 1e-4, 2.0, True  # fresh: H, g were computed at x since the last check
+    mu, nu, fresh = damping, 2.0, True  # fresh: H, g were computed at x since the last check
     for _ in range(max_iterations):
         if np.max(np.abs(g)) < gtol:
             return LMResult(x, 0.5 * cost, nfev, 3)

@@ -227,7 +227,14 @@ class Problem:
             for rows, part in state.noise_model.chunks(CHUNK_ROWS):
                 whitened = part.split(residual[rows], state.sigma)
                 robust, slope = huber_sqrt(whitened, self.huber_k)
-                J = part.split(self._rows_jacobian(state, lin, rows), state.sigma)
+                M = self._rows_jacobian(state, lin, rows)
+                if R is None and not scipy.sparse.issparse(M):  # summed without the whitened rows (most weigh 1)
+                    weight = (np.abs(whitened) <= self.huber_k).astype(float) if curvature else slope**2
+                    H_part, g_part = part.split_normal(M, state.sigma, weight, slope * robust)
+                    H += H_part
+                    g += g_part
+                    continue
+                J = part.split(M, state.sigma)
                 if curvature:
                     g += J.T @ (slope * robust)  # the Huber loss's derivative, clip(w, -k, k)
                     inside = (np.abs(whitened) <= self.huber_k).astype(float)
@@ -257,6 +264,8 @@ class Problem:
         DENSE_LIMIT unknowns, sparse."""
         n, sig = len(self.params), self.params.prior_sigmas
         J_chain = lin.jac_chain.reshape(lin.residual.size, self.n_chain)[rows] * sig[: self.n_chain]
+        if n == self.n_chain:  # no block brings unknowns: the chain's columns are all
+            return J_chain if n <= DENSE_LIMIT else scipy.sparse.csr_matrix(J_chain)
         dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
         if dense is not None:
             dense[:, : self.n_chain] = J_chain

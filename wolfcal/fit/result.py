@@ -114,6 +114,8 @@ def _block_dict(fit: Fit, k: int) -> dict:
     outlier_tags: dict[int, list[int]] = {}
     for s, t in sorted(b.outlier_views):
         outlier_tags.setdefault(s, []).append(t)
+    rule = block.unit_rule  # single corners left out one by one (None: the block has no such rule)
+    corners = _outlier_corners(fit, k) if rule is not None else None
     samples = []
     for i in range(obs.n_samples):
         samples.append({
@@ -125,14 +127,21 @@ def _block_dict(fit: Fit, k: int) -> dict:
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
             "outlier": bool(b.outlier_samples[i]),
             "outlier_tags": outlier_tags.get(i, []),
+            **({"outlier_corners": corners.get(i, [])} if corners is not None else {}),
         })  # fmt: skip
+    corner_keys = {} if rule is None or corners is None else {
+        # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
+        "n_outlier_corners": sum(len(c) for c in corners.values()),
+        "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
+    }
     return {
         "name": b.name,
         "system": b.system,
         "camera": views.camera_name,
         "unit": unit,
         "tags_used": views.tag_ids,
-        "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views",
+        "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views"
+        + (", single corners left out excluded" if rule is not None else ""),
         f"rms_before_{unit}": round(b.rms_before, 4),
         f"rms_after_{unit}": round(b.rms_after, 4),
         f"max_after_{unit}": round(b.max_after, 4),
@@ -140,9 +149,28 @@ def _block_dict(fit: Fit, k: int) -> dict:
         "n_samples": obs.n_samples,
         "n_outlier_samples": sum(s["outlier"] for s in samples),
         "n_outlier_views": len(b.outlier_views),
+        **corner_keys,
         "n_units_used": b.n_units,
         "samples": samples,
     }
+
+
+CORNER_RULE_MEANING = (
+    "a corner of a view kept is left out when its distance from where the fit puts it, less what the view's share of "
+    "the joint-reading errors explains, exceeds max(floor_px, factor * the robust per-axis scale of the corners "
+    "counted) [px]"
+)
+
+
+def _outlier_corners(fit: Fit, k: int) -> dict[int, list[list[int]]]:
+    """Sample -> [tag id, corner index] of each single corner the fit left out of block k's views kept
+    (`Block.unit_rule`, e.g. `outliers.FLOOR_CORNER_PX`; the solver's final outlier sets). Only for a block with a
+    unit rule: its units are the detected corners, one per row of its observations."""
+    obs, state = cast(TagViewBlock, fit.blocks[k]).obs, fit.problem.states[k]
+    out: dict[int, list[list[int]]] = {}
+    for m in np.flatnonzero(state.excluded_units):
+        out.setdefault(int(obs.sample_index[m]), []).append([int(obs.tag_ids[m]), int(obs.corner_index[m])])
+    return out
 
 
 def external_camera_poses(fit: Fit) -> dict:
@@ -205,7 +233,7 @@ class FitResult:
     n_samples: int
     n_outlier_samples: int
     n_outlier_tag_views: int
-    n_corners_used: int
+    n_corners_used: int  # corners the fit counts (views kept, less the single corners left out)
     converged: bool
     condition_number: float | None  # of the column-scaled Jacobian; None: infinite
     parameters: list[ParameterResult]
@@ -229,13 +257,16 @@ class FitResult:
     # motion-capture file -> clock offset [s]: t_recording = t_file + offset, t_file = seconds since the file's
     # first frame (absent without motion-capture files)
     mocap_clock_offset_s: dict[str, float] | None = None
+    # single corners of views kept left out as far off (blocks with a corner rule, the floor's; 0 in older files)
+    n_outlier_corners: int = 0
 
     HEAD_FIGURES: ClassVar[tuple[str, ...]] = ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")
     OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s")
     KEY_ORDER: ClassVar[tuple[str, ...]] = (  # result.yaml's key order (fields not listed follow in field order)
         "version", "wolfcal_version", "created", "robot", "urdf", "captures", "intrinsics", "free", "side", "fix_tags",
         "system", "external_moving", "systems_used", "tags_used", "rms_meaning", "rms_before_px", "rms_after_px",
-        "max_after_px", "noise_model", "robust_loss", "outlier_rule", "noise_floor_px",
+        "max_after_px", "noise_model", "robust_loss", "outlier_rule", "noise_floor_px", "n_samples",
+        "n_outlier_samples", "n_outlier_tag_views", "n_outlier_corners",
     )
 
     @property
@@ -340,6 +371,7 @@ def fit_result(
         n_samples=sum(b["n_samples"] for b in blocks),
         n_outlier_samples=sum(b["n_outlier_samples"] for b in blocks),
         n_outlier_tag_views=sum(b["n_outlier_views"] for b in blocks),
+        n_outlier_corners=sum(b.get("n_outlier_corners", 0) for b in blocks),
         n_corners_used=sum(b["n_units_used"] for b in blocks),
         converged=bool(solution.converged),
         condition_number=float(u.condition_number) if np.isfinite(u.condition_number) else None,
@@ -399,7 +431,9 @@ def summary_lines(result: FitResult) -> list[str]:
         scale, shown = (1000.0, "mm") if u == "m" else (1.0, u)
         lines += [
             f"{b['name']}: {b['n_samples']} samples ({b['n_outlier_samples']} left out as outliers, "
-            f"{b['n_outlier_views']} outlier view(s) in all), {used} used: {b['n_units_used']}",
+            f"{b['n_outlier_views']} outlier view(s) in all"
+            + (f", {b['n_outlier_corners']} single corner(s) far off" if b.get("n_outlier_corners") else "")
+            + f"), {used} used: {b['n_units_used']}",
             f"  {what} RMS (per axis, inliers): {b[f'rms_before_{u}'] * scale:.3f} {shown} before -> "
             f"{b[f'rms_after_{u}'] * scale:.3f} {shown} after (max {b[f'max_after_{u}'] * scale:.3f} {shown})",
         ]

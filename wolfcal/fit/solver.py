@@ -14,6 +14,7 @@ solve happened to stop), and `uncertainty` at the solution.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,6 +46,7 @@ ROUND_COST_TOL = 1e-3
 ROUND_STD_TOL = 0.1
 FINAL_STD_TOL = 0.003
 FINAL_FTOL = 1e-12
+FINAL_DAMPING = 1e-9
 # The rounds end once no outlier set changed and no noise level moved by ROUND_NOISE_TOL (relative). The final
 # solve is then repeated under the noise model re-estimated at its solution until no outlier set changes and no
 # level moves by FIXED_POINT_TOL (a level 0.1 % off moves the estimates by far less than 0.01 standard deviations),
@@ -152,7 +154,11 @@ def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_para
     """Robust scale of the whitened inlier residuals (1 when the noise model fits): the median over their degrees of
     freedom of the standardised numbers (`GroupedWhitening.standardized`: what the robust fit weighs, independent of
     how a group is decomposed), corrected for the degrees of freedom the free parameters take."""
-    w, dof = state.noise_model.standardized(residual.ravel(), sigma)
+    return _robust_scale(*state.noise_model.standardized(residual.ravel(), sigma), n_params)
+
+
+def _robust_scale(w: np.ndarray, dof: np.ndarray, n_params: float) -> float:
+    """`residual_scale` of the standardised numbers w with their degrees of freedom dof."""
     n = float(np.sum(dof))
     if n <= n_params:
         return 1.0
@@ -170,18 +176,27 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
-    not below `floor` [unit]); returns the residual scale reached."""
+    not below `floor` [unit]); returns the residual scale reached (`residual_scale`, from the search's own
+    standardised numbers unless setting the level decomposed the groups again)."""
+    model = weakref.ref(state.noise_model)  # not kept alive while set_sigma may build another
     standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
+    # The scale falls as the level grows: at or below 1 at the floor, every step of the search goes down (the same
+    # steps, without evaluating them; the level of a block more precise than the floor, e.g. rendered captures).
+    at_floor = not _scale_above_one(*standardized(float(np.exp(lo))), n_params)
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if _scale_above_one(*standardized(float(np.exp(mid))), n_params):
+        if not at_floor and _scale_above_one(*standardized(float(np.exp(mid))), n_params):
             lo = mid
         else:
             hi = mid
+    sigma = float(np.exp(hi))
+    reached = standardized(sigma)
     del standardized  # its arrays are not kept while set_sigma may decompose the groups again
-    state.set_sigma(float(np.exp(hi)))
-    return residual_scale(state, residual, state.sigma, n_params)
+    state.set_sigma(sigma)
+    if state.noise_model is not model():
+        return residual_scale(state, residual, state.sigma, n_params)
+    return _robust_scale(*reached, n_params)
 
 
 def estimate_class_scales(state: BlockState, lin: Linearization, problem: Problem) -> float:
@@ -368,7 +383,7 @@ def solve(
     std = marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
     for final_index in range(MAX_FINAL_SOLVES):
         result = levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL,
-                                     std_tol=FINAL_STD_TOL, std=std)
+                                     std_tol=FINAL_STD_TOL, std=std, damping=FINAL_DAMPING)
         z, evaluations = result.x, evaluations + result.nfev
         if final_index == MAX_FINAL_SOLVES - 1:
             say(f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
@@ -380,10 +395,11 @@ def solve(
         say(f"final solve {final_index + 1}: the noise model at its solution differs ("
             f"{'outlier set changed' if changed else f'noise {change:.2%}'}): " + "; ".join(notes) + "; solving again")
     after = problem.raw_residuals(z)
-    information, _, triangular = problem.information(z, triangular=True)
+    information, _, _ = problem.information(z)
     return Solution(
         values=problem.values(z),
-        uncertainty=information_uncertainty(information, problem.params.prior_sigmas, triangular),
+        uncertainty=information_uncertainty(information, problem.params.prior_sigmas,
+                                            lambda: problem.information(z, triangular=True)[2]),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,

@@ -8,12 +8,16 @@ Jacobian with unit-norm columns (calibration practice: below 100).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
 
 CORRELATION_LIMIT = 0.9
+# Condition numbers below which the information's eigenvalues give it to ~1e-7 (the smallest eigenvalue's rounding,
+# ~P eps of the largest, relative to it: P eps cond^2 / 2); above, J's triangular factor when it can be had.
+EIGEN_CONDITION_LIMIT = 1e4
 
 
 @dataclass
@@ -46,12 +50,16 @@ def triangular_factor(M: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(M, mode="r"))
 
 
-def information_uncertainty(information: np.ndarray, prior_sigmas: np.ndarray,
-                            triangular: np.ndarray | None = None) -> Uncertainty:
+def information_uncertainty(
+    information: np.ndarray, prior_sigmas: np.ndarray,
+    triangular: np.ndarray | Callable[[], np.ndarray | None] | None = None,
+) -> Uncertainty:
     """Uncertainty of the unknowns from the information J^T J (P, P) of the whitened data Jacobian J in
     prior-normalised units. The condition number from J's triangular factor R (J = Q R, (P, P)) when given, else
     from the information's eigenvalues (which lose what lies below 1e-8 of the largest singular value: a nearly
-    singular problem reads infinite)."""
+    singular problem reads infinite). `triangular` may be a function giving R (or None), called only where the
+    eigenvalues would not do (a condition number from them of EIGEN_CONDITION_LIMIT or more): R costs a fit's
+    whitened Jacobian formed and factored chunk by chunk, 3x the normal equations."""
     n = len(prior_sigmas)
     cov_z = np.linalg.inv(information + np.eye(n))
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
@@ -60,12 +68,14 @@ def information_uncertainty(information: np.ndarray, prior_sigmas: np.ndarray,
         condition = 1.0
     elif np.any(norms < 1e-12):
         condition = float("inf")
-    elif triangular is None:
-        e = np.linalg.eigvalsh(information / np.outer(norms, norms))
-        condition = float(np.sqrt(e[-1] / e[0])) if e[0] > 0 else float("inf")
-    else:  # singular values of the column-scaled Jacobian J / norms = Q (R / norms)
-        s = np.linalg.svd(triangular / norms, compute_uv=False)
-        condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    else:
+        if triangular is None or callable(triangular):
+            e = np.linalg.eigvalsh(information / np.outer(norms, norms))
+            condition = float(np.sqrt(e[-1] / e[0])) if e[0] > 0 else float("inf")
+            triangular = triangular() if callable(triangular) and not condition < EIGEN_CONDITION_LIMIT else None
+        if triangular is not None:  # singular values of the column-scaled Jacobian J / norms = Q (R / norms)
+            s = np.linalg.svd(triangular / norms, compute_uv=False)
+            condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     return Uncertainty(
         std=d * prior_sigmas,
         covariance=cov_z * np.outer(prior_sigmas, prior_sigmas),

@@ -160,6 +160,30 @@ def _solve(
     return camera, np.asarray(rvecs, float).reshape(-1, 3), np.asarray(tvecs, float).reshape(-1, 3)
 
 
+@dataclass
+class ViewFit:
+    """OpenCV's calibration of some views, with every corner's board point, detection and residual (views in
+    order)."""
+
+    camera: CameraModel
+    rvecs: np.ndarray  # (V, 3) board -> camera rotation vectors
+    tvecs: np.ndarray  # (V, 3) [m]
+    obj: np.ndarray  # (N, 3) board points of the corners [m]
+    img: np.ndarray  # (N, 2) detected corners [px]
+    view: np.ndarray  # (N,) view index of each corner
+    residual: np.ndarray  # (N, 2) projected minus detected [px]
+
+
+def fit_views(views: list[Detection], board: Board, model: str, size: tuple[int, int]) -> ViewFit:
+    """Calibrate the views (`_solve`) and project every corner through the result."""
+    camera, rvecs, tvecs = _solve(views, board, model, size)
+    all_obj = board.object_points()
+    obj = np.concatenate([all_obj[v.ids] for v in views])
+    img = np.concatenate([v.corners for v in views])
+    view = np.concatenate([np.full(len(v.ids), i) for i, v in enumerate(views)])
+    return ViewFit(camera, rvecs, tvecs, obj, img, view, _project_all(camera, rvecs, tvecs, obj, view) - img)
+
+
 def calibrate_views(
     views: list[Detection],
     board: Board,
@@ -182,20 +206,16 @@ def calibrate_views(
     used = list(views)
     rejected: list[tuple[Detection, float]] = []
     max_rejected = int(len(views) * MAX_REJECTED_SHARE)
-    all_obj = board.object_points()
     while True:
-        camera, rvecs, tvecs = _solve(used, board, model, size)
-        obj = np.concatenate([all_obj[v.ids] for v in used])
-        img = np.concatenate([v.corners for v in used])
-        view = np.concatenate([np.full(len(v.ids), i) for i, v in enumerate(used)])
-        r = _project_all(camera, rvecs, tvecs, obj, view) - img
-        residuals = [r[view == i] for i in range(len(used))]
+        fit = fit_views(used, board, model, size)
+        residuals = [fit.residual[fit.view == i] for i in range(len(used))]
         rms = np.array([np.sqrt(np.mean(np.sum(e**2, axis=1))) for e in residuals])
         worst = int(np.argmax(rms))
         can_drop = len(rejected) < max_rejected and len(used) > min_views
         if not (reject_outliers and can_drop and INTRINSICS_VIEW_PX.flags(rms)[worst]):
             break
         rejected.append((used.pop(worst), float(rms[worst])))
-    std = _intrinsics_std(camera, rvecs, tvecs, obj, img, view)
+    std = _intrinsics_std(fit.camera, fit.rvecs, fit.tvecs, fit.obj, fit.img, fit.view)
     names = ["fx", "fy", "cx", "cy", *DISTORTION_NAMES[model]]
-    return Calibration(camera, dict(zip(names, map(float, std), strict=True)), used, rvecs, tvecs, residuals, rejected)
+    return Calibration(fit.camera, dict(zip(names, map(float, std), strict=True)), used, fit.rvecs, fit.tvecs,
+                       residuals, rejected)  # fmt: skip

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.intrinsics.calibrate import _project_all, _solve
+from wolfcal.intrinsics.calibrate import fit_views
 from wolfcal.intrinsics.detect import Detection
 from wolfcal.vision.board import Board
 
@@ -44,12 +44,7 @@ def _candidates(view: Detection) -> dict[int, np.ndarray]:
 
 
 def _rms(views: list[Detection], board: Board, model: str) -> float:
-    camera, rvecs, tvecs = _solve(views, board, model, views[0].image_size)
-    all_obj = board.object_points()
-    obj = np.concatenate([all_obj[v.ids] for v in views])
-    img = np.concatenate([v.corners for v in views])
-    index = np.concatenate([np.full(len(v.ids), i) for i, v in enumerate(views)])
-    r = _project_all(camera, rvecs, tvecs, obj, index) - img
+    r = fit_views(views, board, model, views[0].image_size).residual
     return float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
 
 

@@ -84,9 +84,7 @@ def plan_camera(robot: Robot, system: str, external: str | None = None, placemen
         if not robot.config.external_cameras:
             raise WolfcalError(f"{robot.config.path}: --system external needs a camera under 'external_cameras:'")
         name = external or robot.config.external_cameras[0].name
-    intrinsics, key = robot.config.camera_intrinsics(name)
-    if intrinsics is None:
-        raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML): the plan needs the intrinsics")
+    intrinsics = robot.config.intrinsics_file(name, "the plan")
     T = None if name == HEAD_CAMERA else (placement_from_text(placement) if placement else expected_placement())
     return PlanCamera(name, load_camera_info(intrinsics), T)
 

@@ -37,7 +37,8 @@ def _motion_twists(joints: list[JointModel], T_root_frames: list[np.ndarray]) ->
     if not joints:
         return []
     frames = np.stack(T_root_frames)  # (K, S, 4, 4)
-    axis = np.einsum("ksij,kj->ksi", frames[:, :, :3, :3], np.stack([j.axis for j in joints]))  # (K, S, 3)
+    R, a = frames[:, :, :3, :3], np.stack([j.axis for j in joints])[:, None, None, :]  # (K, S, 3, 3), (K, 1, 1, 3)
+    axis = R[..., 0] * a[..., 0] + R[..., 1] * a[..., 1] + R[..., 2] * a[..., 2]  # (K, S, 3): 4x einsum's speed
     prismatic = np.array([j.type == "prismatic" for j in joints])[:, None, None]
     v0 = np.where(prismatic, axis, cross(frames[:, :, :3, 3], axis))
     return list(np.concatenate([v0, np.where(prismatic, 0.0, axis)], axis=2))
@@ -99,35 +100,78 @@ class ChainDerivatives:
                 twists = _frame_twists(walk.T_root_origin[name], T_root_frame, delta)
                 p_terms += [(i, twists[:, params.parameters[i].component]) for i in frame_cols[name]]
             joint_q[name], joint_p[name] = q_terms, p_terms
-        self._twist_q: dict[str, np.ndarray] = {}
-        self._twist_p: dict[str, np.ndarray] = {}
+        # Per link and tag key: the (column, twist (S, 6)) terms of the joints from the root down, in path order; the
+        # dense twists (`twist_q`, `twist_p`) and the relative ones (`relative`) are sums of them, made when asked.
+        self._n, self._width = n, {True: n_joints, False: n_params}
+        self._terms: dict[bool, dict[str, list[tuple[int, np.ndarray]]]] = {True: {}, False: {}}
         for link in dict.fromkeys(links + tag_links):
-            tq, tp = np.zeros((n, n_joints, 6)), np.zeros((n, n_params, 6))
-            for joint in model.path_from_root(link):
-                for col, twist in joint_q.get(joint.name, []):
-                    tq[:, col] += twist
-                for col, twist in joint_p.get(joint.name, []):
-                    tp[:, col] += twist
-            self._twist_q[link], self._twist_p[link] = tq, tp
+            path = model.path_from_root(link)
+            self._terms[True][link] = [term for joint in path for term in joint_q.get(joint.name, [])]
+            self._terms[False][link] = [term for joint in path for term in joint_p.get(joint.name, [])]
         for tag_id, link in zip(tag_ids, tag_links):
             key = tag_key(tag_id)
             T_root_mount = self.T_root[link] @ robot.T_link_tag(tag_id)
             self.T_root[key] = self.T_root[link] @ robot.T_link_tag(tag_id, corrections)
-            tp = self._twist_p[link].copy()
+            terms = list(self._terms[False][link])
             cols = [i for i, p in enumerate(params.parameters) if p.kind == "tag" and int(p.target) == tag_id]
             if cols:
                 twists = _frame_twists(T_root_mount, self.T_root[key], corrections.tags.get(tag_id, np.zeros(6)))
-                for i in cols:
-                    tp[:, i] += twists[:, params.parameters[i].component]
-            self._twist_q[key], self._twist_p[key] = self._twist_q[link], tp
+                terms += [(i, twists[:, params.parameters[i].component]) for i in cols]
+            self._terms[True][key], self._terms[False][key] = self._terms[True][link], terms
+        self._dense: dict[tuple[bool, str], np.ndarray] = {}
 
     def twist_q(self, frame: str) -> np.ndarray:
         """(S, J, 6) twists of the joint readings for a link or tag key."""
-        return self._twist_q[frame]
+        return self._twists(True, frame)
 
     def twist_p(self, frame: str) -> np.ndarray:
         """(S, P, 6) twists of the chain parameters for a link or tag key."""
-        return self._twist_p[frame]
+        return self._twists(False, frame)
+
+    def _twists(self, joints: bool, frame: str) -> np.ndarray:
+        if (joints, frame) not in self._dense:
+            out = np.zeros((self._n, self._width[joints], 6))
+            for col, twist in self._terms[joints][frame]:
+                out[:, col] += twist
+            self._dense[joints, frame] = out
+        return self._dense[joints, frame]
+
+    def relative(self, frame: str, viewer: str, joints: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The twists of `frame` less those of `viewer` (how the frame moves relative to the viewer) of the joint
+        readings (`joints`) or of the chain parameters, only in the columns where they do not cancel: the columns
+        (C,) and the twists (S, 6, C) (axes ordered for d(pixel)/d(twist) @ twists). The numbers of
+        twist_q/p(frame) - twist_q/p(viewer) in those columns, the other columns of which are exactly 0 (the same
+        joints above both); without the (S, J or P, 6) arrays of every frame, most of whose columns are 0."""
+        mine, theirs = _by_column(self._terms[joints][frame]), _by_column(self._terms[joints][viewer])
+        cols = [c for c in sorted(mine.keys() | theirs.keys())
+                if len(mine.get(c, [])) != len(theirs.get(c, []))
+                or any(a is not b for a, b in zip(mine.get(c, []), theirs.get(c, [])))]  # fmt: skip
+        out = np.empty((self._n, 6, len(cols)))
+        for k, c in enumerate(cols):
+            a, b = _summed(mine.get(c, [])), _summed(theirs.get(c, []))
+            if a is None and b is not None:
+                out[:, :, k] = -b
+            elif a is not None:
+                out[:, :, k] = a if b is None else a - b
+        return np.array(cols, dtype=int), out
+
+
+def _by_column(terms: list[tuple[int, np.ndarray]]) -> dict[int, list[np.ndarray]]:
+    """The twists of each column, in the terms' order."""
+    out: dict[int, list[np.ndarray]] = {}
+    for col, twist in terms:
+        out.setdefault(col, []).append(twist)
+    return out
+
+
+def _summed(twists: list[np.ndarray]) -> np.ndarray | None:
+    """Their sum in order (as the dense arrays add them up: the same numbers), None for none."""
+    if not twists:
+        return None
+    total = twists[0].copy()
+    for twist in twists[1:]:
+        total += twist
+    return total
 
 
 def point_motion(twists: np.ndarray, p_root: np.ndarray) -> np.ndarray:

@@ -37,22 +37,13 @@ def random_visible_poses(
     margin_px = 0.03 * camera.width if margin_px is None else margin_px
     min_size_px = 0.02 * camera.width if min_size_px is None else min_size_px
     lo, hi = sampling_bounds(robot, "head")
-    kept_q, kept_vis = [], []
-    for _ in range(200):
-        q = rng.uniform(lo, hi, size=(4000, len(lo)))
-        vis = tag_visibility(robot, camera, q, truth, tag_ids, margin_px, min_size_px)
-        good = np.any(vis, axis=1)
-        kept_q.append(q[good])
-        kept_vis.append(vis[good])
-        if sum(len(k) for k in kept_q) >= n:
-            break
-    q, vis = np.concatenate(kept_q)[:n], np.concatenate(kept_vis)[:n]
-    if len(q) < n:
-        raise WolfcalError(
-            f"the simulator found only {len(q)} of {n} poses with a tag in view; check the tags and camera of "
-            f"{robot.config.path}"
-        )
-    return q, vis
+
+    def visibility(q: np.ndarray) -> np.ndarray:
+        return tag_visibility(robot, camera, q, truth, tag_ids, margin_px, min_size_px)
+
+    q = draw_accepted(lo, hi, n, rng, lambda q: np.any(visibility(q), axis=1),
+                      f"a tag is in view; check the tags and camera of {robot.config.path}")  # fmt: skip
+    return q, visibility(q)
 
 
 def draw_accepted(

@@ -21,9 +21,9 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
 from wolfcal.encoders import RAD_PER_TICK
-from wolfcal.errors import WolfcalError
 from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.writer import camera_info_message
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.poses import random_visible_poses
@@ -103,11 +103,7 @@ def simulate_recording(
     `binning`) with true encoder offsets on the joints of `offsets` (see `offset_joints`); returns the truth.
     Everything random follows `options.seed`."""
     rng = np.random.default_rng(options.seed)
-    intrinsics = robot.config.head_camera().intrinsics
-    if intrinsics is None:
-        raise WolfcalError(f"{robot.config.path}: 'camera.intrinsics' is needed to simulate the head camera")
-    full = load_camera_info(intrinsics)
-    camera = full.scaled(1 / binning, 1 / binning, full.width // binning, full.height // binning)
+    camera = load_camera_info(robot.config.intrinsics_file(HEAD_CAMERA, "simulating")).binned(binning, HEAD_CAMERA)
     truth = random_truth(robot, TruthSpec(offset_joints=offset_joints(robot, offsets)), rng)
     q_still = random_visible_poses(robot, camera, truth, poses, rng)[0]
     write_recording(path, robot, truth, camera, q_still, options)

@@ -84,22 +84,13 @@ def offset_joints(robot: Robot, which: str) -> tuple[str, ...]:
     return {"none": (), "head": head, "legs": legs, "all": everything}[which]
 
 
-def _binned(camera: CameraModel, b: int) -> CameraModel:
-    if camera.width % b or camera.height % b:
-        raise WolfcalError(f"--binning {b}: must divide the camera size {camera.width}x{camera.height}")
-    return camera if b == 1 else camera.scaled(1 / b, 1 / b, camera.width // b, camera.height // b)
-
-
 def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dict[str, _SimCamera]:
     """The simulated cameras by name, without placements yet."""
     cameras: dict[str, _SimCamera] = {}
     if options.system in ("head", "all"):
         if head is None:
-            intrinsics = robot.config.head_camera().intrinsics
-            if intrinsics is None:
-                raise WolfcalError(f"{robot.config.path}: set 'camera.intrinsics' or pass --intrinsics FILE")
-            head = load_camera_info(intrinsics)
-        cameras[HEAD_CAMERA] = _SimCamera(head, _binned(head, options.binning))
+            head = load_camera_info(robot.config.intrinsics_file(HEAD_CAMERA, "simulating", "pass --intrinsics FILE"))
+        cameras[HEAD_CAMERA] = _SimCamera(head, head.binned(options.binning, HEAD_CAMERA))
     if options.system in ("external", "all"):
         if not robot.config.external_cameras:
             raise WolfcalError(
@@ -107,11 +98,8 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
                 "'external_cameras:' (name, image_topic, info_topic, intrinsics)"
             )
         name = options.external or robot.config.external_cameras[0].name
-        intrinsics, key = robot.config.camera_intrinsics(name)
-        if intrinsics is None:
-            raise WolfcalError(f"{robot.config.path}: set '{key}' (a camera_info YAML) to simulate camera '{name}'")
-        model = load_camera_info(intrinsics)
-        cameras[name] = _SimCamera(model, _binned(model, options.binning))
+        model = load_camera_info(robot.config.intrinsics_file(name, "simulating"))
+        cameras[name] = _SimCamera(model, model.binned(options.binning, name))
     return cameras
 
 
@@ -292,9 +280,4 @@ def planned_readings(robot: Robot, path: Path) -> np.ndarray:
     """(S, J) joint readings [rad] of a poses file, checked as `capture --poses` checks it: each joint at its
     latest target, joints never named at the rest pose (`rest_pose:`, others 0)."""
     script = load_poses(path, joint_limits(robot, robot.joint_names))
-    targets = dict(robot.config.planning.rest_pose)
-    rows = []
-    for pose in script.poses:
-        targets.update(pose.joints)
-        rows.append([targets.get(j, 0.0) for j in robot.joint_names])
-    return np.array(rows)
+    return script.readings(robot.joint_names, robot.config.planning.rest_pose)

@@ -40,8 +40,9 @@ from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: 
 from wolfcal.vision.batch import Detections, iter_detect_checked
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
-# length from the cell across each edge, profiles clear of the other edge at acute corners)
-DETECTOR_VERSION = 5
+# length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
+# cells averaged in bins, a settled tag not iterated again)
+DETECTOR_VERSION = 6
 FORMAT = 1  # entry layout
 
 

@@ -13,18 +13,19 @@ corner (lens distortion bends whole edges, so only a local fit is exact), and th
 
 Why (bench/bench_vision.py: tag36h11 of 0.08 m at 0.3-1.2 m, tilted up to 50 deg, anywhere in the image,
 noise sigma 2; a 2048x1536 camera with strong barrel distortion, k1 = -0.286, and the same lens binned to
-512x384; corner error |detected - projected truth| [px per corner], median / 95th percentile, 100 views):
+512x384; corner error |detected - projected truth| [px per corner], median / 95th percentile; edges and SUBPIX
+over the default 60 views, the others 100 views):
 
     refinement          2048x1536        512x384
-    edges (this)        0.023 / 0.13     0.037 / 0.13
-    aruco SUBPIX        0.20  / 0.33     0.35  / 0.91
+    edges (this)        0.023 / 0.14     0.033 / 0.12
+    aruco SUBPIX        0.20  / 0.32     0.35  / 0.93
     aruco APRILTAG      0.67  / 1.10     0.62  / 0.84   (and ~1 s per full image)
     aruco CONTOUR       0.72  / 1.24     0.70  / 0.94
     none                0.64  / 1.09     0.69  / 1.14
 
 Part of the "edges" error is aliasing in the rendered truth (4x4 supersampling): rendered at 16x16 it is
-0.012 / 0.031 px (full) and 0.023 / 0.062 px (binned; tags there are 15-60 px wide). With a Gaussian blur of
-sigma 1 px it is 0.019 / 0.13 px at full resolution (SUBPIX: 0.25 / 0.38). A large frontal tag rendered at
+0.013 / 0.029 px (full) and 0.021 / 0.051 px (binned; tags there are 15-60 px wide). With a Gaussian blur of
+sigma 1 px it is 0.020 / 0.13 px at full resolution (SUBPIX: 0.25 / 0.36). A large frontal tag rendered at
 16x16 is found within 0.04 px (mean signed error < 0.003 px): renderer and detector share the pixel convention.
 
 Tags are searched for at full resolution. Searching at half resolution (AprilTag's quad_decimate; areas averaged)
