@@ -15,7 +15,9 @@ Prints, with units:
    (the machine may be shared with other work).
 4. Detection accuracy (median, 95th percentile corner error [px]) on bench/bench_vision.py's rendered views,
    next to the figures that bench printed before (README).
-BLAS runs on one thread, as in the `wolfcal` command.
+BLAS runs on one thread, as in the `wolfcal` command. Each capture is read once before its figures are taken, so
+that every figure finds it in the page cache (as after a capture): a cold read from a slow disk (26 MB/s on the
+machine the figures were taken on) would add seconds of waiting to whichever run came first.
 """
 
 from __future__ import annotations
@@ -121,8 +123,16 @@ def process_run(path: Path, free: list[str], cache_dir: Path) -> tuple[float, fl
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+def warm(path: Path) -> None:
+    """Read the file once, so that the runs timed after find it in the page cache."""
+    with path.open("rb") as file:
+        while file.read(1 << 24):
+            pass
+
+
 def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> None:
     robot = load_robot(CONFIG)
+    warm(path)
     with tempfile.TemporaryDirectory() as cache_dir:
         first_wall, first_cpu = fit_run(path, options, Path(cache_dir))
         seconds = sorted((fit_run(path, options, Path(cache_dir)) for _ in range(SECOND_RUNS)), key=lambda r: r[1])
@@ -156,6 +166,7 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
 def large_leg_fit(path: Path, limit: float) -> None:
     options = FitOptions(free="leg", side="both")
     robot = load_robot(CONFIG)
+    warm(path)
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as cache_dir:
         wall, cpu = fit_run(path, options, Path(cache_dir))

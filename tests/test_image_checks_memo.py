@@ -13,6 +13,7 @@ import pytest
 from wolfcal.config import load_robot_config
 from wolfcal.io import filememo
 from wolfcal.io import reader as reader_module
+from wolfcal.io.cdr import compressed_image
 from wolfcal.io.reader import read_capture
 from wolfcal.sim.faulty import rewrite_capture, with_damaged_image
 from wolfcal.sim.simulate import SimOptions, simulate_capture
@@ -143,11 +144,11 @@ def test_compressed_image_layout_reads_as_the_ros_decoder(frame_id, image_format
         data = encode({"header": {"stamp": {"sec": 1_700_000_123, "nanosec": 456_789}, "frame_id": frame_id},
                        "format": image_format, "data": payload})  # fmt: skip
         decoded = decode(data)
-        stamp, image = reader_module._compressed_image(data, SimpleNamespace(name=COMPRESSED_IMAGE), 7)
+        stamp, image = compressed_image(data, SimpleNamespace(name=COMPRESSED_IMAGE), 7)
         assert stamp == decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec
         assert bytes(image) == bytes(decoded.data) == payload
-        assert reader_module._compressed_image(data[:-1], SimpleNamespace(name=COMPRESSED_IMAGE), 7) is None
-        assert reader_module._compressed_image(data, SimpleNamespace(name="sensor_msgs/msg/Image"), 7) is None
+        assert compressed_image(data[:-1], SimpleNamespace(name=COMPRESSED_IMAGE), 7) is None
+        assert compressed_image(data, SimpleNamespace(name="sensor_msgs/msg/Image"), 7) is None
 
 
 @pytest.mark.parametrize("compression", ["none", "zstd"])

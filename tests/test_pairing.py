@@ -18,10 +18,11 @@ from mcap_ros2.decoder import DecoderFactory
 import wolfcal.io.reader as reader_module
 from wolfcal.config import load_robot_config
 from wolfcal.fit.pipeline import repeat_warnings
+from wolfcal.io.cdr import joint_state
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture
-from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_frame
+from wolfcal.io.recording import STILL_WINDOW_NS, JointStates, Paired, pair_exact, pair_frame
 from wolfcal.io.samples import Capture
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.faulty import rewrite_capture
@@ -226,3 +227,70 @@ def test_frames_repeating_one_image_are_counted_and_warned_about(simulated, tmp_
     warning = repeat_warnings({"head": observations["head"]}, 0.05)
     assert len(warning) == 1 and f"head camera: {counts[repeated][0]} of {counts[repeated][1]} sample(s)" in warning[0]
     assert "stays at its floor (0.05 px)" in warning[0]
+
+
+def test_capture_frames_paired_at_once_as_one_by_one():
+    """`pair_exact` (a capture file's frames, all at once) gives what `pair_frame(exact=True)` gives frame by frame:
+    the readings stamped like the frame, velocities only where every joint reported one, and for a frame without a
+    state of its stamp the first joint (in name order) that lacks one; joints published in two groups, one group
+    without velocities in one message, one missing a stamp."""
+    rng = np.random.default_rng(5)
+    stamps = np.arange(1, 9) * 1_000 * MS
+    messages = []
+    for k, stamp in enumerate(stamps):
+        legs = rng.normal(size=3)
+        messages.append((int(stamp), ["a", "b", "c"], legs.tolist(), [] if k == 2 else (legs / 10).tolist()))
+        if k != 5:  # the head group lacks the sixth stamp
+            messages.append((int(stamp), ["d", "e"], rng.normal(size=2).tolist(), [0.0, 0.0]))
+    states = JointStates.from_messages(messages)
+    frames = np.array([*stamps, stamps[3] + 1, 0], dtype=np.int64)  # and two stamps no joint state has
+    expected = [pair_frame(states, int(stamp), exact=True) for stamp in frames]
+    got = pair_exact(states, frames)
+    assert [isinstance(r, str) for r in expected] == [False] * 5 + [True] + [False] * 2 + [True, True]
+    for want, have in zip(expected, got, strict=True):
+        if isinstance(want, str):
+            assert have == want
+        else:
+            assert isinstance(have, Paired)
+            np.testing.assert_array_equal(have.positions, want.positions)
+            assert (have.velocities is None) == (want.velocities is None)
+            if want.velocities is not None:
+                np.testing.assert_array_equal(have.velocities, want.velocities)
+    assert got[2].velocities is None and got[5] == "no joint state of d with the image's stamp"  # type: ignore[union-attr]
+
+
+def test_joint_states_read_from_their_layout_as_the_decoder_reads_them():
+    """`wolfcal.io.cdr.joint_state` (the reader's layout reading) gives the stamp, names, positions and velocities the
+    general ROS 2 decoder gives, for frame ids and names of every length modulo 4 (the CDR padding), empty velocity
+    and effort lists, no joints, a zero stamp (the log time) and a non-ASCII name; a message cut short is left to the
+    decoder (None)."""
+    from mcap_ros2._dynamic import generate_dynamic
+
+    from wolfcal.io.msgdefs import JOINT_STATE, MSGDEFS
+
+    encode = serialize_dynamic(JOINT_STATE, MSGDEFS[JOINT_STATE])[JOINT_STATE]
+    decode = generate_dynamic(JOINT_STATE, MSGDEFS[JOINT_STATE])[JOINT_STATE]
+
+    class Schema:
+        name = JOINT_STATE
+
+    cases = [
+        ("", ["a"], [0.5], [0.1], [1.0], (3, 7)),
+        ("b", ["ab", "abc", "abcd", "abcde"], [1.0, -2.0, 3.5, 1e-9], [], [], (12, 999_999_999)),
+        ("base", [], [], [], [], (1, 0)),
+        ("fr_3", ["knee_ä", "x"], [np.pi, -np.pi], [0.0, float("nan")], [2.0, 3.0], (0, 0)),
+    ]
+    names_seen: dict[bytes, list[str]] = {}
+    for frame_id, names, positions, velocities, effort, (sec, nanosec) in cases:
+        data = encode({"header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id}, "name": names,
+                       "position": positions, "velocity": velocities, "effort": effort})  # fmt: skip
+        want = decode(data)
+        got = joint_state(data, Schema, 42, names_seen)
+        assert got is not None
+        assert got[0] == header_stamp_ns(want.header, 42) == (sec * 10**9 + nanosec or 42)
+        assert got[1] == list(want.name) == names
+        np.testing.assert_array_equal(got[2], want.position)
+        np.testing.assert_array_equal(got[3], want.velocity)
+        assert joint_state(data[:12], Schema, 42, {}) is None  # within the header
+        if len(positions) == 4:  # the last 12 bytes of the positions and the empty lists' counts missing
+            assert joint_state(data[:-20], Schema, 42, {}) is None

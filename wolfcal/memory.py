@@ -2,7 +2,9 @@
 
 glibc's allocator keeps freed heap pages (of every thread's arena) mapped: after reading a long recording or
 detecting tags on worker threads, the resident size stays at the phase's peak although the data are gone, and the
-next phase's peak lands on top of it. `malloc_trim(0)` returns those pages. Elsewhere (no glibc) this does nothing.
+next phase's peak lands on top of it. `malloc_trim(0)` returns those pages. How large blocks (image buffers, file
+chunks; the solve's arrays) are placed: `buffers_from_heap`, `large_blocks_mapped`. Elsewhere (no glibc) this does
+nothing.
 """
 
 from __future__ import annotations
@@ -35,6 +37,20 @@ MMAP_THRESHOLD_MAX = 32 * 1024 * 1024  # [bytes] the most glibc's own adjustment
 SOLVE_TRIM_THRESHOLD = 32 * 1024 * 1024  # [bytes] free heap top kept (not handed back) during the solve
 
 
+def buffers_from_heap() -> None:
+    """Blocks up to MMAP_THRESHOLD_MAX (image buffers, the file's chunks) come from the heap and are reused there
+    once freed, from the first: what glibc's own adjustment reaches only after the first such block is freed, and
+    what `large_blocks_mapped` leaves. Until then every large block gets a fresh mapping, zeroed page by page on
+    first touch: the first fit in a process (every `wolfcal fit`) read and detected the 24-sample 2048x1536 camera
+    capture with 66000-76000 page faults (0.2-0.35 s of system time, about a fifth of its CPU) against 20000-24000
+    with the threshold set first, as in any later run. The heap then holds what a phase's peak needed, as it does
+    after the adjustment; `release_freed_memory` hands it back between phases."""
+    mallopt = _libc("mallopt")
+    if mallopt is not None:
+        mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX)
+        mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)
+
+
 @contextmanager
 def large_blocks_mapped() -> Iterator[None]:
     """Inside, blocks from SOLVE_MMAP_THRESHOLD up (numpy arrays of more than 131072 numbers) each get their own
@@ -52,8 +68,8 @@ def large_blocks_mapped() -> Iterator[None]:
     exceeds its trim threshold (128 KB unless its adjustment raised it before), and the solve's next arrays fault
     the same pages in again: a cached 1000-sample leg fit made 245000 page faults (0.6 s of system time) instead of
     36000 (0.2 s), peak 125 -> 128 MB (the cached 6000-frame fit's 143 -> 149 MB, below its detection's). On
-    leaving, the trim threshold is set to twice MMAP_THRESHOLD_MAX, where glibc's own adjustment puts it.
-    Elsewhere (no glibc) this does nothing."""
+    leaving, the trim threshold is set to twice MMAP_THRESHOLD_MAX, where glibc's own adjustment puts it
+    (`buffers_from_heap`). Elsewhere (no glibc) this does nothing."""
     mallopt = _libc("mallopt")
     if mallopt is not None:
         mallopt(M_MMAP_THRESHOLD, SOLVE_MMAP_THRESHOLD)
@@ -61,6 +77,4 @@ def large_blocks_mapped() -> Iterator[None]:
     try:
         yield
     finally:
-        if mallopt is not None:
-            mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX)
-            mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)
+        buffers_from_heap()

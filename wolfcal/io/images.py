@@ -11,6 +11,7 @@ from wolfcal.errors import WolfcalError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SIGNATURE = b"\xff\xd8"
+PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
 JPEG_QUALITY = 95
 # png as wolfcal writes it: stored (zlib level 0), rows unfiltered. A standard png that any tool opens, the size of
 # the raw pixels (+0.1 %), decoded 5-10x faster than deflated (the fit decodes every image: inflating and unfiltering
@@ -53,17 +54,19 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
     return buffer.tobytes(), f"{encoding}; {image_format} compressed {encoding}"
 
 
-def image_kind(data: bytes) -> str | None:
+def image_kind(data: bytes | memoryview) -> str | None:
     """'png' or 'jpeg' from the file signature; None for anything else (e.g. compressedDepth)."""
-    if data.startswith(PNG_SIGNATURE):
+    head = bytes(data[: len(PNG_SIGNATURE)])
+    if head.startswith(PNG_SIGNATURE):
         return "png"
-    if data.startswith(JPEG_SIGNATURE):
+    if head.startswith(JPEG_SIGNATURE):
         return "jpeg"
     return None
 
 
-def image_size(data: bytes) -> tuple[int, int] | None:
-    """(width, height) of an encoded png or jpeg from its header, without decoding; None if not found."""
+def image_size(data: bytes | memoryview) -> tuple[int, int] | None:
+    """(width, height) of an encoded png or jpeg from its header, without decoding (`data` may be a view into a
+    larger buffer); None if not found."""
     kind = image_kind(data)
     if kind == "png":
         if len(data) < 24 or data[12:16] != b"IHDR":
@@ -92,29 +95,31 @@ def image_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-def image_damage(data: bytes) -> str | None:
+def image_damage(data: bytes | memoryview) -> str | None:
     """Why an encoded png or jpeg is damaged (bad chunk checksum, cut short), or None when it looks whole.
-    Cheap: checks the structure and checksums, does not decode."""
-    if image_kind(data) == "png":
+    Cheap: checks the structure and checksums, does not decode; `data` may be a view into a larger buffer (the
+    image's bytes are not copied)."""
+    view = memoryview(data)  # checksums over slices without copying them
+    kind = image_kind(view)
+    if kind == "png":
         pos = len(PNG_SIGNATURE)
-        view = memoryview(data)  # checksums over slices without copying them
-        while pos + 12 <= len(data):
-            (length,) = struct.unpack_from(">I", data, pos)
-            kind = bytes(data[pos + 4 : pos + 8])
+        while pos + 12 <= len(view):
+            (length,) = struct.unpack_from(">I", view, pos)
+            chunk = bytes(view[pos + 4 : pos + 8])
             end = pos + 12 + length
-            if end > len(data):
-                return f"png cut short in its {kind.decode('latin-1')} chunk"
-            (crc,) = struct.unpack_from(">I", data, end - 4)
+            if end > len(view):
+                return f"png cut short in its {chunk.decode('latin-1')} chunk"
+            (crc,) = struct.unpack_from(">I", view, end - 4)
             if zlib.crc32(view[pos + 4 : end - 4]) & 0xFFFFFFFF != crc:
-                return f"png checksum error in its {kind.decode('latin-1')} chunk"
-            if kind == b"IEND":
+                return f"png checksum error in its {chunk.decode('latin-1')} chunk"
+            if chunk == b"IEND":
                 return None
             pos = end
         return "png cut short (no IEND chunk)"
-    if image_kind(data) == "jpeg":
-        if image_size(data) is None:
+    if kind == "jpeg":
+        if image_size(view) is None:
             return "jpeg without a readable frame header"
-        if b"\xff\xd9" not in data[-64:]:
+        if b"\xff\xd9" not in bytes(view[-64:]):
             return "jpeg cut short (no end-of-image marker)"
         return None
     return "not a png or jpeg image"

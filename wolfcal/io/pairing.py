@@ -26,7 +26,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.io.recording import STILL_WINDOW_NS, JointLog, JointSeries, JointStates, Paired, pair_frame
+from wolfcal.io.recording import (
+    STILL_WINDOW_NS,
+    JointLog,
+    JointSeries,
+    JointStates,
+    Paired,
+    pair_exact,
+    pair_frame,
+)
 
 DISORDER_NS = 2_000_000_000  # [ns] how far back of the stamps read so far a message's header stamp may lie
 BATCH_NS = 500_000_000  # [ns] frames are paired when the stamps read have advanced by this much
@@ -148,11 +156,11 @@ class FramePairer:
             return
         self._paired_at = stamp
         horizon = stamp - self.disorder_ns  # no message to come is stamped before this
-        ready = [p for p in self._pending if p[1] + STILL_WINDOW_NS < horizon]
         if self._capture is not None:
             if self._capture.holds(horizon):
                 return  # may be a capture file: keep everything until `finish`
             self._capture = None
+        ready = [p for p in self._pending if p[1] + STILL_WINDOW_NS < horizon]
         if ready:
             self._pending = [p for p in self._pending if p[1] + STILL_WINDOW_NS >= horizon]
             self._pair(ready, exact=False)
@@ -171,10 +179,16 @@ class FramePairer:
         none = JointSeries(np.empty(0, np.int64), np.empty(0), np.empty(0))
         states = JointStates(names, {n: window.series.get(n, none) for n in names})
         bad = np.concatenate([g[1][~k] for g, k in zip(groups, keep)]) if groups else np.empty(0, np.int64)
-        for camera, stamp, item, pair in frames:
-            bad_stamp = bool(np.any(bad == stamp))
-            result = pair_frame(states, stamp, exact=exact) if pair and not bad_stamp else None
-            self._frames.append(PairedFrame(camera, stamp, item, result, bad_stamp))
+        stamps = np.array([stamp for _, stamp, _, _ in frames], dtype=np.int64)
+        bad_stamps = np.isin(stamps, bad)
+        used = [pair and not bad_stamp for (_, _, _, pair), bad_stamp in zip(frames, bad_stamps)]
+        if exact:  # a capture file: every frame at once
+            paired = iter(pair_exact(states, stamps[used]))
+            results = [next(paired) if use else None for use in used]
+        else:
+            results = [pair_frame(states, int(stamp), exact=False) if use else None for stamp, use in zip(stamps, used)]
+        for (camera, stamp, item, _), result, bad_stamp in zip(frames, results, bad_stamps):
+            self._frames.append(PairedFrame(camera, stamp, item, result, bool(bad_stamp)))
 
 
 class _CaptureTest:

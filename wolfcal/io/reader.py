@@ -22,7 +22,6 @@ with a note naming camera, index and time (an error when more than 20 % of a cam
 
 from __future__ import annotations
 
-import struct
 import time
 from array import array
 from collections.abc import Callable, Iterable
@@ -39,8 +38,9 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
+from wolfcal.io.cdr import compressed_image, joint_state
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
-from wolfcal.io.images import JPEG_SIGNATURE, image_damage, image_kind, image_size
+from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import (
     channel_decoder,
@@ -51,12 +51,13 @@ from wolfcal.io.mcapfile import (
     recover_hint,
     torn_error,
 )
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns, stamp_ns
+from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
+from wolfcal.memory import buffers_from_heap
 
 
 def read_captures(
@@ -84,6 +85,7 @@ def read_capture(
     check_mcap(path)
     if not is_finished(path):
         raise torn_error(path)
+    buffers_from_heap()  # the file's chunks and image messages: not mapped afresh each (`wolfcal.memory`)
     try:
         with path.open("rb") as handle:
             return _read(path, handle, robot_config, intrinsics, progress)
@@ -196,27 +198,28 @@ def _pass_one(
     topics = [config.joint_states_topic, *image_topics, *info_topics]
     total = message_count(reader, topics)
     decoders: dict[int, Callable] = {}
+    names_seen: dict[bytes, list[str]] = {}  # a JointState's name list by its bytes (`joint_state`)
     # with the checks remembered, of a png only its header is read from the file (`_png_head`)
     messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
     for count, (schema, channel, message, complete) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
-            image = _compressed_image(message.data, schema, message.log_time, complete)
-            if image is None:  # not as `_compressed_image` reads it: the general decoder (a whole message)
+            image = compressed_image(message.data, schema, message.log_time, complete)
+            if image is None:  # not as `compressed_image` reads it: the general decoder (a whole message)
                 decoded = channel_decoder(path, decoders, channel, schema)(message.data)
                 image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
             stamp = image[0]
             name = image_topics[channel.topic]
-            whole = known is None  # the checksums need every byte; else the header is enough (png)
-            data = bytes(image[1] if whole or image[1][:2] == JPEG_SIGNATURE else image[1][:_PNG_HEAD])
-            kind = image_kind(data)
-            size = image_size(data)
+            # the checksums (known None) read the image where it lies, without a copy; kind and size come from a
+            # png's first bytes, a jpeg's from anywhere in its header segments
+            kind = image_kind(image[1])
+            size = image_size(image[1][:PNG_HEAD] if kind == "png" else image[1])
             size = sizes.setdefault(size, size)
             damage = None
             if kind:
                 check_key = (channel.topic, message.log_time, stamp, checks.images)
-                damage = known.damaged.get(check_key) if known is not None else image_damage(data)
+                damage = known.damaged.get(check_key) if known is not None else image_damage(image[1])
                 if damage:
                     checks.damaged[check_key] = damage
             checks.images += 1
@@ -224,11 +227,16 @@ def _pass_one(
             stamps[name].append(stamp)
             pairer.add_frame(name, stamp, header, pair=header.kind is not None and header.size is not None)
             continue
-        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-        stamp = header_stamp_ns(decoded.header, message.log_time)
         if channel.topic == config.joint_states_topic:
-            pairer.add_joints(stamp, decoded.name, decoded.position, decoded.velocity)
+            joints = joint_state(message.data, schema, message.log_time, names_seen)
+            if joints is None:  # not as `joint_state` reads it: the general decoder
+                decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+                joints = (header_stamp_ns(decoded.header, message.log_time), decoded.name, decoded.position,
+                          decoded.velocity)  # fmt: skip
+            pairer.add_joints(*joints)
         else:
+            decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+            stamp = header_stamp_ns(decoded.header, message.log_time)
             key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
                    tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
             if key not in models:  # one model per distinct CameraInfo
@@ -240,40 +248,14 @@ def _pass_one(
     return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos, checks)
 
 
-_PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
-
-
 _HEAD_BYTES = 4096  # of an image message, read first: the CDR header, format and a png's header
 
 
 def _png_head(schema, head: bytes) -> bool:
     """Whether the first bytes of an image message hold all the reader needs when the image checks are remembered:
     its stamp and a png's kind and size (else the whole message is read)."""
-    image = _compressed_image(head, schema, 0, complete=False)
-    return image is not None and image_kind(bytes(image[1][:_PNG_HEAD])) == "png"
-
-
-def _compressed_image(data: bytes, schema, log_time: int, complete: bool = True) -> tuple[int, memoryview] | None:
-    """(header stamp [ns], `log_time` when unset (`msgdefs.stamp_ns`); the encoded image, a view into `data`) of a
-    little-endian CDR sensor_msgs/CompressedImage message, read from its layout without copying the image; None for
-    anything else (the caller decodes it with the general decoder). `complete` False: `data` is the message's first
-    bytes only; the view holds the image's bytes among them (at least a png's header, else None)."""
-    if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
-        return None
-    try:
-        sec, nanosec, length = struct.unpack_from("<iII", data, 4)
-        pos = 4 + 12 + length  # after header.frame_id (CDR offsets count from the end of the 4-byte encapsulation)
-        pos += -(pos - 4) % 4
-        (length,) = struct.unpack_from("<I", data, pos)
-        pos += 4 + length  # after format
-        pos += -(pos - 4) % 4
-        (length,) = struct.unpack_from("<I", data, pos)
-    except struct.error:
-        return None
-    if pos + 4 + (length if complete else min(length, _PNG_HEAD)) > len(data):
-        return None
-    return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
-
+    image = compressed_image(head, schema, 0, complete=False)
+    return image is not None and image_kind(bytes(image[1][:PNG_HEAD])) == "png"
 
 
 def _read(

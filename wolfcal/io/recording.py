@@ -179,6 +179,31 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
     return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
 
 
+def pair_exact(states: JointStates, stamps_ns: np.ndarray) -> list[Paired | str]:
+    """`pair_frame(states, stamp, exact=True)` of each stamp of `stamps_ns` (N,) [ns], all at once: the joint states
+    stamped exactly like each frame, or why a frame has none (the first joint, in the order of `states.names`,
+    without a state of its stamp)."""
+    n = len(stamps_ns)
+    positions = np.empty((n, len(states.names)))
+    velocities = np.empty((n, len(states.names)))
+    missing = np.full(n, -1)  # per frame, the first joint without a state of its stamp
+    for k, name in reversed(list(enumerate(states.names))):
+        s = states.series[name]
+        i = np.searchsorted(s.times, stamps_ns)
+        at = np.minimum(i, len(s.times) - 1)
+        found = (i < len(s.times)) & (s.times[at] == stamps_ns) if len(s.times) else np.zeros(n, bool)
+        missing[~found] = k
+        if len(s.times):
+            positions[:, k] = s.positions[at]
+            velocities[:, k] = s.velocities[at]
+    finite = np.all(np.isfinite(velocities), axis=1).tolist()
+    return [
+        f"no joint state of {states.names[m]} with the image's stamp" if m >= 0
+        else Paired(positions[f], velocities[f] if finite[f] else None)
+        for f, m in enumerate(missing)
+    ]  # fmt: skip
+
+
 def group_by_stamp(stamps: Sequence[int], cameras: Sequence[str], tolerance_ns: int) -> list[list[int]]:
     """Indices of frames grouped into samples: in stamp order, a frame joins the current group when it is within
     `tolerance_ns` of the group's first frame and its camera is not in the group yet."""

@@ -16,6 +16,7 @@ from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
 
 from wolfcal.errors import WolfcalError
+from wolfcal.io.cdr import compressed_image
 from wolfcal.io.mcapfile import channel_decoder
 from wolfcal.io.msgdefs import header_stamp_ns
 
@@ -76,11 +77,14 @@ def _stream_window(
     for schema, channel, message in messages:
         if (channel.topic, message.log_time) not in times:
             continue
-        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-        key = (channel.topic, message.log_time, header_stamp_ns(decoded.header, message.log_time))
+        image = compressed_image(message.data, schema, message.log_time)
+        if image is None:  # not as `compressed_image` reads it: the general decoder
+            decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+            image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
+        key = (channel.topic, message.log_time, image[0])
         if not remaining.get(key) or key in waiting:
             continue
-        waiting[key] = bytes(decoded.data)
+        waiting[key] = bytes(image[1])  # the image alone, not the message around it
         while turn < len(keys) and keys[turn] in waiting:
             data = waiting[keys[turn]]
             remaining[keys[turn]] -= 1

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.memory import buffers_from_heap
 
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
@@ -139,6 +140,7 @@ def iter_detect_encoded(
     if not head:
         return
     batch = batch or task_size(head[0], processes)
+    buffers_from_heap()  # image buffers: not mapped afresh each (`wolfcal.memory`)
     depth = 2 * workers  # tasks under way
     stream = chain(head, source)
     if workers == 1 or len(head) <= IN_PROCESS:
