@@ -12,9 +12,9 @@ edges of large cells have 100-200 profiles: they are averaged in bins (PROFILES)
 after one iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows,
 edge by edge; the grid's unused and padded rows were ~23 % at 512x384), window sums and bins are sums of their own
 (`np.add.reduceat`), the fits closed-form 3x3 solves. CPU per tag, one thread, the bench captures' own tags in
-the fit's tasks, side by side with the version before (min of 15-21 alternated runs): about 0.61 ms at 512x384
-(0.84 ms before; 0.94 ms before the bins) and 1.0 ms at 2048x1536 (1.05x less than before, which was 3x less than
-before the bins and the settled rule).
+the fit's tasks, in alternated runs beside the version before (min-median): 0.53-0.58 ms at 512x384 (0.73-0.80 ms
+before, 1.38x; ~0.85 ms before the bins) and 0.88-0.97 ms at 2048x1536 (1.16x; the bins and the settled rule had
+cut it 3x).
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j) of a grid of M points along an edge at
 distances `d` [px] from the corner (padded to the longest edge), S samples across it at offsets `t` [px]
