@@ -8,7 +8,7 @@ Run: python bench/bench_detection.py [--views N] [--quick] [--before REV]. Print
    of `task_size` images, as the workers run it); with --before REV (a git revision) also the refinement of
    wolfcal/vision/edges.py at REV on the same tags, and the largest difference of its corners [px]; with
    --capture FILE (only this part) the same split on a capture's own images, beside the fit's detection of them
-   on all cores;
+   on all cores (and with --before the refinement at REV on them);
 2. a capture's worth of png images (stored, as wolfcal's captures hold them) decoded and detected on all cores:
    serial, threads, worker processes (wolfcal.vision.batch), against the floor: decoding plus OpenCV's bare marker
    detector on all cores;
@@ -122,13 +122,13 @@ def edges_at(revision: str) -> types.ModuleType:
     return module
 
 
-def _refine_tasks(tasks: list, edges: types.ModuleType | None = None) -> list:
-    """refine_found over each task (gray images, OpenCV's tags), with `edges`' refine_tags if given."""
+def _refine_tasks(tasks: list, edges: types.ModuleType | None = None, family: str = FAMILY) -> list:
+    """refine_found over each task (gray images, OpenCV's tags of `family`), with `edges`' refine_tags if given."""
     now = tags.refine_tags
     if edges is not None:
         tags.refine_tags = edges.refine_tags
     try:
-        return [tag for grays, found in tasks for tag in refine_found(grays, found, FAMILY)]
+        return [tag for grays, found in tasks for tag in refine_found(grays, found, family)]
     finally:
         tags.refine_tags = now
 
@@ -170,10 +170,12 @@ def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
         cv2.setNumThreads(threads)
 
 
-def capture_split(path: Path, robot_dir: Path, repeat: int) -> None:
+def capture_split(path: Path, robot_dir: Path, repeat: int, before: str | None = None) -> None:
     """Per-image CPU [ms] on a capture's own images: one thread, decode + OpenCV's detector (wolfcal's settings and
     the bare default) + refinement, beside the fit's detection as it runs (`detect_encoded`, threads on all
-    cores, tasks of `task_size`): what the scheduling adds is the difference."""
+    cores, tasks of `task_size`): what the scheduling adds is the difference. With `before` (a git revision) also
+    the refinement of wolfcal/vision/edges.py at that revision on the same tasks, and the largest difference of
+    its corners [px]."""
     from wolfcal.fit.pipeline import load_samples
     from wolfcal.io.samples import encoded_images
     from wolfcal.observations import HEAD_CAMERA
@@ -193,13 +195,17 @@ def capture_split(path: Path, robot_dir: Path, repeat: int) -> None:
         found = {f: [_found(g, f, ids, "edges") for g in grays] for f, ids in families.items()}
         size = task_size(data[0], processes=False)
         bare = {f: cv2.aruco.ArucoDetector(tags._dictionary(f)) for f in families}
+        tasks = {f: [(grays[i : i + size], found[f][i : i + size]) for i in range(0, len(grays), size)]
+                 for f in families}  # fmt: skip
         functions = {
             "decode": lambda: [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data],
             "detector": lambda: [_found(g, f, ids, "edges") for g in grays for f, ids in families.items()],
             "bare detector": lambda: [bare[f].detectMarkers(g) for g in grays for f in families],
-            "refinement": lambda: [refine_found(grays[i : i + size], found[f][i : i + size], f)
-                                   for f in families for i in range(0, len(grays), size)],  # fmt: skip
+            "refinement": lambda: [_refine_tasks(tasks[f], family=f) for f in families],
         }
+        old = edges_at(before) if before else None
+        if old is not None:
+            functions["refinement before"] = lambda: [_refine_tasks(tasks[f], old, f) for f in families]
 
         def as_in_the_fit(workers: int) -> None:  # OpenCV's own threads as the fit leaves them
             cv2.setNumThreads(threads)
@@ -219,6 +225,11 @@ def capture_split(path: Path, robot_dir: Path, repeat: int) -> None:
           f"{t['refinement']:.2f} = {total:.2f} ms CPU/image on one thread; the fit's detection on one thread "
           f"{t['fit, 1 thread']:.2f} ({t['fit, 1 thread'] / total:.2f}x), on {cpu_count()} threads {t['fit']:.2f} "
           f"({t['fit'] / total:.2f}x)")
+    if old is not None:
+        now, then = ([tag for f in families for tag in _refine_tasks(tasks[f], e, f)] for e in (None, old))
+        diff = max((np.abs(a[k] - b[k]).max() for a, b in zip(now, then) for k in a), default=0.0)
+        print(f"    refinement at {before} {t['refinement before']:.2f} ms CPU/image "
+              f"({t['refinement before'] / t['refinement']:.2f}x now's); corners differ by at most {diff:.1e} px")
 
 
 def _floor_one(data: bytes) -> None:
@@ -351,7 +362,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=40, help="rendered views per camera")
     parser.add_argument("--quick", action="store_true", help="fewer views and repetitions")
-    parser.add_argument("--before", help="git revision whose refinement (wolfcal/vision/edges.py) to time beside")
+    parser.add_argument("--before", help="git revision whose refinement (wolfcal/vision/edges.py) to time beside "
+                        "(with --only-split or --capture)")
     parser.add_argument("--only-split", action="store_true", help="only part 1b (the CPU split)")
     parser.add_argument("--capture", type=Path, action="append", default=[],
                         help="only the CPU split on this capture's head-camera images (repeatable), beside the "
@@ -364,7 +376,7 @@ def main() -> None:
     if args.capture:
         print("\n1c. CPU per image of captures [ms CPU/image]: one thread split, and the fit's detection on all cores")
         for path in args.capture:
-            capture_split(path, args.robot, 3 if args.quick else 5)
+            capture_split(path, args.robot, 3 if args.quick else 5, args.before)
         return
     by_camera = {"512x384": render_views(BINNED, views, seed=11), "2048x1536": render_views(FULL, views, seed=11)}
     if args.only_split:

@@ -116,3 +116,27 @@ def test_binned_profiles_and_settled_tags_keep_the_corners(monkeypatch):
     assert 0.0 < np.abs(binned - every).max()  # the bins are used
     for tag_id, corners in enumerate(binned):
         assert np.linalg.norm(corners - truth(CAMERA, views[tag_id]), axis=1).max() < 0.15
+
+
+def test_tags_of_several_images_in_any_order_get_the_same_corners():
+    """Tags of two images refined in one pass get the same corners whether each image's tags come in a row (its
+    edges a slice of the pass) or interleaved (its edges picked out), and each image's corners are its own."""
+    rng = np.random.default_rng(17)
+    first = [make_transform(FACING, [x, y, z]) for x, y, z in ((-0.25, -0.1, 0.5), (0.3, 0.1, 1.2))]
+    second = [make_transform(FACING, [x, y, z]) for x, y, z in ((0.2, -0.1, 0.7), (-0.3, 0.1, 2.0))]
+    images, starts = [], []
+    for views in (first, second):
+        image = render_targets(CAMERA, [tag_target("tag36h11", i, T) for i, T in enumerate(views)], noise_sigma=2.0,
+                               rng=rng)  # fmt: skip
+        found = _found(image, "tag36h11", None, "edges")
+        assert sorted(found) == [0, 1]
+        images.append(image.astype(np.float32))
+        starts.append(np.stack([found[0], found[1]]))
+    cells = tag_cells("tag36h11")
+    in_a_row = edges.refine_tags(images, np.array([0, 0, 1, 1]), np.concatenate(starts), cells)
+    mixed = np.stack([starts[1][0], starts[0][0], starts[1][1], starts[0][1]])
+    interleaved = edges.refine_tags(images, np.array([1, 0, 1, 0]), mixed, cells)
+    np.testing.assert_allclose(interleaved[[1, 3, 0, 2]], in_a_row, atol=1e-9)
+    for views, image_of in ((first, 0), (second, 1)):
+        for tag_id, T in enumerate(views):
+            assert np.linalg.norm(in_a_row[2 * image_of + tag_id] - truth(CAMERA, T), axis=1).max() < 0.3

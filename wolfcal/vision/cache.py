@@ -42,7 +42,7 @@ from wolfcal.vision.batch import Detections, iter_detect_checked
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
 # cells averaged in bins, a settled tag not iterated again)
-DETECTOR_VERSION = 6
+DETECTOR_VERSION = 7  # 7: window sums and bins summed on their own, not by a cumulative sum or matmul (~1e-5 px)
 FORMAT = 1  # entry layout
 
 
