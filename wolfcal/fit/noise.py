@@ -324,12 +324,18 @@ class GroupedWhitening:
             weights.append(share[on])
         weight = np.concatenate(weights)
 
-        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:
-            values = [own / sigma / root_free]
-            if len(self.s2):
+        n_own, n_spaces = len(own), int(np.count_nonzero(on)) if len(self.s2) else 0
+
+        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:  # written into one array, few temporaries (memory)
+            values = np.empty(n_own + n_spaces)
+            np.divide(own, sigma, out=values[:n_own])
+            values[:n_own] /= root_free
+            if n_spaces:
                 t = tr / np.sqrt(sigma**2 + self.s2)
-                values.append(np.bincount(key, Q.data * np.repeat(t, per_column))[on] / root_share)
-            return np.concatenate(values), weight
+                entries = np.repeat(t, per_column)
+                entries *= Q.data
+                np.divide(np.bincount(key, entries)[on], root_share, out=values[n_own:])
+            return values, weight
 
         return at
 

@@ -171,7 +171,7 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
     n = float(np.sum(dof))
     if n <= n_params:
         return False
-    return weighted_median_above(np.abs(w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
+    return weighted_median_above(np.abs(w, out=w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
 
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
