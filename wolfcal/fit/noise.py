@@ -324,13 +324,13 @@ class GroupedWhitening:
             weights.append(share[on])
         weight = np.concatenate(weights)
 
-        n_own, n_spaces = len(own), int(np.count_nonzero(on)) if len(self.s2) else 0
+        n_own, n_numbers = len(own), int(np.count_nonzero(on)) if len(self.s2) else 0
 
         def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:  # written into one array, few temporaries (memory)
-            values = np.empty(n_own + n_spaces)
+            values = np.empty(n_own + n_numbers)
             np.divide(own, sigma, out=values[:n_own])
             values[:n_own] /= root_free
-            if n_spaces:
+            if n_numbers:
                 t = tr / np.sqrt(sigma**2 + self.s2)
                 entries = np.repeat(t, per_column)
                 entries *= Q.data
