@@ -116,13 +116,14 @@ class BlockState:
         """Set the noise level per measured number [the block's unit]. The shared detection error's size follows
         it (`shared_size`); when that size changes the groups are decomposed again, so the next solve and the
         reported uncertainty use one noise model."""
-        self.sigma = sigma
         tau = self.shared_size(sigma)
         shared = self.noise_model.shared
-        if shared.tau != tau and np.any(shared.label >= 0):
-            if self.released:
-                raise RuntimeError(f"{self.block.name}: noise level set after the noise model's joint sensitivities "
-                                   "were released (call rebuild first)")
+        again = shared.tau != tau and np.any(shared.label >= 0)
+        if again and self.released:
+            raise RuntimeError(f"{self.block.name}: noise level set after the noise model's joint sensitivities "
+                               "were released (call rebuild first)")
+        self.sigma = sigma
+        if again:
             groups, row_scale = self.noise_model.group_of_row, self.noise_model.row_scale
             self.whitening = None  # the old factors go before the new ones are built (memory)
             self.whitening = GroupedWhitening(groups, replace(shared, tau=tau), row_scale)
@@ -133,7 +134,7 @@ class BlockState:
         ones (5.7 MB of a 6000-frame fit's). The factors stay; a `set_sigma` that has to decompose the groups again
         then needs a `rebuild` first."""
         model = self.noise_model
-        model.shared = replace(model.shared, A=np.empty((model.n_rows, 0)))  # not a view: that would keep A
+        model.shared = replace(model.shared, A=np.empty((len(model.group_of_row), 0)))  # not a view: that would keep A
         self.released = True
 
     def whiten(self, M, split: bool = True):
