@@ -101,10 +101,10 @@ class GroupedWhitening:
     ) -> None:
         """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
         self.group_of_row, self.shared = group_of_row, shared
-        self.row_scale = np.ones(len(shared.A)) if row_scale is None else np.asarray(row_scale, dtype=float)
+        self.row_scale = np.ones(len(group_of_row)) if row_scale is None else np.asarray(row_scale, dtype=float)
         self.at_level = bool(np.all(self.row_scale == 1.0))  # every row at the block's level: D = I
         self.in_group = group_of_row >= 0
-        self.n_rows, self.n_groups = len(shared.A), int(group_of_row.max()) + 1 if self.in_group.any() else 0
+        self.n_rows, self.n_groups = len(group_of_row), int(group_of_row.max()) + 1 if self.in_group.any() else 0
         grouped = np.flatnonzero(self.in_group)
         self.rows = grouped[np.argsort(group_of_row[grouped], kind="stable")]  # grouped rows, group by group
         sizes = np.bincount(group_of_row[grouped], minlength=self.n_groups)
@@ -135,8 +135,10 @@ class GroupedWhitening:
             Q = self.Q[:, columns]
             Q = scipy.sparse.csc_matrix((Q.data, position[Q.indices] - ends[first], Q.indptr),
                                         shape=(len(rows), len(columns)))  # fmt: skip
+            # the part's factors are given: its rows' joint sensitivities are not copied (A without columns; 5.7 MB
+            # of a 6000-frame fit's chunks)
             shared = self.shared
-            part = SharedErrors(shared.A[rows], shared.sigma_q, shared.reading[rows], shared.label[rows],
+            part = SharedErrors(np.empty((len(rows), 0)), shared.sigma_q, shared.reading[rows], shared.label[rows],
                                 shared.axis[rows], shared.tau)  # fmt: skip
             factors = (Q, self.s2[columns], self.group_of_column[columns] - first)
             yield rows, GroupedWhitening(self.group_of_row[rows] - first, part, self.row_scale[rows], factors)
@@ -322,12 +324,18 @@ class GroupedWhitening:
             weights.append(share[on])
         weight = np.concatenate(weights)
 
-        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:
-            values = [own / sigma / root_free]
-            if len(self.s2):
+        n_own, n_numbers = len(own), int(np.count_nonzero(on)) if len(self.s2) else 0
+
+        def at(sigma: float) -> tuple[np.ndarray, np.ndarray]:  # written into one array, few temporaries (memory)
+            values = np.empty(n_own + n_numbers)
+            np.divide(own, sigma, out=values[:n_own])
+            values[:n_own] /= root_free
+            if n_numbers:
                 t = tr / np.sqrt(sigma**2 + self.s2)
-                values.append(np.bincount(key, Q.data * np.repeat(t, per_column))[on] / root_share)
-            return np.concatenate(values), weight
+                entries = np.repeat(t, per_column)
+                entries *= Q.data
+                np.divide(np.bincount(key, entries)[on], root_share, out=values[n_own:])
+            return values, weight
 
         return at
 
@@ -359,9 +367,11 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
     statistic, which jumps from one value to the next as the weights' order changes: 2 % of a noise level from 128
     rows, enough to move a fit's noise model and with it its estimates by a sizable fraction of a standard
     deviation), a continuous function of the values where they lie closer than 2 `width` around the median; NaN
-    for no values. Found within a window around the values' plain median that holds it (a few passes over the
-    values), sorting only the values whose spread reaches into the window (a 1000-sample fit's 150k standardised
-    numbers: sorting them all took 5x as long)."""
+    for no values. Found within a window around the values' plain median that holds it, narrowed by bisection to
+    about `width` (a few passes over the values), sorting only the values whose spread reaches into the window (a
+    1000-sample fit's 150k standardised numbers: sorting them all took 5x as long; a 6000-frame fit's 390k
+    eigenspace numbers, most within the first window: the narrowed one holds a tenth of them, and the sort's
+    arrays no longer make the solve's peak memory)."""
     if values.size == 0:
         return float("nan")
     half = 0.5 * float(np.sum(weights))
@@ -374,6 +384,15 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
         if (below_a < levels[0] and _weight_below(values, weights, b, width) > levels[1]) or (a, b) == (low, high):
             break
         reach *= 4.0
+    while b - a > width:  # narrowed by bisection: fewer values' spreads reach into it (a pass each, no sort)
+        mid = 0.5 * (a + b)
+        below_mid = _weight_below(values, weights, mid, width)
+        if below_mid < levels[0]:
+            a, below_a = mid, below_mid
+        elif below_mid > levels[1]:
+            b = mid
+        else:
+            break
     near = (values > a - width) & (values < b + width)  # the values whose spread reaches into the window
     spread = np.concatenate([values[near] - width, values[near] + width])
     step = np.concatenate([weights[near], -weights[near]]) / (2.0 * width)  # the slope's change at each edge
@@ -397,7 +416,10 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
 
 def _weight_below(values: np.ndarray, weights: np.ndarray, x: float, width: float) -> float:
     """The cumulative weight of `weighted_median` at x: each value's weight spread over +- width, the part below x."""
-    return float(np.clip((x - values) / (2.0 * width) + 0.5, 0.0, 1.0) @ weights)
+    share = np.subtract(x, values)  # one temporary, worked in place (the values of a long fit: 390k)
+    share *= 1.0 / (2.0 * width)
+    share += 0.5
+    return float(np.clip(share, 0.0, 1.0, out=share) @ weights)
 
 
 def weighted_median_above(

@@ -171,7 +171,7 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
     n = float(np.sum(dof))
     if n <= n_params:
         return False
-    return weighted_median_above(np.abs(w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
+    return weighted_median_above(np.abs(w, out=w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
 
 
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
@@ -191,12 +191,12 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
         else:
             hi = mid
     sigma = float(np.exp(hi))
-    reached = standardized(sigma)
+    scale = _robust_scale(*standardized(sigma), n_params)
     del standardized  # its arrays are not kept while set_sigma may decompose the groups again
     state.set_sigma(sigma)
     if state.noise_model is not model():
         return residual_scale(state, residual, state.sigma, n_params)
-    return _robust_scale(*reached, n_params)
+    return scale
 
 
 def estimate_class_scales(state: BlockState, lin: Linearization, problem: Problem) -> float:
@@ -354,6 +354,8 @@ def _update_round(
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
     change, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
+    for state in problem.states:  # the next solve's linearisations are not kept beside this one's sensitivities
+        state.release_sensitivities()
     return changed, change, notes
 
 
@@ -363,6 +365,8 @@ def solve(
 ) -> Solution:
     """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
     say = progress or (lambda _msg: None)
+    for state in problem.states:  # see `_update_round`
+        state.release_sensitivities()
     z = np.zeros(len(problem.params))
     before = [r.copy() for r in problem.raw_residuals(z)]
     rows_total = sum(r.size for r in before)
