@@ -1,14 +1,19 @@
 """ROS 2 messages read from their little-endian CDR layout, without the general decoder: the two kinds a capture
 or recording holds many of (sensor_msgs/CompressedImage, sensor_msgs/JointState). Each reader returns None for a
 message it does not read so (another type, big-endian, cut short): the caller then uses the general decoder
-(`wolfcal.io.mcapfile.channel_decoder`), which gives the same values (tests)."""
+(`wolfcal.io.mcapfile.channel_decoder`), which gives the same values (tests); `image_of` does both for an image."""
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
+from pathlib import Path
+
+from mcap.records import Channel, Message
 
 from wolfcal.io.images import PNG_HEAD
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, stamp_ns
+from wolfcal.io.mcapfile import channel_decoder
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns, stamp_ns
 
 
 def compressed_image(data: bytes, schema, log_time: int, complete: bool = True) -> tuple[int, memoryview] | None:
@@ -31,6 +36,19 @@ def compressed_image(data: bytes, schema, log_time: int, complete: bool = True) 
     if pos + 4 + (length if complete else min(length, PNG_HEAD)) > len(data):
         return None
     return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
+
+
+def image_of(
+    path: Path, decoders: dict[int, Callable], schema, channel: Channel, message: Message, complete: bool = True
+) -> tuple[int, memoryview]:
+    """(header stamp [ns], the encoded image, a view) of a CompressedImage message of the file `path`: from its layout
+    (`compressed_image`), else by the channel's general decoder (`channel_decoder`, kept in `decoders`; a whole
+    message: `complete` False only where `compressed_image` has read the head)."""
+    image = compressed_image(message.data, schema, message.log_time, complete)
+    if image is None:
+        decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+        image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
+    return image
 
 
 def joint_state(

@@ -32,13 +32,12 @@ from typing import IO, NamedTuple
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
-from wolfcal.io.cdr import compressed_image, joint_state
+from wolfcal.io.cdr import compressed_image, image_of, joint_state
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
@@ -205,10 +204,7 @@ def _pass_one(
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
-            image = compressed_image(message.data, schema, message.log_time, complete)
-            if image is None:  # not as `compressed_image` reads it: the general decoder (a whole message)
-                decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-                image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
+            image = image_of(path, decoders, schema, channel, message, complete)
             stamp = image[0]
             name = image_topics[channel.topic]
             # the checksums (known None) read the image where it lies, without a copy; kind and size come from a
@@ -267,7 +263,7 @@ def _read(
 ) -> Capture:
     """Read an open file: pair and select frames per camera, leave out damaged images, group the frames into
     samples."""
-    reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+    reader = make_reader(handle)  # messages decoded by `channel_decoder` or from their layout (`wolfcal.io.cdr`)
     found = check_topics(path, reader, config)
     info_cameras = {n for n in found.with_info if not (n == HEAD_CAMERA and intrinsics is not None)}
     identity, _ = identity_and_memo(path, "images")

@@ -16,9 +16,7 @@ from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.cdr import compressed_image
-from wolfcal.io.mcapfile import channel_decoder
-from wolfcal.io.msgdefs import header_stamp_ns
+from wolfcal.io.cdr import image_of
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,10 +75,7 @@ def _stream_window(
     for schema, channel, message in messages:
         if (channel.topic, message.log_time) not in times:
             continue
-        image = compressed_image(message.data, schema, message.log_time)
-        if image is None:  # not as `compressed_image` reads it: the general decoder
-            decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-            image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
+        image = image_of(path, decoders, schema, channel, message)
         key = (channel.topic, message.log_time, image[0])
         if not remaining.get(key) or key in waiting:
             continue
