@@ -443,15 +443,15 @@ def test_pairing_split_publishers_and_sparse_states_with_velocities():
     head = [(k * 20 * ms + 7 * ms, ["HeadPan"], [0.1 * (k > 30)], []) for k in range(50)]  # moves at 0.62 s
     states = JointStates.from_messages(legs + head)
     assert states.names == ["RKnee", "HeadPan"]
-    paired = pair_frame(states, 300 * ms, exact=False)
+    paired = pair_frame(states, 300 * ms)
     assert (
         isinstance(paired, Paired) and paired.positions.tolist() == [0.5, 0.0] and paired.velocities is None
     )
-    assert "HeadPan moved" in pair_frame(states, 500 * ms, exact=False)
+    assert "HeadPan moved" in pair_frame(states, 500 * ms)
 
     sparse = [(k * 500 * ms, ["RKnee"], [0.5], [0.0 if k < 3 else 0.2]) for k in range(6)]  # 2 Hz
     sparse_states = JointStates.from_messages(sparse)
-    assert isinstance(pair_frame(sparse_states, 1000 * ms + 5 * ms, exact=False), Paired)
-    assert "turning" in pair_frame(sparse_states, 2000 * ms, exact=False)
+    assert isinstance(pair_frame(sparse_states, 1000 * ms + 5 * ms), Paired)
+    assert "turning" in pair_frame(sparse_states, 2000 * ms)
     no_velocity = JointStates.from_messages([(t, n, q, []) for t, n, q, _ in sparse])
-    assert "too few joint states" in pair_frame(no_velocity, 1000 * ms, exact=False)
+    assert "too few joint states" in pair_frame(no_velocity, 1000 * ms)

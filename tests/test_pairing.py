@@ -143,7 +143,7 @@ def whole_log_pairing(path: Path, topic: str) -> dict[int, Paired | str]:
             else:
                 joints.append((stamp, list(decoded.name), list(decoded.position), list(decoded.velocity)))
     states = JointStates.from_messages(joints)
-    return {s: pair_frame(states, s, exact=False) for s in stamps}
+    return {s: pair_frame(states, s) for s in stamps}
 
 
 @pytest.mark.parametrize(
@@ -229,8 +229,23 @@ def test_frames_repeating_one_image_are_counted_and_warned_about(simulated, tmp_
     assert "stays at its floor (0.05 px)" in warning[0]
 
 
+def _exact_one_by_one(states: JointStates, stamp: int) -> Paired | str:
+    """The exact rule of a capture file for one frame, written out: each joint, in name order, needs a state stamped
+    like the frame (the first of equal stamps); velocities only where every joint reported one."""
+    positions, velocities = [], []
+    for name in states.names:
+        series = states.series[name]
+        same = np.flatnonzero(series.times == stamp)
+        if not len(same):
+            return f"no joint state of {name} with the image's stamp"
+        positions.append(series.positions[same[0]])
+        velocities.append(series.velocities[same[0]])
+    v = np.asarray(velocities)
+    return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
+
+
 def test_capture_frames_paired_at_once_as_one_by_one():
-    """`pair_exact` (a capture file's frames, all at once) gives what `pair_frame(exact=True)` gives frame by frame:
+    """`pair_exact` (a capture file's frames, all at once) gives what the exact rule gives frame by frame:
     the readings stamped like the frame, velocities only where every joint reported one, and for a frame without a
     state of its stamp the first joint (in name order) that lacks one; joints published in two groups, one group
     without velocities in one message, one missing a stamp."""
@@ -244,7 +259,7 @@ def test_capture_frames_paired_at_once_as_one_by_one():
             messages.append((int(stamp), ["d", "e"], rng.normal(size=2).tolist(), [0.0, 0.0]))
     states = JointStates.from_messages(messages)
     frames = np.array([*stamps, stamps[3] + 1, 0], dtype=np.int64)  # and two stamps no joint state has
-    expected = [pair_frame(states, int(stamp), exact=True) for stamp in frames]
+    expected = [_exact_one_by_one(states, int(stamp)) for stamp in frames]
     got = pair_exact(states, frames)
     assert [isinstance(r, str) for r in expected] == [False] * 5 + [True] + [False] * 2 + [True, True]
     for want, have in zip(expected, got, strict=True):

@@ -186,7 +186,7 @@ class FramePairer:
             paired = iter(pair_exact(states, stamps[used]))
             results = [next(paired) if use else None for use in used]
         else:
-            results = [pair_frame(states, int(stamp), exact=False) if use else None for stamp, use in zip(stamps, used)]
+            results = [pair_frame(states, int(stamp)) if use else None for stamp, use in zip(stamps, used)]
         for (camera, stamp, item, _), result, bad_stamp in zip(frames, results, bad_stamps):
             self._frames.append(PairedFrame(camera, stamp, item, result, bool(bad_stamp)))
 

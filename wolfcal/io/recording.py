@@ -130,12 +130,9 @@ class Paired:
     velocities: np.ndarray | None  # (J,) [rad/s]; None unless every joint reported one
 
 
-def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
-    """Joint angles for the frame at `stamp_ns`, or the reason the frame is not used.
-
-    exact=True (capture files): the joint state must have the image's stamp, and no stillness test is
-    made (the capture decided that the robot was still). exact=False (recordings): nearest state within the
-    tolerance, and the stillness test of the module docstring.
+def pair_frame(states: JointStates, stamp_ns: int) -> Paired | str:
+    """Joint angles for the frame at `stamp_ns` of a recording, or the reason the frame is not used: the nearest
+    state within the tolerance, and the stillness test of the module docstring. A capture file's frames: `pair_exact`.
     """
     positions, velocities = [], []
     worst: tuple[float, str] | None = None  # (ticks moved, joint) of the joint that moved most
@@ -145,16 +142,12 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
         candidates = [j for j in (i - 1, i) if 0 <= j < len(s.times)]
         j = min(candidates, key=lambda c: abs(int(s.times[c]) - stamp_ns)) if candidates else -1
         dt = abs(int(s.times[j]) - stamp_ns) if candidates else None
-        if exact and dt != 0:
-            return f"no joint state of {name} with the image's stamp"
         if dt is None or dt > PAIR_TOLERANCE_NS:
             nearest = f"nearest {dt / 1e6:.0f} ms away" if dt is not None and dt <= STILL_WINDOW_NS else (
                 f"none within {STILL_WINDOW_NS / 1e6:.0f} ms")  # what a window of +-STILL_WINDOW_NS tells
             return f"no joint state of {name} within {PAIR_TOLERANCE_NS / 1e6:.0f} ms ({nearest})"
         positions.append(s.positions[j])
         velocities.append(s.velocities[j])
-        if exact:
-            continue
         lo = int(np.searchsorted(s.times, stamp_ns - STILL_WINDOW_NS, side="left"))
         hi = int(np.searchsorted(s.times, stamp_ns + STILL_WINDOW_NS, side="right"))
         if s.times[hi - 1] - s.times[lo] >= STILL_WINDOW_NS:
@@ -180,9 +173,9 @@ def pair_frame(states: JointStates, stamp_ns: int, exact: bool) -> Paired | str:
 
 
 def pair_exact(states: JointStates, stamps_ns: np.ndarray) -> list[Paired | str]:
-    """`pair_frame(states, stamp, exact=True)` of each stamp of `stamps_ns` (N,) [ns], all at once: the joint states
-    stamped exactly like each frame, or why a frame has none (the first joint, in the order of `states.names`,
-    without a state of its stamp)."""
+    """A capture file's frames at `stamps_ns` (N,) [ns], all at once: for each, the joint states stamped exactly like
+    it (the first of equal stamps), or why it has none (the first joint, in the order of `states.names`, without a
+    state of its stamp). No stillness test: the capture decided that the robot was still."""
     n = len(stamps_ns)
     positions = np.empty((n, len(states.names)))
     velocities = np.empty((n, len(states.names)))
