@@ -112,10 +112,10 @@ class BlockState:
         )
         self.set_sigma(self.sigma)
 
-    def set_sigma(self, sigma: float) -> None:
+    def set_sigma(self, sigma: float) -> bool:
         """Set the noise level per measured number [the block's unit]. The shared detection error's size follows
         it (`shared_size`); when that size changes the groups are decomposed again, so the next solve and the
-        reported uncertainty use one noise model."""
+        reported uncertainty use one noise model. Returns whether they were."""
         tau = self.shared_size(sigma)
         shared = self.noise_model.shared
         again = shared.tau != tau and np.any(shared.label >= 0)
@@ -127,6 +127,7 @@ class BlockState:
             groups, row_scale = self.noise_model.group_of_row, self.noise_model.row_scale
             self.whitening = None  # the old factors go before the new ones are built (memory)
             self.whitening = GroupedWhitening(groups, replace(shared, tau=tau), row_scale)
+        return bool(again)
 
     def release_sensitivities(self) -> None:
         """Let go of the joint sensitivities (R, J) the noise model was decomposed from (a view of the linearisation

@@ -14,7 +14,6 @@ solve happened to stop), and `uncertainty` at the solution.
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -178,7 +177,6 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
     not below `floor` [unit]); returns the residual scale reached (`residual_scale`, from the search's own
     standardised numbers unless setting the level decomposed the groups again)."""
-    model = weakref.ref(state.noise_model)  # not kept alive while set_sigma may build another
     standardized = state.noise_model.standardizer(residual.ravel())
     lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
     # The scale falls as the level grows: at or below 1 at the floor, every step of the search goes down (the same
@@ -193,8 +191,7 @@ def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, flo
     sigma = float(np.exp(hi))
     scale = _robust_scale(*standardized(sigma), n_params)
     del standardized  # its arrays are not kept while set_sigma may decompose the groups again
-    state.set_sigma(sigma)
-    if state.noise_model is not model():
+    if state.set_sigma(sigma):  # another noise model: its own standardised numbers
         return residual_scale(state, residual, state.sigma, n_params)
     return scale
 
