@@ -26,7 +26,6 @@ def synthetic_observations(
     return observations_from_poses(robot, camera, truth, q_true, T_camera_tag, visible, noise_px, rng)
 
 
-
 def reordered(obs: Observations, seed: int) -> Observations:
     """The same observations with the samples in another order and the corner rows shuffled (seeded): what a fit
     must not depend on (tests and `bench/bench_fit.py --stability`)."""
