@@ -38,6 +38,7 @@ from wolfcal.atomic import atomic_output
 from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, recall, write_memo
 from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
 from wolfcal.vision.batch import Detections, iter_detect_checked
+from wolfcal.vision.tag_views import TagViews
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
@@ -120,7 +121,7 @@ def _entry_path(key: str) -> Path:
     return cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
 
 
-def _load(path: Path, key: str, stamps: np.ndarray) -> list[Detections] | None:
+def _load(path: Path, key: str, stamps: np.ndarray) -> TagViews | None:
     """The entry's detections if it exists, is whole, and was made for this key and these stamps."""
     try:
         with np.load(path, allow_pickle=False) as entry:
@@ -131,26 +132,15 @@ def _load(path: Path, key: str, stamps: np.ndarray) -> list[Detections] | None:
         return None
     if len(counts) != len(stamps) or counts.sum() != len(ids) or corners.shape != (len(ids), 4, 2):
         return None
-    starts = np.concatenate([[0], np.cumsum(counts)])
-    return [
-        {int(i): c for i, c in zip(ids[a:b], corners[a:b])} for a, b in zip(starts[:-1], starts[1:], strict=True)
-    ]
+    return TagViews.from_arrays(counts, ids, corners)
 
 
-def _save(path: Path, key: str, stamps: np.ndarray, detections: list[Detections]) -> None:
+def _save(path: Path, key: str, stamps: np.ndarray, detections: TagViews) -> None:
     """Write the entry atomically; a cache that cannot be written is skipped (it only saves time)."""
-    ids = [tag for found in detections for tag in sorted(found)]
-    corners = [found[tag] for found in detections for tag in sorted(found)]
+    counts, ids, corners = detections.arrays()
     try:
         with atomic_output(path, scratch=True) as handle:
-            np.savez(
-                handle,
-                key=np.array(key),
-                stamps=stamps,
-                counts=np.array([len(found) for found in detections], dtype=np.int64),
-                ids=np.array(ids, dtype=np.int64),
-                corners=np.array(corners, dtype=np.float64).reshape(-1, 4, 2),
-            )
+            np.savez(handle, key=np.array(key), stamps=stamps, counts=counts, ids=ids, corners=corners)
     except OSError:
         pass
 
@@ -164,12 +154,13 @@ def cached_detect(
     progress: Callable[[int, int | None], None] | None = None,
     labels: Callable[[int], str] | None = None,
     workers: int | None = None,
-) -> list[Detections]:
+) -> TagViews:
     """Detections of the images of one camera in one capture file, from the cache when it holds them.
 
     `stamps` [ns]: one per image, in order; `images`: their encoded bytes, read only when the cache misses.
-    Returns per image {tag id: (4, 2) corners [px]} as `wolfcal.vision.batch.detect_encoded` gives them
-    (`workers` processes, default one per core; `labels(i)` names image i in errors).
+    Returns per image {tag id: (4, 2) corners [px]} as `wolfcal.vision.batch.detect_encoded` gives them, kept
+    compactly as they come (`TagViews`; `workers` processes, default one per core; `labels(i)` names image i in
+    errors).
     """
     stamps_array = np.asarray(stamps, dtype=np.int64)
 
@@ -200,9 +191,9 @@ def cached_detect(
     return found
 
 
-def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> list[Detections]:
-    """The detections as a list, one per stamp."""
-    found = list(detections)
+def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> TagViews:
+    """The detections kept as they come (`TagViews`), one image per stamp."""
+    found = TagViews.of(detections)
     if len(found) != len(stamps):
         raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
     return found
@@ -215,7 +206,7 @@ def _detect_while_hashing(
     detect: Callable[[], Generator[Detections, None, None]],
     settings: DetectorSettings,
     progress: Callable[[int, int | None], None] | None,
-) -> list[Detections]:
+) -> TagViews:
     """Detections of a file's images (`detect()`) with the file hashed meanwhile on a thread of its own (hashlib
     and the reads release the interpreter lock), so the hash (0.05-0.1 s per 70 MB, more when the file is not in
     the page cache) no longer waits before the detection; then saved. Should the digest find a whole entry (a
@@ -225,7 +216,7 @@ def _detect_while_hashing(
     with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
         hashing = hasher.submit(hash_file, path, stop)
         looked = False
-        found: list[Detections] = []
+        found = TagViews()
         stream = detect()
         try:
             for detections in stream:
@@ -238,7 +229,8 @@ def _detect_while_hashing(
                         if progress:
                             progress(len(cached), len(cached))
                         return cached
-            found = _all(found, stamps)
+            if len(found) != len(stamps):
+                raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
         except BaseException:  # an undecodable image, Ctrl-C: the hash of a long recording is not waited for
             stop.set()
             raise
@@ -270,7 +262,7 @@ def detect_by_source(
     progress: Callable[[int, int], None] | None = None,
     labels: Callable[[int], str] | None = None,
     workers: int | None = None,
-) -> list[Detections]:
+) -> TagViews:
     """`cached_detect` for images from several capture files and cameras: image i came from `sources[i]` (a
     path) with stamp `stamps[i]` [ns], seen by `camera_name` (one name for all, or one per image);
     `images(indices)` gives the encoded bytes of those images in that order, lazily (a generator: read only when
@@ -279,14 +271,15 @@ def detect_by_source(
     groups: dict[tuple[str, str], list[int]] = {}
     for index, key in enumerate(zip(sources, names, strict=True)):
         groups.setdefault(key, []).append(index)
-    found: list[Detections | None] = [None] * len(sources)
+    parts, order = [], []
     done = 0
     for (source, name), indices in groups.items():
         step = (lambda n, _t, base=done: progress(base + n, len(sources))) if progress else None
         named = (lambda k, ix=indices: labels(ix[k])) if labels else None
         times = [stamps[i] for i in indices]
-        results = cached_detect(Path(source), name, times, images(indices), settings, step, named, workers)
-        for i, result in zip(indices, results, strict=True):
-            found[i] = result
+        parts.append(cached_detect(Path(source), name, times, images(indices), settings, step, named, workers))
+        order += indices
         done += len(indices)
-    return found  # type: ignore[return-value]
+    if len(parts) == 1:  # one file and camera: already in input order
+        return parts[0]
+    return TagViews.concat(parts).take(np.argsort(order))

@@ -19,6 +19,7 @@ from wolfcal.io.samples import Sample, SampleImage, encoded_images
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.cache import DetectorSettings, detect_by_source
+from wolfcal.vision.tag_views import TagViews
 
 Families = dict[str, set[int]]  # tag family -> configured ids
 
@@ -36,29 +37,21 @@ def _check_one_camera(name: str, images: list[SampleImage]) -> CameraModel:
     return images[0].camera
 
 
-def _stack(
-    name: str, robot: Robot, samples: list[Sample], detections: list[dict[int, np.ndarray]], camera: CameraModel
-) -> Observations:
-    """Observations of the samples (all with detections) of one camera."""
-    sample_index, tag_ids, corner_index, uv = [], [], [], []
-    for k, found in enumerate(detections):
-        for tag_id, corners in sorted(found.items()):
-            sample_index.append(np.full(4, k))
-            tag_ids.append(np.full(4, tag_id))
-            corner_index.append(np.arange(4))
-            uv.append(corners)
+def _stack(name: str, robot: Robot, samples: list[Sample], views: TagViews, camera: CameraModel) -> Observations:
+    """Observations of the samples (all with detections, `views` of their images in the same order) of one
+    camera."""
+    counts, ids, corners = views.arrays()
     names = robot.joint_names
-    return Observations(
-        joint_names=list(names),
-        q_measured=np.stack([s.joint_positions(names) for s in samples]),
-        stamps_ns=np.array([s.stamp_ns for s in samples], dtype=np.int64),
-        sources=[s.source for s in samples],
-        camera=camera,
-        sample_index=np.concatenate(sample_index),
-        tag_ids=np.concatenate(tag_ids),
-        corner_index=np.concatenate(corner_index),
-        uv=np.concatenate(uv).astype(float),
-        camera_name=name,
+    return Observations.of_views(
+        list(names),
+        np.stack([s.joint_positions(names) for s in samples]),
+        np.array([s.stamp_ns for s in samples], dtype=np.int64),
+        [s.source for s in samples],
+        camera,
+        np.repeat(np.arange(len(samples)), counts),
+        ids.copy(),
+        corners.copy(),
+        name,
     )
 
 
@@ -93,18 +86,19 @@ def detect_observations(
         labels=lambda k: f"{jobs[k][0].source}: the {jobs[k][1]} image at t={jobs[k][0].stamp_ns} ns",
         workers=workers,
     )  # fmt: skip
+    counts = found.arrays()[0]
     observations: dict[str, Observations] = {}
     warnings = []
     for name, camera in models.items():
         rows = [k for k, (_, n) in enumerate(jobs) if n == name]
-        seen = [k for k in rows if found[k]]
+        seen = [k for k in rows if counts[k]]
         if len(seen) < len(rows):
             warnings.append(
                 f"{len(rows) - len(seen)} of {len(rows)} image(s) of camera '{name}' show no configured tag and are "
                 "not used"
             )
         if seen:
-            observations[name] = _stack(name, robot, [jobs[k][0] for k in seen], [found[k] for k in seen], camera)
+            observations[name] = _stack(name, robot, [jobs[k][0] for k in seen], found.take(seen), camera)
     if not observations:
         ids = ", ".join(f"{t.family} id {t.id}" for t in robot.config.tags)
         sources = ", ".join(sorted({s.source for s in samples}))
