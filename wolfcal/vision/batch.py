@@ -63,14 +63,12 @@ def _family_list(families: Families) -> FamilyList:
 def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
     """Decode each encoded image (png, jpeg, ...; None if undecodable) and detect the tags of every family, the
     corners of all of them refined together (one pass per family)."""
-    import cv2
-
+    from wolfcal.io.images import decode_gray
     from wolfcal.vision.tags import detect_tags_many
 
     # straight to 8-bit gray: a colour jpeg decodes only its luma (2048x1536: 15 -> 9 ms), within 1 grey level
     # of decoding the colours and converting them
-    images = [cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if len(data) else None
-              for data in batch]  # fmt: skip
+    images = [decode_gray(data) for data in batch]
     decoded = [image for image in images if image is not None]
     found: list[Detections] = [{} for _ in decoded]
     for family, ids in families:

@@ -41,8 +41,9 @@ from wolfcal.vision.batch import Detections, iter_detect_checked
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
-# cells averaged in bins, a settled tag not iterated again)
-DETECTOR_VERSION = 7  # 7: window sums and bins summed on their own, not by a cumulative sum or matmul (~1e-5 px)
+# cells averaged in bins, a settled tag not iterated again; 7: window sums and bins summed on their own, not by a
+# cumulative sum or matmul, ~1e-5 px)
+DETECTOR_VERSION = 8  # 8: each tag refined in a crop of its own (smaller float32 sample coordinates, ~1e-5 px)
 FORMAT = 1  # entry layout
 
 
