@@ -58,8 +58,9 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
 def decode_gray(data: bytes | memoryview) -> np.ndarray | None:
     """8-bit gray (H, W) image of an encoded png or jpeg (as OpenCV's IMREAD_GRAYSCALE gives it); None if it cannot
     be decoded. A png as wolfcal writes mono8 images (stored, unfiltered: `PNG_COMPRESSION`) is read by
-    `_stored_gray` without a decoder (its pixels lie in the file as they are; 2048x1536: 1.9 vs 3.8-4.5 ms of CPU
-    with OpenCV, whose libpng also checks each chunk's CRC, which the reader's `image_damage` has checked); any
+    `_stored_gray` without a decoder: its pixels lie in the file as they are, and its zlib checksum is verified
+    (2048x1536: 1.6 ms of CPU against OpenCV's 2.7-4.2 ms, which also checks each chunk's CRC: the reader has
+    checked those of every image it read from a capture file, `image_damage`; 512x384: 0.10 against 0.17 ms). Any
     other image goes to OpenCV."""
     gray = _stored_gray(data)
     if gray is not None:
@@ -88,7 +89,9 @@ def _stored_gray(data: bytes | memoryview) -> np.ndarray | None:
         elif chunk == b"IEND":
             break
         pos += 12 + length
-    stream = b"".join(parts)  # stored blocks (<= 64 KiB) run across the IDAT chunks
+    # stored blocks (<= 64 KiB) run across the IDAT chunks: the chunks' data in one array (copied by numpy: joining
+    # them as bytes took 1.7 ms at 2048x1536, copying 0.2 ms)
+    stream = _concatenated(parts)
     size = (width + 1) * height  # each row: its filter byte, then the pixels
     if size > 1 << 31 or len(stream) < 2 or stream[0] & 0x0F != 8 or stream[1] & 0x20:  # deflate, no dictionary
         return None
@@ -109,6 +112,18 @@ def _stored_gray(data: bytes | memoryview) -> np.ndarray | None:
     if rows[:, 0].any():  # a filtered row
         return None
     return rows[:, 1:]
+
+
+def _concatenated(parts: list[memoryview]) -> memoryview:
+    """The bytes of `parts` one after the other (the only part itself: no copy)."""
+    if len(parts) == 1:
+        return parts[0]
+    joined = np.empty(sum(len(part) for part in parts), np.uint8)
+    start = 0
+    for part in parts:
+        joined[start : start + len(part)] = np.frombuffer(part, np.uint8)
+        start += len(part)
+    return joined.data
 
 
 def image_kind(data: bytes | memoryview) -> str | None:
