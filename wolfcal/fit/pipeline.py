@@ -33,6 +33,7 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
+from wolfcal.vision.cache import hashing_ahead
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
 
@@ -385,14 +386,15 @@ def detect_captures(
     detected tag corners [px] with the joint readings of their samples; and the warnings of reading and detection
     (frames skipped, repeated images)."""
     required = (HEAD_CAMERA,) if options.system == "head" else ()
-    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-    release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
-    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-    observations, detect_warnings = detect_observations(
-        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-    )
+    with hashing_ahead(captures):  # a first run's hashes for the detection cache beside the reading
+        samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
+        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+        observations, detect_warnings = detect_observations(
+            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+        )
     warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
     release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
     return observations, warnings

@@ -1,4 +1,5 @@
-"""Encoded images of `sensor_msgs/CompressedImage`: encode, recognise the format, read the size cheaply."""
+"""Encoded images of `sensor_msgs/CompressedImage`: encode, decode to gray, recognise the format, read the size
+cheaply."""
 
 from __future__ import annotations
 
@@ -52,6 +53,77 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
     if not ok:
         raise WolfcalError(f"OpenCV could not encode an image of shape {image.shape} as {image_format}")
     return buffer.tobytes(), f"{encoding}; {image_format} compressed {encoding}"
+
+
+def decode_gray(data: bytes | memoryview) -> np.ndarray | None:
+    """8-bit gray (H, W) image of an encoded png or jpeg (as OpenCV's IMREAD_GRAYSCALE gives it); None if it cannot
+    be decoded. A png as wolfcal writes mono8 images (stored, unfiltered: `PNG_COMPRESSION`) is read by
+    `_stored_gray` without a decoder: its pixels lie in the file as they are, and its zlib checksum is verified
+    (2048x1536: 1.6 ms of CPU against OpenCV's 2.7-4.2 ms, which also checks each chunk's CRC: the reader has
+    checked those of every image it read from a capture file, `image_damage`; 512x384: 0.10 against 0.17 ms). Any
+    other image goes to OpenCV."""
+    gray = _stored_gray(data)
+    if gray is not None:
+        return gray
+    import cv2
+
+    return cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if len(data) else None
+
+
+def _stored_gray(data: bytes | memoryview) -> np.ndarray | None:
+    """The pixels (H, W) of an 8-bit gray, non-interlaced png whose zlib stream is made of stored blocks only and
+    whose rows are all unfiltered, with its zlib checksum (Adler-32 of the rows) verified; None for any other
+    image (or one that is damaged: then OpenCV says so)."""
+    view = memoryview(data)
+    if len(view) < 33 or bytes(view[: len(PNG_SIGNATURE)]) != PNG_SIGNATURE or bytes(view[12:16]) != b"IHDR":
+        return None
+    width, height, depth, colour, _, _, interlace = struct.unpack_from(">IIBBBBB", view, 16)
+    if depth != 8 or colour != 0 or interlace != 0 or width == 0 or height == 0:
+        return None
+    parts, pos = [], len(PNG_SIGNATURE)
+    while pos + 12 <= len(view):
+        (length,) = struct.unpack_from(">I", view, pos)
+        chunk = bytes(view[pos + 4 : pos + 8])
+        if chunk == b"IDAT":
+            parts.append(view[pos + 8 : pos + 8 + length])
+        elif chunk == b"IEND":
+            break
+        pos += 12 + length
+    # stored blocks (<= 64 KiB) run across the IDAT chunks: the chunks' data in one array (copied by numpy: joining
+    # them as bytes took 1.7 ms at 2048x1536, copying 0.2 ms)
+    stream = _concatenated(parts)
+    size = (width + 1) * height  # each row: its filter byte, then the pixels
+    if size > 1 << 31 or len(stream) < 2 or stream[0] & 0x0F != 8 or stream[1] & 0x20:  # deflate, no dictionary
+        return None
+    out = np.empty(size, np.uint8)
+    pos, filled, last = 2, 0, False
+    while not last:
+        if pos + 5 > len(stream) or stream[pos] & 0x06:  # cut short, or a compressed block
+            return None
+        last = bool(stream[pos] & 1)
+        count, complement = struct.unpack_from("<HH", stream, pos + 1)
+        if count ^ complement != 0xFFFF or filled + count > size or pos + 5 + count > len(stream):
+            return None
+        out[filled : filled + count] = np.frombuffer(stream, np.uint8, count, pos + 5)
+        filled, pos = filled + count, pos + 5 + count
+    if filled != size or pos + 4 > len(stream) or zlib.adler32(out.data) != struct.unpack_from(">I", stream, pos)[0]:
+        return None
+    rows = out.reshape(height, width + 1)
+    if rows[:, 0].any():  # a filtered row
+        return None
+    return rows[:, 1:]
+
+
+def _concatenated(parts: list[memoryview]) -> memoryview:
+    """The bytes of `parts` one after the other (the only part itself: no copy)."""
+    if len(parts) == 1:
+        return parts[0]
+    joined = np.empty(sum(len(part) for part in parts), np.uint8)
+    start = 0
+    for part in parts:
+        joined[start : start + len(part)] = np.frombuffer(part, np.uint8)
+        start += len(part)
+    return joined.data
 
 
 def image_kind(data: bytes | memoryview) -> str | None:
