@@ -5,14 +5,16 @@ captures are cached in the temp folder, or DIR (the first run renders them: abou
 how captures are written, give a fresh DIR to compare); each fit gets a fresh detection cache folder.
 Prints, with units:
 1. End to end (`run_fit` in this process: read, detect, solve, uncertainty, write) on 2048x1536 captures, camera
-   fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU; the floor (reading the images,
-   decoding them and OpenCV's bare aruco detector on all cores, wall); the naive reference in CPU (the same
-   detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second run (cache), in this process
-   (the median of SECOND_RUNS runs) and as a whole `wolfcal fit` process.
+   fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU, the median of FIRST_RUNS runs each with
+   a fresh cache folder (and the very first of them, which also pays the process's first-call costs); the floor
+   (reading the images, decoding them and OpenCV's bare aruco detector on all cores; the median of FIRST_RUNS); the
+   naive reference in CPU (the same detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second
+   run (cache), in this process (the median of SECOND_RUNS runs) and as a whole `wolfcal fit` process. The ratios
+   are taken between medians: one run of 0.5-1 s varies by +-15 % on this machine even when it is idle.
 2. The solve alone (`fit_observations` on the same detections) vs the naive solve, CPU.
 3. Leg fits of 400 and 1000 samples at 512x384 (2048x1536 binned 4x4), end to end, first run: wall and CPU, in
-   this process and as a `wolfcal fit` process (start-up and imports included); the solve alone; the load average
-   (the machine may be shared with other work).
+   this process and as a `wolfcal fit` process (start-up and imports included), each the median of PROCESS_RUNS
+   runs with a fresh cache, with the range; the solve alone; the load average (the machine may be shared).
 4. Detection accuracy (median, 95th percentile corner error [px]) on bench/bench_vision.py's rendered views,
    next to the figures that bench printed before (README).
 BLAS runs on one thread, as in the `wolfcal` command. Each capture is read once before its figures are taken, so
@@ -58,6 +60,8 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CACHE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
 PARTS = ("camera", "leg", "large", "accuracy")
 SECOND_RUNS = 3  # cached runs after the first, in process
+FIRST_RUNS = 5  # no-cache runs in process (and floors) of the 2048x1536 captures
+PROCESS_RUNS = 3  # no-cache runs of the large captures, in process and as a process
 README_ACCURACY = {"2048x1536": (0.02, 0.13), "512x384": (0.04, 0.13)}  # median, p95 [px] before issue 13
 
 
@@ -81,6 +85,23 @@ def timed(fn):
     wall, cpu = time.perf_counter(), time.process_time()
     result = fn()
     return result, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def median_run(runs: list[tuple[float, float]], by: int = 1) -> tuple[float, float]:
+    """The (wall, CPU) run with the median CPU time (by=1) or wall time (by=0)."""
+    return sorted(runs, key=lambda run: run[by])[len(runs) // 2]
+
+
+def spread(runs: list[tuple[float, float]], which: int) -> str:
+    """'lo-hi' of the runs' wall (which=0) or CPU (which=1) times [s]."""
+    values = [run[which] for run in runs]
+    return f"{min(values):.2f}-{max(values):.2f}"
+
+
+def fresh_fit_run(path: Path, options: FitOptions) -> tuple[float, float]:
+    """(wall, CPU) [s] of a first run: `run_fit` with a fresh, empty detection cache folder."""
+    with tempfile.TemporaryDirectory() as cache_dir:
+        return fit_run(path, options, Path(cache_dir))
 
 
 def fit_run(path: Path, options: FitOptions, cache_dir: Path) -> tuple[float, float]:
@@ -133,12 +154,15 @@ def warm(path: Path) -> None:
 def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> None:
     robot = load_robot(CONFIG)
     warm(path)
+    firsts = [fresh_fit_run(path, options) for _ in range(FIRST_RUNS)]
+    first_wall, first_cpu = median_run(firsts)
     with tempfile.TemporaryDirectory() as cache_dir:
-        first_wall, first_cpu = fit_run(path, options, Path(cache_dir))
+        fit_run(path, options, Path(cache_dir))
         seconds = sorted((fit_run(path, options, Path(cache_dir)) for _ in range(SECOND_RUNS)), key=lambda r: r[1])
         second_wall, second_cpu = seconds[len(seconds) // 2]  # the median in CPU: one run of 0.1-0.2 s is noisy
         process_wall, process_cpu = process_run(path, free, Path(cache_dir))
-    bare, bare_cpu = floor(path)
+    floors = [floor(path) for _ in range(FIRST_RUNS)]
+    bare, bare_cpu = median_run(floors)
     with cache_enabled(False):  # the detection's own cost, the naive reference uses the same detections
         samples, _ = load_samples(robot, [path], None)
         (observations, _), _, detect_cpu = timed(lambda: detect_observations(samples, robot))
@@ -149,9 +173,12 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
     naive_total = detect_cpu + naive_cpu
     print(f"\n{label}: {obs.n_samples} samples with tags, {len(obs.uv)} corners, {len(fit.chain)} unknowns "
           f"(naive model = wolfcal's to {check:.1e} px)")  # fmt: skip
-    print(f"  first run      {first_wall:6.2f} s wall, {first_cpu:6.2f} s CPU; floor (read + decode + bare aruco, "
-          f"{cpu_count()} threads) {bare:.2f} s wall, {bare_cpu:.2f} s CPU -> {first_wall / bare:.2f}x the floor in "
-          f"wall (target <= 1.3), {first_cpu / bare_cpu:.2f}x in CPU")
+    print(f"  first run      {first_wall:6.2f} s wall, {first_cpu:6.2f} s CPU (no cache; median of {FIRST_RUNS} runs, "
+          f"{spread(firsts, 1)} s CPU, {spread(firsts, 0)} s wall; the process's first {firsts[0][1]:.2f} s CPU, "
+          f"{firsts[0][0]:.2f} s wall)")
+    print(f"  floor          {bare:6.2f} s wall, {bare_cpu:6.2f} s CPU (read + decode + bare aruco, {cpu_count()} "
+          f"threads; median of {FIRST_RUNS}, {spread(floors, 1)} s CPU) -> first run {first_wall / bare:.2f}x the "
+          f"floor in wall (target <= 1.3), {first_cpu / bare_cpu:.2f}x in CPU")
     print(f"  naive reference {naive_total:6.2f} s CPU (detection {detect_cpu:.2f} + naive solve {naive_cpu:.2f}) "
           f"-> wolfcal {naive_total / first_cpu:.1f}x faster in CPU (target >= 3)")
     print(f"  second run     {second_wall:6.2f} s wall, {second_cpu:6.2f} s CPU (cache; median of {SECOND_RUNS} runs, "
@@ -168,23 +195,21 @@ def large_leg_fit(path: Path, limit: float) -> None:
     robot = load_robot(CONFIG)
     warm(path)
     load = os.getloadavg()[0]
-    with tempfile.TemporaryDirectory() as cache_dir:
-        wall, cpu = fit_run(path, options, Path(cache_dir))
+    runs = [fresh_fit_run(path, options) for _ in range(PROCESS_RUNS)]
+    wall, cpu = median_run(runs, by=0)  # the target is wall time
+    with cache_enabled(False):
         samples_read, _ = load_samples(robot, [path], None)
-        observations, _ = detect_observations(samples_read, robot)  # from the cache the run filled
+        observations, _ = detect_observations(samples_read, robot)
     _, solve_wall, solve_cpu = timed(lambda: fit_observations(robot, observations, options))
-    with tempfile.TemporaryDirectory() as cache_dir, tempfile.TemporaryDirectory() as out:
-        command = [sys.executable, "-c", "from wolfcal.cli import app; app()", "fit", str(path), "--robot",
-                   str(CONFIG), "--free", "leg", "--out", out, "--force"]  # fmt: skip
-        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-        start = time.perf_counter()
-        subprocess.run(command, check=True, capture_output=True, env={**os.environ, "WOLFCAL_CACHE_DIR": cache_dir})
-        process_wall = time.perf_counter() - start
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        process_cpu = after.ru_utime + after.ru_stime - usage.ru_utime - usage.ru_stime
+    processes = []
+    for _ in range(PROCESS_RUNS):
+        with tempfile.TemporaryDirectory() as cache_dir:
+            processes.append(process_run(path, ["--free", "leg"], Path(cache_dir)))
+    process_wall, process_cpu = median_run(processes, by=0)
     print(f"  {len(samples_read):4d} samples: {wall:.2f} s wall ({cpu:.2f} s CPU) in this process, "
           f"{process_wall:.2f} s wall ({process_cpu:.2f} s CPU) as a `wolfcal fit` process (target < {limit:g} s "
-          f"wall); the solve alone {solve_wall:.2f} s wall ({solve_cpu:.2f} s CPU); load average {load:.1f} -> "
+          f"wall; medians of {PROCESS_RUNS} first runs, {spread(runs, 0)} s and {spread(processes, 0)} s wall); the "
+          f"solve alone {solve_wall:.2f} s wall ({solve_cpu:.2f} s CPU); load average {load:.1f} -> "
           f"{os.getloadavg()[0]:.1f}")
 
 

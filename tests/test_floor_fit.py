@@ -11,7 +11,7 @@ from conftest import OTHER_CAMERA, robot_with_floor_tags
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
 from wolfcal.fit.floor_block import check_floor_samples
-from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.fit.pipeline import FitOptions, check_solution_left_out, fit_observations
 from wolfcal.fit.result import fit_result, load_result, summary_lines, write_result
 from wolfcal.observations import Observations
 from wolfcal.outliers import FLOOR_CORNER_PX
@@ -128,3 +128,23 @@ def test_result_yaml_names_the_single_floor_corners_left_out(robot, tmp_path):
     assert after["n_units_used"] == len(obs.uv) - listed  # no floor view left out here: every other corner counts
     assert all("outlier_corners" not in s for s in result.samples)  # the head camera's views have no corner rule
     assert f"{listed} single corner(s) far off" in "\n".join(summary_lines(result))
+
+
+def test_fit_refuses_when_more_than_a_fifth_of_the_floor_corners_are_left_out(robot):
+    """One corner 3 px off, in a random direction, in every other floor view (40 of 316 corners): the fit's
+    corner rule then leaves out 85-129 corners (seeds 0, 1), good ones with them, while fewer than 20 % of the
+    views go. That share of single corners is more than the outlier rule may absorb (`leftout.MAX_LEFT_OUT`): the
+    fit is refused, naming the floor's single corners. The clean capture passes the same check."""
+    feet, floor = scene(robot, 1, offsets="none")
+    obs, options = floor.obs, FitOptions(free="camera")
+    moved = obs.subset(np.arange(obs.n_samples))
+    rows = np.flatnonzero(obs.corner_index == 0)[::2]
+    direction = np.random.default_rng(0).normal(size=(len(rows), 2))
+    moved.uv[rows] += 3.0 * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    check_solution_left_out(fit_observations(robot, {"head": joined(feet.obs, obs)}, options), [Path("clean.mcap")])
+    fit = fit_observations(robot, {"head": joined(feet.obs, moved)}, options)
+    k = [b.name for b in fit.blocks].index("floor")
+    assert fit.problem.states[k].excluded_units.sum() > 0.2 * len(obs.uv)
+    assert len(fit.solution.blocks[k].outlier_views) <= 0.2 * fit.blocks[k].n_views  # the views alone would pass
+    with pytest.raises(WolfcalError, match=r"moved\.mcap: \d+ of \d+ floor single corners \(\d+%\) left out"):
+        check_solution_left_out(fit, [Path("moved.mcap")])

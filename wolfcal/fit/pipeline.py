@@ -298,11 +298,14 @@ def repeat_warnings(observations: dict[str, Observations], noise_floor_px: float
 
 def check_solution_left_out(fit: Fit, captures: list[Path]) -> None:
     """The outlier rule must not absorb unusable data: WolfcalError when more than MAX_LEFT_OUT of a measurement
-    system's samples or tag views were left out as outliers."""
+    system's samples or tag views, or of the single units of a block with a unit rule (the floor's corners), were
+    left out as outliers."""
     counts = {}
-    for block, result in zip(fit.blocks, fit.solution.blocks):
+    for block, result, state in zip(fit.blocks, fit.solution.blocks, fit.problem.states):
         counts[f"{block.name} samples"] = (int(result.outlier_samples.sum()), len(block.q_measured))
         counts[f"{block.name} tag views"] = (len(result.outlier_views), block.n_views)
+        if block.unit_rule is not None:
+            counts[f"{block.name} single corners"] = (int(state.excluded_units.sum()), block.n_units)
     check_left_out(
         counts,
         ", ".join(map(str, captures)),
