@@ -86,7 +86,7 @@ def test_noise_factors_multiply_as_scipy_sparse(robot, camera):
     products, and a chunk's factors are Q's columns and rows of its groups."""
     obs, options = scenario(robot, camera, "head, repeated frames")
     model = fit_observations(robot, obs, options).problem.states[0].noise_model
-    Q, reference = model.Q, model.Q.to_scipy()
+    Q, reference = model.Q, model.Q.as_scipy
     assert len(Q._groups) > 1 and Q.shape[1] > 0  # groups of several shapes
     rng = np.random.default_rng(0)
     x, M = rng.normal(size=(Q.shape[1], 3)), rng.normal(size=(Q.shape[0], 3))
@@ -100,5 +100,5 @@ def test_noise_factors_multiply_as_scipy_sparse(robot, camera):
     for rows, part in chunks:
         groups = model.group_of_row[rows]
         columns = np.flatnonzero((model.group_of_column >= groups.min()) & (model.group_of_column <= groups.max()))
-        np.testing.assert_array_equal(part.Q.to_scipy().toarray(), reference[rows][:, columns].toarray())
+        np.testing.assert_array_equal(part.Q.as_scipy.toarray(), reference[rows][:, columns].toarray())
     assert sum(part.Q.shape[1] for _, part in chunks) == Q.shape[1]

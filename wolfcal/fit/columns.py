@@ -6,7 +6,7 @@ in rows indices[...], a group's columns consecutive, each listing the group's ro
 matrix is formed. Products with dense matrices run group by group: groups of the same shape in one batched
 matrix product (a group's rows gathered once, not once per column). The dense fit path then needs no
 scipy.sparse, whose import (its array-API layer loads numpy.f2py and numpy.testing) was 40 % of `wolfcal fit`'s
-start-up (0.46 -> 0.28 s CPU); a sparse Jacobian (more than DENSE_LIMIT unknowns) still uses it, through `to_scipy`.
+start-up (0.46 -> 0.28 s CPU); a sparse Jacobian (more than DENSE_LIMIT unknowns) still uses it, through `as_scipy`.
 """
 
 from __future__ import annotations
@@ -52,8 +52,10 @@ class ColumnMatrix:
         entry = np.repeat(self.indptr[columns] - indptr[:-1], lengths) + np.arange(indptr[-1])
         return ColumnMatrix(self.data[entry], row_map[self.indices[entry]], indptr, n_rows)
 
-    def to_scipy(self):
-        """The same matrix as scipy.sparse.csc_matrix (for products with sparse matrices)."""
+    @cached_property
+    def as_scipy(self):
+        """The same matrix as scipy.sparse.csc_matrix (for products with sparse matrices: a sparse Jacobian), made
+        once (its arrays shared, not copied)."""
         import scipy.sparse
 
         return scipy.sparse.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape)
@@ -72,9 +74,13 @@ class ColumnMatrix:
         new[1:] = (first_row[1:] != first_row[:-1]) | (length[1:] != length[:-1])  # a group's columns are consecutive
         head = np.flatnonzero(new)  # first column of each group
         width = np.diff(np.append(head, K))  # columns per group
-        shapes, group_shape = np.unique(np.stack([length[head], width], axis=1), axis=0, return_inverse=True)
+        base = int(width.max()) + 1
+        shape_key = length[head] * base + width  # (n, k) as one number
+        order = np.argsort(shape_key, kind="stable")  # groups of one shape in column order
+        keys, starts = np.unique(shape_key[order], return_index=True)
         out = []
-        for (n, k), heads in zip(shapes, (head[group_shape.ravel() == i] for i in range(len(shapes)))):
+        for key, heads in zip(keys, np.split(head[order], starts[1:])):
+            n, k = divmod(int(key), base)
             columns = heads[:, None] + np.arange(k)  # (G, k)
             rows = self.indices[self.indptr[heads][:, None] + np.arange(n)]  # (G, n)
             values = self.data[self.indptr[columns][:, :, None] + np.arange(n)].swapaxes(1, 2)  # (G, n, k)

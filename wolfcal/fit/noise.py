@@ -226,7 +226,7 @@ class GroupedWhitening:
         if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
             import scipy.sparse
 
-            Q = self.Q.to_scipy()
+            Q = self.Q.as_scipy
             M = scipy.sparse.diags(1.0 / self.row_scale) @ M
             shared = Q @ (scipy.sparse.diags(d) @ (Q.T @ M))
             return (scipy.sparse.diags(keep) @ M + shared).tocsr()
@@ -250,7 +250,7 @@ class GroupedWhitening:
         if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
             import scipy.sparse
 
-            Q = self.Q.to_scipy()
+            Q = self.Q.as_scipy
             M = scipy.sparse.diags(1.0 / self.row_scale) @ M
             t = Q.T @ M
             own = scipy.sparse.diags(keep) @ (M - Q @ t)
