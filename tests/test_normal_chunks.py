@@ -79,3 +79,26 @@ def test_the_condition_number_from_the_eigenvalues_unless_nearly_singular():
         lazy = information_uncertainty(J.T @ J, np.ones(6), factor)
         assert bool(asked) == nearly_singular == (exact >= EIGEN_CONDITION_LIMIT)
         assert lazy.condition_number == pytest.approx(exact, rel=1e-7)
+
+
+def test_noise_factors_multiply_as_scipy_sparse(robot, camera):
+    """The noise groups' factors Q in numpy (wolfcal.fit.columns, batched by group shape) give scipy.sparse's
+    products, and a chunk's factors are Q's columns and rows of its groups."""
+    obs, options = scenario(robot, camera, "head, repeated frames")
+    model = fit_observations(robot, obs, options).problem.states[0].noise_model
+    Q, reference = model.Q, model.Q.as_scipy
+    assert len(Q._groups) > 1 and Q.shape[1] > 0  # groups of several shapes
+    rng = np.random.default_rng(0)
+    x, M = rng.normal(size=(Q.shape[1], 3)), rng.normal(size=(Q.shape[0], 3))
+    np.testing.assert_allclose(Q @ x, reference @ x, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(Q @ x[:, 0], reference @ x[:, 0], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(Q.T @ M, reference.T @ M, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(Q.T @ M[:, 0], reference.T @ M[:, 0], rtol=0, atol=1e-13)
+    sizes = np.bincount(model.group_of_row[model.rows])
+    chunks = model.chunks(int(sizes.max() + sizes.min()))
+    assert len(chunks) > 1
+    for rows, part in chunks:
+        groups = model.group_of_row[rows]
+        columns = np.flatnonzero((model.group_of_column >= groups.min()) & (model.group_of_column <= groups.max()))
+        np.testing.assert_array_equal(part.Q.as_scipy.toarray(), reference[rows][:, columns].toarray())
+    assert sum(part.Q.shape[1] for _, part in chunks) == Q.shape[1]

@@ -22,7 +22,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse
+
+from wolfcal.fit.columns import ColumnMatrix, is_sparse
 
 # Half-width over which `weighted_median` spreads each value's weight, in the values' unit: for standardised residuals
 # (median 0.67 when the noise model fits) it shifts the median of a normal sample by about 1e-4 of itself, and it
@@ -97,7 +98,7 @@ class GroupedWhitening:
 
     def __init__(
         self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None,
-        factors: tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray] | None = None,
+        factors: tuple[ColumnMatrix, np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
         self.group_of_row, self.shared = group_of_row, shared
@@ -132,9 +133,7 @@ class GroupedWhitening:
             end = max(int(np.searchsorted(ends, ends[first] + max_rows, side="right")) - 1, first + 1)
             rows = self.rows[ends[first] : ends[end]]
             columns = np.flatnonzero((self.group_of_column >= first) & (self.group_of_column < end))
-            Q = self.Q[:, columns]
-            Q = scipy.sparse.csc_matrix((Q.data, position[Q.indices] - ends[first], Q.indptr),
-                                        shape=(len(rows), len(columns)))  # fmt: skip
+            Q = self.Q.select(columns, position - ends[first], len(rows))
             # the part's factors are given: its rows' joint sensitivities are not copied (A without columns; 5.7 MB
             # of a 6000-frame fit's chunks)
             shared = self.shared
@@ -158,11 +157,11 @@ class GroupedWhitening:
                 yield int(n), members[first : first + per_batch]
 
     @property
-    def QT(self) -> scipy.sparse.csr_matrix:
+    def QT(self):
         """Q^T: a view of Q's arrays (no copy)."""
         return self.Q.T
 
-    def _thin_factors(self, sizes: np.ndarray) -> tuple[scipy.sparse.csc_matrix, np.ndarray, np.ndarray]:
+    def _thin_factors(self, sizes: np.ndarray) -> tuple[ColumnMatrix, np.ndarray, np.ndarray]:
         """Q (R, K) block diagonal over the groups (each group's left singular vectors of U_g), s^2 (K,) and the
         group of each column. Q is stored by columns (each column: its group's rows, ascending), built in place
         from the decompositions (a copy through (row, column) pairs would hold several times its size)."""
@@ -188,7 +187,6 @@ class GroupedWhitening:
         col_len: list[np.ndarray] = []
         s2: list[np.ndarray] = []
         group_of_column: list[np.ndarray] = []
-        K = 0  # columns so far
         for n, members in self._batches(sizes, counts, labels):
             widths = [int(c[members].max(initial=0)) for c in counts]  # columns per joint: its distinct readings
             k_reading = int(np.sum(widths))
@@ -215,20 +213,22 @@ class GroupedWhitening:
             col_len.append(np.full(len(g), n))
             s2.append(s_squared[g, c])
             group_of_column.append(members[g])
-            K += len(g)
         if not data:
-            return scipy.sparse.csc_matrix((self.n_rows, 0)), np.zeros(0), np.zeros(0, dtype=int)
+            return ColumnMatrix.empty(self.n_rows), np.zeros(0), np.zeros(0, dtype=int)
         indptr = np.concatenate([[0], np.cumsum(np.concatenate(col_len))])
-        Q = scipy.sparse.csc_matrix((np.concatenate(data), np.concatenate(row_idx), indptr), shape=(self.n_rows, K))
-        return Q, np.concatenate(s2), np.concatenate(group_of_column)
+        factor = ColumnMatrix(np.concatenate(data), np.concatenate(row_idx), indptr, self.n_rows)
+        return factor, np.concatenate(s2), np.concatenate(group_of_column)
 
     def apply(self, M, sigma: float):
         """W M: the whitening of rows (R,) or (R, P), dense or sparse (then sparse); rows in no group become 0."""
         d = 1.0 / np.sqrt(sigma**2 + self.s2) - 1.0 / sigma
         keep = self.in_group / sigma
-        if scipy.sparse.issparse(M):
+        if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
+            import scipy.sparse
+
+            Q = self.Q.as_scipy
             M = scipy.sparse.diags(1.0 / self.row_scale) @ M
-            shared = self.Q @ (scipy.sparse.diags(d) @ (self.QT @ M))
+            shared = Q @ (scipy.sparse.diags(d) @ (Q.T @ M))
             return (scipy.sparse.diags(keep) @ M + shared).tocsr()
         M = np.asarray(M, dtype=float)
         if M.ndim == 1:
@@ -247,10 +247,13 @@ class GroupedWhitening:
         basis), so a loss applied per number (the robust fit's) does not depend on how a group was decomposed."""
         scale = 1.0 / np.sqrt(sigma**2 + self.s2)
         keep = self.in_group / sigma
-        if scipy.sparse.issparse(M):
+        if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
+            import scipy.sparse
+
+            Q = self.Q.as_scipy
             M = scipy.sparse.diags(1.0 / self.row_scale) @ M
-            t = self.QT @ M
-            own = scipy.sparse.diags(keep) @ (M - self.Q @ t)
+            t = Q.T @ M
+            own = scipy.sparse.diags(keep) @ (M - Q @ t)
             return scipy.sparse.vstack([own, scipy.sparse.diags(scale) @ t]).tocsr()
         M = np.asarray(M, dtype=float)
         M = M / (self.row_scale if M.ndim == 1 else self.row_scale[:, None])
@@ -279,7 +282,7 @@ class GroupedWhitening:
         shared = 1.0 / (sigma**2 + self.s2)
         H = N.T @ N / sigma**2 + T.T @ ((shared * weight[R:] - 1.0 / sigma**2)[:, None] * T)
         if len(odd):
-            own = (N[odd] - self.Q[odd] @ T) / sigma
+            own = (N[odd] - (self.Q @ T)[odd]) / sigma
             H += own.T @ ((weight[odd] - 1.0)[:, None] * own)
         g = (N.T @ v[:R] - T.T @ (self.QT @ v[:R])) / sigma + T.T @ (np.sqrt(shared) * v[R:])
         return 0.5 * (H + H.T), g

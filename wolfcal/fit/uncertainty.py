@@ -10,9 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse
+
+from wolfcal.fit.columns import is_sparse
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 CORRELATION_LIMIT = 0.9
 # Condition numbers below which the information's eigenvalues give it to ~1e-7 (the smallest eigenvalue's rounding,
@@ -39,7 +44,7 @@ class Uncertainty:
 def uncertainty(J_data: np.ndarray | scipy.sparse.spmatrix, prior_sigmas: np.ndarray) -> Uncertainty:
     """Uncertainty of the unknowns from the whitened data Jacobian (R, P) in prior-normalised units."""
     information = J_data.T @ J_data
-    if scipy.sparse.issparse(J_data):
+    if is_sparse(J_data):
         return information_uncertainty(information.toarray(), prior_sigmas)
     return information_uncertainty(np.asarray(information), prior_sigmas, triangular_factor(J_data))
 

@@ -1,0 +1,116 @@
+"""The noise groups' thin factors Q (`wolfcal.fit.noise`) as a numpy matrix stored by columns, and its products.
+
+Q (R, K) is block diagonal over the noise groups: a group's columns (its shared errors' left singular vectors)
+hold its rows and no others. Stored by columns in scipy's csc layout (column c: values data[indptr[c]:indptr[c+1]]
+in rows indices[...], a group's columns consecutive, each listing the group's rows in one order), so no R x K
+matrix is formed. Products with dense matrices run group by group: groups of the same shape in one batched
+matrix product (a group's rows gathered once, not once per column). The dense fit path then needs no
+scipy.sparse, whose import (its array-API layer loads numpy.f2py and numpy.testing) was 40 % of `wolfcal fit`'s
+start-up (0.46 -> 0.28 s CPU); a sparse Jacobian (more than DENSE_LIMIT unknowns) still uses it, through `as_scipy`.
+"""
+
+from __future__ import annotations
+
+import sys
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+
+def is_sparse(M: Any) -> bool:
+    """Whether M is a scipy.sparse matrix, without importing scipy.sparse (no sparse matrix exists before it is)."""
+    sparse = sys.modules.get("scipy.sparse")
+    return sparse is not None and bool(sparse.issparse(M))
+
+
+class ColumnMatrix:
+    """A block-diagonal (R, K) matrix stored by columns; `Q @ x` and `Q.T @ M` for dense x (K,) / (K, P) and M (R,)
+    / (R, P)."""
+
+    def __init__(self, data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, n_rows: int) -> None:
+        self.data, self.indices = np.asarray(data, dtype=float), np.asarray(indices)
+        self.indptr = np.asarray(indptr, dtype=np.int64)
+        self.shape = (int(n_rows), len(self.indptr) - 1)
+
+    @classmethod
+    def empty(cls, n_rows: int) -> ColumnMatrix:
+        return cls(np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(1, dtype=np.int64), n_rows)
+
+    @property
+    def nnz(self) -> int:
+        return len(self.data)
+
+    @property
+    def T(self) -> _Transposed:
+        return _Transposed(self)
+
+    def select(self, columns: np.ndarray, row_map: np.ndarray, n_rows: int) -> ColumnMatrix:
+        """The matrix of `columns` (in that order), each entry's row r moved to row_map[r], with n_rows rows."""
+        lengths = np.diff(self.indptr)[columns]
+        indptr = np.concatenate([[0], np.cumsum(lengths)])
+        entry = np.repeat(self.indptr[columns] - indptr[:-1], lengths) + np.arange(indptr[-1])
+        return ColumnMatrix(self.data[entry], row_map[self.indices[entry]], indptr, n_rows)
+
+    @cached_property
+    def as_scipy(self):
+        """The same matrix as scipy.sparse.csc_matrix (for products with sparse matrices: a sparse Jacobian), made
+        once (its arrays shared, not copied)."""
+        import scipy.sparse
+
+        return scipy.sparse.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape)
+
+    @cached_property
+    def _groups(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per shape (n rows, k columns): the groups of that shape (G of them) as (rows (G, n), columns (G, k),
+        values (G, n, k)). Grouped by exact shape, not padded to a common k: each group's products are then the
+        same numbers whichever other groups it is batched with (a fit summed chunk by chunk is the fit in one)."""
+        K = self.shape[1]
+        if K == 0:
+            return []
+        length = np.diff(self.indptr)
+        first_row = self.indices[self.indptr[:-1]]
+        new = np.ones(K, dtype=bool)
+        new[1:] = (first_row[1:] != first_row[:-1]) | (length[1:] != length[:-1])  # a group's columns are consecutive
+        head = np.flatnonzero(new)  # first column of each group
+        width = np.diff(np.append(head, K))  # columns per group
+        base = int(width.max()) + 1
+        shape_key = length[head] * base + width  # (n, k) as one number
+        order = np.argsort(shape_key, kind="stable")  # groups of one shape in column order
+        keys, starts = np.unique(shape_key[order], return_index=True)
+        out = []
+        for key, heads in zip(keys, np.split(head[order], starts[1:])):
+            n, k = divmod(int(key), base)
+            columns = heads[:, None] + np.arange(k)  # (G, k)
+            rows = self.indices[self.indptr[heads][:, None] + np.arange(n)]  # (G, n)
+            values = self.data[self.indptr[columns][:, :, None] + np.arange(n)].swapaxes(1, 2)  # (G, n, k)
+            out.append((rows, columns, np.ascontiguousarray(values)))
+        return out
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        """Q x for dense x (K,) or (K, P): (R,) or (R, P); rows in no group are 0."""
+        x = np.asarray(x, dtype=float)
+        x2 = x[:, None] if x.ndim == 1 else x
+        out = np.zeros((self.shape[0], x2.shape[1]))
+        for rows, columns, values in self._groups:
+            out[rows] = values @ x2[columns]
+        return out[:, 0] if x.ndim == 1 else out
+
+    def rmatmul(self, M: np.ndarray) -> np.ndarray:
+        """Q^T M for dense M (R,) or (R, P): (K,) or (K, P)."""
+        M = np.asarray(M, dtype=float)
+        M2 = M[:, None] if M.ndim == 1 else M
+        out = np.zeros((self.shape[1], M2.shape[1]))
+        for rows, columns, values in self._groups:
+            out[columns] = values.swapaxes(1, 2) @ M2[rows]
+        return out[:, 0] if M.ndim == 1 else out
+
+
+class _Transposed:
+    """Q^T of a `ColumnMatrix`: `Q.T @ M` for dense M."""
+
+    def __init__(self, matrix: ColumnMatrix) -> None:
+        self.matrix = matrix
+
+    def __matmul__(self, M: np.ndarray) -> np.ndarray:
+        return self.matrix.rmatmul(M)
