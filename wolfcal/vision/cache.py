@@ -136,8 +136,7 @@ def hashing_ahead(paths: Iterable[Path]) -> Iterator[None]:
                     continue
             except OSError:
                 continue
-            stop = threading.Event()
-            started[name] = _ahead[name] = (pool.submit(hash_file, Path(path), stop), stop)
+            started[name] = _ahead[name] = _begin_hash(pool, Path(path))
         yield
     finally:
         for name, (_, stop) in started.items():
@@ -229,7 +228,11 @@ def cached_detect(
 
 def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> TagViews:
     """The detections kept as they come (`TagViews`), one image per stamp."""
-    found = TagViews.of(detections)
+    return _one_per_stamp(TagViews.of(detections), stamps)
+
+
+def _one_per_stamp(found: TagViews, stamps: list[int] | np.ndarray) -> TagViews:
+    """`found`, checked to hold one image per stamp."""
     if len(found) != len(stamps):
         raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
     return found
@@ -266,8 +269,7 @@ def _detect_while_hashing(
                         if progress:
                             progress(len(cached), len(cached))
                         return cached
-            if len(found) != len(stamps):
-                raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
+            _one_per_stamp(found, stamps)
         except BaseException:  # an undecodable image, Ctrl-C: the hash of a long recording is not waited for
             stop.set()
             raise
@@ -283,6 +285,7 @@ def _detect_while_hashing(
 
 
 def _begin_hash(pool: ThreadPoolExecutor, path: Path) -> Hashing:
+    """`hash_file(path)` begun on `pool`, with the event that stops it."""
     stop = threading.Event()
     return pool.submit(hash_file, path, stop), stop
 
