@@ -13,9 +13,17 @@ from __future__ import annotations
 
 import sys
 from functools import cached_property
+from types import ModuleType
 from typing import Any
 
 import numpy as np
+
+
+def scipy_sparse() -> ModuleType:
+    """scipy.sparse, imported when first needed: by a sparse Jacobian (more than DENSE_LIMIT unknowns) only."""
+    import scipy.sparse
+
+    return scipy.sparse
 
 
 def is_sparse(M: Any) -> bool:
@@ -56,9 +64,7 @@ class ColumnMatrix:
     def as_scipy(self):
         """The same matrix as scipy.sparse.csc_matrix (for products with sparse matrices: a sparse Jacobian), made
         once (its arrays shared, not copied)."""
-        import scipy.sparse
-
-        return scipy.sparse.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape)
+        return scipy_sparse().csc_matrix((self.data, self.indices, self.indptr), shape=self.shape)
 
     @cached_property
     def _groups(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.fit.columns import ColumnMatrix, is_sparse
+from wolfcal.fit.columns import ColumnMatrix, is_sparse, scipy_sparse
 
 # Half-width over which `weighted_median` spreads each value's weight, in the values' unit: for standardised residuals
 # (median 0.67 when the noise model fits) it shifts the median of a normal sample by about 1e-4 of itself, and it
@@ -224,12 +224,11 @@ class GroupedWhitening:
         d = 1.0 / np.sqrt(sigma**2 + self.s2) - 1.0 / sigma
         keep = self.in_group / sigma
         if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
-            import scipy.sparse
-
+            sparse = scipy_sparse()
             Q = self.Q.as_scipy
-            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
-            shared = Q @ (scipy.sparse.diags(d) @ (Q.T @ M))
-            return (scipy.sparse.diags(keep) @ M + shared).tocsr()
+            M = sparse.diags(1.0 / self.row_scale) @ M
+            shared = Q @ (sparse.diags(d) @ (Q.T @ M))
+            return (sparse.diags(keep) @ M + shared).tocsr()
         M = np.asarray(M, dtype=float)
         if M.ndim == 1:
             M = M / self.row_scale
@@ -248,13 +247,12 @@ class GroupedWhitening:
         scale = 1.0 / np.sqrt(sigma**2 + self.s2)
         keep = self.in_group / sigma
         if is_sparse(M):  # a sparse Jacobian (many unknowns): scipy.sparse is loaded
-            import scipy.sparse
-
+            sparse = scipy_sparse()
             Q = self.Q.as_scipy
-            M = scipy.sparse.diags(1.0 / self.row_scale) @ M
+            M = sparse.diags(1.0 / self.row_scale) @ M
             t = Q.T @ M
-            own = scipy.sparse.diags(keep) @ (M - Q @ t)
-            return scipy.sparse.vstack([own, scipy.sparse.diags(scale) @ t]).tocsr()
+            own = sparse.diags(keep) @ (M - Q @ t)
+            return sparse.vstack([own, sparse.diags(scale) @ t]).tocsr()
         M = np.asarray(M, dtype=float)
         M = M / (self.row_scale if M.ndim == 1 else self.row_scale[:, None])
         t = self.QT @ M

@@ -12,13 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wolfcal.fit.blocks import Block, Linearization
-from wolfcal.fit.columns import is_sparse
+from wolfcal.fit.columns import is_sparse, scipy_sparse
 from wolfcal.fit.noise import GroupedWhitening, SharedErrors, row_groups
 from wolfcal.fit.uncertainty import triangular_factor
 from wolfcal.graph import connected_components
@@ -156,15 +155,6 @@ class BlockState:
         return self.whitening
 
 
-def _sparse() -> ModuleType:
-    """scipy.sparse, imported when a Jacobian is sparse (more than DENSE_LIMIT unknowns): the dense fit path does
-    not load it (its import, with the numpy.f2py and numpy.testing its array-API layer loads, was a fifth of a
-    `wolfcal fit` process's start)."""
-    import scipy.sparse
-
-    return scipy.sparse
-
-
 class Problem:
     """See the module docstring. `chain` holds the robot-model parameters; blocks bring their own."""
 
@@ -233,10 +223,10 @@ class Problem:
             J = state.whiten(self._rows_jacobian(state, lin, np.arange(lin.residual.size)), split=robust)
             if robust:
                 scale = huber_sqrt(w, self.huber_k)[1]
-                J = _sparse().diags(scale) @ J if is_sparse(J) else np.multiply(J, scale[:, None], out=J)
+                J = scipy_sparse().diags(scale) @ J if is_sparse(J) else np.multiply(J, scale[:, None], out=J)
             parts.append(J)
         if len(self.params) > DENSE_LIMIT:
-            return _sparse().vstack(parts).tocsr()
+            return scipy_sparse().vstack(parts).tocsr()
         return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def information(
@@ -267,11 +257,11 @@ class Problem:
                 if curvature:
                     g += J.T @ (slope * robust)  # the Huber loss's derivative, clip(w, -k, k)
                     inside = (np.abs(whitened) <= self.huber_k).astype(float)
-                    J = _sparse().diags(inside) @ J if is_sparse(J) else J * inside[:, None]
+                    J = scipy_sparse().diags(inside) @ J if is_sparse(J) else J * inside[:, None]
                     H += (J.T @ J).toarray() if is_sparse(J) else J.T @ J
                     continue
                 if is_sparse(J):
-                    J = _sparse().diags(slope) @ J
+                    J = scipy_sparse().diags(slope) @ J
                     H += (J.T @ J).toarray()
                 else:
                     J *= slope[:, None]
@@ -294,7 +284,7 @@ class Problem:
         n, sig = len(self.params), self.params.prior_sigmas
         J_chain = lin.jac_chain.reshape(lin.residual.size, self.n_chain)[rows] * sig[: self.n_chain]
         if n == self.n_chain:  # no block brings unknowns: the chain's columns are all
-            return J_chain if n <= DENSE_LIMIT else _sparse().csr_matrix(J_chain)
+            return J_chain if n <= DENSE_LIMIT else scipy_sparse().csr_matrix(J_chain)
         dense = np.zeros((len(rows), n)) if n <= DENSE_LIMIT else None
         if dense is not None:
             dense[:, : self.n_chain] = J_chain
@@ -306,12 +296,12 @@ class Problem:
             if dense is not None:
                 np.add.at(dense, (np.arange(len(rows))[:, None], cols), vals)
             else:
-                local = _sparse().csr_matrix((vals.ravel(), (np.repeat(np.arange(len(rows)), L), cols.ravel())),
+                local = scipy_sparse().csr_matrix((vals.ravel(), (np.repeat(np.arange(len(rows)), L), cols.ravel())),
                                                 shape=(len(rows), n))  # fmt: skip
         if dense is not None:
             return dense
-        empty = _sparse().csr_matrix((len(rows), n - self.n_chain))
-        J = _sparse().hstack([_sparse().csr_matrix(J_chain), empty]).tocsr()
+        empty = scipy_sparse().csr_matrix((len(rows), n - self.n_chain))
+        J = scipy_sparse().hstack([scipy_sparse().csr_matrix(J_chain), empty]).tocsr()
         return J if local is None else (J + local).tocsr()
 
 
