@@ -41,7 +41,7 @@ from wolfcal.atomic import atomic_output
 from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, recall, write_memo
 from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
 from wolfcal.vision.batch import Detections, iter_detect_checked
-from wolfcal.vision.tag_views import TagViews
+from wolfcal.vision.found_tags import FoundTags
 
 # bump when detection or refinement changes its corners (4: refined in crops, ~1e-5 px; 5: window and profile
 # length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
@@ -155,7 +155,7 @@ def _entry_path(key: str) -> Path:
     return cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
 
 
-def _load(path: Path, key: str, stamps: np.ndarray) -> TagViews | None:
+def _load(path: Path, key: str, stamps: np.ndarray) -> FoundTags | None:
     """The entry's detections if it exists, is whole, and was made for this key and these stamps."""
     try:
         with np.load(path, allow_pickle=False) as entry:
@@ -166,10 +166,10 @@ def _load(path: Path, key: str, stamps: np.ndarray) -> TagViews | None:
         return None
     if len(counts) != len(stamps) or counts.sum() != len(ids) or corners.shape != (len(ids), 4, 2):
         return None
-    return TagViews.from_arrays(counts, ids, corners)
+    return FoundTags.from_arrays(counts, ids, corners)
 
 
-def _save(path: Path, key: str, stamps: np.ndarray, detections: TagViews) -> None:
+def _save(path: Path, key: str, stamps: np.ndarray, detections: FoundTags) -> None:
     """Write the entry atomically; a cache that cannot be written is skipped (it only saves time)."""
     counts, ids, corners = detections.arrays()
     try:
@@ -188,12 +188,12 @@ def cached_detect(
     progress: Callable[[int, int | None], None] | None = None,
     labels: Callable[[int], str] | None = None,
     workers: int | None = None,
-) -> TagViews:
+) -> FoundTags:
     """Detections of the images of one camera in one capture file, from the cache when it holds them.
 
     `stamps` [ns]: one per image, in order; `images`: their encoded bytes, read only when the cache misses.
     Returns per image {tag id: (4, 2) corners [px]} as `wolfcal.vision.batch.detect_encoded` gives them, kept
-    compactly as they come (`TagViews`; `workers` processes, default one per core; `labels(i)` names image i in
+    compactly as they come (`FoundTags`; `workers` processes, default one per core; `labels(i)` names image i in
     errors).
     """
     stamps_array = np.asarray(stamps, dtype=np.int64)
@@ -226,12 +226,12 @@ def cached_detect(
     return found
 
 
-def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> TagViews:
-    """The detections kept as they come (`TagViews`), one image per stamp."""
-    return _one_per_stamp(TagViews.of(detections), stamps)
+def _all(detections: Iterable[Detections], stamps: list[int] | np.ndarray) -> FoundTags:
+    """The detections kept as they come (`FoundTags`), one image per stamp."""
+    return _one_per_stamp(FoundTags.of(detections), stamps)
 
 
-def _one_per_stamp(found: TagViews, stamps: list[int] | np.ndarray) -> TagViews:
+def _one_per_stamp(found: FoundTags, stamps: list[int] | np.ndarray) -> FoundTags:
     """`found`, checked to hold one image per stamp."""
     if len(found) != len(stamps):
         raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
@@ -246,7 +246,7 @@ def _detect_while_hashing(
     settings: DetectorSettings,
     progress: Callable[[int, int | None], None] | None,
     ahead: Hashing | None = None,
-) -> TagViews:
+) -> FoundTags:
     """Detections of a file's images (`detect()`) with the file hashed meanwhile on a thread of its own (hashlib
     and the reads release the interpreter lock), so the hash (0.05-0.1 s per 70 MB, more when the file is not in
     the page cache) no longer waits before the detection; then saved. Should the digest find a whole entry (a
@@ -256,7 +256,7 @@ def _detect_while_hashing(
     with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
         hashing, stop = ahead if ahead is not None else _begin_hash(hasher, path)
         looked = False
-        found = TagViews()
+        found = FoundTags()
         stream = detect()
         try:
             for detections in stream:
@@ -307,7 +307,7 @@ def detect_by_source(
     progress: Callable[[int, int], None] | None = None,
     labels: Callable[[int], str] | None = None,
     workers: int | None = None,
-) -> TagViews:
+) -> FoundTags:
     """`cached_detect` for images from several capture files and cameras: image i came from `sources[i]` (a
     path) with stamp `stamps[i]` [ns], seen by `camera_name` (one name for all, or one per image);
     `images(indices)` gives the encoded bytes of those images in that order, lazily (a generator: read only when
@@ -327,4 +327,4 @@ def detect_by_source(
         done += len(indices)
     if len(parts) == 1:  # one file and camera: already in input order
         return parts[0]
-    return TagViews.concat(parts).take(np.argsort(order))
+    return FoundTags.concat(parts).take(np.argsort(order))

@@ -19,7 +19,7 @@ from wolfcal.io.samples import Sample, SampleImage, encoded_images
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.cache import DetectorSettings, detect_by_source
-from wolfcal.vision.tag_views import TagViews
+from wolfcal.vision.found_tags import FoundTags
 
 Families = dict[str, set[int]]  # tag family -> configured ids
 
@@ -37,7 +37,7 @@ def _check_one_camera(name: str, images: list[SampleImage]) -> CameraModel:
     return images[0].camera
 
 
-def _stack(name: str, robot: Robot, samples: list[Sample], views: TagViews, camera: CameraModel) -> Observations:
+def _stack(name: str, robot: Robot, samples: list[Sample], views: FoundTags, camera: CameraModel) -> Observations:
     """Observations of the samples (all with detections, `views` of their images in the same order) of one
     camera."""
     counts, ids, corners = views.arrays()

@@ -2,7 +2,7 @@
 
 A long recording gives thousands of images with a few tags each; as {tag id: (4, 2) array} per image that is a dict
 and an array object per tag, allocated as the detection goes and kept to the end, between the detection's image
-buffers. `TagViews` keeps per image the number of tags, and per tag (a view: one tag in one image) its id and
+buffers. `FoundTags` keeps per image the number of tags, and per tag (a view: one tag in one image) its id and
 corners, in typed arrays that grow in place; an image's dict is made only when asked for (`views[i]`).
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
 
 
-class TagViews:
+class FoundTags:
     """Per image, the tags found: `counts` (N,) tags per image, `ids` (V,) and `corners` (V, 4, 2) [px] of the
     views, image after image, ids ascending within an image. Reads like a list of `Detections` (one per image)."""
 
@@ -24,7 +24,7 @@ class TagViews:
         self._counts, self._ids, self._corners = array("q"), array("q"), array("d")
 
     @classmethod
-    def of(cls, detections: Iterable[Detections]) -> TagViews:
+    def of(cls, detections: Iterable[Detections]) -> FoundTags:
         """Each image's detections appended as they come (the dicts and their arrays can go at once)."""
         views = cls()
         for found in detections:
@@ -32,7 +32,7 @@ class TagViews:
         return views
 
     @classmethod
-    def from_arrays(cls, counts: np.ndarray, ids: np.ndarray, corners: np.ndarray) -> TagViews:
+    def from_arrays(cls, counts: np.ndarray, ids: np.ndarray, corners: np.ndarray) -> FoundTags:
         """From `counts` (N,), `ids` (V,) and `corners` (V, 4, 2) [px] laid out image after image (as `arrays`
         gives them); within an image the views are put in ascending id order."""
         counts = np.asarray(counts, dtype=np.int64)
@@ -61,7 +61,7 @@ class TagViews:
         """(N + 1,) index of each image's first view, then the number of views."""
         return np.concatenate([[0], np.cumsum(np.frombuffer(self._counts, np.int64))])
 
-    def take(self, images: Iterable[int] | np.ndarray) -> TagViews:
+    def take(self, images: Iterable[int] | np.ndarray) -> FoundTags:
         """The views of the given images, in that order."""
         images = np.asarray(images, dtype=np.int64).reshape(-1)
         counts, ids, corners = self.arrays()
@@ -69,10 +69,10 @@ class TagViews:
         picked = counts[images]
         first = np.concatenate([[0], np.cumsum(picked)[:-1]]).astype(np.int64)  # each picked image's first view
         view = np.repeat(starts[images] - first, picked) + np.arange(int(picked.sum()))  # in this storage
-        return TagViews.from_arrays(picked, ids[view], corners[view])
+        return FoundTags.from_arrays(picked, ids[view], corners[view])
 
     @classmethod
-    def concat(cls, parts: Iterable[TagViews]) -> TagViews:
+    def concat(cls, parts: Iterable[FoundTags]) -> FoundTags:
         """The images of each part, part after part."""
         views = cls()
         for part in parts:
@@ -88,15 +88,16 @@ class TagViews:
         """Image `image`'s {tag id: (4, 2) corners [px]} (copies)."""
         if not -len(self) <= image < len(self):
             raise IndexError(image)
+        starts = self.starts()
         image %= len(self)
-        counts, ids, corners = self.arrays()
-        a = int(counts[:image].sum())
-        b = a + int(counts[image])
-        return {int(t): corners[k].copy() for k, t in zip(range(a, b), ids[a:b])}
+        return self._detections(int(starts[image]), int(starts[image + 1]))
 
     def __iter__(self) -> Iterator[Detections]:
-        counts, ids, corners = self.arrays()
-        a = 0
-        for n in counts.tolist():
-            yield {int(t): corners[k].copy() for k, t in zip(range(a, a + n), ids[a : a + n])}
-            a += n
+        starts = self.starts().tolist()
+        for a, b in zip(starts[:-1], starts[1:]):
+            yield self._detections(a, b)
+
+    def _detections(self, a: int, b: int) -> Detections:
+        """{tag id: (4, 2) corners [px]} (copies) of views a to b (one image's)."""
+        _, ids, corners = self.arrays()
+        return {int(t): corners[k].copy() for k, t in zip(range(a, b), ids[a:b])}

@@ -1,4 +1,4 @@
-"""TagViews (wolfcal.vision.tag_views): the detections of many images kept as flat arrays, read back as the dicts
+"""FoundTags (wolfcal.vision.found_tags): the detections of many images kept as flat arrays, read back as the dicts
 the detector gave, on real detections of rendered views."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from test_vision import CAMERA, random_view, tag_target
 
+from wolfcal.vision.found_tags import FoundTags
 from wolfcal.vision.render import render_targets
-from wolfcal.vision.tag_views import TagViews
 from wolfcal.vision.tags import detect_tags
 
 BINNED = CAMERA.scaled(0.25, 0.25, 512, 384)
@@ -24,7 +24,7 @@ def detections() -> list[dict[int, np.ndarray]]:
         tags = [tag_target("tag36h11", t, random_view(BINNED, rng)) for t in ids]
         image = render_targets(BINNED, tags, noise_sigma=2.0, rng=rng)
         found = detect_tags(image, "tag36h11", {3, 4, 5})
-        out.append({t: found[t] for t in sorted(found, reverse=True)})  # ids descending: TagViews sorts them
+        out.append({t: found[t] for t in sorted(found, reverse=True)})  # ids descending: FoundTags sorts them
     assert [len(d) for d in out] == [2, 1, 0, 2, 1, 0]  # what the test relies on: several tags, one, none
     return out
 
@@ -38,7 +38,7 @@ def assert_same(a, b) -> None:
 
 
 def test_views_read_back_as_the_detections_and_lay_out_by_image_then_id(detections):
-    views = TagViews.of(detections)
+    views = FoundTags.of(detections)
     assert_same(list(views), detections)
     assert_same([views[k] for k in range(len(views))], detections)
     assert_same([views[-1]], [detections[-1]])
@@ -51,14 +51,14 @@ def test_views_read_back_as_the_detections_and_lay_out_by_image_then_id(detectio
 
 
 def test_take_concat_and_from_arrays_keep_each_images_views(detections):
-    views = TagViews.of(detections)
+    views = FoundTags.of(detections)
     picked = [4, 0, 2, 0]
     assert_same(list(views.take(picked)), [detections[k] for k in picked])
     assert_same(list(views.take([])), [])
-    both = TagViews.concat([views.take([1, 2]), views.take([3])])
+    both = FoundTags.concat([views.take([1, 2]), views.take([3])])
     assert_same(list(both), [detections[1], detections[2], detections[3]])
     counts, ids, corners = views.arrays()
     reversed_within = np.array([1, 0, 2, 4, 3, 5])  # each image's views in descending id order
-    again = TagViews.from_arrays(counts, ids[reversed_within], corners[reversed_within])
+    again = FoundTags.from_arrays(counts, ids[reversed_within], corners[reversed_within])
     assert_same(list(again), detections)
     assert again.arrays()[1].tolist() == ids.tolist()
