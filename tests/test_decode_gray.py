@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from wolfcal.io.images import _stored_gray, decode_gray, encode_image
+from wolfcal.io.images import CheckedImage, _stored_gray, decode_gray, encode_image
 
 
 def _noise(height: int, width: int, seed: int = 0) -> np.ndarray:
@@ -78,3 +78,18 @@ def test_a_damaged_or_cut_png_cannot_be_decoded():
     for bad in (bytes(damaged), data[: len(data) // 2], b""):
         assert _stored_gray(bad) is None
         assert decode_gray(bad) is None
+
+
+def test_a_checked_image_is_decoded_without_its_zlib_checksum():
+    """Bytes whose reader verified their chunks' CRCs (`CheckedImage`) are not verified again: a pixel changed
+    behind both checksums is decoded as it stands, where plain bytes are refused."""
+    image = _noise(50, 80, seed=5)
+    data, _ = encode_image(image, "png")
+    changed = bytearray(data)
+    at = data.index(b"IDAT") + 4 + 2 + 5 + 81 * 10 + 1  # zlib header, stored-block header, row 10's first pixel
+    changed[at] ^= 0x10
+    assert decode_gray(bytes(changed)) is None
+    expected = image.copy()
+    expected[10, 0] ^= 0x10
+    assert np.array_equal(decode_gray(CheckedImage(bytes(changed))), expected)
+    assert np.array_equal(decode_gray(CheckedImage(data)), image)

@@ -2,11 +2,13 @@
 
 The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
 back when they are needed (detection, a figure): one pass over the part of the file they span, each image's
-bytes handed on and then dropped, so a long recording's images never sit in memory together.
+bytes handed on and then dropped, so a long recording's images never sit in memory together. Bytes read back from
+the file as it was when the reader checked them come as `CheckedImage` (their checksums are not verified again).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from itertools import groupby, islice
@@ -17,6 +19,8 @@ from mcap.reader import McapReader, make_reader
 
 from wolfcal.errors import WolfcalError
 from wolfcal.io.cdr import image_of
+from wolfcal.io.filememo import identity_of
+from wolfcal.io.images import CheckedImage
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,6 +31,9 @@ class ImageLocation:
     topic: str
     log_time: int  # [ns] the message's log time (what the file's index is ordered by)
     stamp_ns: int  # [ns] its header stamp (tells apart messages of one topic with one log time)
+    # the file's identity (`filememo.identity_of`) when its reader checked this image's checksums (`image_damage`, or
+    # its memo of them), None if it did not or the file had changed too recently to tell (`filememo.trusted`)
+    checked_identity: tuple[int, ...] | None = None
 
 
 WINDOW = 256  # images looked up per pass over the part of the file they span
@@ -38,8 +45,9 @@ def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
     Consecutive locations in one file are read in passes over the time span of up to `WINDOW` of them, in the
     file's order (what a pass keeps of its images and of the file's chunks grows with the images it looks up, not
     with the recording); an image that comes before its turn waits in memory until then (none waits when the order
-    given is the file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the
-    file changed since it was read)."""
+    given is the file's, e.g. samples in stamp order). An image comes as a `CheckedImage` when the file's identity is
+    the one its reader checked it in. WolfcalError naming the file when an image is not found (the file changed since
+    it was read)."""
     for path, run in groupby(locations, key=lambda location: location.path):
         yield from _stream_file(path, run)
 
@@ -49,18 +57,25 @@ def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]
     run = iter(wanted)
     try:
         with path.open("rb") as handle:
+            identity = tuple(identity_of(os.fstat(handle.fileno())))
             reader = make_reader(handle)
             while window := list(islice(run, WINDOW)):
-                yield from _stream_window(path, reader, decoders, window)
+                yield from _stream_window(path, reader, decoders, window, identity)
     except (OSError, McapError) as exc:
         raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
 
 
 def _stream_window(
-    path: Path, reader: McapReader, decoders: dict[int, Callable], wanted: list[ImageLocation]
+    path: Path,
+    reader: McapReader,
+    decoders: dict[int, Callable],
+    wanted: list[ImageLocation],
+    identity: tuple[int, ...],
 ) -> Iterator[bytes]:
-    """The images at `wanted` (one file), in that order, from one pass over the time span they cover."""
+    """The images at `wanted` (one file, whose identity is now `identity`), in that order, from one pass over the time
+    span they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
+    checked = {key for key, w in zip(keys, wanted) if w.checked_identity == identity}
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
         remaining[key] = remaining.get(key, 0) + 1
@@ -79,7 +94,8 @@ def _stream_window(
         key = (channel.topic, message.log_time, image[0])
         if not remaining.get(key) or key in waiting:
             continue
-        waiting[key] = bytes(image[1])  # the image alone, not the message around it
+        # the image alone, not the message around it
+        waiting[key] = CheckedImage(image[1]) if key in checked else bytes(image[1])
         while turn < len(keys) and keys[turn] in waiting:
             data = waiting[keys[turn]]
             remaining[keys[turn]] -= 1
