@@ -19,6 +19,7 @@ from wolfcal.io import filememo
 from wolfcal.vision import cache
 from wolfcal.vision.batch import detect_encoded, iter_detect_encoded, task_size
 from wolfcal.vision.cache import DetectorSettings, cache_enabled, cached_detect, hashing_ahead
+from wolfcal.vision.edges import TAGS_PER_PASS
 from wolfcal.vision.render import render_targets
 from wolfcal.vision.tags import detect_tags
 
@@ -76,6 +77,25 @@ def test_workers_give_exactly_the_detections_of_detect_tags(images):
     assert_same(detect_encoded(images[:2], FAMILIES, workers=2), reference[:2])  # in this thread
 
 
+def test_consecutive_images_tags_are_refined_together_in_passes_of_bounded_size(images, monkeypatch):
+    """The tags of consecutive images are refined in one pass, up to TAGS_PER_PASS tags (here 3), and give the
+    corners of detect_tags on each image alone."""
+    from wolfcal.vision import edges, tags
+
+    passes = []
+
+    def counted(found):
+        passes.append(sum(f.count() for f in found))
+        return refine_found(found)
+
+    reference = fresh(images)
+    refine_found = tags.refine_found
+    monkeypatch.setattr(edges, "TAGS_PER_PASS", 3)
+    monkeypatch.setattr(tags, "refine_found", counted)
+    assert_same(detect_encoded(images, FAMILIES, workers=2), reference)
+    assert passes == [3, 3, 2]  # 8 images of one tag each, then 2 blank ones (in the last pass)
+
+
 def test_colour_images_give_the_corners_of_their_gray_version(images):
     """Colour jpeg and png (decoded straight to gray) give the tags and, within 0.03 px, the corners of
     detect_tags on the colour image (the gray levels differ by at most 1: up to 0.011 px seen here)."""
@@ -94,7 +114,8 @@ def test_colour_images_give_the_corners_of_their_gray_version(images):
 
 @pytest.mark.parametrize("processes", [False, True], ids=["threads", "processes"])
 def test_read_ahead_is_bounded(images, processes):
-    """A long lazy input is read at most 2 tasks per worker ahead of the results."""
+    """A long lazy input is read at most 2 tasks per worker ahead of the results, and the images whose tags wait
+    for one refinement pass (at most TAGS_PER_PASS; only their tags' crops are kept)."""
     pulled = []
 
     def source():
@@ -104,7 +125,7 @@ def test_read_ahead_is_bounded(images, processes):
 
     results = iter_detect_encoded(source(), FAMILIES, workers=2, processes=processes)
     next(results)
-    assert len(pulled) <= 2 * 2 * task_size(images[0], processes)
+    assert len(pulled) <= 2 * 2 * task_size(images[0], processes) + TAGS_PER_PASS
     assert sum(1 for _ in results) == 59
 
 

@@ -1,12 +1,15 @@
 """Tag detection in many encoded images on all cores: decode once, detect, refine; bounded memory.
 
 Images go to the workers in tasks of about PIXELS_PER_TASK (one image at 1280x960 and above, six at 512x384:
-the tags of a task's images are refined in one pass, `wolfcal.vision.tags.detect_tags_many`; single large images
-keep both cores busy to the last image), of at least BATCH images for processes (each task pickles its
-images), and at most 2 tasks per worker are under way at once, so memory stays bounded however many images the
-input yields (it may be a lazy iterator over a long recording). Results come back in input order, each what
-`wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px: refined together, the sums run
-over padded arrays).
+single large images keep both cores busy to the last image), of at least BATCH images for processes (each task
+pickles its images), and at most 2 tasks per worker are under way at once, so memory stays bounded however many
+images the input yields (it may be a lazy iterator over a long recording). A worker decodes an image, finds its
+tags with OpenCV and keeps a crop around each (`wolfcal.vision.tags.find_tags`); the caller's thread refines the
+corners of consecutive images' tags together, up to TAGS_PER_PASS tags a pass (`_refined`: the refinement's cost
+is numpy's per call, so 2048x1536 images, 1-2 tags each, were refined at the cost of many calls: the 24-sample
+camera capture's 37 tags took 62-70 ms in a call per image, 27-32 ms in passes). Results come back in input order,
+each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px: refined together, the sums
+run over padded arrays).
 
 Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
 held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
@@ -27,21 +30,26 @@ from collections.abc import Callable, Generator, Iterable, Mapping, Sized
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.memory import buffers_from_heap
 
+if TYPE_CHECKING:
+    from wolfcal.vision.tags import PendingTags
+
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
 BATCH = 4  # images per process task at least: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
-# Pixels per task: one image at 1280x960 and above, six at 512x384. The corner refinement costs ~1.5 ms per call
-# and ~0.5 ms per tag at 512x384 (numpy's per-operation cost dominates), so the tags of small images are refined
-# together; beyond ~8 tags a call gains nothing.
+# Pixels per task: one image at 1280x960 and above, six at 512x384 (a task's own cost, ~0.1 ms, against ~4 ms of
+# detection per small image; the refinement takes consecutive tasks' tags together whatever their size)
 PIXELS_PER_TASK = 1_200_000
+# Bytes of crops waiting for one refinement pass at most: a pass of 16 tags of 300 px at 2048x1536 holds ~8 MB; tags
+# filling much of the image are refined a few at a time instead
+PASS_BYTES = 32 * 1024 * 1024
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
 _pool: ProcessPoolExecutor | None = None
@@ -60,22 +68,47 @@ def _family_list(families: Families) -> FamilyList:
     return [(family, None if ids is None else frozenset(ids)) for family, ids in families.items()]
 
 
-def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[Detections | None]:
-    """Decode each encoded image (png, jpeg, ...; None if undecodable) and detect the tags of every family, the
-    corners of all of them refined together (one pass per family)."""
+def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[PendingTags | None]:
+    """Decode each encoded image (png, jpeg, ...; None if undecodable) and find the tags of every family, their
+    corners still to be refined (`_refined`); each image is dropped once its tags' crops are taken."""
     from wolfcal.io.images import decode_gray
-    from wolfcal.vision.tags import detect_tags_many
+    from wolfcal.vision.tags import find_tags
 
-    # straight to 8-bit gray: a colour jpeg decodes only its luma (2048x1536: 15 -> 9 ms), within 1 grey level
-    # of decoding the colours and converting them
-    images = [decode_gray(data) for data in batch]
-    decoded = [image for image in images if image is not None]
-    found: list[Detections] = [{} for _ in decoded]
-    for family, ids in families:
-        for tags, more in zip(found, detect_tags_many(decoded, family, None if ids is None else set(ids), refine)):
-            tags.update(more)
-    results = iter(found)
-    return [None if image is None else next(results) for image in images]
+    wanted = {family: None if ids is None else set(ids) for family, ids in families}
+    found: list[PendingTags | None] = []
+    for data in batch:
+        # straight to 8-bit gray: a colour jpeg decodes only its luma (2048x1536: 15 -> 9 ms), within 1 grey level
+        # of decoding the colours and converting them
+        image = decode_gray(data)
+        found.append(None if image is None else find_tags(image, wanted, refine))
+    return found
+
+
+def _refined(found: Iterable[PendingTags | None]) -> Generator[Detections | None, None, None]:
+    """Each image's detections in input order (None for an undecodable image), the corners of consecutive images'
+    tags refined together in passes of up to TAGS_PER_PASS tags and PASS_BYTES of crops (`refine_found`: a call per
+    2048x1536 image refined 1-2 tags at the cost of many). At most that many images wait for their pass."""
+    from wolfcal.vision.edges import TAGS_PER_PASS
+    from wolfcal.vision.tags import refine_found
+
+    def refined(pending: list[PendingTags | None]) -> list[Detections | None]:
+        results = iter(refine_found([p for p in pending if p is not None]))
+        return [None if p is None else next(results) for p in pending]
+
+    pending: list[PendingTags | None] = []
+    count, size = 0, 0  # tags of `pending` to refine, and their crops' bytes
+    for item in found:
+        more = item.count() if item is not None else 0
+        if count and count + more > TAGS_PER_PASS:
+            yield from refined(pending)
+            pending, count, size = [], 0, 0
+        pending.append(item)
+        count += more
+        size += item.nbytes() if item is not None else 0
+        if count == 0 or count >= TAGS_PER_PASS or size >= PASS_BYTES:  # nothing to wait for, or a full pass
+            yield from refined(pending)
+            pending, count, size = [], 0, 0
+    yield from refined(pending)
 
 
 def task_size(data: bytes, processes: bool) -> int:
@@ -127,7 +160,8 @@ def iter_detect_encoded(
     processes: bool = False,
     total: int | None = None,
 ) -> Generator[Detections | None, None, None]:
-    """Detections of each encoded image in input order (None for an image that cannot be decoded).
+    """Detections of each encoded image in input order (None for an image that cannot be decoded), found on the
+    workers and refined here (`_refined`).
 
     Tasks of `batch` images (default `task_size`); at most 2 * `workers` tasks are read ahead of the results.
     `workers`: threads, or processes if `processes` (default: one per core); 1 detects in this thread. Inputs of at
@@ -135,6 +169,20 @@ def iter_detect_encoded(
     at once, and the first task goes to a worker as soon as its images are read (else the first IN_PROCESS + 1
     images are read before any is detected: 2048x1536, 30 ms with both cores idle at the start of a fit).
     """
+    yield from _refined(_found_on_workers(images, families, refine, workers, batch, processes, total))
+
+
+def _found_on_workers(
+    images: Iterable[bytes],
+    families: Families,
+    refine: str,
+    workers: int | None,
+    batch: int | None,
+    processes: bool,
+    total: int | None,
+) -> Generator[PendingTags | None, None, None]:
+    """The tags found in each encoded image, in input order, their corners still to be refined (see
+    `iter_detect_encoded`)."""
     workers = max(1, workers or cpu_count())
     names = _family_list(families)
     source = iter(images)

@@ -48,7 +48,8 @@ from wolfcal.vision.found_tags import FoundTags
 # length from the cell across each edge, profiles clear of the other edge at acute corners; 6: profiles of large
 # cells averaged in bins, a settled tag not iterated again; 7: window sums and bins summed on their own, not by a
 # cumulative sum or matmul, ~1e-5 px)
-DETECTOR_VERSION = 8  # 8: each tag refined in a crop of its own (smaller float32 sample coordinates, ~1e-5 px)
+# 8: each tag refined in a crop of its own (smaller float32 sample coordinates, ~1e-5 px)
+DETECTOR_VERSION = 9  # 9: consecutive images' tags refined together, up to TAGS_PER_PASS a pass (~1e-13 px)
 FORMAT = 1  # entry layout
 DIGEST = "xxh3_128"  # the content digest's name in memos and entry keys (entries keyed by "sha256" before)
 

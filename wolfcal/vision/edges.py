@@ -34,8 +34,8 @@ from wolfcal.vision.outline import mean_side
 
 MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
-# Tags refined in one pass at most: a task's tags at 512x384 (6 images, ~9 tags) in one pass (8 a pass split them
-# in two: 1.15x the CPU); a pass holds ~0.5 MB per tag of 160 px at 512x384
+# Tags refined in one pass at most (detection gathers consecutive images' tags up to this many, `vision.batch`): 8 a
+# pass took 1.15x the CPU of ~9 at 512x384; a pass holds ~0.5 MB per tag of 160 px at 512x384
 TAGS_PER_PASS = 16
 # Kept profiles per edge from which they are averaged in bins of k = n // PROFILES (PROFILES to 2 PROFILES - 1 bins):
 # a large cell's edge has 100-200 profiles 0.5 px apart. Binned, the corners move by ~0.01 px (bench_vision: median

@@ -40,7 +40,8 @@ i.e. a bound on its distance, which floor tags (0.5-5 m, seen at a grazing angle
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -146,32 +147,66 @@ def detect_tags_many(
 ) -> list[dict[int, np.ndarray]]:
     """`detect_tags` of each image, the corners of all of them refined in one pass (faster for many small
     images: `wolfcal.vision.edges.refine_tags`)."""
+    return refine_found([find_tags(_to_gray(image), {family: ids}, refine) for image in images])
+
+
+Crop = tuple[np.ndarray, tuple[int, int]]  # a float32 crop of an image and its origin (x, y) [px]
+
+
+@dataclass
+class PendingTags:
+    """The tags OpenCV found in one 8-bit gray image, per family: {id: (4, 2) corners [px]}, and, when the corners are
+    still to be refined ("edges"), the crop of the image each tag is refined in (in the same order)."""
+
+    tags: dict[str, dict[int, np.ndarray]]  # family -> tag id -> corners
+    crops: dict[str, list[Crop]]  # family -> one crop per tag (families to refine only)
+
+    def count(self) -> int:
+        """Tags still to be refined."""
+        return sum(len(self.tags[family]) for family in self.crops)
+
+    def nbytes(self) -> int:
+        """Bytes the crops hold."""
+        return sum(crop.nbytes for crops in self.crops.values() for crop, _ in crops)
+
+
+def find_tags(gray: np.ndarray, families: Mapping[str, set[int] | None], refine: str = "edges") -> PendingTags:
+    """OpenCV's tags of each family {family: ids to keep (None: all)} in an 8-bit gray image, as `detect_tags` keeps
+    them, each with its crop for `refine_found` when `refine` is "edges" (the crops hold all the refinement reads:
+    the image need not be kept)."""
     if refine not in REFINEMENTS:
         raise ValueError(f"unknown refinement {refine!r}; use one of {', '.join(REFINEMENTS)}")
-    grays = [_to_gray(image) for image in images]
-    found = [_found(gray, family, ids, refine) for gray in grays]
-    return refine_found(grays, found, family) if refine == "edges" else found
+    tags = {family: _found(gray, family, ids, refine) for family, ids in families.items()}
+    crops = {}
+    if refine == "edges":
+        crops = {family: [_tags_crop(gray, c[None], tag_cells(family)) for c in found.values()]
+                 for family, found in tags.items()}  # fmt: skip
+    return PendingTags(tags, crops)
 
 
-def refine_found(
-    grays: Sequence[np.ndarray], found: list[dict[int, np.ndarray]], family: str
-) -> list[dict[int, np.ndarray]]:
-    """OpenCV's tags `found` ({id: (4, 2) corners [px]}) in each 8-bit gray image of `grays`, their corners refined
-    (`wolfcal.vision.edges.refine_tags`, all tags in one pass, each tag in a crop of its own: the tags of one image
-    can lie far apart, e.g. on both feet, and the crop around both was up to 2.3 of the 3.1 megapixels of a
-    2048x1536 image, converted to float for nothing)."""
-    if not any(found):
-        return found
-    corners = np.stack([c for tags in found for c in tags.values()])
-    cells = tag_cells(family)
-    crops = [_tags_crop(grays[k], c[None], cells) for k, tags in enumerate(found) for c in tags.values()]
-    origins = np.array([origin for _, origin in crops], dtype=float)[:, None]  # (T, 1, 2)
-    image_of_tag = np.arange(len(crops))
-    refined = iter(refine_tags([crop for crop, _ in crops], image_of_tag, corners - origins, cells) + origins)
-    return [{tag_id: next(refined) for tag_id in tags} for tags in found]
+def refine_found(found: Sequence[PendingTags]) -> list[dict[int, np.ndarray]]:
+    """Each image's tags {id: (4, 2) corners [px]} (all families), the corners still to be refined refined
+    (`wolfcal.vision.edges.refine_tags`: all tags of a family in one pass, each tag in a crop of its own: the tags
+    of one image can lie far apart, e.g. on both feet, and the crop around both was up to 2.3 of the 3.1 megapixels of
+    a 2048x1536 image, converted to float for nothing). The per-call cost of the refinement is numpy's, not the
+    pixels': 37 tags of 24 images at 2048x1536 in one call took half the CPU of a call per image."""
+    out: list[dict[int, np.ndarray]] = [{} for _ in found]
+    for family in dict.fromkeys(f for image in found for f in image.tags):
+        rows = [(k, tag_id) for k, image in enumerate(found) for tag_id in image.tags.get(family, {})]
+        if not rows:
+            continue
+        corners = np.stack([found[k].tags[family][tag_id] for k, tag_id in rows])
+        if any(family in image.crops for image in found):
+            crops = [crop for image in found for crop in image.crops.get(family, [])]
+            origins = np.array([origin for _, origin in crops], dtype=float)[:, None]  # (T, 1, 2)
+            corners = refine_tags([crop for crop, _ in crops], np.arange(len(crops)), corners - origins,
+                                  tag_cells(family)) + origins  # fmt: skip
+        for (k, tag_id), c in zip(rows, corners):
+            out[k][tag_id] = c
+    return out
 
 
-def _tags_crop(gray: np.ndarray, corners: np.ndarray, cells: int) -> tuple[np.ndarray, tuple[int, int]]:
+def _tags_crop(gray: np.ndarray, corners: np.ndarray, cells: int) -> Crop:
     """float32 crop of `gray` holding all that `refine_tags` samples around the tags `corners` (T, 4, 2) [px] of
     `cells` cells across, and its origin (x, y) [px]; the whole image if the crop would reach all its borders.
 
