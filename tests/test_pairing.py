@@ -18,7 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 import wolfcal.io.reader as reader_module
 from wolfcal.config import load_robot_config
 from wolfcal.fit.pipeline import repeat_warnings
-from wolfcal.io.cdr import joint_state
+from wolfcal.io.cdr import camera_info_key, joint_state
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.pairing import BATCH_NS, DISORDER_NS, FramePairer
 from wolfcal.io.reader import read_capture
@@ -309,3 +309,40 @@ def test_joint_states_read_from_their_layout_as_the_decoder_reads_them():
         assert joint_state(data[:12], Schema, 42, {}) is None  # within the header
         if len(positions) == 4:  # the last 12 bytes of the positions and the empty lists' counts missing
             assert joint_state(data[:-20], Schema, 42, {}) is None
+
+
+def test_camera_info_messages_are_keyed_by_all_but_their_stamp():
+    """`wolfcal.io.cdr.camera_info_key` gives the stamp the general decoder gives (the log time for a zero stamp) and
+    one key for messages that differ only in their stamp; another frame id or other intrinsics give another key, and a
+    message of another type is left to the decoder (None)."""
+    from mcap_ros2._dynamic import generate_dynamic
+
+    from wolfcal.io.msgdefs import CAMERA_INFO, MSGDEFS
+
+    encode = serialize_dynamic(CAMERA_INFO, MSGDEFS[CAMERA_INFO])[CAMERA_INFO]
+    decode = generate_dynamic(CAMERA_INFO, MSGDEFS[CAMERA_INFO])[CAMERA_INFO]
+
+    class Schema:
+        name = CAMERA_INFO
+
+    def message(stamp: tuple[int, int], frame_id: str = "cam", fx: float = 500.0) -> bytes:
+        return encode({"header": {"stamp": {"sec": stamp[0], "nanosec": stamp[1]}, "frame_id": frame_id},
+                       "height": 384, "width": 512, "distortion_model": "plumb_bob", "d": [0.1, 0.0, 0.0, 0.0, 0.0],
+                       "k": [fx, 0, 256, 0, fx, 192, 0, 0, 1], "r": [1, 0, 0, 0, 1, 0, 0, 0, 1],
+                       "p": [fx, 0, 256, 0, 0, fx, 192, 0, 0, 0, 1, 0]})  # fmt: skip
+
+    keys = {}
+    for stamp in [(3, 7), (12, 999_999_999), (0, 0)]:
+        data = message(stamp)
+        got = camera_info_key(data, Schema, 42)
+        assert got is not None
+        assert got[0] == header_stamp_ns(decode(data).header, 42) == (stamp[0] * 10**9 + stamp[1] or 42)
+        keys[stamp] = got[1]
+    assert len(set(keys.values())) == 1
+    assert camera_info_key(message((3, 7), "cam2"), Schema, 42)[1] != keys[3, 7]  # type: ignore[index]
+    assert camera_info_key(message((3, 7), fx=501.0), Schema, 42)[1] != keys[3, 7]  # type: ignore[index]
+
+    class Other:
+        name = "sensor_msgs/msg/Image"
+
+    assert camera_info_key(message((3, 7)), Other, 42) is None

@@ -1,6 +1,7 @@
-"""ROS 2 messages read from their little-endian CDR layout, without the general decoder: the two kinds a capture
-or recording holds many of (sensor_msgs/CompressedImage, sensor_msgs/JointState). Each reader returns None for a
-message it does not read so (another type, big-endian, cut short): the caller then uses the general decoder
+"""ROS 2 messages read from their little-endian CDR layout, without the general decoder: the kinds a capture or
+recording holds many of (sensor_msgs/CompressedImage, sensor_msgs/JointState; of sensor_msgs/CameraInfo, which
+repeats one content, the stamp and a key of that content). Each reader returns None for a message it does not read
+so (another type, big-endian, cut short): the caller then uses the general decoder
 (`wolfcal.io.mcapfile.channel_decoder`), which gives the same values (tests); `image_of` does both for an image."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from mcap.records import Channel, Message
 
 from wolfcal.io.images import PNG_HEAD
 from wolfcal.io.mcapfile import channel_decoder
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns, stamp_ns
+from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, header_stamp_ns, stamp_ns
 
 
 def compressed_image(data: bytes, schema, log_time: int, complete: bool = True) -> tuple[int, memoryview] | None:
@@ -49,6 +50,17 @@ def image_of(
         decoded = channel_decoder(path, decoders, channel, schema)(message.data)
         image = (header_stamp_ns(decoded.header, message.log_time), memoryview(decoded.data))
     return image
+
+
+def camera_info_key(data: bytes, schema, log_time: int) -> tuple[int, bytes] | None:
+    """(header stamp [ns] (`msgdefs.stamp_ns`), the message's bytes without its stamp) of a little-endian CDR
+    sensor_msgs/CameraInfo message: messages with the same key hold the same frame and intrinsics, so a reader decodes
+    one of them (the general decoder took 0.7 ms a message, 16 of the 44 ms of reading a 24-sample capture); None
+    for anything else."""
+    if schema is None or schema.name != CAMERA_INFO or data[:2] != b"\x00\x01" or len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    return stamp_ns(sec, nanosec, log_time), bytes(data[:4]) + bytes(data[12:])
 
 
 def joint_state(

@@ -37,7 +37,7 @@ from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
-from wolfcal.io.cdr import compressed_image, image_of, joint_state
+from wolfcal.io.cdr import camera_info_key, compressed_image, image_of, joint_state
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, trusted, write_memo
 from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
@@ -191,7 +191,8 @@ def _pass_one(
     pairer = FramePairer(disorder_ns)
     stamps: dict[str, array] = {n: array("q") for n in cameras}
     infos: dict[str, list[tuple[int, InfoModel | None]]] = {n: [] for n in cameras}
-    models: dict[tuple, InfoModel | None] = {}
+    models: dict[tuple, InfoModel | None] = {}  # CameraInfo models by their content
+    by_bytes: dict[tuple[str, bytes], InfoModel | None] = {}  # the same by topic and message bytes but the stamp
     sizes: dict[tuple[int, int] | None, tuple[int, int] | None] = {None: None}  # one tuple per image size
     checks = _Checks({})
     topics = [config.joint_states_topic, *image_topics, *info_topics]
@@ -231,17 +232,36 @@ def _pass_one(
                           decoded.velocity)  # fmt: skip
             pairer.add_joints(*joints)
         else:
-            decoded = channel_decoder(path, decoders, channel, schema)(message.data)
-            stamp = header_stamp_ns(decoded.header, message.log_time)
-            key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k),
-                   tuple(decoded.d), decoded.binning_x, decoded.binning_y)  # fmt: skip
-            if key not in models:  # one model per distinct CameraInfo
-                models[key] = camera_info_model(path, channel.topic, decoded)
-            infos[info_topics[channel.topic]].append((stamp, models[key]))
+            info = _camera_info(path, decoders, schema, channel, message, models, by_bytes)
+            infos[info_topics[channel.topic]].append(info)
     pairing = pairer.finish()
     if progress is not None:
         progress(total, total)
     return _PassOne(pairing, {n: np.sort(np.frombuffer(a, np.int64)) for n, a in stamps.items()}, infos, checks)
+
+
+def _camera_info(
+    path: Path,
+    decoders: dict[int, Callable],
+    schema,
+    channel,
+    message,
+    models: dict[tuple, InfoModel | None],
+    by_bytes: dict[tuple[str, bytes], InfoModel | None],
+) -> tuple[int, InfoModel | None]:
+    """(header stamp [ns], model) of a CameraInfo message; one model per distinct CameraInfo (`models`), and messages
+    of the same bytes but their stamp decoded once (`camera_info_key`, `by_bytes`)."""
+    known = camera_info_key(message.data, schema, message.log_time)
+    if known is not None and (channel.topic, known[1]) in by_bytes:
+        return known[0], by_bytes[channel.topic, known[1]]
+    decoded = channel_decoder(path, decoders, channel, schema)(message.data)
+    key = (channel.topic, decoded.width, decoded.height, decoded.distortion_model, tuple(decoded.k), tuple(decoded.d),
+           decoded.binning_x, decoded.binning_y)  # fmt: skip
+    if key not in models:
+        models[key] = camera_info_model(path, channel.topic, decoded)
+    if known is not None:
+        by_bytes[channel.topic, known[1]] = models[key]
+    return header_stamp_ns(decoded.header, message.log_time), models[key]
 
 
 _HEAD_BYTES = 4096  # of an image message, read first: the CDR header, format and a png's header
