@@ -22,6 +22,19 @@ def compressed_image(data: bytes, schema, log_time: int, complete: bool = True) 
     little-endian CDR sensor_msgs/CompressedImage message, read from its layout without copying the image; None for
     anything else (the caller decodes it with the general decoder). `complete` False: `data` is the message's first
     bytes only; the view holds the image's bytes among them (at least a png's header, else None)."""
+    span = compressed_image_span(data, schema, log_time)
+    if span is None:
+        return None
+    stamp, start, length = span
+    if start + (length if complete else min(length, PNG_HEAD)) > len(data):
+        return None
+    return stamp, memoryview(data)[start : start + length]
+
+
+def compressed_image_span(data: bytes, schema, log_time: int) -> tuple[int, int, int] | None:
+    """(header stamp [ns] as `compressed_image` gives it, where the encoded image begins in the message's data
+    [bytes], its length [bytes]) of a little-endian CDR sensor_msgs/CompressedImage message whose first bytes are
+    `data` (up to the image's length field at least); None for anything else."""
     if schema is None or schema.name != COMPRESSED_IMAGE or data[:2] != b"\x00\x01":
         return None
     try:
@@ -34,9 +47,7 @@ def compressed_image(data: bytes, schema, log_time: int, complete: bool = True) 
         (length,) = struct.unpack_from("<I", data, pos)
     except struct.error:
         return None
-    if pos + 4 + (length if complete else min(length, PNG_HEAD)) > len(data):
-        return None
-    return stamp_ns(sec, nanosec, log_time), memoryview(data)[pos + 4 : pos + 4 + length]
+    return stamp_ns(sec, nanosec, log_time), pos + 4, length
 
 
 def image_of(

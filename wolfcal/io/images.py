@@ -56,12 +56,16 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
     return buffer.tobytes(), f"{encoding}; {image_format} compressed {encoding}"
 
 
-class CheckedImage(bytes):
+Encoded = bytes | bytearray  # an encoded image's bytes (a `CheckedImage` is a bytearray)
+
+
+class CheckedImage(bytearray):
     """Encoded image bytes whose checksums their reader has verified (`image_damage`, or its memo of that check),
-    read back from the same, unchanged file (`wolfcal.io.stream`): `decode_gray` does not verify them again."""
+    read back from the same, unchanged file (`wolfcal.io.stream`): `decode_gray` does not verify them again. A
+    bytearray: the stream reads the bytes straight into it."""
 
 
-def decode_gray(data: bytes | memoryview) -> np.ndarray | None:
+def decode_gray(data: Encoded | memoryview) -> np.ndarray | None:
     """8-bit gray (H, W) image of an encoded png or jpeg (as OpenCV's IMREAD_GRAYSCALE gives it); None if it cannot
     be decoded. A png as wolfcal writes mono8 images (stored, unfiltered: `PNG_COMPRESSION`) is read by
     `_stored_gray` without a decoder: its pixels lie in the file as they are, and its zlib checksum is verified
@@ -76,7 +80,7 @@ def decode_gray(data: bytes | memoryview) -> np.ndarray | None:
     return cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if len(data) else None
 
 
-def _stored_gray(data: bytes | memoryview, verify: bool = True) -> np.ndarray | None:
+def _stored_gray(data: Encoded | memoryview, verify: bool = True) -> np.ndarray | None:
     """The pixels (H, W) of an 8-bit gray, non-interlaced png whose zlib stream is made of stored blocks only and
     whose rows are all unfiltered, with its zlib checksum (Adler-32 of the rows) verified if `verify`; None for any
     other image (or one that is damaged: then OpenCV says so)."""
@@ -140,7 +144,7 @@ def _concatenated(parts: list[memoryview]) -> memoryview:
     return joined.data
 
 
-def image_kind(data: bytes | memoryview) -> str | None:
+def image_kind(data: Encoded | memoryview) -> str | None:
     """'png' or 'jpeg' from the file signature; None for anything else (e.g. compressedDepth)."""
     head = bytes(data[: len(PNG_SIGNATURE)])
     if head.startswith(PNG_SIGNATURE):
@@ -150,7 +154,7 @@ def image_kind(data: bytes | memoryview) -> str | None:
     return None
 
 
-def image_size(data: bytes | memoryview) -> tuple[int, int] | None:
+def image_size(data: Encoded | memoryview) -> tuple[int, int] | None:
     """(width, height) of an encoded png or jpeg from its header, without decoding (`data` may be a view into a
     larger buffer); None if not found."""
     kind = image_kind(data)
@@ -181,7 +185,7 @@ def image_size(data: bytes | memoryview) -> tuple[int, int] | None:
     return None
 
 
-def image_damage(data: bytes | memoryview) -> str | None:
+def image_damage(data: Encoded | memoryview) -> str | None:
     """Why an encoded png or jpeg is damaged (bad chunk checksum, cut short), or None when it looks whole.
     Cheap: checks the structure and checksums, does not decode; `data` may be a view into a larger buffer (the
     image's bytes are not copied)."""

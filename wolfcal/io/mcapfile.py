@@ -98,6 +98,7 @@ class Head(NamedTuple):
     channel: Channel
     message: Message
     complete: bool
+    offset: int | None = None  # where the message's data begin in the file [bytes] (None: read by mcap's reader)
 
 
 def iter_message_heads(
@@ -107,17 +108,24 @@ def iter_message_heads(
     heads: Container[str],
     head_bytes: int,
     enough: Callable[[Schema | None, bytes], bool],
+    starting_at: int | None = None,
+    ending_at: int | None = None,
 ) -> Iterator[Head]:
-    """`reader.iter_messages(topics)`: the same messages in the same order (log time, then place in the file), but
-    of a message on one of the `heads` topics in an uncompressed chunk only the first `head_bytes` of its data are
-    read when `enough(schema, those bytes)` says so (e.g. an image whose header is all a reader needs): its other
-    bytes are skipped, not read from the file. Files without a chunk index or with compressed chunks are read
-    whole (`iter_messages`). `handle`: the file `reader` reads."""
+    """`reader.iter_messages(topics, starting_at=, ending_at=)` (log times [ns], both inclusive): the same messages in
+    the same order (log time, then place in the file), but of a message on one of the `heads` topics in an
+    uncompressed chunk only the first `head_bytes` of its data are read when `enough(schema, those bytes)` says so
+    (e.g. an image whose header is all a reader needs): its other bytes are skipped, not read from the file, and
+    `Head.offset` says where they are. Files without a chunk index or with compressed chunks are read whole
+    (`iter_messages`). `handle`: the file `reader` reads."""
     summary = reader.get_summary()
     wanted = {c.id for c in summary.channels.values() if c.topic in topics} if summary else set()
-    chunks = [c for c in summary.chunk_indexes if wanted & c.message_index_offsets.keys()] if summary else []
+    low = -1 if starting_at is None else starting_at
+    high = 1 << 64 if ending_at is None else ending_at
+    chunks = [c for c in summary.chunk_indexes if wanted & c.message_index_offsets.keys()
+              and c.message_start_time <= high and c.message_end_time >= low] if summary else []  # fmt: skip
     if summary is None or not chunks or any(c.compression for c in chunks):
-        for schema, channel, message in reader.iter_messages(topics=topics):
+        for schema, channel, message in reader.iter_messages(topics=topics, starting_at=starting_at,
+                                                             ending_at=ending_at):  # fmt: skip
             yield Head(schema, channel, message, True)
         return
     # the order of `iter_messages`: by log time, then chunk offset, then place in the chunk; a chunk is read when
@@ -130,7 +138,7 @@ def iter_message_heads(
         if isinstance(item, Head):
             yield item
             continue
-        for index, head in _chunk_heads(handle, item, summary, wanted, heads, head_bytes, enough):
+        for index, head in _chunk_heads(handle, item, summary, wanted, heads, head_bytes, enough, (low, high)):
             heapq.heappush(queue, (head.message.log_time, item.chunk_start_offset, index, head))
 
 
@@ -147,9 +155,10 @@ def _chunk_heads(
     heads: Container[str],
     head_bytes: int,
     enough: Callable[[Schema | None, bytes], bool],
+    times: tuple[int, int],
 ) -> Iterator[tuple[int, Head]]:
-    """(index of the record in the chunk, message) of the wanted messages of one uncompressed chunk, read record by
-    record (see `iter_message_heads`)."""
+    """(index of the record in the chunk, message) of the wanted messages of one uncompressed chunk with log times in
+    `times` (first, last) [ns], read record by record (see `iter_message_heads`)."""
     handle.seek(chunk.chunk_start_offset + 1 + 8 + _CHUNK_FIXED.size)
     (length,) = struct.unpack("<I", _exactly(handle, 4))
     handle.seek(length, io.SEEK_CUR)  # the compression's name ('')
@@ -162,9 +171,10 @@ def _chunk_heads(
         if opcode == _OPCODE_MESSAGE:
             channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(_exactly(handle, _MESSAGE_FIXED.size))
             size = length - _MESSAGE_FIXED.size
-            if channel_id in wanted:
+            if channel_id in wanted and times[0] <= log_time <= times[1]:
                 channel = summary.channels[channel_id]
                 schema = summary.schemas.get(channel.schema_id)
+                offset = handle.tell()
                 data = _exactly(handle, min(size, head_bytes) if channel.topic in heads else size)
                 complete = len(data) == size
                 if not complete and not enough(schema, data):
@@ -172,7 +182,7 @@ def _chunk_heads(
                     complete = True
                 fields = {"channel_id": channel_id, "sequence": sequence, "log_time": log_time}
                 message = Message(**fields, publish_time=publish_time, data=data)
-                yield index, Head(schema, channel, message, complete)
+                yield index, Head(schema, channel, message, complete, offset)
         handle.seek(position)
         index += 1
 

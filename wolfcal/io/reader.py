@@ -201,7 +201,7 @@ def _pass_one(
     names_seen: dict[bytes, list[str]] = {}  # a JointState's name list by its bytes (`joint_state`)
     # with the checks remembered, of a png only its header is read from the file (`_png_head`)
     messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
-    for count, (schema, channel, message, complete) in enumerate(messages):
+    for count, (schema, channel, message, complete, _) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
