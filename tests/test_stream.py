@@ -3,7 +3,6 @@ pass per file; detection streams them; a file changed after reading is a clear e
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import cv2
@@ -13,7 +12,6 @@ from mcap_ros2.writer import Writer as Ros2Writer
 
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
-from wolfcal.io.images import CheckedImage
 from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.reader import read_capture
 from wolfcal.io.recording import JointLog, JointStates
@@ -101,27 +99,6 @@ def test_changed_file_is_a_clear_error(tmp_path):
     path.unlink()
     with pytest.raises(WolfcalError, match=r"rec.mcap: cannot read its images again"):
         kept[0].encoded()
-
-
-def test_images_read_back_from_the_file_their_reader_checked_are_not_verified_again(tmp_path, monkeypatch):
-    """Images come back as `CheckedImage` (their checksums are not verified again when decoded) only while the file
-    has the identity it had when the reader checked them, and only if that was RACY_NS or more after its last change;
-    otherwise as plain bytes, which `decode_gray` verifies."""
-    from wolfcal.io import filememo
-
-    path = tmp_path / "rec.mcap"
-    images = write_still_recording(path, 3)
-    config = load_robot_config(CONFIG)
-    just_written = [s.images[HEAD_CAMERA].location for s in read_capture(path, config).samples]
-    fresh = list(stream_images(just_written))
-    assert fresh == images and not any(isinstance(b, CheckedImage) for b in fresh)  # changed too recently to tell
-    monkeypatch.setattr(filememo, "RACY_NS", 0)
-    kept = [s.images[HEAD_CAMERA].location for s in read_capture(path, config).samples]
-    checked = list(stream_images(kept))
-    assert checked == images and all(type(b) is CheckedImage for b in checked)
-    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 1))  # the file changed since
-    after = list(stream_images(kept))
-    assert after == images and all(type(b) is bytes for b in after)
 
 
 def test_joint_log_matches_per_message_reading():

@@ -48,22 +48,13 @@ def caching() -> bool:
     return _enabled.get()
 
 
-def identity_of(info: os.stat_result) -> list[int]:
-    """A file's identity from its status: device, inode, size, modification and status-change times [ns]."""
-    return [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
-
-
-def trusted(identity: list[int], taken_ns: int) -> bool:
-    """Whether what was seen of a file of `identity` from `taken_ns` (time.time_ns) on holds while its identity does:
-    taken RACY_NS or more after its last change."""
-    return taken_ns - identity[4] >= RACY_NS
-
-
 def identity_and_memo(path: Path, kind: str) -> tuple[list[int], Path]:
-    """The file's identity (`identity_of`) and the path of its memo of `kind` (e.g. 'digest') in the cache folder
-    (named by the hash of its resolved path)."""
+    """The file's identity (device, inode, size, modification and status-change times [ns]) and the path of its
+    memo of `kind` (e.g. 'digest') in the cache folder (named by the hash of its resolved path)."""
+    info = os.stat(path)
+    identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
     name = hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]
-    return identity_of(os.stat(path)), cache_dir() / f"{name}.{kind}.json"
+    return identity, cache_dir() / f"{name}.{kind}.json"
 
 
 def read_memo(path: Path, kind: str) -> dict | None:
@@ -84,7 +75,7 @@ def recall(path: Path, kind: str) -> tuple[dict | None, bool]:
     except (OSError, ValueError):  # none yet, or torn
         return None, False
     try:
-        if saved["identity"] == identity and trusted(identity, saved["taken_ns"]):
+        if saved["identity"] == identity and saved["taken_ns"] - identity[4] >= RACY_NS:
             return (saved["memo"] if isinstance(saved["memo"], dict) else None), True
     except (KeyError, TypeError):  # foreign
         pass

@@ -38,7 +38,7 @@ from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.capture_topics import check_topics
 from wolfcal.io.cdr import camera_info_key, compressed_image, image_of, joint_state
-from wolfcal.io.filememo import caching, identity_and_memo, read_memo, trusted, write_memo
+from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
 from wolfcal.io.mcapfile import (
@@ -309,9 +309,8 @@ def _read(
                                 pairing.bad_joints)  # fmt: skip
     del reader  # its index of the file's chunks (~0.7 kB a chunk)
     frames: list[_Frame] = []
-    checked_identity = tuple(identity) if trusted(identity, taken_ns) else None  # the images' checks hold while it does
     for name in found.cameras:
-        frames += _keep_frames(path, config, name, read, intrinsics, skipped, checked_identity)
+        frames += _keep_frames(path, config, name, read, intrinsics, skipped)
     pairing.frames.clear()  # the pass's state of every frame: the samples are built in the room it leaves
     if not frames:
         counts = ", ".join(f"{len(read.stamps[n])} image(s) of '{n}' on {config.camera_topics(n)[0]}"
@@ -340,11 +339,9 @@ def _keep_frames(
     read: _PassOne,
     intrinsics: CameraModel | None,
     skipped: list[str],
-    checked_identity: tuple[int, ...] | None,
 ) -> list[_Frame]:
     """The still (or, in a capture file, stamped) frames of one camera; reasons for the others go to `skipped`.
-    Frames stamped like a joint state that was left out (non-finite) are left out: `skipped` says so already. Their
-    images' locations carry `checked_identity` (`ImageLocation`)."""
+    Frames stamped like a joint state that was left out (non-finite) are left out: `skipped` says so already."""
     chooser = IntrinsicsChooser(path, config, name, intrinsics)
     topic = config.camera_topics(name)[0]
     source = f"{path}: {topic}"  # one string for all the camera's images
@@ -370,7 +367,7 @@ def _keep_frames(
             skipped.append(f"{where}: a second image with the same stamp")
             continue
         info = infos[int(np.argmin(np.abs(info_stamps - stamp)))][1] if len(infos) else None
-        location = ImageLocation(path, topic, log_time, stamp, checked_identity)
+        location = ImageLocation(path, topic, log_time, stamp)
         image = SampleImage(b"", kind, chooser.for_image(size, info), source, stamp, location)
         kept[stamp] = _Frame(name, stamp, image, paired, damage)
     return list(kept.values())

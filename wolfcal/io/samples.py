@@ -18,7 +18,6 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
-from wolfcal.io.images import Encoded
 from wolfcal.io.stream import ImageLocation, stream_images
 from wolfcal.observations import HEAD_CAMERA
 
@@ -34,7 +33,7 @@ class SampleImage:
     stamp_ns: int = 0  # header stamp of the image [ns]
     location: ImageLocation | None = None  # where its bytes lie in the file it was read from
 
-    def encoded(self) -> Encoded:
+    def encoded(self) -> bytes:
         """The encoded bytes (read from the file when the image holds only its location)."""
         if self.data or self.location is None:
             return self.data
@@ -54,7 +53,7 @@ class SampleImage:
         return image
 
 
-def encoded_images(images: Iterable[SampleImage]) -> Iterator[Encoded]:
+def encoded_images(images: Iterable[SampleImage]) -> Iterator[bytes]:
     """The encoded bytes of each image, in order; images of files are streamed (`stream_images`): consecutive
     ones of one file in one pass, none kept after it is handed on."""
     for from_file, run in groupby(images, key=lambda image: image.location is not None):

@@ -2,13 +2,11 @@
 
 The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
 back when they are needed (detection, a figure): one pass over the part of the file they span, each image's
-bytes handed on and then dropped, so a long recording's images never sit in memory together. Bytes read back from
-the file as it was when the reader checked them come as `CheckedImage` (their checksums are not verified again).
+bytes handed on and then dropped, so a long recording's images never sit in memory together.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from itertools import groupby, islice
@@ -20,8 +18,6 @@ from mcap.reader import McapReader, make_reader
 
 from wolfcal.errors import WolfcalError
 from wolfcal.io.cdr import compressed_image_span, image_of
-from wolfcal.io.filememo import identity_of
-from wolfcal.io.images import CheckedImage, Encoded
 from wolfcal.io.mcapfile import iter_message_heads
 
 
@@ -33,36 +29,31 @@ class ImageLocation:
     topic: str
     log_time: int  # [ns] the message's log time (what the file's index is ordered by)
     stamp_ns: int  # [ns] its header stamp (tells apart messages of one topic with one log time)
-    # the file's identity (`filememo.identity_of`) when its reader checked this image's checksums (`image_damage`, or
-    # its memo of them), None if it did not or the file had changed too recently to tell (`filememo.trusted`)
-    checked_identity: tuple[int, ...] | None = None
 
 
 WINDOW = 256  # images looked up per pass over the part of the file they span
 
 
-def stream_images(locations: Iterable[ImageLocation]) -> Iterator[Encoded]:
+def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
     """The encoded bytes of the image at each location, in the order given.
 
     Consecutive locations in one file are read in passes over the time span of up to `WINDOW` of them, in the
     file's order (what a pass keeps of its images and of the file's chunks grows with the images it looks up, not
     with the recording); an image that comes before its turn waits in memory until then (none waits when the order
-    given is the file's, e.g. samples in stamp order). An image comes as a `CheckedImage` when the file's identity is
-    the one its reader checked it in. WolfcalError naming the file when an image is not found (the file changed since
-    it was read)."""
+    given is the file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the
+    file changed since it was read)."""
     for path, run in groupby(locations, key=lambda location: location.path):
         yield from _stream_file(path, run)
 
 
-def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[Encoded]:
+def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]:
     decoders: dict[int, Callable] = {}  # channel id -> its decoder
     run = iter(wanted)
     try:
         with path.open("rb") as handle:
-            identity = tuple(identity_of(os.fstat(handle.fileno())))
             reader = make_reader(handle)
             while window := list(islice(run, WINDOW)):
-                yield from _stream_window(path, reader, handle, decoders, window, identity)
+                yield from _stream_window(path, reader, handle, decoders, window)
     except (OSError, McapError) as exc:
         raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
 
@@ -73,19 +64,17 @@ def _stream_window(
     handle: IO[bytes],
     decoders: dict[int, Callable],
     wanted: list[ImageLocation],
-    identity: tuple[int, ...],
-) -> Iterator[Encoded]:
-    """The images at `wanted` (one file, open as `handle`, whose identity is now `identity`), in that order, from one
-    pass over the time span they cover. In an uncompressed chunk an image's bytes are read from where they lie, once
+) -> Iterator[bytes]:
+    """The images at `wanted` (one file, open as `handle`), in that order, from one pass over the time span they
+    cover. In an uncompressed chunk an image's bytes are read from where they lie, once
     (`iter_message_heads`; read with their message, then copied out of it, they were copied three times: 0.7-1.3 ms
     per 3 MB image)."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
-    checked = {key for key, w in zip(keys, wanted) if w.checked_identity == identity}
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
         remaining[key] = remaining.get(key, 0) + 1
     times = {(topic, log_time) for topic, log_time, _ in keys}
-    waiting: dict[tuple[str, int, int], Encoded] = {}
+    waiting: dict[tuple[str, int, int], bytes] = {}
     turn = 0
     topics = sorted({topic for topic, _, _ in keys})
     first, last = min(log_time for _, log_time, _ in keys), max(log_time for _, log_time, _ in keys)
@@ -102,9 +91,9 @@ def _stream_window(
         if not remaining.get(key) or key in waiting:
             continue
         if span is None:  # the image alone, not the message around it
-            waiting[key] = CheckedImage(image) if key in checked else bytes(image)
+            waiting[key] = bytes(image)
         else:
-            waiting[key] = _read_at(handle, offset + start, length, key in checked)  # type: ignore[operator]
+            waiting[key] = _read_at(handle, offset + start, length)  # type: ignore[operator]
         while turn < len(keys) and keys[turn] in waiting:
             data = waiting[keys[turn]]
             remaining[keys[turn]] -= 1
@@ -128,16 +117,10 @@ def _image_head(schema, head: bytes) -> bool:
     return compressed_image_span(head, schema, 0) is not None
 
 
-def _read_at(handle: IO[bytes], offset: int, length: int, checked: bool) -> Encoded:
-    """`length` bytes of the file at `offset`, as a `CheckedImage` if `checked` (read into it: one copy)."""
+def _read_at(handle: IO[bytes], offset: int, length: int) -> bytes:
+    """`length` bytes of the file at `offset`."""
     handle.seek(offset)
-    data: Encoded
-    if checked:
-        data = CheckedImage(length)
-        count = handle.readinto(data)  # type: ignore[attr-defined]
-    else:
-        data = handle.read(length)
-        count = len(data)
-    if count != length:
-        raise McapError(f"an image ends {length - count} byte(s) early")
+    data = handle.read(length)
+    if len(data) != length:
+        raise McapError(f"an image ends {length - len(data)} byte(s) early")
     return data

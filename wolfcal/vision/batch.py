@@ -38,7 +38,6 @@ from wolfcal.errors import WolfcalError
 from wolfcal.memory import buffers_from_heap
 
 if TYPE_CHECKING:
-    from wolfcal.io.images import Encoded
     from wolfcal.vision.tags import PendingTags
 
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
@@ -69,7 +68,7 @@ def _family_list(families: Families) -> FamilyList:
     return [(family, None if ids is None else frozenset(ids)) for family, ids in families.items()]
 
 
-def _detect_batch(batch: list[Encoded], families: FamilyList, refine: str) -> list[PendingTags | None]:
+def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list[PendingTags | None]:
     """Decode each encoded image (png, jpeg, ...; None if undecodable) and find the tags of every family, their
     corners still to be refined (`_refined`); each image is dropped once its tags' crops are taken."""
     from wolfcal.io.images import decode_gray
@@ -112,7 +111,7 @@ def _refined(found: Iterable[PendingTags | None]) -> Generator[Detections | None
     yield from refined(pending)
 
 
-def task_size(data: Encoded, processes: bool) -> int:
+def task_size(data: bytes, processes: bool) -> int:
     """Images per task: as many as make PIXELS_PER_TASK (by the first image's size; at least BATCH for
     processes, whose tasks pickle their images)."""
     from wolfcal.io.images import image_size
@@ -153,7 +152,7 @@ def shutdown_pool() -> None:
 
 
 def iter_detect_encoded(
-    images: Iterable[Encoded],
+    images: Iterable[bytes],
     families: Families,
     refine: str = "edges",
     workers: int | None = None,
@@ -174,7 +173,7 @@ def iter_detect_encoded(
 
 
 def _found_on_workers(
-    images: Iterable[Encoded],
+    images: Iterable[bytes],
     families: Families,
     refine: str,
     workers: int | None,
@@ -220,14 +219,14 @@ def _found_on_workers(
             pool.shutdown()
 
 
-def detect_encoded(images: Iterable[Encoded], families: Families, **options: Any) -> list[Detections]:
+def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
     """Detect tags of `families` ({family: ids or None}) in every encoded image, on all cores -> per image
     {tag id: (4, 2) corners [px]}, as `detect_tags` gives them; `options`: those of `iter_detect_checked`."""
     return list(iter_detect_checked(images, families, **options))
 
 
 def iter_detect_checked(
-    images: Iterable[Encoded],
+    images: Iterable[bytes],
     families: Families,
     refine: str = "edges",
     workers: int | None = None,

@@ -41,7 +41,6 @@ import xxhash
 from wolfcal.atomic import atomic_output
 from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, recall, write_memo
 from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
-from wolfcal.io.images import Encoded
 from wolfcal.vision.batch import Detections, iter_detect_checked
 from wolfcal.vision.found_tags import FoundTags
 
@@ -192,7 +191,7 @@ def cached_detect(
     path: Path,
     camera_name: str,
     stamps: list[int],
-    images: Iterable[Encoded],
+    images: Iterable[bytes],
     settings: DetectorSettings,
     progress: Callable[[int, int | None], None] | None = None,
     labels: Callable[[int], str] | None = None,
@@ -310,7 +309,7 @@ def _key_of(hashing: Future, camera_name: str, settings: DetectorSettings) -> st
 def detect_by_source(
     sources: list[str],
     stamps: list[int],
-    images: Callable[[list[int]], Iterable[Encoded]],
+    images: Callable[[list[int]], Iterable[bytes]],
     camera_name: str | list[str],
     settings: DetectorSettings,
     progress: Callable[[int, int], None] | None = None,
