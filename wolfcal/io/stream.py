@@ -66,9 +66,9 @@ def _stream_window(
     wanted: list[ImageLocation],
 ) -> Iterator[bytes]:
     """The images at `wanted` (one file, open as `handle`), in that order, from one pass over the time span they
-    cover. In an uncompressed chunk an image's bytes are read from where they lie, once
-    (`iter_message_heads`; read with their message, then copied out of it, they were copied three times: 0.7-1.3 ms
-    per 3 MB image)."""
+    cover. In an uncompressed chunk an image's bytes are read from where they lie, once (`iter_message_heads`; read
+    with their chunk, then copied out of the chunk and out of the message, a 2048x1536 image cost 0.8 ms against
+    0.6 ms)."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
@@ -82,18 +82,18 @@ def _stream_window(
     for schema, channel, message, complete, offset in messages:
         if (channel.topic, message.log_time) not in times:
             continue
-        span = None if complete else compressed_image_span(message.data, schema, message.log_time)
+        span = None if complete or offset is None else _image_in_file(message.data, schema, message.log_time, offset)
         if span is None:  # the whole message read
             stamp, image = image_of(path, decoders, schema, channel, message)
         else:
-            stamp, start, length = span
+            stamp, at, length = span
         key = (channel.topic, message.log_time, stamp)
         if not remaining.get(key) or key in waiting:
             continue
         if span is None:  # the image alone, not the message around it
             waiting[key] = bytes(image)
         else:
-            waiting[key] = _read_at(handle, offset + start, length)  # type: ignore[operator]
+            waiting[key] = _read_at(handle, at, length)
         while turn < len(keys) and keys[turn] in waiting:
             data = waiting[keys[turn]]
             remaining[keys[turn]] -= 1
@@ -115,6 +115,13 @@ _HEAD_BYTES = 256  # of an image message read first: its CDR header and format, 
 def _image_head(schema, head: bytes) -> bool:
     """Whether `head` holds a CompressedImage message's layout up to its image (then the image is read on its own)."""
     return compressed_image_span(head, schema, 0) is not None
+
+
+def _image_in_file(head: bytes, schema, log_time: int, offset: int) -> tuple[int, int, int] | None:
+    """(header stamp [ns], where its image begins in the file [bytes], its length [bytes]) of a CompressedImage message
+    whose data begin at `offset` in the file, from their first bytes `head` (`compressed_image_span`)."""
+    span = compressed_image_span(head, schema, log_time)
+    return None if span is None else (span[0], offset + span[1], span[2])
 
 
 def _read_at(handle: IO[bytes], offset: int, length: int) -> bytes:
