@@ -49,8 +49,8 @@ from opencv_intrinsics import calibrate as plain_calibrate  # noqa: E402
 from wolfcal.intrinsics.pipeline import IntrinsicsOptions, run_intrinsics  # noqa: E402
 from wolfcal.io.images import encode_image  # noqa: E402
 from wolfcal.vision import cache, tags  # noqa: E402
-from wolfcal.vision.batch import cpu_count, detect_encoded, task_size  # noqa: E402
-from wolfcal.vision.tags import _detector, _found, _to_gray, detect_tags, refine_found, tag_cells  # noqa: E402
+from wolfcal.vision.batch import _refined, cpu_count, detect_encoded, task_size  # noqa: E402
+from wolfcal.vision.tags import PendingTags, _detector, _found, _to_gray, detect_tags, tag_cells  # noqa: E402
 
 FAMILY = "tag36h11"
 
@@ -122,13 +122,17 @@ def edges_at(revision: str) -> types.ModuleType:
     return module
 
 
-def _refine_tasks(tasks: list, edges: types.ModuleType | None = None, family: str = FAMILY) -> list:
-    """refine_found over each task (gray images, OpenCV's tags of `family`), with `edges`' refine_tags if given."""
+def _refine_passes(grays: list, found: list, edges: types.ModuleType | None = None, family: str = FAMILY) -> list:
+    """The refinement as a fit runs it, of OpenCV's tags of `family` `found` in `grays` (each tag's crop, then
+    consecutive images' tags in passes: `wolfcal.vision.batch._refined`), with `edges`' refine_tags if given."""
     now = tags.refine_tags
     if edges is not None:
         tags.refine_tags = edges.refine_tags
     try:
-        return [tag for grays, found in tasks for tag in refine_found(grays, found, family)]
+        cells = tag_cells(family)
+        pending = [PendingTags({family: f}, {family: [tags._tags_crop(g, c[None], cells) for c in f.values()]})
+                   for g, f in zip(grays, found)]  # fmt: skip
+        return list(_refined(pending))
     finally:
         tags.refine_tags = now
 
@@ -145,14 +149,13 @@ def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
             grays = [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data]
             found = [_found(g, FAMILY, None, "edges") for g in grays]
             size = task_size(data[0], processes=False)
-            tasks = [(grays[i : i + size], found[i : i + size]) for i in range(0, len(grays), size)]
             functions = {
                 "decode": lambda: [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data],  # noqa: B023
                 "detector": lambda: [_found(g, FAMILY, None, "edges") for g in grays],  # noqa: B023
-                "refinement": lambda: _refine_tasks(tasks),  # noqa: B023
+                "refinement": lambda: _refine_passes(grays, found),  # noqa: B023
             }
             if old is not None:
-                functions["refinement before"] = lambda: _refine_tasks(tasks, old)  # noqa: B023
+                functions["refinement before"] = lambda: _refine_passes(grays, found, old)  # noqa: B023
             t = {k: 1e3 * v / len(data) for k, v in interleaved(functions, repeat, time.process_time).items()}
             n_tags = sum(len(f) for f in found) / len(data)
             total = t["decode"] + t["detector"] + t["refinement"]
@@ -160,7 +163,7 @@ def cpu_split(views_by_camera: dict, before: str | None, repeat: int) -> None:
                     f"{t['detector']:5.2f} + refinement {t['refinement']:5.2f} = {total:5.2f}")  # fmt: skip
             if old is not None:
                 before_total = total - t["refinement"] + t["refinement before"]
-                now, then = _refine_tasks(tasks), _refine_tasks(tasks, old)
+                now, then = _refine_passes(grays, found), _refine_passes(grays, found, old)
                 diff = max(np.abs(a[k] - b[k]).max() for a, b in zip(now, then) for k in a)
                 line += (f"; refinement at {before} {t['refinement before']:5.2f} (total {before_total:5.2f}, "
                          f"{before_total / total:.2f}x; refinement {t['refinement before'] / t['refinement']:.2f}x; "
@@ -195,17 +198,15 @@ def capture_split(path: Path, robot_dir: Path, repeat: int, before: str | None =
         found = {f: [_found(g, f, ids, "edges") for g in grays] for f, ids in families.items()}
         size = task_size(data[0], processes=False)
         bare = {f: cv2.aruco.ArucoDetector(tags._dictionary(f)) for f in families}
-        tasks = {f: [(grays[i : i + size], found[f][i : i + size]) for i in range(0, len(grays), size)]
-                 for f in families}  # fmt: skip
         functions = {
             "decode": lambda: [cv2.imdecode(np.frombuffer(d, np.uint8), cv2.IMREAD_GRAYSCALE) for d in data],
             "detector": lambda: [_found(g, f, ids, "edges") for g in grays for f, ids in families.items()],
             "bare detector": lambda: [bare[f].detectMarkers(g) for g in grays for f in families],
-            "refinement": lambda: [_refine_tasks(tasks[f], family=f) for f in families],
+            "refinement": lambda: [_refine_passes(grays, found[f], family=f) for f in families],
         }
         old = edges_at(before) if before else None
         if old is not None:
-            functions["refinement before"] = lambda: [_refine_tasks(tasks[f], old, f) for f in families]
+            functions["refinement before"] = lambda: [_refine_passes(grays, found[f], old, f) for f in families]
 
         def as_in_the_fit(workers: int) -> None:  # OpenCV's own threads as the fit leaves them
             cv2.setNumThreads(threads)
@@ -226,7 +227,7 @@ def capture_split(path: Path, robot_dir: Path, repeat: int, before: str | None =
           f"{t['fit, 1 thread']:.2f} ({t['fit, 1 thread'] / total:.2f}x), on {cpu_count()} threads {t['fit']:.2f} "
           f"({t['fit'] / total:.2f}x)")
     if old is not None:
-        now, then = ([tag for f in families for tag in _refine_tasks(tasks[f], e, f)] for e in (None, old))
+        now, then = ([tag for f in families for tag in _refine_passes(grays, found[f], e, f)] for e in (None, old))
         diff = max((np.abs(a[k] - b[k]).max() for a, b in zip(now, then) for k in a), default=0.0)
         print(f"    refinement at {before} {t['refinement before']:.2f} ms CPU/image "
               f"({t['refinement before'] / t['refinement']:.2f}x now's); corners differ by at most {diff:.1e} px")
