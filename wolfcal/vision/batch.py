@@ -22,9 +22,10 @@ multiprocessing, a script that uses it must guard its top level with `if __name_
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sized
-from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
 from typing import Any
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.memory import buffers_from_heap
+from wolfcal.memory import buffers_from_heap, release_thread_heap
 
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
@@ -158,6 +159,8 @@ def iter_detect_encoded(
                 yield from pending.popleft().result()
         while pending:
             yield from pending.popleft().result()
+        if not processes:
+            _release_worker_heaps(pool, workers)
     except BrokenProcessPool:
         shutdown_pool()
         raise WolfcalError(
@@ -169,6 +172,23 @@ def iter_detect_encoded(
             future.cancel()
         if not processes:
             pool.shutdown()
+
+
+def _release_worker_heaps(pool: Executor, workers: int) -> None:
+    """Each detection thread hands back its heap's free top (`release_thread_heap`: the decoded images' room, kept
+    by glibc for the next ones): one task per thread, each held at a barrier until all run, so that no thread takes
+    two."""
+    barrier = threading.Barrier(workers)
+
+    def release() -> None:
+        try:
+            barrier.wait(timeout=60.0)
+        except threading.BrokenBarrierError:  # a thread did not come: the others release their own all the same
+            pass
+        release_thread_heap()
+
+    for task in [pool.submit(release) for _ in range(workers)]:
+        task.result()
 
 
 def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
