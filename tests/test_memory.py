@@ -45,3 +45,47 @@ def test_freed_image_buffers_are_reused_from_the_first_round():
     assert heap[0] > pages * 0.9 and default[0] > pages * 0.9  # the first round touches every page either way
     assert heap[1] < pages * 0.1 and max(heap[2:]) < pages * 0.1
     assert default[1] > pages * 0.9
+
+
+def test_a_released_thread_heap_still_reuses_freed_buffers():
+    """`release_thread_heap` sets the trim threshold back as `buffers_from_heap` leaves it: rounds of image buffers
+    after it reuse the freed pages as before."""
+    release = "from wolfcal.memory import release_thread_heap; release_thread_heap()\n    "
+    script = ROUNDS.replace("faults.append(", release + "faults.append(")
+    run = subprocess.run([sys.executable, "-c", script, "heap"], capture_output=True, text=True, check=True)
+    faults, pages = json.loads(run.stdout), (20 * (3 << 20)) // 4096
+    assert faults[0] > pages * 0.9 and max(faults[1:]) < pages * 0.1, faults
+
+
+def test_each_detection_thread_releases_its_heap_once(monkeypatch):
+    """At the end of detection every worker thread hands back its own heap's free top (`release_thread_heap`), one
+    call on each: a thread that took two calls would leave another's heap as it was."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from wolfcal.vision import batch
+
+    called: list[int] = []
+    monkeypatch.setattr(batch, "release_thread_heap", lambda: called.append(threading.get_ident()))
+    with ThreadPoolExecutor(3) as pool:
+        batch._release_worker_heaps(pool, 3)
+    assert len(called) == 3 and len(set(called)) == 3 and threading.get_ident() not in called
+
+
+def test_work_in_its_own_arena_runs_on_a_thread_with_the_callers_settings():
+    """`in_own_arena` returns the work's result or raises its exception, runs it on another thread, and the
+    caller's context variables (`--no-cache`) hold there."""
+    import threading
+
+    from wolfcal.io.filememo import cache_enabled, caching
+    from wolfcal.memory import in_own_arena
+
+    with cache_enabled(False):
+        thread, cached = in_own_arena(lambda: (threading.get_ident(), caching()))
+    assert thread != threading.get_ident() and cached is False
+
+    def fails() -> None:
+        raise ValueError("from the thread")
+
+    with pytest.raises(ValueError, match="from the thread"):
+        in_own_arena(fails)

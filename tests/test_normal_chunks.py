@@ -10,6 +10,7 @@ import pytest
 from test_noise import TRIPOD, repeated_frames
 
 from wolfcal.fit import problem
+from wolfcal.fit.columns import ColumnMatrix
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.fit.uncertainty import EIGEN_CONDITION_LIMIT, information_uncertainty, triangular_factor
 from wolfcal.sim.scenario import synthetic_external_scenario
@@ -101,4 +102,10 @@ def test_noise_factors_multiply_as_scipy_sparse(robot, camera):
         groups = model.group_of_row[rows]
         columns = np.flatnonzero((model.group_of_column >= groups.min()) & (model.group_of_column <= groups.max()))
         np.testing.assert_array_equal(part.Q.as_scipy.toarray(), reference[rows][:, columns].toarray())
+        # its products: those of a copy of its columns, exactly, from views of Q's values
+        copy = ColumnMatrix(part.Q.data, part.Q.indices, part.Q.indptr, part.Q.shape[0])
+        y, N = rng.normal(size=(part.Q.shape[1], 3)), rng.normal(size=(part.Q.shape[0], 3))
+        np.testing.assert_array_equal(part.Q @ y, copy @ y)
+        np.testing.assert_array_equal(part.Q.T @ N, copy.T @ N)
+        assert all(any(np.shares_memory(v, w) for _, _, w in Q._groups) for _, _, v in part.Q._groups)
     assert sum(part.Q.shape[1] for _, part in chunks) == Q.shape[1]

@@ -3,16 +3,21 @@
 glibc's allocator keeps freed heap pages (of every thread's arena) mapped: after reading a long recording or
 detecting tags on worker threads, the resident size stays at the phase's peak although the data are gone, and the
 next phase's peak lands on top of it. `malloc_trim(0)` returns those pages. How large blocks (image buffers, file
-chunks; the solve's arrays) are placed: `buffers_from_heap`, `large_blocks_mapped`. Elsewhere (no glibc) this does
-nothing.
+chunks; the solve's arrays) are placed: `buffers_from_heap`, `large_blocks_mapped`; a phase whose transient
+blocks would spread the heap that its results live in: `in_own_arena`. Elsewhere (no glibc) this does nothing.
 """
 
 from __future__ import annotations
 
+import contextvars
 import ctypes
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import cache
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 @cache
@@ -78,3 +83,57 @@ def large_blocks_mapped() -> Iterator[None]:
         yield
     finally:
         buffers_from_heap()
+
+
+TRIM_BLOCK = 256 * 1024  # [bytes] a block freed to make glibc trim a thread's heap (>= its 64 KB consolidation size)
+
+
+def release_thread_heap() -> None:
+    """Hand back the free top of the calling thread's own heap (its glibc arena; on the main thread: the main heap's).
+
+    glibc trims a thread's heap when a block of 64 KB or more is freed in it while its free top exceeds
+    M_TRIM_THRESHOLD, which `buffers_from_heap` sets to 64 MB (image buffers are reused, not faulted in again), and
+    `release_freed_memory` (malloc_trim) did not hand back what the detection threads' heaps kept after detection:
+    a 600-frame fit at 2048x1536 held 91-100 MB before its solve, 77 MB with each detection thread calling this at
+    the end (`wolfcal.vision.batch`), and the 6000-frame fit's solve, whose peak is that memory plus its own, peaked
+    lower by as much. So a block is allocated and freed here with the threshold at 0, then the threshold is set back
+    as `buffers_from_heap` sets it."""
+    mallopt, malloc, free = _libc("mallopt"), _libc("malloc"), _libc("free")
+    if mallopt is None or malloc is None or free is None:
+        return
+    malloc.restype, free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+    mallopt(M_TRIM_THRESHOLD, 0)
+    try:
+        free(malloc(TRIM_BLOCK))
+    finally:
+        mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)
+
+
+def in_own_arena(work: Callable[[], T]) -> T:
+    """`work()` run on a thread of its own (the caller waits): its result, or its exception raised here.
+
+    glibc gives each thread a heap of its own (an arena), so the blocks `work` allocates and frees come from that
+    heap, not from the caller's. For reading a long file: its message buffers (an image each, 0.6 MB at 2048x1536)
+    freed between the small blocks that live on (the pairing's state of each frame, kept to the end of the pass)
+    left the main heap spread over 24-26 MB with a few live blocks every 0.8 MB (reading 6000 frames; 9 MB for 600);
+    the results built after it (each sample's arrays) took the gaps, and the detection's image buffers that followed
+    reused those gaps page by page: the main heap's resident size reached its span, 29-34 MB, against 16-19 MB after
+    600 frames. Read on its own thread, the main heap after 6000 frames spans 7 MB and detection's streaming leaves
+    it at 18 MB, as after 600; the reading thread's heap is free when it ends, and the next threads (detection's)
+    take it up. The thread is a daemon: an interrupted caller does not wait for it at exit."""
+    outcome: list = []
+    context = contextvars.copy_context()  # the caller's settings (e.g. `--no-cache`) hold on the thread too
+
+    def run() -> None:
+        try:
+            outcome.append((True, context.run(work)))
+        except BaseException as exc:  # noqa: BLE001  (handed to the caller as it is)
+            outcome.append((False, exc))
+
+    thread = threading.Thread(target=run, name="wolfcal-own-arena", daemon=True)
+    thread.start()
+    thread.join()
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value

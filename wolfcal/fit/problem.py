@@ -197,6 +197,10 @@ class Problem:
             self._cache = (key, lins)
         return self._cache[1]
 
+    def forget_linearization(self) -> None:
+        """Drop the cached linearisation (`evaluate` builds the next one afresh)."""
+        self._cache = None
+
     def linearize(self, z: np.ndarray) -> None:
         """Rebuild every block's noise model at z (joint sensitivities and inlier groups)."""
         for state, lin in zip(self.states, self.evaluate(z)):

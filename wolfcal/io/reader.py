@@ -26,6 +26,7 @@ import time
 from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import IO, NamedTuple
 
@@ -56,7 +57,7 @@ from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
-from wolfcal.memory import buffers_from_heap
+from wolfcal.memory import buffers_from_heap, in_own_arena
 
 
 def read_captures(
@@ -290,14 +291,13 @@ def _read(
     taken_ns = time.time_ns()
     known = _Checks.remembered(path) if caching() else None
     for checks in (known, None) if known is not None else (None,):
+        # on a thread of its own: the pass's message buffers do not spread the heap the samples live in (`in_own_arena`)
+        one_pass = partial(_pass_one, path, reader, config, found.cameras, info_cameras, progress, handle=handle,
+                           known=checks)  # fmt: skip
         try:
-            read = _pass_one(
-                path, reader, config, found.cameras, info_cameras, progress, DISORDER_NS, handle=handle, known=checks
-            )
+            read = in_own_arena(partial(one_pass, DISORDER_NS))
         except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-            read = _pass_one(
-                path, reader, config, found.cameras, info_cameras, progress, None, handle=handle, known=checks
-            )
+            read = in_own_arena(partial(one_pass, None))
         if checks is None or read.checks.images == checks.images:
             break
         known = None  # the memo counted other images: not the file it was taken of; checked again

@@ -25,9 +25,10 @@ multiprocessing, a script that uses it must guard its top level with `if __name_
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sized
-from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
 from typing import TYPE_CHECKING, Any
@@ -35,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.memory import buffers_from_heap
+from wolfcal.memory import buffers_from_heap, release_thread_heap
 
 if TYPE_CHECKING:
     from wolfcal.vision.tags import PendingTags
@@ -218,6 +219,8 @@ def _found_on_workers(
                 yield from pending.popleft().result()
         while pending:
             yield from pending.popleft().result()
+        if not processes:
+            _release_worker_heaps(pool, workers)
     except BrokenProcessPool:
         shutdown_pool()
         raise WolfcalError(
@@ -233,6 +236,23 @@ def _found_on_workers(
             import cv2
 
             cv2.setNumThreads(opencv_threads)
+
+
+def _release_worker_heaps(pool: Executor, workers: int) -> None:
+    """Each detection thread hands back its heap's free top (`release_thread_heap`: the decoded images' room, kept
+    by glibc for the next ones): one task per thread, each held at a barrier until all run, so that no thread takes
+    two."""
+    barrier = threading.Barrier(workers)
+
+    def release() -> None:
+        try:
+            barrier.wait(timeout=60.0)
+        except threading.BrokenBarrierError:  # a thread did not come: the others release their own all the same
+            pass
+        release_thread_heap()
+
+    for task in [pool.submit(release) for _ in range(workers)]:
+        task.result()
 
 
 def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
