@@ -49,12 +49,14 @@ def test_freed_image_buffers_are_reused_from_the_first_round():
 
 def test_a_released_thread_heap_still_reuses_freed_buffers():
     """`release_thread_heap` sets the trim threshold back as `buffers_from_heap` leaves it: rounds of image buffers
-    after it reuse the freed pages as before."""
+    after it reuse most of the freed pages as before. Each release hands back the heap's free top beyond its live
+    blocks, which the next round faults in again: 768 or 1536 of the 15360 pages here, by where the interpreter's own
+    blocks lie (it depends on the folder the process starts in); without the reuse every page would be."""
     release = "from wolfcal.memory import release_thread_heap; release_thread_heap()\n    "
     script = ROUNDS.replace("faults.append(", release + "faults.append(")
     run = subprocess.run([sys.executable, "-c", script, "heap"], capture_output=True, text=True, check=True)
     faults, pages = json.loads(run.stdout), (20 * (3 << 20)) // 4096
-    assert faults[0] > pages * 0.9 and max(faults[1:]) < pages * 0.1, faults
+    assert faults[0] > pages * 0.9 and max(faults[1:]) < pages * 0.2, faults
 
 
 def test_each_detection_thread_releases_its_heap_once(monkeypatch):
