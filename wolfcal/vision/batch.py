@@ -48,9 +48,11 @@ BATCH = 4  # images per process task at least: a 2048x1536 png is ~3 MB, so ~12 
 # Pixels per task: one image at 1280x960 and above, six at 512x384 (a task's own cost, ~0.1 ms, against ~4 ms of
 # detection per small image; the refinement takes consecutive tasks' tags together whatever their size)
 PIXELS_PER_TASK = 1_200_000
-# Bytes of crops waiting for one refinement pass at most: a pass of 16 tags of 300 px at 2048x1536 holds ~8 MB; tags
-# filling much of the image are refined a few at a time instead
-PASS_BYTES = 32 * 1024 * 1024
+# Bytes of crops waiting for one refinement pass at most (held on top of detection's own buffers): a 2048x1536 tag's
+# crop is 0.4-0.5 MB (up to 6 MB for a tag near the camera), so a pass takes ~9 such tags. The 24-sample camera
+# capture's refinement: 28 ms of CPU at 4 MB, 24 ms at 32 MB (one thread, median of 7); the 6000-frame recording's fit
+# (bench_stream) peaked at 134 MB against 140 MB, its 600-frame fit at 123 against 125-127 MB.
+PASS_BYTES = 4 * 1024 * 1024
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
 _pool: ProcessPoolExecutor | None = None
