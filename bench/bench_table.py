@@ -7,10 +7,11 @@ Prints, with units:
 1. End to end (`run_fit` in this process: read, detect, solve, uncertainty, write) on 2048x1536 captures, camera
    fit of 24 samples and leg fit of 40: first run (no cache) wall and CPU, the median of FIRST_RUNS runs each with
    a fresh cache folder (and the very first of them, which also pays the process's first-call costs); the floor
-   (reading the images, decoding them and OpenCV's bare aruco detector on all cores; the median of FIRST_RUNS); the
-   naive reference in CPU (the same detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second
-   run (cache), in this process (the median of SECOND_RUNS runs) and as a whole `wolfcal fit` process. The ratios
-   are taken between medians: one run of 0.5-1 s varies by +-15 % on this machine even when it is idle.
+   (reading the images, decoding them and OpenCV's bare aruco detector on all cores; the median of FIRST_RUNS, each
+   run right after a first run, and the median of the pairs' ratios); the naive reference in CPU (the same
+   detection's CPU + the naive solve's CPU, bench/naive_reference.py); the second run (cache), in this process (the
+   median of SECOND_RUNS runs) and as a whole `wolfcal fit` process. The ratios are taken between medians: one run
+   of 0.5-1 s varies by +-15 % on this machine even when it is idle, and its speed drifts by more between minutes.
 2. The solve alone (`fit_observations` on the same detections) vs the naive solve, CPU.
 3. Leg fits of 400 and 1000 samples at 512x384 (2048x1536 binned 4x4), end to end, first run: wall and CPU, in
    this process and as a `wolfcal fit` process (start-up and imports included), each the median of PROCESS_RUNS
@@ -154,14 +155,18 @@ def warm(path: Path) -> None:
 def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> None:
     robot = load_robot(CONFIG)
     warm(path)
-    firsts = [fresh_fit_run(path, options) for _ in range(FIRST_RUNS)]
+    firsts, floors = [], []
+    for _ in range(FIRST_RUNS):  # in turn, so that the machine's drift (up to 1.6x here) falls on both alike
+        firsts.append(fresh_fit_run(path, options))
+        floors.append(floor(path))
     first_wall, first_cpu = median_run(firsts)
+    pair_wall = np.median([f[0] / b[0] for f, b in zip(firsts, floors)])
+    pair_cpu = np.median([f[1] / b[1] for f, b in zip(firsts, floors)])
     with tempfile.TemporaryDirectory() as cache_dir:
         fit_run(path, options, Path(cache_dir))
         seconds = sorted((fit_run(path, options, Path(cache_dir)) for _ in range(SECOND_RUNS)), key=lambda r: r[1])
         second_wall, second_cpu = seconds[len(seconds) // 2]  # the median in CPU: one run of 0.1-0.2 s is noisy
         process_wall, process_cpu = process_run(path, free, Path(cache_dir))
-    floors = [floor(path) for _ in range(FIRST_RUNS)]
     bare, bare_cpu = median_run(floors)
     with cache_enabled(False):  # the detection's own cost, the naive reference uses the same detections
         samples, _ = load_samples(robot, [path], None)
@@ -178,7 +183,8 @@ def end_to_end(label: str, path: Path, options: FitOptions, free: list[str]) -> 
           f"{firsts[0][0]:.2f} s wall)")
     print(f"  floor          {bare:6.2f} s wall, {bare_cpu:6.2f} s CPU (read + decode + bare aruco, {cpu_count()} "
           f"threads; median of {FIRST_RUNS}, {spread(floors, 1)} s CPU) -> first run {first_wall / bare:.2f}x the "
-          f"floor in wall (target <= 1.3), {first_cpu / bare_cpu:.2f}x in CPU")
+          f"floor in wall (target <= 1.3), {first_cpu / bare_cpu:.2f}x in CPU; median of the {FIRST_RUNS} pairs' "
+          f"ratios {pair_wall:.2f}x wall, {pair_cpu:.2f}x CPU")
     print(f"  naive reference {naive_total:6.2f} s CPU (detection {detect_cpu:.2f} + naive solve {naive_cpu:.2f}) "
           f"-> wolfcal {naive_total / first_cpu:.1f}x faster in CPU (target >= 3)")
     print(f"  second run     {second_wall:6.2f} s wall, {second_cpu:6.2f} s CPU (cache; median of {SECOND_RUNS} runs, "
