@@ -5,9 +5,9 @@ single large images keep both cores busy to the last image), of at least BATCH i
 pickles its images), and at most 2 tasks per worker are under way at once, so memory stays bounded however many
 images the input yields (it may be a lazy iterator over a long recording). A worker decodes an image, finds its
 tags with OpenCV and keeps a crop around each (`wolfcal.vision.tags.find_tags`); the caller's thread refines the
-corners of consecutive images' tags together, up to TAGS_PER_PASS tags a pass (`_refined`: the refinement's cost
-is numpy's per call, so 2048x1536 images, 1-2 tags each, were refined at the cost of many calls: the 24-sample
-camera capture's 37 tags took 62-70 ms in a call per image, 27-32 ms in passes). Results come back in input order,
+corners of consecutive images' tags together, up to TAGS_PER_PASS tags and PASS_BYTES of crops a pass (`_refined`:
+the refinement's cost is numpy's per call, so 2048x1536 images, 1-2 tags each, were refined at the cost of many
+calls: the 24-sample camera capture's 37 tags took 62-70 ms in a call per image, 24-28 ms in passes). Results come back in input order,
 each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px: refined together, the sums
 run over padded arrays).
 
