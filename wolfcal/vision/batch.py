@@ -7,9 +7,9 @@ images the input yields (it may be a lazy iterator over a long recording). A wor
 tags with OpenCV and keeps a crop around each (`wolfcal.vision.tags.find_tags`); the caller's thread refines the
 corners of consecutive images' tags together, up to TAGS_PER_PASS tags and PASS_BYTES of crops a pass (`_refined`:
 the refinement's cost is numpy's per call, so 2048x1536 images, 1-2 tags each, were refined at the cost of many
-calls: the 24-sample camera capture's 37 tags took 62-70 ms in a call per image, 24-28 ms in passes). Results come back in input order,
-each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px: refined together, the sums
-run over padded arrays).
+calls: the 24-sample camera capture's 37 tags took 62-70 ms in a call per image, 24-28 ms in passes). Results
+come back in input order, each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px:
+refined together, the sums run over padded arrays).
 
 Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
 held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
