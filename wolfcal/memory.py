@@ -39,6 +39,7 @@ def release_freed_memory() -> None:
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameter numbers
 SOLVE_MMAP_THRESHOLD = 1024 * 1024  # [bytes] blocks from this size up get their own mapping during the solve
 MMAP_THRESHOLD_MAX = 32 * 1024 * 1024  # [bytes] the most glibc's own adjustment raises it to (64-bit)
+HEAP_TRIM_THRESHOLD = 2 * MMAP_THRESHOLD_MAX  # [bytes] free heap top kept with buffers from the heap (glibc's own pair)
 SOLVE_TRIM_THRESHOLD = 32 * 1024 * 1024  # [bytes] free heap top kept (not handed back) during the solve
 
 
@@ -53,7 +54,7 @@ def buffers_from_heap() -> None:
     mallopt = _libc("mallopt")
     if mallopt is not None:
         mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX)
-        mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)
+        mallopt(M_TRIM_THRESHOLD, HEAP_TRIM_THRESHOLD)
 
 
 @contextmanager
@@ -106,7 +107,7 @@ def release_thread_heap() -> None:
     try:
         free(malloc(TRIM_BLOCK))
     finally:
-        mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD_MAX)
+        mallopt(M_TRIM_THRESHOLD, HEAP_TRIM_THRESHOLD)
 
 
 def in_own_arena(work: Callable[[], T]) -> T:
