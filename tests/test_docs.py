@@ -3,7 +3,6 @@ explained on its page; the README stays a short user's page."""
 
 import re
 from pathlib import Path
-
 from typing import Any
 
 import pytest
@@ -48,5 +47,7 @@ def test_shipped_text_does_not_speak_of_how_it_was_developed() -> None:
     """Docs, README and docstrings describe the tool, not its history: no issue numbers or work-log words."""
     pattern = re.compile(r"\bissues? \d+\b|\(#\d+\)|\bthis session\b|\bhelper session\b", re.IGNORECASE)
     files = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "wolfcal").rglob("*.py"))]
-    offenders = [f"{path.relative_to(ROOT)}: {m.group(0)}" for path in files for m in pattern.finditer(path.read_text())]
+    offenders = [
+        f"{path.relative_to(ROOT)}: {m.group(0)}" for path in files for m in pattern.finditer(path.read_text())
+    ]
     assert not offenders, offenders
