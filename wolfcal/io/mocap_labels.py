@@ -30,7 +30,9 @@ def short_name(label: str) -> str:
 
 def match_names(path: Path | str, names: list[str], labels: list[str]) -> LabelMatch:
     """Match configured `names` to a source's `labels` (rules of the module docstring)."""
-    found, columns, missing = [], [], []
+    found: list[str] = []
+    columns: list[int] = []
+    missing: list[str] = []
     for name in names:
         if name in labels:
             column = labels.index(name)
