@@ -70,7 +70,7 @@ def run_markers(path: Path, json_out: Path | None, robot: Path | None) -> list[s
     if not any(m["visible_frames"] for m in data["markers"]):
         raise NoMarkers(f"{path}: {len(data['markers'])} marker column(s) ({', '.join(traj.labels[:5])}), but no "
                         "marker is measured in any frame")
-    lines = report_lines(path, data, robot)
+    lines = report_lines(path, data, robot) + [f"note: {note}" for note in traj.notes]
     if json_out is not None:
         try:
             write_text_atomic(json_out, json.dumps(data, indent=1) + "\n")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import struct
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -36,20 +37,13 @@ def read_c3d(path: Path) -> MarkerTrajectories:
                            "'conda install -c conda-forge ezc3d', or 'pip install ezc3d' with cmake and swig "
                            "installed; or export the trial as CSV") from None
 
-    with path.open("rb") as handle:
-        head = handle.read(512)
-        if len(head) < 512 or head[1] != 0x50:
-            raise ValueError("the header's key byte is not 0x50 (80): not a C3D file")
-        handle.seek(max(head[0] - 1, 0) * 512)
-        processor = handle.read(4)[3:4]
-    kind = PROCESSORS.get(processor[0] if processor else 0)
-    if kind is None:
-        raise ValueError(f"unknown processor type {processor[0] if processor else None} (84 Intel, 85 DEC, 86 SGI)")
+    data = path.read_bytes()
+    kind, announced = check_layout(data)
     if kind == "SGI/MIPS":
         handle_fd, scratch = tempfile.mkstemp(suffix=".c3d")
         try:
             with os.fdopen(handle_fd, "wb") as out:
-                out.write(mips_to_intel(path.read_bytes()))
+                out.write(mips_to_intel(data))
             c = ezc3d.c3d(scratch)
         finally:
             os.unlink(scratch)
@@ -63,6 +57,8 @@ def read_c3d(path: Path) -> MarkerTrajectories:
         raise NoMarkers(f"{path}: no marker trajectories in this C3D file (POINT:USED 0); it holds "
                         f"{_contents(params)}; export the markers' trajectories (the POINT group) to use it")
     k = points.shape[1]
+    notes = [f"the data section holds {points.shape[2]} of the {announced} frames POINT:FRAMES announces: the file "
+             "may be cut off"] if points.shape[2] < announced else []
     labels = [str(s).strip() for name in _label_parameters(point) for s in point[name]["value"]][:k]
     labels += [f"point {i + 1}" for i in range(len(labels), k)]
     scale = _point_scales(path, point, k)
@@ -74,7 +70,7 @@ def read_c3d(path: Path) -> MarkerTrajectories:
     units = [str(u).replace("\0", "").strip() for u in point["UNITS"]["value"]]
     return MarkerTrajectories(path, times_from_frames(np.arange(xyz.shape[0], dtype=float), rate), labels, xyz,
                               file_clock=True, format=f"C3D ({kind}, {storage})", rate_hz=rate,
-                              unit=units[0] if len(set(units)) == 1 else ",".join(units))  # fmt: skip
+                              unit=units[0] if len(set(units)) == 1 else ",".join(units), notes=notes)  # fmt: skip
 
 
 def _first(group: dict, name: str, default: float) -> float:
@@ -120,6 +116,57 @@ def _contents(params: dict) -> str:
     return ", ".join(parts) or "nothing else either"
 
 
+def check_layout(data: bytes) -> tuple[str, int]:
+    """The processor format ('Intel', 'DEC', 'SGI/MIPS') of a C3D file's bytes and the frame count POINT:FRAMES
+    announces (0 when absent or full: 65535 and more are counted elsewhere; the header's count is wrong in some
+    real files); ValueError when the header or the parameter records do not fit in the file
+    (ezc3d loops forever on some truncated files: checked first)."""
+    if len(data) < 512:
+        raise ValueError(f"{len(data)} bytes, shorter than a C3D header (512 bytes)")
+    if data[1] != 0x50:
+        raise ValueError("the header's key byte is not 0x50 (80): not a C3D file")
+    section = (max(data[0], 1) - 1) * 512
+    if section + 4 > len(data):
+        raise ValueError(f"the parameter section (block {data[0]}) lies past the end of the file")
+    kind = PROCESSORS.get(data[section + 3])
+    if kind is None:
+        raise ValueError(f"unknown processor type {data[section + 3]} (84 Intel, 85 DEC, 86 SGI/MIPS)")
+    big = kind == "SGI/MIPS"
+    groups, frames = {}, 0
+    for at, group, name_len in parameter_records(data, section, big_endian=big):
+        name = data[at - name_len : at].decode("latin-1").upper()
+        if group < 0:
+            groups[-group] = name
+        elif groups.get(group) == "POINT" and name == "FRAMES" and data[at + 2] == 2 and data[at + 3] == 0:
+            frames = struct.unpack(">H" if big else "<H", data[at + 4 : at + 6])[0]
+    return kind, frames if frames < 65535 else 0
+
+
+def parameter_records(data: bytes, section: int, big_endian: bool) -> Iterator[tuple[int, int, int]]:
+    """(offset word position, group id, name length) of each group and parameter record, in file order; ValueError
+    when a record runs past the end of the file or the chain does not end."""
+    pos = section + 4
+    end = section + max(data[section + 2], 1) * 512
+    if end > len(data):
+        raise ValueError(f"the parameter section ({data[section + 2]} blocks) runs past the end of the file")
+    for _ in range(100_000):
+        if pos + 2 > len(data):
+            raise ValueError(f"the parameter section is cut off at byte {pos} (the file has {len(data)})")
+        name_len, group = struct.unpack("bb", data[pos : pos + 2])
+        name_len = abs(name_len)
+        if name_len == 0:
+            return
+        at = pos + 2 + name_len
+        if at + 4 > len(data):
+            raise ValueError(f"the parameter section is cut off at byte {at} (the file has {len(data)})")
+        yield at, group, name_len
+        offset = struct.unpack(">h" if big_endian else "<h", data[at : at + 2])[0]
+        if offset <= 0 or at + offset >= end:
+            return
+        pos = at + offset
+    raise ValueError("the parameter records do not end")
+
+
 def mips_to_intel(data: bytes) -> bytes:
     """An SGI/MIPS (big-endian) C3D file's bytes in Intel (little-endian) order, processor byte 84."""
     out = bytearray(data)
@@ -138,25 +185,13 @@ def mips_to_intel(data: bytes) -> bytes:
     swap(304, 4, 18)  # words 153-188: event times
     section = (data[0] - 1) * 512
     out[section + 3] = 84
-    pos = section + 4
-    while pos + 4 <= len(data):
-        name_len, group = struct.unpack("bb", data[pos : pos + 2])
-        name_len = abs(name_len)
-        if name_len == 0:
-            break
-        at = pos + 2 + name_len
-        offset = struct.unpack(">h", data[at : at + 2])[0]
+    for at, group, _ in parameter_records(data, section, big_endian=True):
         swap(at, 2, 1)
         if group > 0:  # a parameter: type, dimensions, values
-            size = struct.unpack("b", data[at + 2 : at + 3])[0]
-            ndims = data[at + 3]
-            dims = data[at + 4 : at + 4 + ndims]
-            count = int(np.prod(list(dims))) if ndims else 1
+            size, ndims = struct.unpack("b", data[at + 2 : at + 3])[0], data[at + 3]
+            count = int(np.prod(list(data[at + 4 : at + 4 + ndims]))) if ndims else 1
             if abs(size) in (2, 4):
                 swap(at + 4 + ndims, abs(size), count)
-        if offset <= 0:
-            break
-        pos = at + offset
     start = (struct.unpack(">H", data[16:18])[0] - 1) * 512
     swap(start, 4 if is_float else 2, (len(data) - start) // (4 if is_float else 2))
     return bytes(out)

@@ -13,7 +13,7 @@ becomes a `WolfcalError` naming the file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ class MarkerTrajectories:
     format: str = ""  # what wrote it, e.g. "Motive CSV 1.23", "C3D (Intel, float)", "Vicon Nexus CSV"
     rate_hz: float = 0.0  # frame rate the source states [Hz] (0: none, e.g. a recording)
     unit: str = "m"  # length unit as the source writes it ("Millimeters", "mm", "m")
+    notes: list[str] = field(default_factory=list)  # what a person should know about the file (read nonetheless)
 
 
 class NoMarkers(WolfcalError):
