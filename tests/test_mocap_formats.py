@@ -5,6 +5,9 @@ as the file writes them, short names from the robot config, and no traceback fro
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import ezc3d
 import numpy as np
 import pytest
@@ -206,3 +209,46 @@ def test_no_traceback_from_any_file(tmp_path):
         result = runner.invoke(app, ["markers", str(tmp_path / name)])
         assert result.exit_code == 2, (name, result.output, result.exception)
         assert f"{name}:" in result.output and "Traceback" not in result.output, (name, result.output)
+
+
+def test_markers_command_json_schema_and_robot_comparison(tmp_path):
+    """`wolfcal markers FILE --json OUT --robot R` on a Motive 1.23 export of Wolfgang markers under an asset prefix:
+    the JSON holds exactly the documented keys, markers in file order, positions in metres; the report lists the
+    configured markers found (by their short names), the missing ones and the extra labels."""
+    f = 12
+    foot = track(f, 1000.0)
+    foot[:5] = np.nan
+    blocks = [marker("wolfgang:r_foot_fl", foot), marker("Unlabeled 1036", track(f, 1000.0)),
+              marker("wolfgang:torso_ul", track(f, 1000.0))]  # fmt: skip
+    (tmp_path / "take.csv").write_text(motive_csv("1.23", 240.0, "Millimeters", blocks))
+    runner = CliRunner()
+    wolfgang = str(Path(__file__).resolve().parents[1] / "configs" / "wolfgang")
+    result = runner.invoke(app, ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "m.json"),
+                                 "--robot", wolfgang])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    data = json.loads((tmp_path / "m.json").read_text())
+    assert data == {"format": "Motive CSV 1.23", "rate_hz": 240.0, "frames": f, "unit_in_file": "Millimeters",
+                    "markers": [{"label": b.name, "visible_frames": int(np.isfinite(b.values[:, 0]).sum()),
+                                 "mean_m": pytest.approx(np.nanmean(b.values, axis=0) / 1000.0, abs=1e-12)}
+                                for b in blocks]}  # fmt: skip
+    assert "2 of 14 configured markers found" in result.output
+    assert "found:   r_foot_fl (as wolfgang:r_foot_fl), torso_ul (as wolfgang:torso_ul)" in result.output
+    assert "missing: r_foot_fr, " in result.output and "extra labels (not in the config, ignored by a fit): " \
+        "Unlabeled 1036" in result.output
+    # the JSON never replaces the input; an ambiguous short name is an error listing the candidates
+    result = runner.invoke(app, ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "take.csv")])
+    assert result.exit_code == 2 and "is an input of the command" in result.output
+    blocks.append(marker("spare:torso_ul", track(f, 1000.0)))
+    (tmp_path / "two.csv").write_text(motive_csv("1.23", 240.0, "Millimeters", blocks))
+    result = runner.invoke(app, ["markers", str(tmp_path / "two.csv"), "--robot", wolfgang])
+    assert result.exit_code == 2
+    assert "'torso_ul' matches 2 labels ('wolfgang:torso_ul', 'spare:torso_ul')" in result.output
+
+
+def test_a_c3d_cut_in_its_data_is_read_with_a_note(tmp_path):
+    data = C3DLayout(points(40, 2), labels=["a", "b"]).to_bytes()
+    (tmp_path / "cut.c3d").write_bytes(data[: len(data) - 10 * 2 * 16 - 5])  # 10.3 frames short
+    result = CliRunner().invoke(app, ["markers", str(tmp_path / "cut.c3d")])
+    assert result.exit_code == 0, result.output
+    assert "29 frames at 100 Hz" in result.output
+    assert "note: the data section holds 29 of the 40 frames POINT:FRAMES announces" in result.output
