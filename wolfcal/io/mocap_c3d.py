@@ -19,6 +19,7 @@ import struct
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -28,14 +29,20 @@ from wolfcal.io.mocap_files import MarkerTrajectories, NoMarkers, times_from_fra
 PROCESSORS = {84: "Intel", 85: "DEC", 86: "SGI/MIPS"}
 
 
-def read_c3d(path: Path) -> MarkerTrajectories:
-    """Every point of a C3D file in metres, NaN where invalid; times since the first frame."""
+def import_ezc3d(what: str) -> ModuleType:
+    """The ezc3d module; a WolfcalError saying how to install it where PyPI has no wheel (ARM Linux)."""
     try:
         import ezc3d
     except ImportError:
-        raise WolfcalError(f"{path}: reading C3D files needs ezc3d, which PyPI has no wheel of for this computer: "
-                           "'conda install -c conda-forge ezc3d', or 'pip install ezc3d' with cmake and swig "
-                           "installed; or export the trial as CSV") from None
+        raise WolfcalError(f"{what} needs ezc3d, which PyPI has no wheel of for this computer: 'conda install -c "
+                           "conda-forge ezc3d', or 'pip install ezc3d' with cmake and swig installed; or use a CSV "
+                           "export") from None
+    return ezc3d
+
+
+def read_c3d(path: Path) -> MarkerTrajectories:
+    """Every point of a C3D file in metres, NaN where invalid; times since the first frame."""
+    ezc3d = import_ezc3d(f"{path}: reading a C3D file")
 
     data = path.read_bytes()
     kind, announced = check_layout(data)

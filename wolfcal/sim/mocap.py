@@ -143,7 +143,9 @@ def c3d_bytes(labels: list[str], xyz_mm: np.ndarray) -> bytes:
     import os
     import tempfile
 
-    import ezc3d
+    from wolfcal.io.mocap_c3d import import_ezc3d
+
+    ezc3d = import_ezc3d("writing the session's C3D file")
 
     c = ezc3d.c3d()
     c["parameters"]["POINT"]["RATE"]["value"] = [RATE_HZ]
