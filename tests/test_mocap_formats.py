@@ -252,3 +252,15 @@ def test_a_c3d_cut_in_its_data_is_read_with_a_note(tmp_path):
     assert result.exit_code == 0, result.output
     assert "29 frames at 100 Hz" in result.output
     assert "note: the data section holds 29 of the 40 frames POINT:FRAMES announces" in result.output
+
+
+def test_motive_export_of_rigid_bodies_only_says_so(tmp_path):
+    """Motive exports the rigid bodies alone when markers are unticked in the export dialog: no measured marker."""
+    f = 5
+    blocks = [rigid_body("Rigid Body 1", track(f + 0)[:, [0, 1, 2, 0]], track(f), np.full(f, 0.0001)),
+              rigid_body_marker("Rigid Body 1_1", track(f), np.ones(f))]  # fmt: skip
+    (tmp_path / "rb.csv").write_text(motive_csv("1.21", 120.0, "Meters", blocks))
+    result = CliRunner().invoke(app, ["markers", str(tmp_path / "rb.csv")])
+    assert result.exit_code == 2
+    assert "rb.csv: Motive CSV 1.21: no Marker position columns; it holds Rigid Body, Rigid Body Marker only; " \
+           "export the markers" in result.output
