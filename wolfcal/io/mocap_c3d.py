@@ -58,9 +58,8 @@ def read_c3d(path: Path) -> MarkerTrajectories:
         c = ezc3d.c3d(str(path))
     params = c["parameters"]
     point = params["POINT"]
-    used = int(_first(point, "USED", 0))
     points = c["data"]["points"]  # (4, K, F): x, y, z, 1
-    if used == 0 or points.shape[1] == 0:
+    if points.shape[1] == 0:
         raise NoMarkers(f"{path}: no marker trajectories in this C3D file (POINT:USED 0); it holds "
                         f"{_contents(params)}; export the markers' trajectories (the POINT group) to use it")
     k = points.shape[1]
@@ -71,7 +70,7 @@ def read_c3d(path: Path) -> MarkerTrajectories:
     scale = _point_scales(path, point, k)
     rate = float(_first(point, "RATE", 0.0)) or float(c["header"]["points"]["frame_rate"])
     if not rate > 0:
-        raise NoMarkers(f"{path}: POINT:RATE and the header give no frame rate; the file cannot be timed")
+        raise WolfcalError(f"{path}: POINT:RATE and the header give no frame rate; the file cannot be timed")
     xyz = np.transpose(points[:3], (2, 1, 0)) * scale[None, :, None]
     storage = "float" if float(_first(point, "SCALE", -1.0)) < 0 else "integer"
     units = [str(u).replace("\0", "").strip() for u in point["UNITS"]["value"]]
@@ -103,8 +102,8 @@ def _point_scales(path: Path, point: dict, k: int) -> np.ndarray:
     if len({u.replace("\0", "").strip() for u in named}) == 1:
         return np.full(k, unit_scale(path, named[0], "POINT:UNITS"))
     if len(units) < k:
-        raise NoMarkers(f"{path}: POINT:UNITS gives {len(units)} different units for {k} points; it must give one "
-                        "unit, or one per point")
+        raise WolfcalError(f"{path}: POINT:UNITS gives {len(units)} different units for {k} points; it must give "
+                           "one unit, or one per point")
     return np.array([unit_scale(path, u, f"POINT:UNITS[{i + 1}]") for i, u in enumerate(units[:k])])
 
 
