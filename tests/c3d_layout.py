@@ -92,18 +92,30 @@ class C3DLayout:
     def _parameters(self, f: int, k: int) -> list[Parameter]:
         channels = 0 if self.analog is None else self.analog.shape[1]
         frames = self.frames_parameter if self.frames_parameter is not None else min(f, 65535)
-        trial = [Parameter("TRIAL", "ACTUAL_START_FIELD", [1, 0]),
-                 Parameter("TRIAL", "ACTUAL_END_FIELD", [f & 0xFFFF, f >> 16])] if f > 65535 else []
+        trial = (
+            [
+                Parameter("TRIAL", "ACTUAL_START_FIELD", [1, 0]),
+                Parameter("TRIAL", "ACTUAL_END_FIELD", [f & 0xFFFF, f >> 16]),
+            ]
+            if f > 65535
+            else []
+        )
         defaults = [
-            Parameter("POINT", "USED", k), Parameter("POINT", "FRAMES", frames, "int"),
+            Parameter("POINT", "USED", k),
+            Parameter("POINT", "FRAMES", frames, "int"),
             Parameter("POINT", "SCALE", -abs(self.scale) if self.float_data else abs(self.scale)),
-            Parameter("POINT", "RATE", self.rate), Parameter("POINT", "DATA_START", 0),
-            Parameter("POINT", "LABELS", self.labels), Parameter("POINT", "UNITS", self.units),
-            Parameter("ANALOG", "USED", channels), Parameter("ANALOG", "RATE", self.rate * self.analog_per_frame),
-            Parameter("ANALOG", "GEN_SCALE", 1.0), Parameter("ANALOG", "SCALE", [1.0] * channels),
+            Parameter("POINT", "RATE", self.rate),
+            Parameter("POINT", "DATA_START", 0),
+            Parameter("POINT", "LABELS", self.labels),
+            Parameter("POINT", "UNITS", self.units),
+            Parameter("ANALOG", "USED", channels),
+            Parameter("ANALOG", "RATE", self.rate * self.analog_per_frame),
+            Parameter("ANALOG", "GEN_SCALE", 1.0),
+            Parameter("ANALOG", "SCALE", [1.0] * channels),
             Parameter("ANALOG", "OFFSET", [0] * channels),
             Parameter("ANALOG", "LABELS", [f"CH{i + 1}" for i in range(channels)]),
-            Parameter("ANALOG", "UNITS", ["V"] * channels), *trial,
+            Parameter("ANALOG", "UNITS", ["V"] * channels),
+            *trial,
         ]
         given = {(p.group, p.name) for p in self.extra}
         out = [p for p in defaults if f"{p.group}:{p.name}" not in self.skip and (p.group, p.name) not in given]

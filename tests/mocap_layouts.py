@@ -48,8 +48,14 @@ def rigid_body(name: str, quat: np.ndarray, xyz: np.ndarray, error: np.ndarray) 
 
 
 def rigid_body_marker(name: str, xyz: np.ndarray, quality: np.ndarray) -> MotiveColumns:
-    return MotiveColumns("Rigid Body Marker", name, "CF5107FCB3ED11E565670A50E6808782",
-                         ["Position"] * 3 + ["Marker Quality"], ["X", "Y", "Z", ""], np.column_stack([xyz, quality]))
+    return MotiveColumns(
+        "Rigid Body Marker",
+        name,
+        "CF5107FCB3ED11E565670A50E6808782",
+        ["Position"] * 3 + ["Marker Quality"],
+        ["X", "Y", "Z", ""],
+        np.column_stack([xyz, quality]),
+    )
 
 
 def _cell(v: float) -> str:
@@ -87,13 +93,23 @@ def vicon_csv(rate: float, labels: list[str], xyz_mm: np.ndarray, devices: np.nd
     rows: list[list[str]] = []
     if devices is not None:
         channels = devices.shape[1]
-        rows += [["Devices"], [f"{rate * 10:g}"], ["", "", "Imported Analog EMG - Voltage"] + [""] * (channels - 1),
-                 ["Frame", "Sub Frame"] + [str(c + 1) for c in range(channels)], ["", ""] + ["V"] * channels]
+        rows += [
+            ["Devices"],
+            [f"{rate * 10:g}"],
+            ["", "", "Imported Analog EMG - Voltage"] + [""] * (channels - 1),
+            ["Frame", "Sub Frame"] + [str(c + 1) for c in range(channels)],
+            ["", ""] + ["V"] * channels,
+        ]
         for i, sample in enumerate(devices):
             rows.append([str(i // 10 + 1), str(i % 10), *[f"{v:g}" for v in sample]])
         rows.append([])
-    rows += [["Trajectories"], [f"{rate:g}"], ["", ""] + [c for name in labels for c in (name, "", "")],
-             ["Frame", "Sub Frame"] + ["X", "Y", "Z"] * len(labels), ["", ""] + ["mm"] * (3 * len(labels))]
+    rows += [
+        ["Trajectories"],
+        [f"{rate:g}"],
+        ["", ""] + [c for name in labels for c in (name, "", "")],
+        ["Frame", "Sub Frame"] + ["X", "Y", "Z"] * len(labels),
+        ["", ""] + ["mm"] * (3 * len(labels)),
+    ]
     for i, frame in enumerate(xyz_mm):
         rows.append([str(i + 1), "0", *[("" if not np.isfinite(v) else f"{v:g}") for v in frame.ravel()]])
     return "\n".join(",".join(r) for r in rows) + "\n"

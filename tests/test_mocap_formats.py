@@ -34,8 +34,10 @@ def test_motive_1_21_unnamed_header_rows_rigid_body_and_unlabeled_columns(tmp_pa
     f = 30
     measured = {"Rigid Body 1:Marker1": track(f), "Unlabeled:108": track(f)}
     measured["Unlabeled:108"][4:7] = np.nan  # blank cells: not seen
-    blocks = [rigid_body("Rigid Body 1", track(f + 0)[:, [0, 1, 2, 0]], track(f), np.full(f, 0.0001)),
-              rigid_body_marker("Rigid Body 1_1", track(f), np.ones(f))] + [marker(n, v) for n, v in measured.items()]
+    blocks = [
+        rigid_body("Rigid Body 1", track(f + 0)[:, [0, 1, 2, 0]], track(f), np.full(f, 0.0001)),
+        rigid_body_marker("Rigid Body 1_1", track(f), np.ones(f)),
+    ] + [marker(n, v) for n, v in measured.items()]
     (tmp_path / "take.csv").write_text(motive_csv("1.21", 120.0, "Meters", blocks, first_frame=0))
     traj = read_mocap_file(tmp_path / "take.csv")
     assert traj.labels == ["Rigid Body 1:Marker1", "Unlabeled:108"] and traj.format == "Motive CSV 1.21"
@@ -63,8 +65,11 @@ def test_motive_3_layouts_named_rows_rounded_times_and_prefixed_labels(tmp_path,
         assert np.allclose(traj.xyz[:, k], values[n] * scale, atol=1e-12, equal_nan=True), n
     match = match_names("m.csv", ["Box:Marker1", "Unlabeled 1036"], traj.labels)
     assert match.columns == [0, 3] and match.extra == ["Left:Marker1", "Right:Marker1"]
-    with pytest.raises(WolfcalError, match=r"'Marker1' matches 3 labels \('Box:Marker1', 'Left:Marker1', "
-                                           r"'Right:Marker1'\); name it in full"):
+    with pytest.raises(
+        WolfcalError,
+        match=r"'Marker1' matches 3 labels \('Box:Marker1', 'Left:Marker1', "
+        r"'Right:Marker1'\); name it in full",
+    ):
         match_names("m.csv", ["Marker1"], traj.labels)
 
 
@@ -91,8 +96,11 @@ def test_vicon_nexus_devices_then_trajectories_with_subject_prefixes(tmp_path):
     assert traj.times_ns[-1] == 240_000_000
     text = vicon_csv(100.0, labels, xyz, devices=RNG.normal(0, 0.01, (f * 10, 3)))
     (tmp_path / "d.csv").write_text(text[: text.index("Trajectories")])
-    with pytest.raises(NoMarkers, match=r"d.csv: Vicon Nexus CSV without a Trajectories section; it holds Devices "
-                                        r"\(3 channels at 1000 Hz\) \(analog only\)"):
+    with pytest.raises(
+        NoMarkers,
+        match=r"d.csv: Vicon Nexus CSV without a Trajectories section; it holds Devices "
+        r"\(3 channels at 1000 Hz\) \(analog only\)",
+    ):
         read_mocap_file(tmp_path / "d.csv")
 
 
@@ -178,8 +186,11 @@ def test_c3d_without_markers_says_what_it_holds(tmp_path):
     analog = C3DLayout(np.zeros((10, 0, 3)), labels=[], analog=RNG.normal(size=(100, 4)), analog_per_frame=10,
                        extra=[Parameter("FORCE_PLATFORM", "USED", 1)])  # fmt: skip
     (tmp_path / "plates.c3d").write_bytes(analog.to_bytes())
-    with pytest.raises(NoMarkers, match=r"plates.c3d: no marker trajectories in this C3D file \(POINT:USED 0\); "
-                                        r"it holds 4 analog channel\(s\) at 1000 Hz \(analog only\), 1 force plate"):
+    with pytest.raises(
+        NoMarkers,
+        match=r"plates.c3d: no marker trajectories in this C3D file \(POINT:USED 0\); "
+        r"it holds 4 analog channel\(s\) at 1000 Hz \(analog only\), 1 force plate",
+    ):
         read_mocap_file(tmp_path / "plates.c3d")
 
 
@@ -233,8 +244,10 @@ def test_markers_command_json_schema_and_robot_comparison(tmp_path):
                                 for b in blocks]}  # fmt: skip
     assert "2 of 14 configured markers found" in result.output
     assert "found:   r_foot_fl (as wolfgang:r_foot_fl), torso_ul (as wolfgang:torso_ul)" in result.output
-    assert "missing: r_foot_fr, " in result.output and "extra labels (not in the config, ignored by a fit): " \
-        "Unlabeled 1036" in result.output
+    assert (
+        "missing: r_foot_fr, " in result.output
+        and "extra labels (not in the config, ignored by a fit): Unlabeled 1036" in result.output
+    )
     # the JSON never replaces the input; an ambiguous short name is an error listing the candidates
     result = runner.invoke(app, ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "take.csv")])
     assert result.exit_code == 2 and "is an input of the command" in result.output
@@ -262,5 +275,7 @@ def test_motive_export_of_rigid_bodies_only_says_so(tmp_path):
     (tmp_path / "rb.csv").write_text(motive_csv("1.21", 120.0, "Meters", blocks))
     result = CliRunner().invoke(app, ["markers", str(tmp_path / "rb.csv")])
     assert result.exit_code == 2
-    assert "rb.csv: Motive CSV 1.21: no Marker position columns; it holds Rigid Body, Rigid Body Marker only; " \
-           "export the markers" in result.output
+    assert (
+        "rb.csv: Motive CSV 1.21: no Marker position columns; it holds Rigid Body, Rigid Body Marker only; "
+        "export the markers" in result.output
+    )

@@ -47,7 +47,8 @@ def test_motive_csv_export_fits_as_well_as_the_c3d(tmp_path):
         data = yaml.safe_load((tmp_path / name / "result.yaml").read_text())
         fits[name] = {p["name"]: (p["value"], p["std"]) for p in data["parameters"] if p["name"].endswith(".offset")}
         assert data["mocap_clock_offset_s"][f"s.{name}"] == pytest.approx(
-            yaml.safe_load((tmp_path / "s.truth.yaml").read_text())["c3d_clock_offset_s"], abs=0.005)
+            yaml.safe_load((tmp_path / "s.truth.yaml").read_text())["c3d_clock_offset_s"], abs=0.005
+        )
     assert fits["csv"].keys() == fits["c3d"].keys() and len(fits["csv"]) >= 10
     for param, (value, std) in fits["csv"].items():
         error = value - truth.get(param[: -len(".offset")], 0.0)

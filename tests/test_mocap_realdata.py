@@ -79,7 +79,11 @@ def test_markers_summary_agrees_with_a_reader_written_from_the_layout(tmp_path, 
     data = markers_json(tmp_path, name)
     assert list(data) == ["format", "rate_hz", "frames", "unit_in_file", "markers"]
     assert (data["format"], data["rate_hz"], data["frames"], data["unit_in_file"]) == (
-        fmt, truth["rate"], len(truth["xyz"]), unit)
+        fmt,
+        truth["rate"],
+        len(truth["xyz"]),
+        unit,
+    )
     assert [m["label"] for m in data["markers"]] == truth["labels"]
     seen = np.all(np.isfinite(truth["xyz"]), axis=2)
     for k, m in enumerate(data["markers"]):
@@ -109,8 +113,10 @@ def test_devices_only_export_is_refused_naming_what_it_holds(tmp_path):
     result = CliRunner().invoke(app, ["markers", str(REALDATA / "pyomeca_analogs.csv"), "--json",
                                       str(tmp_path / "x.json")])  # fmt: skip
     assert result.exit_code == 2 and not (tmp_path / "x.json").exists()
-    assert "pyomeca_analogs.csv: Vicon Nexus CSV without a Trajectories section; it holds Devices (38 channels at " \
-           "2000 Hz) (analog only)" in result.output
+    assert (
+        "pyomeca_analogs.csv: Vicon Nexus CSV without a Trajectories section; it holds Devices (38 channels at "
+        "2000 Hz) (analog only)" in result.output
+    )
 
 
 def test_robot_config_short_names_on_a_nexus_export(tmp_path):

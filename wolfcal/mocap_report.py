@@ -39,8 +39,11 @@ def summary(traj: MarkerTrajectories) -> dict:
 def report_lines(path: Path, data: dict, robot: Path | None) -> list[str]:
     """The lines a person reads: the file, then one line per marker, then the robot config's comparison."""
     frames, rate = data["frames"], data["rate_hz"]
-    lines = [f"{path}: {data['format']}, {frames} frames at {rate:g} Hz ({frames / rate:.2f} s), lengths in "
-             f"{data['unit_in_file']!r} (shown in m)", f"{len(data['markers'])} marker(s), in file order:"]
+    lines = [
+        f"{path}: {data['format']}, {frames} frames at {rate:g} Hz ({frames / rate:.2f} s), lengths in "
+        f"{data['unit_in_file']!r} (shown in m)",
+        f"{len(data['markers'])} marker(s), in file order:",
+    ]
     width = max(len(m["label"]) for m in data["markers"])
     for m in data["markers"]:
         where = "never measured" if m["mean_m"] is None else "mean " + " ".join(f"{v:+.4f}" for v in m["mean_m"])
@@ -68,8 +71,10 @@ def run_markers(path: Path, json_out: Path | None, robot: Path | None) -> list[s
     traj = read_mocap_file(path)
     data = summary(traj)
     if not any(m["visible_frames"] for m in data["markers"]):
-        raise NoMarkers(f"{path}: {len(data['markers'])} marker column(s) ({', '.join(traj.labels[:5])}), but no "
-                        "marker is measured in any frame")
+        raise NoMarkers(
+            f"{path}: {len(data['markers'])} marker column(s) ({', '.join(traj.labels[:5])}), but no "
+            "marker is measured in any frame"
+        )
     lines = report_lines(path, data, robot) + [f"note: {note}" for note in traj.notes]
     if json_out is not None:
         try:

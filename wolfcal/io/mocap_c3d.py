@@ -34,9 +34,11 @@ def import_ezc3d(what: str) -> ModuleType:
     try:
         import ezc3d
     except ImportError:
-        raise WolfcalError(f"{what} needs ezc3d, which PyPI has no wheel of for this computer: 'conda install -c "
-                           "conda-forge ezc3d', or 'pip install ezc3d' with cmake and swig installed; or use a CSV "
-                           "export") from None
+        raise WolfcalError(
+            f"{what} needs ezc3d, which PyPI has no wheel of for this computer: 'conda install -c "
+            "conda-forge ezc3d', or 'pip install ezc3d' with cmake and swig installed; or use a CSV "
+            "export"
+        ) from None
     return ezc3d
 
 
@@ -60,11 +62,19 @@ def read_c3d(path: Path) -> MarkerTrajectories:
     point = params["POINT"]
     points = c["data"]["points"]  # (4, K, F): x, y, z, 1
     if points.shape[1] == 0:
-        raise NoMarkers(f"{path}: no marker trajectories in this C3D file (POINT:USED 0); it holds "
-                        f"{_contents(params)}; export the markers' trajectories (the POINT group) to use it")
+        raise NoMarkers(
+            f"{path}: no marker trajectories in this C3D file (POINT:USED 0); it holds "
+            f"{_contents(params)}; export the markers' trajectories (the POINT group) to use it"
+        )
     k = points.shape[1]
-    notes = [f"the data section holds {points.shape[2]} of the {announced} frames POINT:FRAMES announces: the file "
-             "may be cut off"] if points.shape[2] < announced else []
+    notes = (
+        [
+            f"the data section holds {points.shape[2]} of the {announced} frames POINT:FRAMES announces: the file "
+            "may be cut off"
+        ]
+        if points.shape[2] < announced
+        else []
+    )
     labels = [str(s).strip() for name in _label_parameters(point) for s in point[name]["value"]][:k]
     labels += [f"point {i + 1}" for i in range(len(labels), k)]
     scale = _point_scales(path, point, k)
@@ -102,8 +112,10 @@ def _point_scales(path: Path, point: dict, k: int) -> np.ndarray:
     if len({u.replace("\0", "").strip() for u in named}) == 1:
         return np.full(k, unit_scale(path, named[0], "POINT:UNITS"))
     if len(units) < k:
-        raise WolfcalError(f"{path}: POINT:UNITS gives {len(units)} different units for {k} points; it must give "
-                           "one unit, or one per point")
+        raise WolfcalError(
+            f"{path}: POINT:UNITS gives {len(units)} different units for {k} points; it must give "
+            "one unit, or one per point"
+        )
     return np.array([unit_scale(path, u, f"POINT:UNITS[{i + 1}]") for i, u in enumerate(units[:k])])
 
 

@@ -41,8 +41,10 @@ def read_csv_export(path: Path) -> MarkerTrajectories:
         return read_motive(path, rows)
     if first in VICON_SECTIONS:
         return read_vicon(path, rows)
-    raise WolfcalError(f"{path}: neither a Motive CSV export (first cell 'Format Version') nor a Vicon Nexus CSV "
-                       f"export (first cell 'Trajectories' or 'Devices'); found {first!r}")
+    raise WolfcalError(
+        f"{path}: neither a Motive CSV export (first cell 'Format Version') nor a Vicon Nexus CSV "
+        f"export (first cell 'Trajectories' or 'Devices'); found {first!r}"
+    )
 
 
 def numbers(path: Path, rows: list[list[str]], first_line: int, columns: list[int]) -> np.ndarray:
@@ -55,8 +57,9 @@ def numbers(path: Path, rows: list[list[str]], first_line: int, columns: list[in
                 try:
                     out[i, j] = float(row[c])
                 except ValueError:
-                    raise WolfcalError(f"{path}: line {first_line + i + 1}, column {c + 1}: {row[c]!r} is not a "
-                                       "number") from None
+                    raise WolfcalError(
+                        f"{path}: line {first_line + i + 1}, column {c + 1}: {row[c]!r} is not a number"
+                    ) from None
     return out
 
 
@@ -66,8 +69,10 @@ def read_motive(path: Path, rows: list[list[str]]) -> MarkerTrajectories:
     version = pairs.get("Format Version", "?")
     axis_line = next((i for i, r in enumerate(rows[:20]) if r and r[0].strip() == "Frame"), None)
     if axis_line is None or axis_line < 3:
-        raise WolfcalError(f"{path}: Motive CSV {version}: no column header line starting 'Frame' in the first 20 "
-                           "lines; export with the header rows on")
+        raise WolfcalError(
+            f"{path}: Motive CSV {version}: no column header line starting 'Frame' in the first 20 "
+            "lines; export with the header rows on"
+        )
     kinds = rows[axis_line - 1]
     first_header = next(i for i in range(1, axis_line) if any(c.strip() for c in rows[i]))
     header = rows[first_header : axis_line - 1]
@@ -86,21 +91,26 @@ def read_motive(path: Path, rows: list[list[str]]) -> MarkerTrajectories:
             skipped.add(cell(types, c) or "untyped")
             continue
         if [cell(axes, c + 1), cell(axes, c + 2)] != ["Y", "Z"] or len({cell(names, c + i) for i in range(3)}) != 1:
-            raise WolfcalError(f"{path}: Motive CSV {version}: column {c + 1}: marker {cell(names, c)!r} has no "
-                               "X, Y, Z columns of one name")
+            raise WolfcalError(
+                f"{path}: Motive CSV {version}: column {c + 1}: marker {cell(names, c)!r} has no "
+                "X, Y, Z columns of one name"
+            )
         labels.append(cell(names, c))
         columns += [c, c + 1, c + 2]
     if not labels:
-        raise NoMarkers(f"{path}: Motive CSV {version}: no Marker position columns; it holds "
-                        f"{', '.join(sorted(skipped)) or 'no position columns'} only; export the markers")
+        raise NoMarkers(
+            f"{path}: Motive CSV {version}: no Marker position columns; it holds "
+            f"{', '.join(sorted(skipped)) or 'no position columns'} only; export the markers"
+        )
     rate_text = pairs.get("Export Frame Rate") or pairs.get("Capture Frame Rate", "")
     try:
         rate = float(rate_text)
     except ValueError:
         rate = 0.0
     if not rate > 0:
-        raise WolfcalError(f"{path}: Motive CSV {version}: the first line gives no 'Export Frame Rate' (found "
-                           f"{rate_text!r})")
+        raise WolfcalError(
+            f"{path}: Motive CSV {version}: the first line gives no 'Export Frame Rate' (found {rate_text!r})"
+        )
     scale = unit_scale(path, pairs.get("Length Units", ""), f"Motive CSV {version}: the first line's 'Length Units'")
     data_rows = [r for r in rows[axis_line + 1 :] if r and any(c.strip() for c in r)]
     data = numbers(path, data_rows, axis_line + 1, [0] + columns)
@@ -115,12 +125,16 @@ def read_vicon(path: Path, rows: list[list[str]]) -> MarkerTrajectories:
     starts = {r[0].strip(): i for i, r in enumerate(rows) if r and r[0].strip() in VICON_SECTIONS}
     if "Trajectories" not in starts:
         held = ", ".join(f"{name} ({_section_summary(rows, i)})" for name, i in starts.items())
-        raise NoMarkers(f"{path}: Vicon Nexus CSV without a Trajectories section; it holds {held} "
-                        "(analog only); export the trajectories")
+        raise NoMarkers(
+            f"{path}: Vicon Nexus CSV without a Trajectories section; it holds {held} "
+            "(analog only); export the trajectories"
+        )
     start = starts["Trajectories"]
     if start + 5 > len(rows):
-        raise WolfcalError(f"{path}: Vicon Nexus CSV: the Trajectories section (line {start + 1}) ends before its "
-                           "rate, names, axis and units lines")
+        raise WolfcalError(
+            f"{path}: Vicon Nexus CSV: the Trajectories section (line {start + 1}) ends before its "
+            "rate, names, axis and units lines"
+        )
     try:
         rate = float(rows[start + 1][0])
     except (ValueError, IndexError):
@@ -136,8 +150,9 @@ def read_vicon(path: Path, rows: list[list[str]]) -> MarkerTrajectories:
             labels.append(names[c].strip())
             columns += [c, c + 1, c + 2]
             unit = units[c] if c < len(units) else ""
-            scales.append(unit_scale(path, unit, f"Vicon Nexus CSV: the units line (line {start + 5}) under "
-                                                 f"{names[c].strip()!r}"))
+            scales.append(
+                unit_scale(path, unit, f"Vicon Nexus CSV: the units line (line {start + 5}) under {names[c].strip()!r}")
+            )
     if not labels:
         raise NoMarkers(f"{path}: Vicon Nexus CSV: the Trajectories section names no markers")
     end = next((i for i in range(start + 5, len(rows)) if not rows[i] or not rows[i][0].strip()), len(rows))

@@ -40,16 +40,20 @@ def match_names(path: Path | str, names: list[str], labels: list[str]) -> LabelM
             candidates = [i for i, label in enumerate(labels) if short_name(label) == name]
             if len(candidates) > 1:
                 listed = ", ".join(repr(labels[i]) for i in candidates)
-                raise WolfcalError(f"{path}: the robot config's marker {name!r} matches {len(candidates)} labels "
-                                   f"({listed}); name it in full in 'markers.list' (e.g. {labels[candidates[0]]!r})")
+                raise WolfcalError(
+                    f"{path}: the robot config's marker {name!r} matches {len(candidates)} labels "
+                    f"({listed}); name it in full in 'markers.list' (e.g. {labels[candidates[0]]!r})"
+                )
             if not candidates:
                 missing.append(name)
                 continue
             column = candidates[0]
         if column in columns:
             other = found[columns.index(column)]
-            raise WolfcalError(f"{path}: the robot config's markers {other!r} and {name!r} both match the label "
-                               f"{labels[column]!r}; give each marker its own name")
+            raise WolfcalError(
+                f"{path}: the robot config's markers {other!r} and {name!r} both match the label "
+                f"{labels[column]!r}; give each marker its own name"
+            )
         found.append(name)
         columns.append(column)
     extra = [label for i, label in enumerate(labels) if i not in set(columns)]
