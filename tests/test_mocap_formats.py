@@ -279,3 +279,11 @@ def test_motive_export_of_rigid_bodies_only_says_so(tmp_path):
         "rb.csv: Motive CSV 1.21: no Marker position columns; it holds Rigid Body, Rigid Body Marker only; "
         "export the markers" in result.output
     )
+
+
+def test_motive_export_in_the_windows_code_page(tmp_path):
+    """A take and asset named with an accent, as Motive on a Windows computer in Western Europe writes them
+    (Windows-1252, not UTF-8): the labels keep the accent."""
+    text = motive_csv("1.23", 100.0, "Millimeters", [marker("Séance:torso_ul", track(4, 1000.0))])
+    (tmp_path / "cp.csv").write_bytes(text.replace("take", "Séance 1").encode("cp1252"))
+    assert read_mocap_file(tmp_path / "cp.csv").labels == ["Séance:torso_ul"]

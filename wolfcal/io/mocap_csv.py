@@ -18,6 +18,7 @@ line (mm) and the data lines, ended by a blank line. Read: the Trajectories sect
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -30,12 +31,16 @@ VICON_SECTIONS = ("Devices", "Joints", "Model Outputs", "Segments", "Trajectorie
 
 
 def read_csv_export(path: Path) -> MarkerTrajectories:
-    """A Motive or Vicon Nexus CSV export, told apart by its first cell."""
+    """A Motive or Vicon Nexus CSV export, told apart by its first cell. UTF-8 (with or without a byte-order mark),
+    else Windows-1252: Motive and Nexus on Windows write take and subject names in the system's code page."""
+    raw = path.read_bytes()
+    if b"\0" in raw[:4096]:
+        raise WolfcalError(f"{path}: a binary file, not a CSV export; give a Motive or Vicon Nexus CSV export")
     try:
-        with path.open(newline="", encoding="utf-8-sig") as handle:
-            rows = list(csv.reader(handle))
-    except UnicodeDecodeError as exc:
-        raise WolfcalError(f"{path}: not a text CSV file ({exc}); give a Motive or Vicon Nexus CSV export") from None
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("cp1252", errors="replace")
+    rows = list(csv.reader(io.StringIO(text, newline="")))
     first = rows[0][0].strip() if rows and rows[0] else ""
     if first == "Format Version":
         return read_motive(path, rows)
