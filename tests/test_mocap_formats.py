@@ -248,8 +248,14 @@ def test_markers_command_json_schema_and_robot_comparison(tmp_path):
         "missing: r_foot_fr, " in result.output
         and "extra labels (not in the config, ignored by a fit): Unlabeled 1036" in result.output
     )
-    # the JSON never replaces the input; an ambiguous short name is an error listing the candidates
-    result = runner.invoke(app, ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "take.csv")])
+    # an existing JSON is replaced only with --force, the input never; an ambiguous short name is an error
+    again = ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "m.json")]
+    result = runner.invoke(app, again)
+    assert result.exit_code == 2 and "m.json exists; pass --force to replace it" in result.output
+    assert runner.invoke(app, [*again, "--force"]).exit_code == 0
+    result = runner.invoke(
+        app, ["markers", str(tmp_path / "take.csv"), "--json", str(tmp_path / "take.csv"), "--force"]
+    )
     assert result.exit_code == 2 and "is an input of the command" in result.output
     blocks.append(marker("spare:torso_ul", track(f, 1000.0)))
     (tmp_path / "two.csv").write_text(motive_csv("1.23", 240.0, "Millimeters", blocks))

@@ -63,7 +63,7 @@ def nexus_by_layout(name: str) -> dict:
 
 
 def markers_json(tmp_path: Path, name: str) -> dict:
-    out = tmp_path / "summary.json"
+    out = tmp_path / f"{name}.json"
     result = CliRunner().invoke(app, ["markers", str(REALDATA / name), "--json", str(out)])
     assert result.exit_code == 0, result.output
     return json.loads(out.read_text())

@@ -62,12 +62,13 @@ def report_lines(path: Path, data: dict, robot: Path | None) -> list[str]:
     return lines
 
 
-def run_markers(path: Path, json_out: Path | None, robot: Path | None) -> list[str]:
-    """Read `path`, write the JSON summary to `json_out` (when given), return the report's lines. A file without
-    usable markers is a WolfcalError naming it and what it holds."""
+def run_markers(path: Path, json_out: Path | None, robot: Path | None, force: bool = False) -> list[str]:
+    """Read `path`, write the JSON summary to `json_out` (when given; an existing one only with `force`, never the
+    input), return the report's lines. A file without usable markers is a WolfcalError naming it and what it
+    holds."""
     path = Path(path)
     if json_out is not None:
-        check_outputs([json_out], force=True, inputs=[path], option="--json")
+        check_outputs([json_out], force=force, inputs=[path], option="--json")
     traj = read_mocap_file(path)
     data = summary(traj)
     if not any(m["visible_frames"] for m in data["markers"]):
