@@ -63,7 +63,7 @@ def test_a_config_for_motion_capture_alone_needs_no_camera_and_no_tags(tmp_path)
         ({"topic": "/m"}, r"'markers' missing key\(s\) list"),
         ({"list": []}, "must be a non-empty list of markers"),
         ({"list": [{"name": "a", "link": "torso"}]}, r"missing key\(s\) xyz"),
-        ({"list": [{"name": "a b", "link": "torso", "xyz": [0, 0, 0]}]}, "must start with a letter"),
+        ({"list": [{"name": "a.b", "link": "torso", "xyz": [0, 0, 0]}]}, "must start with a letter"),
         ({"list": [{"name": "a", "link": "torso", "xyz": [0, 0, 0]}] * 2}, "used by another marker"),
         ({"list": [{"name": "a", "link": "torso", "xyz": [0, 0]}]}, "list of 3 numbers"),
         ({"list": [{"name": "a", "link": "torso", "xyz": [0, 0, 0], "id": 3}]}, r"unknown key\(s\) id"),

@@ -1,6 +1,6 @@
 """Motion-capture sources written by independent writers: C3D by ezc3d, Markers recordings by mcap_ros2 with the
-message definition text written here, Motive and Vicon CSV in their documented layouts; stillness, clock offset,
-bad input. Then the whole path on `wolfcal simulate --system mocap` (slow)."""
+message definition text written here; stillness, clock offset, bad input. Then the whole path on `wolfcal simulate
+--system mocap` (slow). The file layouts of each system: test_mocap_formats.py."""
 
 from __future__ import annotations
 
@@ -121,35 +121,6 @@ def test_c3d_without_units_is_refused(tmp_path):
     write_c3d(tmp_path / "a.c3d", ["a", "b", "c"], p * 1000, units="")
     with pytest.raises(WolfcalError, match="POINT:UNITS gives no length unit"):
         read_mocap_file(tmp_path / "a.c3d")
-
-
-def test_motive_and_vicon_csv_exports_read_in_metres(tmp_path):
-    t, _, p = session(n_poses=1)
-    motive = [["Format Version", "1.23", "Take Name", "s", "Capture Frame Rate", "100", "Length Units",
-               "Millimeters", "Coordinate Space", "Global"], [],
-              ["Type", "", "Marker", "Marker", "Marker", "Rigid Body", "Rigid Body", "Rigid Body"],
-              ["Name", "", "robot:torso_ul", "robot:torso_ul", "robot:torso_ul", "rb", "rb", "rb"],
-              ["ID", "", "1", "1", "1", "2", "2", "2"],
-              ["", "", "Position", "Position", "Position", "Position", "Position", "Position"],
-              ["Frame", "Time (Seconds)", "X", "Y", "Z", "X", "Y", "Z"]]  # fmt: skip
-    for i, ti in enumerate(t[:50]):
-        cells = ["" if np.isnan(v) else f"{v:.6f}" for v in p[i, 0] * 1000] if i != 3 else ["", "", ""]
-        motive.append([str(i), f"{ti:.4f}", *cells, "1", "2", "3"])
-    (tmp_path / "m.csv").write_text("\n".join(",".join(r) for r in motive) + "\n")
-    traj = read_mocap_file(tmp_path / "m.csv")
-    assert traj.labels == ["torso_ul"] and np.allclose(traj.xyz[4, 0], p[4, 0], atol=1e-6)
-    assert np.isnan(traj.xyz[3, 0]).all() and traj.times_ns[10] == 100_000_000
-    vicon = [["Trajectories"], ["100"], ["", "", "robot:torso_ul", "", "", "robot:torso_ur", "", ""],
-             ["Frame", "Sub Frame", "X", "Y", "Z", "X", "Y", "Z"], ["", "", "mm", "mm", "mm", "mm", "mm", "mm"]]
-    for i in range(50):
-        vicon.append([str(i + 1), "0", *[f"{v:.6f}" for v in p[i, 0] * 1000], *[f"{v:.6f}" for v in p[i, 1] * 1000]])
-    (tmp_path / "v.csv").write_text("\n".join(",".join(r) for r in vicon) + "\n")
-    traj = read_mocap_file(tmp_path / "v.csv")
-    assert traj.labels == ["torso_ul", "torso_ur"] and np.allclose(traj.xyz[7, 1], p[7, 1], atol=1e-6)
-    vicon[4] = ["", "", "", "", "", "", "", ""]
-    (tmp_path / "v.csv").write_text("\n".join(",".join(r) for r in vicon) + "\n")
-    with pytest.raises(WolfcalError, match="no length unit"):
-        read_mocap_file(tmp_path / "v.csv")
 
 
 def test_markers_recording_by_name_or_index_and_clock_offset_of_a_c3d(tmp_path):

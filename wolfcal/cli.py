@@ -384,6 +384,22 @@ def tags(
     typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
 
 
+@app.command()
+@friendly_errors
+def markers(
+    file: Path = typer.Argument(..., help="Motion-capture file: .c3d, or a Motive or Vicon Nexus .csv export."),
+    json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON to this file."),
+    robot: Path | None = typer.Option(None, "--robot", help="Robot config: which of its markers the file has."),
+    force: bool = force_option(),
+) -> None:
+    """What a motion-capture file holds: format, rate, frames, and per marker its label, visible frames and mean
+    position [m]; with --robot, the configured markers found and missing and the extra labels."""
+    from wolfcal.mocap_report import run_markers
+
+    for line in run_markers(file, json_out, robot, force):
+        typer.echo(line)
+
+
 def main() -> None:
     app()
 

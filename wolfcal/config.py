@@ -20,6 +20,8 @@ from wolfcal.yamlfile import read_yaml
 
 TAG_FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+# a marker as motion-capture software labels it ('r_foot_fl', 'Marker 001'), optionally with its 'Subject:' prefix
+_MARKER_NAME = re.compile(r"([A-Za-z0-9_][A-Za-z0-9_ -]*:)?[A-Za-z]([A-Za-z0-9_ ]*[A-Za-z0-9_])?")
 
 
 @dataclass(frozen=True)
@@ -481,9 +483,9 @@ def _markers(path: Path, data) -> MarkersConfig:
         m = _Reader(path, item, f"markers.list[{i}]")
         m.check_keys(("name", "link", "xyz"), ("side",))
         name = m.string("name")
-        if not _NAME.fullmatch(name):
-            m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits and '_' "
-                   "(it is used in parameter names such as marker.r_foot_fl.x)")
+        if not _MARKER_NAME.fullmatch(name):
+            m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits, '_' and inner spaces, "
+                   "after an optional 'Subject:' prefix (it is used in parameter names such as marker.r_foot_fl.x)")
         if name in {k.name for k in markers}:
             m.fail(f"'name' {name!r} is used by another marker; names must be unique")
         side = m.data.get("side")

@@ -28,6 +28,7 @@ from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.mocap_files import USE_INDEX, MarkerTrajectories
+from wolfcal.io.mocap_labels import match_names
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.recording import ENCODER_TICK, JointStates
 from wolfcal.markers import MarkerObservations
@@ -76,21 +77,22 @@ def read_recording(
         for name, p in markers:
             xyz[i, column[name]] = p
     times = np.array([f[0] for f in frames], dtype=np.int64)
-    return states, MarkerTrajectories(path, times, labels, xyz, file_clock=False)
+    return states, MarkerTrajectories(path, times, labels, xyz, file_clock=False,
+                                      format="ROS 2 recording (mocap4r2_msgs/msg/Markers)")
 
 
 def match_labels(traj: MarkerTrajectories, config: RobotConfig) -> tuple[list[str], list[int], list[str]]:
-    """(configured names found, their columns in traj, unknown labels); a clear error when none is configured."""
+    """(configured names found, their columns in traj, labels no configured name matched); `mocap_labels` rules;
+    a clear error when none is found."""
     names = config.marker_config().names
-    found = [n for n in names if n in traj.labels]
-    unknown = sorted({label for label in traj.labels if label not in names})
-    if not found:
+    match = match_names(traj.path, names, traj.labels)
+    if not match.found:
         raise WolfcalError(
             f"{traj.path}: none of the robot config's marker names ({', '.join(names[:4])}, ...) is in the data "
-            f"(labels found: {', '.join(unknown[:8]) or 'none'}); name the markers in 'markers.list' as the "
-            "motion-capture system labels them"
+            f"(labels found: {', '.join(match.extra[:8]) or 'none'}); name the markers in 'markers.list' as the "
+            "motion-capture system labels them (with or without the 'Subject:' prefix)"
         )
-    return found, [traj.labels.index(n) for n in found], unknown
+    return match.found, match.columns, sorted(match.extra)
 
 
 def still_frames(times_ns: np.ndarray, xyz: np.ndarray) -> np.ndarray:

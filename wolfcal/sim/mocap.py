@@ -14,7 +14,6 @@ reflection); noise is drawn per frame.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -139,23 +138,26 @@ def _write_recording(robot: Robot, out: Path, t: np.ndarray, q_read: np.ndarray,
 
 
 def c3d_bytes(labels: list[str], xyz_mm: np.ndarray) -> bytes:
-    """A C3D file (float points in mm at RATE_HZ) of positions (F, K, 3) [mm]; NaN points are written invalid."""
-    import io
+    """A C3D file (float points in mm at RATE_HZ, written by ezc3d) of positions (F, K, 3) [mm]; NaN points are
+    written invalid (residual -1)."""
+    import os
+    import tempfile
 
-    import c3d
+    from wolfcal.io.mocap_c3d import import_ezc3d
 
-    writer = c3d.Writer(point_rate=RATE_HZ, point_units="mm  ")
-    writer.set_point_labels(labels)
-    frames = []
-    for frame in xyz_mm:
-        points = np.zeros((len(labels), 5), dtype=np.float32)
-        valid = np.all(np.isfinite(frame), axis=1)
-        points[valid, :3] = frame[valid]
-        points[~valid, 3] = -1.0
-        frames.append((points, np.zeros((0, 0), dtype=np.float32)))
-    writer.add_frames(frames)
-    buffer = io.BytesIO()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        writer.write(buffer)
-    return buffer.getvalue()
+    ezc3d = import_ezc3d("writing the session's C3D file")
+
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [RATE_HZ]
+    c["parameters"]["POINT"]["LABELS"]["value"] = list(labels)
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    points = np.ones((4, len(labels), len(xyz_mm)))
+    points[:3] = np.transpose(xyz_mm, (2, 1, 0))
+    c["data"]["points"] = points
+    handle, scratch = tempfile.mkstemp(suffix=".c3d")
+    os.close(handle)
+    try:
+        c.write(scratch)
+        return Path(scratch).read_bytes()
+    finally:
+        os.unlink(scratch)
