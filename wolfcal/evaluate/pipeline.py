@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import wolfcal
-from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
+from wolfcal.atomic import make_folder, output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
@@ -149,7 +149,7 @@ def _run_external_evaluate(
     truth = _truth_reference(captures)
     figures = external_metrics(robot, observations, fitted, truth, say)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     refused = "The calibration makes the held-out reprojection error worse." if worse else None
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
@@ -347,7 +347,7 @@ def run_evaluate(
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(robot, obs, sample_by_key, errors, result.covariance)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
                                             deploy_worse)  # fmt: skip
     metrics = {
