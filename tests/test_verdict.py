@@ -115,6 +115,18 @@ def test_limits_are_options():
                                                       quiet_limits)["notes"])  # fmt: skip
 
 
+def test_the_mount_warning_appears_only_when_it_calls_for_the_floor_check():
+    turn = np.deg2rad(5.6)
+    unmeasured = deploy_verdict("camera", 22.0, 0.2, STRUCTURE_OK, None, 0.01, turn)
+    mount = [n for n in unmeasured["notes"] if "more than a camera mount moves" in n]
+    assert len(mount) == 1 and "5.6 deg" in mount[0] and "wolfcal capture --floor --check" in mount[0]
+    measured = {"before_m": 5.2, "after_m": 0.006, "after_std_m": 0.005}  # the floor views are the check: done
+    assert not any("mount" in n for n in deploy_verdict("camera", 22.0, 0.2, STRUCTURE_OK, measured, 0.01,
+                                                        turn)["notes"])  # fmt: skip
+    refused = deploy_verdict("camera", 0.2, 0.3, STRUCTURE_OK, None, 0.01, turn)  # refused: nothing to check
+    assert not refused["deploy"] and not any("mount" in n for n in refused["notes"])
+
+
 def test_worse_pixels_refuse():
     v = deploy_verdict("camera", 0.3, 0.4, STRUCTURE_OK, None, None, 0.0)
     assert not v["deploy"] and v["worse"] and v["message"].startswith("Do not deploy: keep the input URDF")

@@ -65,6 +65,13 @@ def load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
+    if Path(fit_dir).is_file() and Path(fit_dir).name not in FIT_OUTPUTS:
+        what = "a capture file" if Path(fit_dir).suffix == ".mcap" else "a file"
+        raise WolfcalError(
+            f"{fit_dir}: {what}, not a fit folder; evaluate takes the --out folder of `wolfcal fit` (it holds "
+            f"result.yaml): fit first (`wolfcal fit CAPTURE.mcap --out FIT`), then `wolfcal evaluate FIT --out "
+            "REPORT`, with held-out captures as `--capture HELD_OUT.mcap`"
+        )
     folder = Path(fit_dir) if Path(fit_dir).is_dir() else Path(fit_dir).parent
     missing = [name for name in FIT_OUTPUTS if not (folder / name).is_file()]
     if missing:
