@@ -119,7 +119,8 @@ def capture(
     external: list[str] = typer.Option([], "--external", help="External camera NAME=SOURCE (NAME from the config's "
                                        "external_cameras, SOURCE as for --camera), e.g. tripod=/dev/video2. "
                                        "Repeatable; beside or instead of --camera."),
-    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on)."),
+    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on); a bare name "
+                                       "not found here is taken from the robot config's folder (poses.yaml)."),
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
     samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
@@ -248,15 +249,15 @@ def compare(
 @app.command()
 @friendly_errors
 def demo(
-    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
-    root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
+    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the simulated captures, the fits and "
+                             "the reports."),
     force: bool = force_option(),
 ) -> None:
-    """The venue workflow on the shipped demo captures (feet + floor -> fit -> evaluate with the measured ground
-    error), then a camera fit refused on a robot whose legs are off."""
+    """The venue workflow on simulated demo captures (feet + floor -> fit -> evaluate with the measured ground
+    error), then a camera fit refused on a robot whose legs are off. Runs from any folder."""
     from wolfcal.demo import run_demo
 
-    run_demo(root, out, say=typer.echo, force=force)
+    run_demo(out, say=typer.echo, force=force)
 
 
 @app.command()
@@ -282,8 +283,9 @@ def simulate(
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
-    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
-                                      "these poses instead of --samples random ones."),
+    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`; a bare name "
+                                      "not found here is taken from the robot config's folder): simulate these "
+                                      "poses instead of --samples random ones."),
     floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands and turns its head to see the "
                                "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml)."),
     check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit, "

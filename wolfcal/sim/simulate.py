@@ -19,7 +19,7 @@ import numpy as np
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
-from wolfcal.capture.poses import joint_limits, load_poses
+from wolfcal.capture.poses import find_poses, joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_pose_ok, external_visibility
@@ -160,7 +160,8 @@ def simulate_capture(
         if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
     if options.poses is not None:
-        options = replace(options, samples=len(planned_readings(robot, options.poses)))
+        poses = find_poses(options.poses, robot_path)  # a bare name: the robot's own poses file
+        options = replace(options, poses=poses, samples=len(planned_readings(robot, poses)))
     inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
     if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
         check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
