@@ -402,7 +402,8 @@ def tags(
     family: str | None = typer.Option(None, "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11 "
                                       "(default: the robot config's, else 36h11)."),
     robot: Path | None = robot_option(),
-    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit (one page of the tags' size)."),
+    paper: str | None = typer.Option(None, "--paper", help="a4 | a3 | letter | fit (one page of the tags' size); "
+                                     "default: a4, or the first of a3, fit that holds the tags."),
     dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
     force: bool = force_option(),
 ) -> None:

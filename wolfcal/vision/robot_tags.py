@@ -3,7 +3,8 @@
 The config's tags (`tags:`, on the robot's links) and floor tags (`floor.tags:`) are what a team has to print, so
 they are the default; `--ids`, `--size` and `--family` narrow or override them. A tag id the config does not list
 takes the given --size (it has no configured one) and family 36h11. Tags of one family and size share pages; each
-group is laid out by `printing.tag_sheets`.
+group is laid out by `printing.tag_sheets` on --paper, by default on the first of DEFAULT_PAPERS that holds a tag of
+the group (the floor tags of 16 cm need A3).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.vision.printing import Sheet, parse_ids, tag_sheets
 
 DEFAULT_FAMILY = "36h11"  # for ids the robot config does not list
+DEFAULT_PAPERS = ("a4", "a3", "fit")  # without --paper: the first that holds a tag of the group
 
 
 def configured_tags(config: RobotConfig) -> dict[int, tuple[str, float]]:
@@ -48,14 +50,27 @@ def tag_groups(
 
 
 def robot_tag_sheets(
-    robot: Path, ids: str | None, size: float | None, family: str | None, paper: str
+    robot: Path, ids: str | None, size: float | None, family: str | None, paper: str | None
 ) -> list[Sheet]:
     """The pages of `wolfcal tags`: the tags of the robot config at `robot` (read only when needed), narrowed by
-    the ids text ('42-44,50'), edge `size` [m] and `family` when given."""
+    the ids text ('42-44,50'), edge `size` [m] and `family` when given; on `paper`, or by default on the first of
+    DEFAULT_PAPERS that holds them."""
     wanted = parse_ids(ids) if ids is not None else None
     needs_config = wanted is None or size is None or family is None
     config = load_robot_config(robot) if needs_config else None
     configured = configured_tags(config) if config is not None else {}
     where = str(config.path) if config is not None else "the robot config"
     groups = tag_groups(configured, wanted, size, family, where)
-    return [sheet for fam, edge, group in groups for sheet in tag_sheets(fam, group, edge, paper)]
+    return [sheet for fam, edge, group in groups for sheet in _group_sheets(fam, edge, group, paper)]
+
+
+def _group_sheets(family: str, size: float, ids: list[int], paper: str | None) -> list[Sheet]:
+    if paper is not None:
+        return tag_sheets(family, ids, size, paper)
+    *smaller, largest = DEFAULT_PAPERS
+    for candidate in smaller:
+        try:
+            return tag_sheets(family, ids, size, candidate)
+        except WolfcalError:  # does not fit (any other problem is raised again by the last paper)
+            continue
+    return tag_sheets(family, ids, size, largest)
