@@ -18,7 +18,7 @@ import yaml
 from typer.testing import CliRunner
 
 import wolfcal
-from wolfcal.atomic import make_folder, output_set, write_text_atomic
+from wolfcal.atomic import atomic_output, make_folder, output_set, write_text_atomic
 from wolfcal.capture.cameras import plan_cameras
 from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.poses import find_poses
@@ -163,6 +163,10 @@ def test_a_failed_output_set_removes_the_folders_it_made(tmp_path):
         make_folder(tmp_path / "kept" / "sub")
         raise KeyboardInterrupt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"] and list((tmp_path / "kept").iterdir()) == []
+    with pytest.raises(RuntimeError), atomic_output(tmp_path / "lone" / "deep" / "x.bin") as handle:
+        handle.write(b"half a file")
+        raise RuntimeError("a lone output is a set of one")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"]
     with output_set():
         write_text_atomic(tmp_path / "report" / "a.txt", "a")
     assert (tmp_path / "report" / "a.txt").read_text() == "a"

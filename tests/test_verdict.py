@@ -41,7 +41,7 @@ def test_camera_fit_on_a_robot_with_leg_offsets_is_refused(tmp_path, robot, came
     assert any("ground error was not measured" in n and "predicts +-" in n for n in m["verdict"]["notes"])
     result = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
                                       "--out", str(out), "--force"])  # fmt: skip
-    assert result.exit_code != 0 and "the legs need calibration" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 1 and "the legs need calibration" in result.output and "Traceback" not in result.output
     forced = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
                                       "--out", str(out), "--force", "--deploy-worse"])  # fmt: skip
     assert forced.exit_code == 0 and all((out / name).exists() for name in DEPLOY_FILES)

@@ -120,11 +120,23 @@ def remove_output(path: Path) -> bool:
 @contextmanager
 def atomic_output(path: str | Path, scratch: bool = False) -> Iterator[BinaryIO]:
     """A binary file that replaces `path` only when the block ends without an exception (and, inside
-    `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one.
-    Mode 0666 & ~umask, like a plain open(). `scratch`: a cache file, not fsynced and renamed at once (module
-    docstring)."""
-    path = Path(path)
-    make_folder(path.parent)
+    `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one;
+    alone, it is a set of one (the folders it made go too if it fails). Mode 0666 & ~umask, like a plain open().
+    `scratch`: a cache file, not fsynced and renamed at once, never part of a set (module docstring)."""
+    if scratch:
+        with _atomic_file(Path(path), scratch=True) as handle:
+            yield handle
+    else:
+        with output_set(), _atomic_file(Path(path), scratch=False) as handle:
+            yield handle
+
+
+@contextmanager
+def _atomic_file(path: Path, scratch: bool) -> Iterator[BinaryIO]:
+    if scratch:
+        path.parent.mkdir(parents=True, exist_ok=True)  # a cache folder: kept whatever happens
+    else:
+        make_folder(path.parent)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     tmp = Path(name)
     try:

@@ -210,7 +210,8 @@ def evaluate(
     ground_limit: float = typer.Option(5.0, "--ground-limit-cm", help="Largest measured ground error at 4.5 m "
                                        "that may be deployed [cm]."),
     mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
-                                      "camera by more than this [deg]."),
+                                      "camera by more than this [deg] and no floor samples measure the ground "
+                                      "error."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
     import math
