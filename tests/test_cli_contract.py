@@ -49,6 +49,8 @@ def process(*args: object, cwd: Path) -> subprocess.Popen:
 def test_version_is_the_package_version():
     code, output = cli("--version")
     assert code == 0 and output == f"wolfcal {wolfcal.__version__}\n"
+    code, output = cli("--help")
+    assert code == 0 and "Exit codes: 0 done, 1 refused to deploy, 2 bad usage or input" in " ".join(output.split())
     pyproject = (ROOT / "pyproject.toml").read_text()
     assert 'dynamic = ["version"]' in pyproject and 'version = {attr = "wolfcal.__version__"}' in pyproject
 

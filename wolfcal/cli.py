@@ -17,7 +17,9 @@ from wolfcal.errors import DeployRefused, WolfcalError
 from wolfcal.robot.presets import DEFAULT_PRESET
 
 app = typer.Typer(
-    help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.",
+    help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.\n\n"
+    "Exit codes: 0 done, 1 refused to deploy, 2 bad usage or input, 3 servo bus failed, 4 camera failed, "
+    "130 interrupted.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -36,11 +38,7 @@ def main_options(
     version: bool = typer.Option(False, "--version", callback=show_version, is_eager=True,
                                  help="Print wolfcal's version and exit."),
 ) -> None:
-    """Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.
-
-    Exit codes: 0 done, 1 refused to deploy, 2 bad usage or input, 3 servo bus failed, 4 camera failed,
-    130 interrupted (docs/cli.md).
-    """
+    """Options before the command: --version."""
 
 
 def friendly_errors(command: Callable) -> Callable:

@@ -84,11 +84,11 @@ def coverage_warnings(calibration: Calibration, board: Board) -> list[str]:
             "add views with the board there"
         )
     coverage = Coverage([view_params(v, board) for v in calibration.views])
-    for name, value in zip(PARAM_NAMES, coverage.progress(), strict=True):
-        if value < 1.0:
-            warnings.append(f"{name} coverage {100 * value:.0f} %")
-    if any(value < 1.0 for value in coverage.progress()):
-        warnings.append("to improve coverage: " + "; ".join(coverage.hints()))
+    short = [f"{name} {100 * value:.0f} %" for name, value in zip(PARAM_NAMES, coverage.progress(), strict=True)
+             if value < 1.0]  # fmt: skip
+    if short:  # one warning, with what to do
+        warnings.append(f"the views cover less than ROS camera_calibration asks ({', '.join(short)}): "
+                        + "; ".join(coverage.hints()))  # fmt: skip
     return warnings
 
 
