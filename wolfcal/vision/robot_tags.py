@@ -29,7 +29,10 @@ def configured_tags(config: RobotConfig) -> dict[int, tuple[str, float]]:
 
 
 def tag_groups(
-    configured: dict[int, tuple[str, float]], ids: list[int] | None, size: float | None, family: str | None,
+    configured: dict[int, tuple[str, float]],
+    ids: list[int] | None,
+    size: float | None,
+    family: str | None,
     where: str = "the robot config",
 ) -> list[tuple[str, float, list[int]]]:
     """(family, edge [m], ids) groups to print, in the order the ids come: `ids` (default: every configured id),
