@@ -218,7 +218,7 @@ def test_fit_on_outliers_is_refused(tmp_path, robot, camera, monkeypatch):
     exists = runner.invoke(app, args)  # the report of the run above is not replaced without --force
     assert exists.exit_code == 2 and "report.html" in exists.output and "pass --force" in exists.output
     refused = runner.invoke(app, args + ["--force"])
-    assert refused.exit_code != 0 and "--deploy-worse" in refused.output and "Traceback" not in refused.output
+    assert refused.exit_code == 1 and "--deploy-worse" in refused.output and "Traceback" not in refused.output
     forced = runner.invoke(app, args + ["--force", "--deploy-worse"])
     assert forced.exit_code == 0, forced.output
     assert all((out / name).exists() for name in DEPLOY_FILES)

@@ -128,15 +128,18 @@ def test_cli_calibrates_a_folder_lists_failures_and_writes_the_report(image_fold
 
 
 @pytest.mark.slow
-def test_cli_wrong_board_size_names_the_size_found_and_keeps_detections(image_folder, tmp_path):
+def test_cli_wrong_board_size_names_the_size_found_and_leaves_nothing_behind(image_folder, tmp_path):
     out = tmp_path / "camera_info.yaml"
     args = ["intrinsics", str(image_folder / "view_0*.png"), "--board", "8x6", "--square", "0.025", "--out", str(out)]
     result = CliRunner().invoke(app, args)
-    assert result.exit_code != 0 and "Traceback" not in result.output
+    assert result.exit_code == 2 and "Traceback" not in result.output
     assert "found a 9x6 checkerboard" in result.output and "--board 9x6" in result.output
-    assert not out.exists()
-    failures = yaml.safe_load((tmp_path / "camera_info_report" / "detections.yaml").read_text())["failures"]
-    assert len(failures) == 10
+    assert sorted(tmp_path.iterdir()) == [], "a failed run leaves no camera_info and no report folder"
+    assert result.output.count("no 8x6 checkerboard found") == 10  # each view's reason, on the terminal
+    args[3] = "9x6"
+    retried = CliRunner().invoke(app, args)  # the retry is not blocked by anything of the failed run
+    assert retried.exit_code == 0, retried.output
+    assert out.is_file() and (tmp_path / "camera_info_report" / "detections.yaml").is_file()
 
 
 def test_cli_missing_input_and_bad_board_text(tmp_path):

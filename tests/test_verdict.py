@@ -41,7 +41,7 @@ def test_camera_fit_on_a_robot_with_leg_offsets_is_refused(tmp_path, robot, came
     assert any("ground error was not measured" in n and "predicts +-" in n for n in m["verdict"]["notes"])
     result = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
                                       "--out", str(out), "--force"])  # fmt: skip
-    assert result.exit_code != 0 and "the legs need calibration" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 1 and "the legs need calibration" in result.output and "Traceback" not in result.output
     forced = CliRunner().invoke(app, ["evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"),
                                       "--out", str(out), "--force", "--deploy-worse"])  # fmt: skip
     assert forced.exit_code == 0 and all((out / name).exists() for name in DEPLOY_FILES)
@@ -113,6 +113,18 @@ def test_limits_are_options():
     quiet_limits = VerdictLimits(mount_limit_rad=np.deg2rad(5.0))
     assert not any("deg" in n for n in deploy_verdict("camera", 2.0, 0.3, STRUCTURE_OK, None, 0.01, turn,
                                                       quiet_limits)["notes"])  # fmt: skip
+
+
+def test_the_mount_warning_appears_only_when_it_calls_for_the_floor_check():
+    turn = np.deg2rad(5.6)
+    unmeasured = deploy_verdict("camera", 22.0, 0.2, STRUCTURE_OK, None, 0.01, turn)
+    mount = [n for n in unmeasured["notes"] if "more than a camera mount moves" in n]
+    assert len(mount) == 1 and "5.6 deg" in mount[0] and "wolfcal capture --floor --check" in mount[0]
+    measured = {"before_m": 5.2, "after_m": 0.006, "after_std_m": 0.005}  # the floor views are the check: done
+    assert not any("mount" in n for n in deploy_verdict("camera", 22.0, 0.2, STRUCTURE_OK, measured, 0.01,
+                                                        turn)["notes"])  # fmt: skip
+    refused = deploy_verdict("camera", 0.2, 0.3, STRUCTURE_OK, None, 0.01, turn)  # refused: nothing to check
+    assert not refused["deploy"] and not any("mount" in n for n in refused["notes"])
 
 
 def test_worse_pixels_refuse():

@@ -9,7 +9,8 @@ torn, which its reader must detect and ignore (`wolfcal.vision.cache` checks eve
 `remove_output`) is staged as a temporary file beside its target, and nothing replaces or removes a target
 until the block ends without an exception; then all staged files are renamed into place together. A command
 that fails halfway (bad URDF, Ctrl-C, a full disk) leaves the outputs of an earlier run as they were and no new
-ones: never a lone result.yaml without its calibrated.urdf.
+ones: never a lone result.yaml without its calibrated.urdf. Folders the set made (`make_folder`, the parents of
+its files) are removed again when it fails, so that a failed run leaves nothing behind to block the next one.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from typing import BinaryIO
 _STAGED: contextvars.ContextVar[list[tuple[Path | None, Path]] | None] = contextvars.ContextVar(
     "wolfcal_output_set", default=None
 )
+# folders made by the output set being written, outermost first
+_MADE: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("wolfcal_output_folders", default=None)
 
 
 def _umask() -> int:
@@ -54,16 +57,23 @@ def output_set() -> Iterator[None]:
         yield
         return
     staged: list[tuple[Path | None, Path]] = []
-    token = _STAGED.set(staged)
+    made: list[Path] = []
+    token, made_token = _STAGED.set(staged), _MADE.set(made)
     try:
         yield
     except BaseException:
         for tmp, _ in staged:
             if tmp is not None:
                 tmp.unlink(missing_ok=True)
+        for folder in reversed(made):
+            try:
+                folder.rmdir()  # only when empty: a file the set did not stage stays, and so does its folder
+            except OSError:
+                pass
         raise
     finally:
         _STAGED.reset(token)
+        _MADE.reset(made_token)
     for tmp, target in staged:
         if tmp is None:
             target.unlink(missing_ok=True)
@@ -71,6 +81,17 @@ def output_set() -> Iterator[None]:
             os.replace(tmp, target)
     for folder in {target.parent for _, target in staged}:
         _fsync_directory(folder)
+
+
+def make_folder(folder: str | Path) -> Path:
+    """Make `folder` and its missing parents; inside an output set, those made are removed again if it fails."""
+    folder = Path(folder)
+    missing = [f for f in [folder, *folder.parents] if not f.exists()][::-1]  # outermost first
+    folder.mkdir(parents=True, exist_ok=True)
+    made = _MADE.get()
+    if made is not None:
+        made.extend(missing)
+    return folder
 
 
 def replace_file(src: Path, target: Path) -> None:
@@ -99,11 +120,23 @@ def remove_output(path: Path) -> bool:
 @contextmanager
 def atomic_output(path: str | Path, scratch: bool = False) -> Iterator[BinaryIO]:
     """A binary file that replaces `path` only when the block ends without an exception (and, inside
-    `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one.
-    Mode 0666 & ~umask, like a plain open(). `scratch`: a cache file, not fsynced and renamed at once (module
-    docstring)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    `output_set()`, only when the whole set succeeds), so readers see either the old file or the whole new one;
+    alone, it is a set of one (the folders it made go too if it fails). Mode 0666 & ~umask, like a plain open().
+    `scratch`: a cache file, not fsynced and renamed at once, never part of a set (module docstring)."""
+    if scratch:
+        with _atomic_file(Path(path), scratch=True) as handle:
+            yield handle
+    else:
+        with output_set(), _atomic_file(Path(path), scratch=False) as handle:
+            yield handle
+
+
+@contextmanager
+def _atomic_file(path: Path, scratch: bool) -> Iterator[BinaryIO]:
+    if scratch:
+        path.parent.mkdir(parents=True, exist_ok=True)  # a cache folder: kept whatever happens
+    else:
+        make_folder(path.parent)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     tmp = Path(name)
     try:

@@ -10,11 +10,16 @@ from pathlib import Path
 import typer
 
 import wolfcal.blas_threads  # noqa: F401  (first of wolfcal's: one BLAS thread, set before numpy loads)
+import wolfcal.opencv_quiet  # noqa: F401  (OpenCV's own log lines off, set before OpenCV loads)
+from wolfcal import __version__
 from wolfcal.config import default_robot
-from wolfcal.errors import WolfcalError
+from wolfcal.errors import DeployRefused, WolfcalError
+from wolfcal.robot.presets import DEFAULT_PRESET
 
 app = typer.Typer(
-    help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.",
+    help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.\n\n"
+    "Exit codes: 0 done, 1 refused to deploy, 2 bad usage or input, 3 servo bus failed, 4 camera failed, "
+    "130 interrupted.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -22,16 +27,32 @@ app = typer.Typer(
 )
 
 
+def show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"wolfcal {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main_options(
+    version: bool = typer.Option(False, "--version", callback=show_version, is_eager=True,
+                                 help="Print wolfcal's version and exit."),
+) -> None:
+    """Options before the command: --version."""
+
+
 def friendly_errors(command: Callable) -> Callable:
-    """Turn WolfcalError (bad input) into a one-line message on stderr and a non-zero exit; Ctrl-C into exit 130,
-    SIGTERM / SIGHUP during a capture into 143 / 129 (128 + the signal number)."""
+    """Turn WolfcalError into a one-line message on stderr and its exit code (`wolfcal.errors`: 2 bad input, 1 a
+    refusal to deploy); Ctrl-C into exit 130, SIGTERM / SIGHUP during a capture into 143 / 129 (128 + the signal
+    number)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
             return command(*args, **kwargs)
         except WolfcalError as exc:
-            typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+            label = "not deployed" if isinstance(exc, DeployRefused) else "error"
+            typer.secho(f"{label}: {exc}", fg=typer.colors.RED, err=True)
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt as exc:
             signum = getattr(exc, "signum", None)  # wolfcal.capture.signals.Stopped
@@ -96,7 +117,8 @@ def capture(
     external: list[str] = typer.Option([], "--external", help="External camera NAME=SOURCE (NAME from the config's "
                                        "external_cameras, SOURCE as for --camera), e.g. tripod=/dev/video2. "
                                        "Repeatable; beside or instead of --camera."),
-    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on)."),
+    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on); a bare name "
+                                       "not found here is taken from the robot config's folder (poses.yaml)."),
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
     samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
@@ -140,7 +162,7 @@ def fit(
     captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
                                           "recordings of the joint states (and Markers, unless --mocap is given)."),
     robot: Path | None = robot_option(),
-    free: str = typer.Option("camera", "--free", help="Free parameters: camera | head_camera | leg."),
+    free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
@@ -186,7 +208,8 @@ def evaluate(
     ground_limit: float = typer.Option(5.0, "--ground-limit-cm", help="Largest measured ground error at 4.5 m "
                                        "that may be deployed [cm]."),
     mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
-                                      "camera by more than this [deg]."),
+                                      "camera by more than this [deg] and no floor samples measure the ground "
+                                      "error."),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
     import math
@@ -201,7 +224,7 @@ def evaluate(
         limits = VerdictLimits(ground_limit / 100.0, math.radians(mount_limit))
         metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force, limits=limits)
     if not metrics["deploy"]["written"]:
-        raise WolfcalError(metrics["deploy"]["reason"])
+        raise DeployRefused("the verdict above withholds the deploy files; --deploy-worse writes them anyway")
 
 
 @app.command()
@@ -225,15 +248,15 @@ def compare(
 @app.command()
 @friendly_errors
 def demo(
-    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the fit and the report."),
-    root: Path = typer.Option(Path("."), "--root", help="wolfcal repository root (holds captures/, configs/)."),
+    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the simulated captures, the fits and "
+                             "the reports."),
     force: bool = force_option(),
 ) -> None:
-    """The venue workflow on the shipped demo captures (feet + floor -> fit -> evaluate with the measured ground
-    error), then a camera fit refused on a robot whose legs are off."""
+    """The venue workflow on simulated demo captures (feet + floor -> fit -> evaluate with the measured ground
+    error), then a camera fit refused on a robot whose legs are off. Runs from any folder."""
     from wolfcal.demo import run_demo
 
-    run_demo(root, out, say=typer.echo, force=force)
+    run_demo(out, say=typer.echo, force=force)
 
 
 @app.command()
@@ -244,7 +267,8 @@ def simulate(
     samples: int = typer.Option(24, "--samples", help="Number of still poses."),
     seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same capture)."),
     offsets: str = typer.Option("none", "--offsets", help="Joints with true encoder offsets: none|head|legs|all."),
-    binning: int = typer.Option(1, "--binning", help="Sensor binning (4 gives 512x384 images of a 2048x1536 camera)."),
+    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of every camera's images "
+                                       "(default, as capture's sim camera: 4 head, 2 external)."),
     noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
     outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
@@ -258,8 +282,9 @@ def simulate(
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
                                          "(m, rad; body frame x forward, y left, z up) in base_link; default random "
                                          "1-2 m in front, looking at the robot."),
-    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`): simulate "
-                                      "these poses instead of --samples random ones."),
+    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`; a bare name "
+                                      "not found here is taken from the robot config's folder): simulate these "
+                                      "poses instead of --samples random ones."),
     floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands and turns its head to see the "
                                "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml)."),
     check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit, "
@@ -284,7 +309,7 @@ def simulate(
 def plan(
     out: Path = typer.Option(..., "--out", help="Poses file to write (the format `capture --poses` reads)."),
     robot: Path | None = robot_option(),
-    free: str = typer.Option("leg", "--free", help="Free parameters: camera | head_camera | leg."),
+    free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     system: str = typer.Option("head", "--system", help="Measurement system: head | external | mocap (the "
                                "config's markers) | floor (head pan/tilt while standing, the config's floor tags)."),
@@ -368,19 +393,25 @@ def board_command(
 @app.command()
 @friendly_errors
 def tags(
-    ids: str = typer.Option("0-11", "--ids", help="Tag ids, e.g. 0-7,10."),
-    size: float = typer.Option(..., "--size", help="Edge of the black square [m]."),
+    ids: str | None = typer.Option(None, "--ids", help="Tag ids, e.g. 42-44,50 (default: the robot config's tags "
+                                   "and floor tags)."),
+    size: float | None = typer.Option(None, "--size", help="Edge of the black square [m] (default: each tag's in "
+                                      "the robot config)."),
     out: Path = typer.Option(..., "--out", help="Output file; OUT.pdf and OUT.png are written."),
-    family: str = typer.Option("36h11", "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11."),
-    paper: str = typer.Option("a4", "--paper", help="a4 | a3 | letter | fit (one page of the tags' size)."),
+    family: str | None = typer.Option(None, "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11 "
+                                      "(default: the robot config's, else 36h11)."),
+    robot: Path | None = robot_option(),
+    paper: str | None = typer.Option(None, "--paper", help="a4 | a3 | letter | fit (one page of the tags' size); "
+                                     "default: a4, or the first of a3, fit that holds the tags."),
     dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
     force: bool = force_option(),
 ) -> None:
     """Write sheets of AprilTags with their ids (a PDF page and a PNG per sheet at exact size, with a scale line);
     as many pages of --paper as the tags need."""
-    from wolfcal.vision.printing import parse_ids, tag_sheets, write_sheet
+    from wolfcal.vision.printing import write_sheet
+    from wolfcal.vision.robot_tags import robot_tag_sheets
 
-    paths = write_sheet(tag_sheets(family, parse_ids(ids), size, paper), out, dpi, force)
+    paths = write_sheet(robot_tag_sheets(default_robot(robot), ids, size, family, paper), out, dpi, force)
     typer.echo(f"wrote {' and '.join(map(str, paths))}: print at 100 % and check the scale line")
 
 

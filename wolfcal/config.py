@@ -16,6 +16,7 @@ import numpy as np
 from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
 from wolfcal.observations import HEAD_CAMERA
+from wolfcal.vision.target_size import check_printed_edge
 from wolfcal.yamlfile import read_yaml
 
 TAG_FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
@@ -243,7 +244,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
     return TagConfig(
         id=tag_id,
         family=family,
-        size=r.number("size", positive=True),
+        size=check_printed_edge(r.number("size", positive=True), f"{path}: '{r.sub('size')}'"),
         link=r.string("link"),
         xyz=r.vector3("xyz"),
         rpy=r.vector3("rpy"),
@@ -572,7 +573,8 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
         thickness = t.number("thickness", 0.0)
         if thickness < 0:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
-        tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
+        size = check_printed_edge(t.number("size", positive=True), f"{path}: '{t.sub('size')}'")
+        tags.append(FloorTagConfig(tag_id, family, size, thickness))
     return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances)
 
 

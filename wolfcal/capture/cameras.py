@@ -4,8 +4,8 @@
 Sources: a V4L index or /dev/video path, a video file, an image folder, or `sim` (renders the robot served by
 `wolfcal emulate`; an external camera from its placement, see `sim_camera`). Intrinsics: the head camera's from
 `--intrinsics` or the config's `camera.intrinsics`; an external camera's from its `intrinsics` in the config.
-Binning: `--binning` for every camera; by default 4 for the simulated head camera, 2 for a simulated external
-camera (its tags are smaller in the image), 1 for real cameras.
+Binning: `--binning` for every camera; by default a simulated camera's (`sim.scene.sim_binning`, as `wolfcal
+simulate`), 1 for real cameras.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from wolfcal.capture.sim_camera import SimCamera
 from wolfcal.hardware.camera import CameraSource, open_camera
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot
+from wolfcal.sim.scene import sim_binning
 
 
 @dataclass
@@ -47,7 +48,7 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
         path = (Path(options.intrinsics) if head and options.intrinsics
                 else robot.config.intrinsics_file(name, "capturing", "pass --intrinsics FILE" if head else ""))
         model = load_camera_info(path)
-        binning = options.binning or ((4 if name == HEAD_CAMERA else 2) if source == "sim" else 1)
+        binning = options.binning or (sim_binning(name) if source == "sim" else 1)
         cameras[name] = CaptureCamera(model, model.binned(binning, name), binning, source)
     return cameras
 

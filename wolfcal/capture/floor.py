@@ -117,11 +117,13 @@ def without_collisions(robot: Robot, script: PoseScript, start: dict[str, float]
     if not colliding:
         return script, None
     kept = [pose for pose in script.poses if pose.name not in colliding]
-    left_out = "; ".join(f"{name} ({' and '.join(pair)} would touch)" for name, pair in colliding.items())
     if not kept:
+        left_out = "; ".join(f"{name} ({' and '.join(pair)} would touch)" for name, pair in colliding.items())
         raise WolfcalError(f"--floor: every floor view would make the robot touch itself, nothing was moved: "
                            f"{left_out}")  # fmt: skip
-    return PoseScript(kept, script.velocity), f"--floor: {len(colliding)} view(s) left out: {left_out}"
+    pairs = sorted({" and ".join(pair) for pair in colliding.values()})  # a few link pairs, not every view
+    return PoseScript(kept, script.velocity), (f"--floor: {len(colliding)} of {len(script.poses)} view(s) left out "
+                                               f"(there {', '.join(pairs)} would touch)")  # fmt: skip
 
 
 def check_floor_limp(robot: Robot, limp: list[str]) -> None:

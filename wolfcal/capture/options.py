@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wolfcal.capture.gating import GateSettings
+from wolfcal.capture.poses import find_poses
 from wolfcal.errors import WolfcalError
 from wolfcal.outputs import check_outputs
 
@@ -25,7 +26,7 @@ class CaptureOptions:
     #   (None: head,legs; with `floor`: head)
     yes: bool = False  # manual mode: switch torque off without asking
     exit_torque: str = "restore"  # restore (as found) | on (hold the last pose) | off
-    binning: int | None = None  # default 4 for the sim camera (fast rendering), else 1
+    binning: int | None = None  # default: a sim camera's (`sim.scene.sim_binning`), else 1
     intrinsics: Path | None = None
     velocity: float | None = None  # overrides the poses file [rad/s]
     pose_timeout_s: float = 5.0  # scripted: give up a pose that gives no sample within this time after arrival
@@ -35,6 +36,10 @@ class CaptureOptions:
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
     floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
+
+    def __post_init__(self) -> None:
+        if self.poses is not None:
+            self.poses = find_poses(self.poses, self.robot)  # a bare name: the robot's own (`poses.yaml`)
 
 
 def parse_external(text: str) -> tuple[str, str]:

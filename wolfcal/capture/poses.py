@@ -63,6 +63,21 @@ def joint_limits(robot: Robot, joints: Iterable[str]) -> dict[str, tuple[float, 
     return {j: (robot.model.joints[j].lower, robot.model.joints[j].upper) for j in joints}
 
 
+def find_poses(path: str | Path, robot_config: str | Path) -> Path:
+    """The poses file `--poses` names: `path` where it exists; else a bare file name is taken from the robot
+    config's folder, so that a robot's own poses (the packaged Wolfgang's `poses.yaml`) are found from any folder
+    as `--poses poses.yaml`. WolfcalError naming both places when neither holds it."""
+    path, folder = Path(path), Path(robot_config)
+    folder = folder if folder.is_dir() else folder.parent
+    if path.exists() or path.parent != Path("."):
+        return path
+    beside = folder / path
+    if beside.is_file():
+        return beside
+    raise WolfcalError(f"--poses {path}: no such file here or beside the robot config ({folder}); give its path, or "
+                       "make one with `wolfcal plan --out POSES.yaml`")  # fmt: skip
+
+
 def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> PoseScript:
     """Read and check a poses file; `limits` maps each servo joint to its URDF (lower, upper) [rad].
 

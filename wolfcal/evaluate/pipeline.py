@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import wolfcal
-from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
+from wolfcal.atomic import make_folder, output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
@@ -65,6 +65,13 @@ def load_fit(fit_dir: Path) -> tuple[FitResult, Robot]:
     """The fit's result.yaml, its robot and its fitted corrections."""
     if not Path(fit_dir).exists():
         raise WolfcalError(f"{fit_dir}: fit folder not found (run `wolfcal fit ... --out {fit_dir}` first)")
+    if Path(fit_dir).is_file() and Path(fit_dir).name not in FIT_OUTPUTS:
+        what = "a capture file" if Path(fit_dir).suffix == ".mcap" else "a file"
+        raise WolfcalError(
+            f"{fit_dir}: {what}, not a fit folder; evaluate takes the --out folder of `wolfcal fit` (it holds "
+            f"result.yaml): fit first (`wolfcal fit CAPTURE.mcap --out FIT`), then `wolfcal evaluate FIT --out "
+            "REPORT`, with held-out captures as `--capture HELD_OUT.mcap`"
+        )
     folder = Path(fit_dir) if Path(fit_dir).is_dir() else Path(fit_dir).parent
     missing = [name for name in FIT_OUTPUTS if not (folder / name).is_file()]
     if missing:
@@ -149,7 +156,7 @@ def _run_external_evaluate(
     truth = _truth_reference(captures)
     figures = external_metrics(robot, observations, fitted, truth, say)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     refused = "The calibration makes the held-out reprojection error worse." if worse else None
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
@@ -347,7 +354,7 @@ def run_evaluate(
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(robot, obs, sample_by_key, errors, result.covariance)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
                                             deploy_worse)  # fmt: skip
     metrics = {

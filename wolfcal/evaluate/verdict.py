@@ -102,8 +102,8 @@ def deploy_verdict(
             f"; the fit's uncertainty alone predicts +- {predicted_ground_m * 100:.1f} cm at 4.5 m (1 sigma), "
             "which does not include errors its free parameters cannot represent")  # fmt: skip
         notes.append(f"The ground error was not measured (no floor samples held out){predicted}.")
-    if camera_turn_rad > limits.mount_limit_rad:
-        notes.append(_mount_note(camera_turn_rad, limits.mount_limit_rad, measured_ground is not None))
+    if camera_turn_rad > limits.mount_limit_rad and measured_ground is None and not refusals:
+        notes.append(_mount_note(camera_turn_rad, limits.mount_limit_rad))  # measured or refused: nothing to do
     deploy = not refusals
     if deploy:
         ground = ("" if measured_ground is None else
@@ -153,11 +153,12 @@ def _judge_measured_ground(
         )
 
 
-def _mount_note(camera_turn_rad: float, mount_limit_rad: float, ground_measured: bool) -> str:
-    """The warning that the camera correction turns the camera by more than a mount moves."""
+def _mount_note(camera_turn_rad: float, mount_limit_rad: float) -> str:
+    """The warning that the camera correction turns the camera by more than a mount moves, with what to do: only
+    for a calibration that would be deployed without a measured ground error (a measured one is the check)."""
     return (
         f"The camera correction turns the camera by {np.rad2deg(camera_turn_rad):.1f} deg, more than a camera "
-        f"mount moves ({np.rad2deg(mount_limit_rad):g} deg): it may be absorbing joint offsets; "
-        + ("the ground error measured on the held-out floor views is the check of that." if ground_measured
-           else "check the ground error with floor samples before deploying.")  # fmt: skip
+        f"mount moves ({np.rad2deg(mount_limit_rad):g} deg): it may be absorbing joint offsets; check the ground "
+        "error with held-out floor samples (`wolfcal capture --floor --check`, then `evaluate --capture`) before "
+        "deploying."
     )

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from wolfcal.errors import WolfcalError
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.parameters import check_preset
+from wolfcal.robot.presets import DEFAULT_PRESET
 
 SYSTEMS = ("head", "external", "mocap", "all")
 # Floor of a pixel block's estimated noise [px]: the detector's systematic error. Its corner errors of 0.02-0.05 px
@@ -18,7 +19,7 @@ NOISE_FLOOR_PX = 0.05
 
 @dataclass(frozen=True)
 class FitOptions:
-    free: str = "camera"
+    free: str = DEFAULT_PRESET
     side: str = "both"
     fix_tags: bool = False
     huber_k: float = 3.0  # robust threshold [standard deviations of the noise model]

@@ -49,11 +49,17 @@ def correlated_groups(names: list[str], pairs: list[tuple[str, str, float]]) -> 
 
 
 def explain(params: ParameterSet, solution: Solution) -> list[str]:
-    """Plain sentences on what the data cannot tell apart and which values rest on the priors."""
+    """Plain sentences on what the data cannot tell apart and which values rest on the priors, each saying what to
+    do, each said once. Only the robot model's parameters are named: a measurement's own unknowns (floor tag
+    places, a camera's placement) that the data cannot separate leave the model as determined, and ask for nothing.
+    """
     lines = []
     u = solution.uncertainty
+    in_chain = {p.name for p in params.parameters if p.in_chain}
     pairs = u.correlated_pairs(params.names)
     for members in correlated_groups(params.names, pairs):
+        if not in_chain & set(members):
+            continue
         strongest = max(abs(c) for a, b, c in pairs if a in members)
         lines.append(
             f"{', '.join(members)} move together in these poses (|correlation| up to {strongest:.2f}): the data "
@@ -61,15 +67,16 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
             "they give together is still determined. Add poses that move them differently, or fix some of them."
         )
     for name, share in zip(params.names, u.data_share):
-        if share < DATA_SHARE_LIMIT:
+        if share < DATA_SHARE_LIMIT and name in in_chain:
             lines.append(
                 f"{name}: only {share:.0%} of its information comes from the data; its value stays near the nominal "
                 "model (prior)."
             )
-    if u.condition_number > CONDITION_LIMIT:
+    if u.condition_number > CONDITION_LIMIT and not lines:
         lines.append(
             f"condition number {u.condition_number:.3g} of the column-scaled Jacobian is above "
-            f"{CONDITION_LIMIT:.0f}: some parameter combinations are weakly or not at all observable in these poses."
+            f"{CONDITION_LIMIT:.0f}: some parameter combinations are weakly observable in these poses; add poses "
+            "that move the free joints more, or free fewer parameters."
         )
     return lines
 
@@ -438,7 +445,7 @@ def summary_lines(result: FitResult) -> list[str]:
             f"{b[f'rms_after_{u}'] * scale:.3f} {shown} after (max {b[f'max_after_{u}'] * scale:.3f} {shown})",
         ]
     lines += [
-        f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.1f}",
+        f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.3g}",
         "parameters (value +- std, share of information from data):",
     ]
     width = max(len(p.name) for p in result.parameters)

@@ -84,11 +84,11 @@ def coverage_warnings(calibration: Calibration, board: Board) -> list[str]:
             "add views with the board there"
         )
     coverage = Coverage([view_params(v, board) for v in calibration.views])
-    for name, value in zip(PARAM_NAMES, coverage.progress(), strict=True):
-        if value < 1.0:
-            warnings.append(f"{name} coverage {100 * value:.0f} %")
-    if any(value < 1.0 for value in coverage.progress()):
-        warnings.append("to improve coverage: " + "; ".join(coverage.hints()))
+    short = [f"{name} {100 * value:.0f} %" for name, value in zip(PARAM_NAMES, coverage.progress(), strict=True)
+             if value < 1.0]  # fmt: skip
+    if short:  # one warning, with what to do
+        warnings.append(f"the views cover less than ROS camera_calibration asks ({', '.join(short)}): "
+                        + "; ".join(coverage.hints()))  # fmt: skip
     return warnings
 
 
@@ -120,14 +120,14 @@ def run_intrinsics(
     streams = [(str(p), p.name) for p in found.videos] + ([(camera_source(camera), None)] if camera else [])
     if streams:
         views = _views_from_streams(streams, views, board, options, say)
-    write_detections(report, views, failures)
     if not views:
         raise WolfcalError(
             f"the {board.describe()} was not found in any view{_wrong_board_hint(failures, board)}; "
-            "check --board "
-            f"(inner corners, COLSxROWS) and --charuco, and that the whole board is in view; see {report}"
+            "check --board (inner corners, COLSxROWS) and --charuco, and that the whole board is in view "
+            "(each view's reason is above)"
         )
     _check_sizes(views)
+    detected = list(views)
     choice = None
     if len(views) >= options.min_views:
         views, choice = choose_window(views, board, options.model)
@@ -136,8 +136,9 @@ def run_intrinsics(
     calibration = calibrate_views(views, board, options.model, options.min_views, options.reject_outliers)
     calibration.camera = dataclasses.replace(calibration.camera, name=options.camera_name)
     warnings = coverage_warnings(calibration, board)
-    with output_set():  # the camera_info and its report together, or neither
+    with output_set():  # the camera_info and its report together, or neither: a failed run leaves nothing
         save_camera_info(calibration.camera, out)
+        write_detections(report, detected, failures)
         write_report(report, calibration, failures, warnings,
                      options.method + (f"; {choice.describe()}" if choice else ""))  # fmt: skip
     _say_result(calibration, failures, warnings, say)

@@ -171,7 +171,7 @@ REPORT_FILES = (
 
 
 def write_detections(folder: Path, detections: list[Detection], failures: list[Failure]) -> None:
-    """Corners of every view and the reason of every failure, as YAML (kept even if calibration fails)."""
+    """Corners of every view and the reason of every failure, as YAML."""
     write_text_atomic(folder / "detections.yaml", detections_yaml(detections, failures))
 
 

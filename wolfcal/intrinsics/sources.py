@@ -69,7 +69,6 @@ def image_jobs(paths: list[Path]) -> list[Job]:
 
 def open_stream(source: str | int) -> cv2.VideoCapture:
     """A video file path, camera index or device path -> an opened capture; a clear error otherwise."""
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # the error below says it better
     capture = cv2.VideoCapture(source)
     if not capture.isOpened():
         what = f"camera {source}" if isinstance(source, int) or str(source).startswith("/dev/") else str(source)

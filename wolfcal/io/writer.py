@@ -25,7 +25,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic
 
-from wolfcal.atomic import replace_file
+from wolfcal.atomic import make_folder, replace_file
 from wolfcal.camera.model import CameraModel
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
@@ -109,7 +109,7 @@ class CaptureWriter:
         self.image_format = image_format
         self.count = 0
         self._closed = False
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        make_folder(self.path.parent)  # removed again if the output set it belongs to fails
         self._file = open(self.partial, "xb")  # closed in close()
         try:
             self._mcap, self._channels, self._encoders = self._start(robot_config)

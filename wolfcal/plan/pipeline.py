@@ -36,6 +36,7 @@ from wolfcal.plan.order import capture_order
 from wolfcal.plan.select import check_criterion, cover_twice, criterion_value, information, select
 from wolfcal.robot.collision import CollisionModel, collision_model, rest_configuration
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
+from wolfcal.robot.presets import DEFAULT_PRESET
 from wolfcal.robot.robot import Robot, load_robot
 
 PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
@@ -46,7 +47,7 @@ DEFAULT_CRITERION = {("head", "head_camera"): "I", ("external", "leg"): "I"}
 
 @dataclass(frozen=True)
 class PlanOptions:
-    free: str = "leg"
+    free: str = DEFAULT_PRESET
     side: str = "both"
     system: str = "head"
     poses: int = 12

@@ -15,10 +15,10 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.presets import PRESETS
 from wolfcal.robot.robot import Robot
 
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
-PRESETS = ("camera", "head_camera", "leg")
 SIDES = ("right", "left", "both")
 
 

@@ -13,12 +13,24 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.external_view import external_tag_poses
 from wolfcal.geometry import invert_transform
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
 from wolfcal.sim.floor import floor_targets
 from wolfcal.vision.render import PlanarTarget, render_targets
 from wolfcal.vision.tags import tag_texture, tag_texture_width
+
+# Binning of a simulated camera's images when none is given: 4 for the head camera (a 2048x1536 sensor gives
+# 512x384, quick to render, the foot tags still about 40 px across), 2 for an external camera (it sees the tags
+# from further away). `wolfcal simulate` and `wolfcal capture --camera sim` both use it.
+SIM_BINNING = {HEAD_CAMERA: 4}
+SIM_BINNING_EXTERNAL = 2
+
+
+def sim_binning(camera: str) -> int:
+    """The default binning of the simulated camera named `camera` ('head' or an external camera's name)."""
+    return SIM_BINNING.get(camera, SIM_BINNING_EXTERNAL)
 
 
 class SimScene:

@@ -19,7 +19,7 @@ import numpy as np
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.camera.camera_info import camera_info_dict, load_camera_info
 from wolfcal.camera.model import CameraModel
-from wolfcal.capture.poses import joint_limits, load_poses
+from wolfcal.capture.poses import find_poses, joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_pose_ok, external_visibility
@@ -37,7 +37,7 @@ from wolfcal.sim.floor import floor_views, render_floor
 from wolfcal.sim.mocap import simulate_mocap
 from wolfcal.sim.placement import random_placement
 from wolfcal.sim.poses import draw_accepted, random_visible_poses, tag_visibility
-from wolfcal.sim.scene import SimScene
+from wolfcal.sim.scene import SimScene, sim_binning
 from wolfcal.sim.truth import TruthSpec, random_truth
 from wolfcal.vision.render import motion_blur
 from wolfcal.yamlfile import dump_yaml
@@ -52,7 +52,7 @@ FLOOR_DISTANCE_M = (0.5, 5.0)  # floor tags lie this far from the robot (`--floo
 class SimOptions:
     samples: int = 24
     seed: int = 0
-    binning: int = 1  # of every camera's images
+    binning: int | None = 1  # of every camera's images; None: each simulated camera's default (`scene.sim_binning`)
     noise_sigma: float = 2.0  # image noise [gray levels]
     outlier_fraction: float = 0.0  # share of samples made outliers (motion blur or stale joint reading)
     offsets: str = "none"  # which joints get a true encoder offset: none | head | legs | all (head and legs)
@@ -71,6 +71,7 @@ class SimOptions:
 class _SimCamera:
     model: CameraModel  # full resolution
     image: CameraModel  # binned
+    binning: int  # sensor binning of the images (both axes)
     T_base_camera: np.ndarray | None = None  # external cameras only
 
 
@@ -90,7 +91,8 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
     if options.system in ("head", "all"):
         if head is None:
             head = load_camera_info(robot.config.intrinsics_file(HEAD_CAMERA, "simulating", "pass --intrinsics FILE"))
-        cameras[HEAD_CAMERA] = _SimCamera(head, head.binned(options.binning, HEAD_CAMERA))
+        binning = options.binning or sim_binning(HEAD_CAMERA)
+        cameras[HEAD_CAMERA] = _SimCamera(head, head.binned(binning, HEAD_CAMERA), binning)
     if options.system in ("external", "all"):
         if not robot.config.external_cameras:
             raise WolfcalError(
@@ -99,7 +101,8 @@ def _cameras(robot: Robot, options: SimOptions, head: CameraModel | None) -> dic
             )
         name = options.external or robot.config.external_cameras[0].name
         model = load_camera_info(robot.config.intrinsics_file(name, "simulating"))
-        cameras[name] = _SimCamera(model, model.binned(options.binning, name))
+        binning = options.binning or sim_binning(name)
+        cameras[name] = _SimCamera(model, model.binned(binning, name), binning)
     return cameras
 
 
@@ -157,7 +160,8 @@ def simulate_capture(
         if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
     if options.poses is not None:
-        options = replace(options, samples=len(planned_readings(robot, options.poses)))
+        poses = find_poses(options.poses, robot_path)  # a bare name: the robot's own poses file
+        options = replace(options, poses=poses, samples=len(planned_readings(robot, poses)))
     inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
     if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
         check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
@@ -205,8 +209,8 @@ def _simulate(
                        T_base_camera=c.T_base_camera)
         for k, (name, c) in enumerate(cameras.items())
     }  # fmt: skip
-    b = options.binning
-    with CaptureWriter(out, robot.config, {name: (c.model, (b, b)) for name, c in cameras.items()}) as writer:
+    streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
+    with CaptureWriter(out, robot.config, streams) as writer:
         for i in range(options.samples):
             if floor is None:
                 images = {name: scene.render_true(q_true[i]) for name, scene in scenes.items()}
@@ -253,8 +257,9 @@ def _write_truth(robot: Robot, out: Path, options: SimOptions, truth: Correction
     data: dict[str, object] = {"truth": truth.to_dict()}
     if HEAD_CAMERA in cameras:
         data["camera"] = camera_info_dict(cameras[HEAD_CAMERA].model)
+    binnings = {name: c.binning for name, c in cameras.items()}
     data |= {
-        "binning": options.binning,
+        "binning": next(iter(binnings.values())) if len(binnings) == 1 else binnings,
         "samples": options.samples,
         "seed": options.seed,
         "noise_sigma": options.noise_sigma,

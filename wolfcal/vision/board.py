@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from wolfcal.errors import WolfcalError
+from wolfcal.vision.target_size import check_printed_edge
 
 
 def aruco_dictionary(name: str) -> cv2.aruco.Dictionary:
@@ -138,6 +139,9 @@ def make_board(
 ) -> Board:
     """A board from command-line values ('9x6', square [m], ChArUco dictionary, marker [m], legacy layout)."""
     cols, rows = parse_board_size(size)
+    check_printed_edge(square, "--square")
+    if marker is not None:
+        check_printed_edge(marker, "--marker")
     if dictionary is None and (marker is not None or legacy):
         raise WolfcalError("--marker and --legacy describe ChArUco boards: add --charuco DICTIONARY")
     board = Board(cols, rows, square, dictionary, marker, legacy)

@@ -22,6 +22,7 @@ from wolfcal.atomic import output_set, write_bytes_atomic
 from wolfcal.errors import WolfcalError
 from wolfcal.outputs import check_outputs
 from wolfcal.vision.board import Board, aruco_dictionary
+from wolfcal.vision.target_size import check_printed_edge
 
 PAPER = {
     "a4": (0.210, 0.297),
@@ -272,6 +273,7 @@ def parse_ids(text: str) -> list[int]:
 def tag_sheets(family: str, ids: list[int], size: float, paper: str = "a4", cell_px: int = 20) -> list[Sheet]:
     """AprilTags (black square edge `size` [m]) in a grid, labelled with their ids, and the scale line; as many
     pages as the paper needs."""
+    check_printed_edge(size, "--size")
     dictionary = aruco_dictionary(family)
     count = len(dictionary.bytesList)
     bad = [i for i in ids if i >= count]
