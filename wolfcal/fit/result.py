@@ -20,6 +20,7 @@ from wolfcal.fit.mocap_result import mocap_block_dict
 from wolfcal.fit.options import NOISE_FLOOR_PX, FitOptions
 from wolfcal.fit.solver import Solution
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
+from wolfcal.io.current import CurrentCalibration
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
@@ -259,9 +260,12 @@ class FitResult:
     mocap_clock_offset_s: dict[str, float] | None = None
     # single corners of views kept left out as far off (blocks with a corner rule, the floor's; 0 in older files)
     n_outlier_corners: int = 0
+    # the robot's present calibration the fit started from (`--current`; `io.current.CurrentCalibration.to_dict`:
+    # sources, corrections, imu_offsets); absent: the input URDF's nominal model. `corrections` are totals.
+    current: dict | None = None
 
     HEAD_FIGURES: ClassVar[tuple[str, ...]] = ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")
-    OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s")
+    OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s", "current")
     KEY_ORDER: ClassVar[tuple[str, ...]] = (  # result.yaml's key order (fields not listed follow in field order)
         "version", "wolfcal_version", "created", "robot", "urdf", "captures", "intrinsics", "free", "side", "fix_tags",
         "system", "external_moving", "systems_used", "tags_used", "rms_meaning", "rms_before_px", "rms_after_px",
@@ -276,8 +280,13 @@ class FitResult:
             free=self.free, side=self.side, fix_tags=self.fix_tags, huber_k=float(self.robust_loss["threshold_sigma"]),
             system=self.system, external_moving=self.external_moving, mocap_moving=self.mocap_moving,
             outlier=OutlierRule(float(self.outlier_rule["factor"]), float(self.outlier_rule["floor_px"])),
-            noise_floor_px=self.noise_floor_px,
+            noise_floor_px=self.noise_floor_px, current=self.current_calibration.corrections,
         )  # fmt: skip
+
+    @property
+    def current_calibration(self) -> CurrentCalibration:
+        """The present calibration the fit started from (empty: the input URDF's nominal model)."""
+        return CurrentCalibration() if self.current is None else CurrentCalibration.from_dict(self.current, "result")
 
     def estimate(self, name: str) -> tuple[float, float] | None:
         """A fitted parameter's value and 1-sigma in its own unit (None: not among the fit's parameters)."""
@@ -344,9 +353,10 @@ def _noise_model(fit: Fit, blocks: list[dict]) -> dict:
 
 
 def fit_result(
-    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str]
+    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str],
+    current: CurrentCalibration | None = None,
 ) -> FitResult:
-    """The result of a fit, with the settings it ran with."""
+    """The result of a fit, with the settings it ran with and the present calibration it started from."""
     config, solution, params = fit.robot.config, fit.solution, fit.params
     u = solution.uncertainty
     blocks = [_block_dict(fit, k) for k in range(len(fit.blocks))]
@@ -386,6 +396,7 @@ def fit_result(
         corrections=fit.corrections,
         mocap_moving=options.mocap_moving,
         mocap_clock_offset_s=next((b["mocap_clock_offset_s"] for b in blocks if b["system"] == "mocap"), None),
+        current=None if current is None else current.to_dict(),
     )  # fmt: skip
 
 
