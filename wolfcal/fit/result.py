@@ -280,7 +280,8 @@ class FitResult:
             free=self.free, side=self.side, fix_tags=self.fix_tags, huber_k=float(self.robust_loss["threshold_sigma"]),
             system=self.system, external_moving=self.external_moving, mocap_moving=self.mocap_moving,
             outlier=OutlierRule(float(self.outlier_rule["factor"]), float(self.outlier_rule["floor_px"])),
-            noise_floor_px=self.noise_floor_px, current=self.current_calibration.corrections,
+            noise_floor_px=self.noise_floor_px,
+            current=None if self.current is None else self.current_calibration.corrections,
         )  # fmt: skip
 
     @property
