@@ -64,8 +64,9 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
     for name, share in zip(params.names, u.data_share):
         if share < DATA_SHARE_LIMIT:
             lines.append(
-                f"{name}: only {share:.0%} of its information comes from the data; its value stays near the nominal "
-                "model (prior)."
+                f"{name}: only {share:.0%} of its information comes from the data; its value stays near its prior "
+                "(the nominal model, or the present calibration given with --current), and the evaluation deploys it "
+                "at its present value."
             )
     if u.condition_number > CONDITION_LIMIT:
         lines.append(
