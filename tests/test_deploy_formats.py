@@ -133,7 +133,7 @@ def test_deploy_files_hold_the_new_total_and_keep_the_imu_block(robot, tmp_path)
     ("op3_manager:\n  ros__parameters:\n    device_info:\n      r_knee:\n        joint_offset: 0.1\n",
      "'r_knee' is not a movable joint"),
     ("parent_frame: cam_uncalibrated\nchild_frame: cam\ntranslation: {x: 0, y: 0, z: 0}\n"
-     "rotation: {x: 0, y: 0, z: 0, w: 1}\n", "'child_frame' is 'cam'"),
+     "rpy: [0, 0, 0]\n", "'child_frame' is 'cam'"),
 ])  # fmt: skip
 def test_current_of_another_robot_or_format_is_refused(robot, tmp_path, text, words):
     path = tmp_path / "present.yaml"

@@ -19,10 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from wolfcal.errors import WolfcalError
-from wolfcal.geometry import log_so3
+from wolfcal.geometry import exp_so3, log_so3, rotation_angle, rpy_to_matrix
 from wolfcal.io.team_formats import (
     CAMERA_NODE,
     EXTRINSIC_FILE,
@@ -79,7 +78,7 @@ def optical_rotation(robot: Robot, corrections: Corrections) -> np.ndarray:
     """(3, 3) rotation of the camera correction between the optical frames: R_uncalibrated_calibrated."""
     vec = corrections.frames.get(robot.camera_joint, np.zeros(6))
     A = camera_axes_rotation(robot)
-    return A.T @ Rotation.from_rotvec(vec[3:]).as_matrix() @ A
+    return A.T @ exp_so3(np.asarray(vec[3:], dtype=float)) @ A
 
 
 def _camera_vector(robot: Robot, R_optical: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -87,10 +86,14 @@ def _camera_vector(robot: Robot, R_optical: np.ndarray, translation: np.ndarray)
     return np.concatenate([translation, log_so3(A @ R_optical @ A.T)])
 
 
-def _joint_offsets(path: Path, data: dict, robot: Robot) -> dict[str, float]:
+def _joint_offsets(path: Path, data: dict) -> dict[str, float]:
+    """wolfcal's joint_offsets.yaml -> joint -> offset [rad]."""
     offsets = data.get("joint_offsets") or {}
     if not isinstance(offsets, dict):
         raise WolfcalError(f"{path}: 'joint_offsets' must map joint names to offsets [rad]")
+    for joint, value in offsets.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise WolfcalError(f"{path}: 'joint_offsets.{joint}' must be a number [rad], found {value!r}")
     return {str(k): float(v) for k, v in offsets.items()}
 
 
@@ -102,10 +105,13 @@ def _camera_correction(path: Path, data: dict, robot: Robot) -> np.ndarray:
                            f"{frame!r} ({robot.config.path}); is this the calibration of another robot?")
     try:
         t = np.array([float(data["translation"][k]) for k in "xyz"])
-        q = np.array([float(data["rotation"][k]) for k in "xyzw"])
+        rpy = np.array([float(v) for v in data["rpy"]])
     except (KeyError, TypeError, ValueError):
-        raise WolfcalError(f"{path}: 'translation' {{x, y, z}} [m] and 'rotation' {{x, y, z, w}} expected") from None
-    return np.concatenate([t, Rotation.from_quat(q).as_rotvec()])
+        raise WolfcalError(f"{path}: 'translation' {{x, y, z}} [m] and 'rpy' [roll, pitch, yaw] [rad] expected"
+                           ) from None  # fmt: skip
+    if rpy.shape != (3,):
+        raise WolfcalError(f"{path}: 'rpy' must be 3 numbers [rad]")
+    return np.concatenate([t, log_so3(rpy_to_matrix(rpy))])
 
 
 def _read_one(path: Path, robot: Robot) -> tuple[dict[str, float], np.ndarray | None, tuple | None]:
@@ -118,8 +124,8 @@ def _read_one(path: Path, robot: Robot) -> tuple[dict[str, float], np.ndarray | 
         camera = None if team.camera is None else _camera_vector(robot, rotation_of_offsets(team.camera), np.zeros(3))
         return {}, camera, team.imu
     if keys == ["joint_offsets"]:
-        return _joint_offsets(path, data, robot), None, None
-    if {"parent_frame", "child_frame", "translation", "rotation"} <= set(keys):
+        return _joint_offsets(path, data), None, None
+    if {"parent_frame", "child_frame", "translation", "rpy"} <= set(keys):
         return {}, _camera_correction(path, data, robot), None
     if len(keys) == 1 and isinstance(data[keys[0]], dict) and "ros__parameters" in data[keys[0]]:
         return read_hardware_offsets(path), None, None
@@ -174,8 +180,8 @@ def _merge_camera(known: tuple[np.ndarray, Path] | None, vec: np.ndarray, path: 
     """The camera correction of two files: the rotations must agree; a translation (wolfcal's file) is kept."""
     if known is None:
         return vec, path
-    turn = Rotation.from_rotvec(known[0][3:]).inv() * Rotation.from_rotvec(vec[3:])
-    if turn.magnitude() > AGREE_RAD:
-        raise WolfcalError(f"{path}: the camera rotation differs from {known[1]} by {np.rad2deg(turn.magnitude()):.3f} "
-                           "deg; give the file the robot runs")  # fmt: skip
+    turn = float(rotation_angle(exp_so3(known[0][3:]).T @ exp_so3(vec[3:])))
+    if turn > AGREE_RAD:
+        raise WolfcalError(f"{path}: the camera rotation differs from {known[1]} by {np.rad2deg(turn):.3f} deg; give "
+                           "the file the robot runs")  # fmt: skip
     return (vec, path) if np.linalg.norm(vec[:3]) > np.linalg.norm(known[0][:3]) else known
