@@ -18,19 +18,24 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 import wolfcal
 from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
-from wolfcal.camera.model import CameraModel
-from wolfcal.config import GroundCheck
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, deploy_lines, write_or_withhold_deploy_files
 from wolfcal.evaluate.explaining import explaining_preset
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.floor_ground import measured_ground_errors
-from wolfcal.evaluate.ground import DISTANCES_M, ground_errors, predicted_ground_std
+from wolfcal.evaluate.ground_figures import (
+    camera_turn,
+    ground_distances,
+    ground_rows,
+    ground_section,
+    measured_ground,
+    predicted_ground,
+    verdict_ground,
+    verdict_limits,
+)
 from wolfcal.evaluate.metrics import (
     HeldOutErrors,
     ModelErrors,
@@ -52,7 +57,7 @@ from wolfcal.evaluate.report_content import (
 from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.undetermined import deployable_model
-from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, VerdictLimits, deploy_verdict
+from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
 from wolfcal.io.current import CurrentCalibration, load_current
@@ -63,7 +68,6 @@ from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
-from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations, observations_of
@@ -118,41 +122,6 @@ def _observe(
             f"{', '.join(str(s) for s in sources)}"
         )
     return samples, obs.only_tags(tags), tags, warnings, floor
-
-
-def _measured_ground(robot: Robot, floor: Observations | None, models: dict[str, Corrections], held_out: bool,
-                     say: Callable[[str], None], corner_inset: tuple[float, float],
-                     distances: tuple[float, ...]) -> dict | None:  # fmt: skip
-    """`floor_ground.measured_ground_errors` of the held-out floor views, before and after (None: not measured)."""
-    if floor is None or not held_out:
-        return None
-    say("measuring the ground error on the held-out floor views ...")
-    return measured_ground_errors(robot, floor, models, distances, corner_inset)
-
-
-def ground_distances(limits: VerdictLimits) -> tuple[float, ...]:
-    """The distances ground errors are given at [m]: DISTANCES_M and the verdict's."""
-    return tuple(sorted({*DISTANCES_M, limits.ground_distance_m}))
-
-
-def verdict_limits(robot: Robot, ground_limit_m: float | None, mount_limit_rad: float) -> VerdictLimits:
-    """The verdict's limits: distance and limit from the robot config's `floor.ground_check` (its defaults without
-    `floor:`), the limit overridden by `ground_limit_m` when given."""
-    check = robot.config.floor.ground_check if robot.config.floor is not None else GroundCheck()
-    return VerdictLimits(check.limit if ground_limit_m is None else ground_limit_m, mount_limit_rad, check.distance)
-
-
-def _verdict_ground(measured: dict | None, distances: tuple[float, ...], distance: float) -> dict | None:
-    """The verdict's {'before_m', 'after_m', 'after_std_m'} at `distance` (inf: the ball lies above the horizon)."""
-    if measured is None:
-        return None
-    k = distances.index(distance)
-    before, after = (measured["models"][m]["rows"][k] for m in ("before", "after"))
-    inf = float("inf")
-    return {"before_m": inf if before["error_m"] is None else before["error_m"],
-            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"],
-            "before_std_m": before["std_m"] or 0.0, "capture": measured.get("capture"),
-            "check": measured.get("check")}
 
 
 def _run_external_evaluate(
@@ -217,50 +186,6 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
     return truths[0] if all(t.to_dict() == first for t in truths[1:]) else None
 
 
-def _ground_rows(
-    robot: Robot, camera: CameraModel, truth: Corrections | None, models: dict[str, Corrections],
-    say: Callable[[str], None], distances: tuple[float, ...],
-) -> tuple[list[dict], str | None]:
-    """`ground_errors` rows of the models before and after [m] against the simulator's truth, or none and why (no
-    `floor:` config). Without a truth the reference is the model after, whose error is then not measured: None,
-    with 'no_truth' set (it would read 0 by definition)."""
-    if robot.config.floor is None:
-        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
-                    "computed")
-    say("computing the ground error ...")
-    rows = ground_errors(robot, camera, truth if truth is not None else models["after"], models, distances)
-    if truth is None:
-        for row in rows:
-            row["models"]["after"].update(error_m=None, no_truth=True)
-    return rows, None
-
-
-def _predicted_ground(
-    robot: Robot, camera: CameraModel, result: FitResult, tags: list[int], fitted: Corrections, distance: float
-) -> float | None:
-    """1-sigma ground error at `distance` [m] from the fit's covariance of its chain parameters (None without
-    floor)."""
-    covariance = result.covariance
-    if robot.config.floor is None or not covariance:
-        return None
-    chain = build_parameter_set(robot, result.free, {HEAD_CAMERA: tags}, result.side, result.fix_tags)
-    index = {name: i for i, name in enumerate(covariance["names"])}
-    keep = [k for k, name in enumerate(chain.names) if name in index]
-    cols = [index[chain.names[k]] for k in keep]
-    sub = ParameterSet([chain.parameters[k] for k in keep])
-    matrix = np.asarray(covariance["matrix"], dtype=float)[np.ix_(cols, cols)]
-    return predicted_ground_std(robot, camera, sub, sub.values_from(fitted), matrix, distance)
-
-
-def camera_turn(robot: Robot, fitted: Corrections, before: Corrections) -> float:
-    """Rotation angle [rad] between the camera frame corrections of the model before and the fitted one (0
-    without a head camera)."""
-    if robot.config.camera is None:
-        return 0.0
-    turn = [Rotation.from_rotvec(c.frames.get(robot.camera_joint, np.zeros(6))[3:]) for c in (before, fitted)]
-    return float((turn[0].inv() * turn[1]).magnitude())
-
-
 REPORT_FILES = ("report.html", "report.md", "metrics.json")
 
 
@@ -314,18 +239,6 @@ def _judge(
     )
     return HeldOutErrors(before, after, after_of_sample, fold_of, mode_note, outliers,
                          summary(obs, views, before, outliers), summary(obs, views, after, outliers))  # fmt: skip
-
-
-def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: dict | None) -> dict:
-    """metrics['ground']: the ground error rows of the standing robot and the one measured on floor views."""
-    floor = robot.config.floor
-    return {
-        "reference": "simulator truth" if from_truth else "calibrated model",
-        "standing_pose_rad": dict(floor.standing) if floor else {},
-        "soles": list(floor.soles) if floor else [],
-        "rows": rows,
-        "measured": measured,
-    }
 
 
 def present_calibration(robot: Robot, result: FitResult, current: list[Path]) -> CurrentCalibration:
@@ -390,18 +303,18 @@ def run_evaluate(
     errors = _judge(robot, obs, views, result, fitted, present, sources, held_out, folds, say)
     truth = _truth_reference(sources)
     models = {"before": present.corrections, "after": fitted}
-    ground_rows, no_ground = _ground_rows(robot, obs.camera, truth, models, say, distances)
+    ground_table, no_ground = ground_rows(robot, obs.camera, truth, models, say, distances)
     if no_ground:
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, errors.after.residuals, ~errors.outliers)
     if structure["unexplained"]:
         say("testing which free parameters explain the residuals ...")
         structure.update(explaining_preset(robot, obs, views, result.options, present.corrections, ~errors.outliers))
-    predicted = _predicted_ground(robot, obs.camera, result, tags, fitted, limits.ground_distance_m)
-    measured = _measured_ground(robot, floor, models, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0),
+    predicted = predicted_ground(robot, obs.camera, result, tags, fitted, limits.ground_distance_m)
+    measured = measured_ground(robot, floor, models, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0),
                                 distances)  # fmt: skip
     verdict = deploy_verdict(result.free, errors.summary_before["rms_px"], errors.summary_after["rms_px"], structure,
-                             _verdict_ground(measured, distances, limits.ground_distance_m), predicted,
+                             verdict_ground(measured, distances, limits.ground_distance_m), predicted,
                              camera_turn(robot, fitted, present.corrections), limits)  # fmt: skip
     verdict["notes"] += held_notes
     say("drawing the pictures ...")
@@ -429,7 +342,7 @@ def run_evaluate(
         "current": present.to_dict() if present.sources else None,
         "before": errors.summary_before,
         "after": errors.summary_after,
-        "ground": _ground_section(robot, truth is not None, ground_rows, measured),
+        "ground": ground_section(robot, truth is not None, ground_table, measured),
         "verdict": verdict,
         "structure": structure,
         "deploy": deploy,
