@@ -145,3 +145,13 @@ def test_undetermined_offset_is_held_and_the_model_kept(robot, tmp_path):
     present = CurrentCalibration(Corrections(offsets={"HeadTilt": 0.01}), None, ["wolfgang.yaml"])
     held, _ = deployable_model(result, present)
     assert held.offsets["HeadTilt"] == 0.01  # held at the present value, not at 0
+
+
+def test_evaluate_refuses_a_present_calibration_other_than_the_fits(camera_fits, tmp_path):
+    other = tmp_path / "other.yaml"
+    other.write_text(PRESENT.replace("offset_x: -0.06", "offset_x: -0.07"))
+    result = CliRunner().invoke(app, ["evaluate", str(camera_fits / "fit_current"), "--capture",
+                                      str(CAPTURES / "demo_heldout.mcap"), "--out", str(tmp_path / "eval"),
+                                      "--current", str(other)])  # fmt: skip
+    assert result.exit_code == 2 and "the fit started from another present calibration" in result.output
+    assert str(camera_fits / "rory.yaml") in result.output and not (tmp_path / "eval").exists()

@@ -137,7 +137,7 @@ def _run_external_evaluate(
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
     truth = _truth_reference(captures)
-    figures = external_metrics(robot, observations, fitted, truth, say)
+    figures = external_metrics(robot, observations, fitted, truth, say, present.corrections)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     out_dir.mkdir(parents=True, exist_ok=True)
     refused = "The calibration makes the held-out reprojection error worse." if worse else None
@@ -210,13 +210,12 @@ def _after(
     present: CurrentCalibration, held_out: list[Path] | None, folds: int, say: Callable[[str], None],
 ) -> tuple[ModelErrors, list[Corrections], np.ndarray | None, str]:
     """Errors of the calibrated model: on held-out captures (`held_out`) the model to deploy (`fitted`), otherwise
-    each sample under the model of the cross-validation fold that left it out (on the present calibration).
+    each sample under the model to deploy of the cross-validation fold that left it out.
     Also the model per sample, the fold of each sample (None when held out) and the sentence saying which."""
     if held_out is not None:
         note = held_out_note(held_out, result.captures)
         return model_errors(robot, obs, views, fitted), [fitted] * obs.n_samples, None, note
-    fold_of, fold_models = cross_validate(robot, obs, result.options, folds, say)
-    models = [present.corrections.overridden_by(m) for m in fold_models]
+    fold_of, models = cross_validate(robot, obs, result.options, folds, say, present)
     after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
     return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs.n_samples)
 

@@ -35,13 +35,19 @@ def _chain_parameter(p: ParameterResult) -> Parameter | None:
 def deployable_model(result: FitResult, present: CurrentCalibration) -> tuple[Corrections, list[str]]:
     """The model to deploy (totals: `present` with the fitted parameters replaced) and a sentence per parameter
     held at its present value. A fit without a covariance deploys its values as they are."""
-    rows = result.parameters
+    return held_model(result.parameters, np.asarray(result.covariance.get("matrix") or [], dtype=float), present)
+
+
+def held_model(
+    rows: list[ParameterResult], covariance: np.ndarray, present: CurrentCalibration
+) -> tuple[Corrections, list[str]]:
+    """`deployable_model` of a fit's parameter rows (`fit.result.parameter_results`) and their covariance (P, P)
+    [SI units of the parameters]."""
     chain = [(i, c) for i, c in ((i, _chain_parameter(p)) for i, p in enumerate(rows)) if c is not None]
     values = np.array([p.value for p in rows], dtype=float)
     params = ParameterSet([c for _, c in chain])
     index = [i for i, _ in chain]
     held = [i for i, c in chain if c.kind in ("offset", "frame") and rows[i].data_share < DATA_SHARE_LIMIT]
-    covariance = np.asarray(result.covariance.get("matrix") or [], dtype=float)
     if not held or covariance.shape != (len(rows), len(rows)):
         return present.corrections.overridden_by(params.corrections(values[index])), []
     present_values = dict(zip(params.names, params.values_from(present.corrections)))

@@ -332,7 +332,8 @@ class FitResult:
         return cls(**values)
 
 
-def _parameter_results(fit: Fit) -> list[ParameterResult]:
+def parameter_results(fit: Fit) -> list[ParameterResult]:
+    """result.yaml's row of every unknown of a solved fit: value, std, data share, what measured it."""
     u, params = fit.solution.uncertainty, fit.params
     return [
         ParameterResult(
@@ -387,7 +388,7 @@ def fit_result(
         n_corners_used=sum(b["n_units_used"] for b in blocks),
         converged=bool(solution.converged),
         condition_number=float(u.condition_number) if np.isfinite(u.condition_number) else None,
-        parameters=_parameter_results(fit),
+        parameters=parameter_results(fit),
         correlated_pairs=[{"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in u.correlated_pairs(params.names)],
         covariance={"names": params.names, "matrix": np.round(u.covariance, 15).tolist()},
         explanations=explain(params, solution),
