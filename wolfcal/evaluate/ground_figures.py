@@ -43,10 +43,15 @@ def ground_distances(limits: VerdictLimits) -> tuple[float, ...]:
     return tuple(sorted({*DISTANCES_M, limits.ground_distance_m}))
 
 
+def ground_check(robot: Robot) -> GroundCheck:
+    """The robot config's `floor.ground_check` (its defaults without `floor:`)."""
+    return robot.config.floor.ground_check if robot.config.floor is not None else GroundCheck()
+
+
 def verdict_limits(robot: Robot, ground_limit_m: float | None, mount_limit_rad: float) -> VerdictLimits:
-    """The verdict's limits: distance and limit from the robot config's `floor.ground_check` (its defaults without
-    `floor:`), the limit overridden by `ground_limit_m` when given."""
-    check = robot.config.floor.ground_check if robot.config.floor is not None else GroundCheck()
+    """The verdict's limits: distance and limit from `ground_check`, the limit overridden by `ground_limit_m` when
+    given."""
+    check = ground_check(robot)
     return VerdictLimits(check.limit if ground_limit_m is None else ground_limit_m, mount_limit_rad, check.distance)
 
 
