@@ -155,3 +155,13 @@ def test_evaluate_refuses_a_present_calibration_other_than_the_fits(camera_fits,
                                       "--current", str(other)])  # fmt: skip
     assert result.exit_code == 2 and "the fit started from another present calibration" in result.output
     assert str(camera_fits / "rory.yaml") in result.output and not (tmp_path / "eval").exists()
+
+
+def test_present_calibration_files_are_never_overwritten(camera_fits):
+    folder = camera_fits / "eval_plain"
+    before = (folder / "bitbots_extrinsic_calibration.yaml").read_bytes()
+    result = CliRunner().invoke(app, ["evaluate", str(camera_fits / "fit_plain"), "--capture",
+                                      str(CAPTURES / "demo_heldout.mcap"), "--out", str(folder), "--current",
+                                      str(folder), "--force"])  # fmt: skip
+    assert result.exit_code == 2 and "this is an input of the command" in result.output
+    assert (folder / "bitbots_extrinsic_calibration.yaml").read_bytes() == before

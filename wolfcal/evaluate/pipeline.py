@@ -60,7 +60,7 @@ from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
-from wolfcal.io.current import CurrentCalibration, load_current
+from wolfcal.io.current import CurrentCalibration, current_files, load_current
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
@@ -290,7 +290,7 @@ def run_evaluate(
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result.captures]
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf,
-              *current]  # fmt: skip
+              *current_files(list(current))]  # fmt: skip
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
     intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views

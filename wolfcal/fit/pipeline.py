@@ -20,7 +20,7 @@ from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
 from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
-from wolfcal.io.current import load_current
+from wolfcal.io.current import current_files, load_current
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -346,7 +346,8 @@ def run_fit(
     (one per capture, clock offsets `mocap_offsets` [s] or estimated). `current`: the robot's present calibration
     (`io.current.load_current`): the fit starts from it and its result holds the new totals."""
     robot = load_robot(robot_path)
-    check_output_folder(out_dir, FIT_OUTPUTS, force, fit_inputs(robot, captures, mocap, intrinsics) + list(current))
+    inputs = fit_inputs(robot, captures, mocap, intrinsics) + current_files(list(current))
+    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
     present = load_current(list(current), robot) if current else None
     if present is not None:
         options = replace(options, current=present.corrections)

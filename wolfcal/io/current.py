@@ -137,7 +137,9 @@ def _read_one(path: Path, robot: Robot) -> tuple[dict[str, float], np.ndarray | 
     )
 
 
-def _files(paths: list[Path]) -> list[Path]:
+def current_files(paths: list[Path]) -> list[Path]:
+    """The files `paths` stand for: each file, and each calibration file (FOLDER_FILES) a folder holds; a missing
+    path or a folder without one is an error."""
     out = []
     for path in map(Path, paths):
         if path.is_dir():
@@ -157,7 +159,7 @@ def load_current(paths: list[Path], robot: Robot) -> CurrentCalibration:
     offsets: dict[str, tuple[float, Path]] = {}
     camera: tuple[np.ndarray, Path] | None = None
     imu: tuple[tuple, Path] | None = None
-    for path in _files(paths):
+    for path in current_files(paths):
         file_offsets, file_camera, file_imu = _read_one(path, robot)
         for joint, value in file_offsets.items():
             if joint not in robot.joint_names:
@@ -173,7 +175,7 @@ def load_current(paths: list[Path], robot: Robot) -> CurrentCalibration:
             imu = (file_imu, path)
     frames = {robot.camera_joint: camera[0]} if camera is not None else {}
     return CurrentCalibration(Corrections({j: v for j, (v, _) in offsets.items()}, frames),
-                              None if imu is None else imu[0], [str(p) for p in _files(paths)])  # fmt: skip
+                              None if imu is None else imu[0], [str(p) for p in current_files(paths)])  # fmt: skip
 
 
 def _merge_camera(known: tuple[np.ndarray, Path] | None, vec: np.ndarray, path: Path) -> tuple[np.ndarray, Path]:
