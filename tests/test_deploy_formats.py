@@ -54,7 +54,7 @@ HARDWARE_FILE = """wolfgang_hardware_interface:
       HeadTilt:
         id: 20
         model_number: 311
-        mounting_offset: 0.0
+        mounting_offset: 0.1
         joint_offset: -0.004
 """
 
@@ -97,7 +97,8 @@ def test_present_calibration_of_the_teams_files(robot, tmp_path):
     expected = node_rotation({"offset_x": -0.065, "offset_y": 0.02, "offset_z": 0.01})
     vec = present.corrections.frames[robot.camera_joint]
     assert np.allclose(vec[:3], 0.0) and (Rotation.from_rotvec(vec[3:]).inv() * expected).magnitude() < 1e-12
-    assert present.corrections.offsets == {"RKnee": 0.012, "HeadTilt": -0.004}
+    assert present.corrections.offsets == pytest.approx({"RKnee": 0.012, "HeadTilt": 0.096})  # mounting + joint
+    assert present.mounting == {"HeadTilt": 0.1}
     assert present.imu == (-0.03, 0.03, 0.0)
 
 
@@ -114,7 +115,7 @@ def test_deploy_files_hold_the_new_total_and_keep_the_imu_block(robot, tmp_path)
     write_deploy_files(robot, new, out, present)
     again = load_current([out], robot)
     assert again.imu == present.imu
-    assert again.corrections.offsets == pytest.approx({"RKnee": 0.02, "HeadTilt": -0.004}, abs=1e-10)
+    assert again.corrections.offsets == pytest.approx({"RKnee": 0.02, "HeadTilt": 0.096}, abs=1e-10)
     assert np.allclose(again.corrections.frames[robot.camera_joint], [0, 0, 0, -0.08, 0.01, 0.0], atol=1e-9)
     snippet = yaml.safe_load((out / "wolfgang_hardware_interface_offsets.yaml").read_text())
     table = yaml.safe_load(HARDWARE_FILE)
@@ -122,7 +123,8 @@ def test_deploy_files_hold_the_new_total_and_keep_the_imu_block(robot, tmp_path)
         table["wolfgang_hardware_interface"]["ros__parameters"]["device_info"][joint].update(entry)
     devices = table["wolfgang_hardware_interface"]["ros__parameters"]["device_info"]
     assert devices["RKnee"]["joint_offset"] == pytest.approx(0.02) and devices["RKnee"]["id"] == 13
-    assert devices["HeadTilt"]["joint_offset"] == pytest.approx(-0.004)
+    assert devices["HeadTilt"]["joint_offset"] == pytest.approx(-0.004)  # the mounting offset stays apart
+    assert devices["HeadTilt"]["mounting_offset"] == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize("text, words", [

@@ -138,7 +138,7 @@ def write_deploy_files(
     write_calibrated_urdf(urdf, model, corrections, paths["calibrated.urdf"], fold_offsets=False)
     write_calibrated_urdf(urdf, model, corrections, paths["calibrated_folded.urdf"], fold_offsets=True)
     write_text_atomic(paths[JOINT_OFFSETS_FILE], joint_offsets_text(offsets))
-    write_text_atomic(paths[HARDWARE_FILE], hardware_offsets_text(offsets))
+    write_text_atomic(paths[HARDWARE_FILE], hardware_offsets_text(offsets, present.mounting if present else {}))
     if robot.config.camera is None:
         return [p for name, p in paths.items() if name not in (EXTRINSIC_FILE, CAMERA_CORRECTION_FILE)]
     write_text_atomic(paths[EXTRINSIC_FILE], team_extrinsic_text(robot, corrections, present))

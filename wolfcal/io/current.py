@@ -47,15 +47,18 @@ BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0
 @dataclass
 class CurrentCalibration:
     """The robot's present calibration: corrections (offsets [rad], the camera's frame correction [m, rad]), the
-    team file's IMU block (offset_x, offset_y, offset_z) [rad] or None, and the files it was read from."""
+    team file's IMU block (offset_x, offset_y, offset_z) [rad] or None, the files it was read from, and the hardware
+    interface's mounting_offset per joint [rad] (part of each offset; kept as it is when deploying)."""
 
     corrections: Corrections = field(default_factory=Corrections)
     imu: tuple[float, float, float] | None = None
     sources: list[str] = field(default_factory=list)
+    mounting: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"sources": list(self.sources), "corrections": self.corrections.to_dict(),
-                "imu_offsets": None if self.imu is None else [float(v) for v in self.imu]}  # fmt: skip
+                "imu_offsets": None if self.imu is None else [float(v) for v in self.imu],
+                "mounting_offsets": dict(self.mounting)}  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict, source: str) -> CurrentCalibration:
@@ -64,7 +67,8 @@ class CurrentCalibration:
         imu = data.get("imu_offsets")
         return cls(Corrections.from_dict(data["corrections"], f"{source}: current.corrections"),
                    None if imu is None else (float(imu[0]), float(imu[1]), float(imu[2])),
-                   [str(s) for s in data.get("sources") or []])  # fmt: skip
+                   [str(s) for s in data.get("sources") or []],
+                   {str(k): float(v) for k, v in (data.get("mounting_offsets") or {}).items()})  # fmt: skip
 
 
 def camera_axes_rotation(robot: Robot) -> np.ndarray:
@@ -114,21 +118,22 @@ def _camera_correction(path: Path, data: dict, robot: Robot) -> np.ndarray:
     return np.concatenate([t, log_so3(rpy_to_matrix(rpy))])
 
 
-def _read_one(path: Path, robot: Robot) -> tuple[dict[str, float], np.ndarray | None, tuple | None]:
-    """(offsets, camera correction vector or None, IMU block or None) of one file."""
+def _read_one(path: Path, robot: Robot) -> tuple[dict[str, float], np.ndarray | None, tuple | None, dict]:
+    """(offsets, camera correction vector or None, IMU block or None, mounting offsets) of one file."""
     data = read_yaml(path, "calibration file (--current)")
     keys = list(data) if isinstance(data, dict) else []
     names = {"/" + str(k).lstrip("/") for k in keys}
     if keys and names <= {CAMERA_NODE, IMU_NODE}:
         team = read_extrinsic_file(path)
         camera = None if team.camera is None else _camera_vector(robot, rotation_of_offsets(team.camera), np.zeros(3))
-        return {}, camera, team.imu
+        return {}, camera, team.imu, {}
     if keys == ["joint_offsets"]:
-        return _joint_offsets(path, data), None, None
+        return _joint_offsets(path, data), None, None, {}
     if {"parent_frame", "child_frame", "translation", "rpy"} <= set(keys):
-        return {}, _camera_correction(path, data, robot), None
+        return {}, _camera_correction(path, data, robot), None, {}
     if len(keys) == 1 and isinstance(data[keys[0]], dict) and "ros__parameters" in data[keys[0]]:
-        return read_hardware_offsets(path), None, None
+        hardware = read_hardware_offsets(path)
+        return {j: m + o for j, (m, o) in hardware.items()}, None, None, {j: m for j, (m, _) in hardware.items()}
     first = keys[0] if keys else None
     raise WolfcalError(
         f"{path}: {'key ' + repr(first) if first is not None else 'the content'} is not of a calibration file wolfcal "
@@ -159,8 +164,10 @@ def load_current(paths: list[Path], robot: Robot) -> CurrentCalibration:
     offsets: dict[str, tuple[float, Path]] = {}
     camera: tuple[np.ndarray, Path] | None = None
     imu: tuple[tuple, Path] | None = None
+    mounting: dict[str, float] = {}
     for path in current_files(paths):
-        file_offsets, file_camera, file_imu = _read_one(path, robot)
+        file_offsets, file_camera, file_imu, file_mounting = _read_one(path, robot)
+        mounting.update({j: m for j, m in file_mounting.items() if m != 0.0})
         for joint, value in file_offsets.items():
             if joint not in robot.joint_names:
                 raise WolfcalError(f"{path}: '{joint}' is not a movable joint of {robot.config.urdf}; is this the "
@@ -175,7 +182,8 @@ def load_current(paths: list[Path], robot: Robot) -> CurrentCalibration:
             imu = (file_imu, path)
     frames = {robot.camera_joint: camera[0]} if camera is not None else {}
     return CurrentCalibration(Corrections({j: v for j, (v, _) in offsets.items()}, frames),
-                              None if imu is None else imu[0], [str(p) for p in current_files(paths)])  # fmt: skip
+                              None if imu is None else imu[0], [str(p) for p in current_files(paths)],
+                              mounting)  # fmt: skip
 
 
 def _merge_camera(known: tuple[np.ndarray, Path] | None, vec: np.ndarray, path: Path) -> tuple[np.ndarray, Path]:

@@ -9,8 +9,8 @@
   translation.
 - The hardware interface's servo table (bitbots_ros_control `config/wolfgang.yaml`): `wolfgang_hardware_interface:
   ros__parameters: device_info: <joint>: {id, model_number, mounting_offset, joint_offset, ...}`; on read the
-  interface adds `mounting_offset + joint_offset` [rad] to the servo's position, i.e. q_used = q_read + joint_offset,
-  the same convention as wolfcal's encoder offsets.
+  interface adds `mounting_offset + joint_offset` [rad] to the servo's position: q_used = q_read + mounting_offset +
+  joint_offset, the convention of wolfcal's encoder offsets with offset = mounting_offset + joint_offset.
 """
 
 from __future__ import annotations
@@ -123,9 +123,10 @@ def extrinsic_text(
     return "\n".join(lines) + "\n"
 
 
-def read_hardware_offsets(path: Path) -> dict[str, float]:
-    """joint -> joint_offset [rad] of a hardware interface parameter file (`<node>: ros__parameters: device_info:
-    <joint>: {joint_offset, ...}`); devices without a joint_offset (IMU, LEDs, buttons) are skipped."""
+def read_hardware_offsets(path: Path) -> dict[str, tuple[float, float]]:
+    """joint -> (mounting_offset, joint_offset) [rad] of a hardware interface parameter file (`<node>:
+    ros__parameters: device_info: <joint>: {mounting_offset, joint_offset, ...}`; a missing mounting_offset is 0);
+    devices without a joint_offset (IMU, LEDs, buttons) are skipped."""
     data = read_yaml(Path(path), "hardware interface parameter file")
     if not isinstance(data, dict) or len(data) != 1:
         raise WolfcalError(f"{path}: not a hardware interface parameter file (expected one node, e.g. "
@@ -139,17 +140,21 @@ def read_hardware_offsets(path: Path) -> dict[str, float]:
     offsets = {}
     for joint, device in devices.items():
         if isinstance(device, dict) and "joint_offset" in device:
-            value = device["joint_offset"]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-                raise WolfcalError(f"{path}: '{node}.ros__parameters.device_info.{joint}.joint_offset' must be a "
-                                   f"number [rad], found {value!r}")  # fmt: skip
-            offsets[str(joint)] = float(value)
+            values = []
+            for key in ("mounting_offset", "joint_offset"):
+                value = device.get(key, 0.0)
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+                    raise WolfcalError(f"{path}: '{node}.ros__parameters.device_info.{joint}.{key}' must be a "
+                                       f"number [rad], found {value!r}")  # fmt: skip
+                values.append(float(value))
+            offsets[str(joint)] = (values[0], values[1])
     return offsets
 
 
-def hardware_offsets_text(offsets: dict[str, tuple[float, str]]) -> str:
-    """The hardware interface's per-joint `joint_offset` values as a parameter-file snippet: joint -> (offset [rad],
-    note), in the given order."""
+def hardware_offsets_text(offsets: dict[str, tuple[float, str]], mounting: dict[str, float]) -> str:
+    """The hardware interface's per-joint `joint_offset` values as a parameter-file snippet: joint -> (encoder offset
+    [rad], note), in the given order; each joint_offset is the offset less the joint's `mounting_offset` (which the
+    interface adds as well; written beside it, unchanged, where not 0; 0 where not given)."""
     lines = [
         "# joint_offset per joint for the hardware interface (bitbots_ros_control config/wolfgang.yaml,",
         "# device_info.<joint>.joint_offset): q_used = q_read + mounting_offset + joint_offset [rad].",
@@ -158,7 +163,11 @@ def hardware_offsets_text(offsets: dict[str, tuple[float, str]]) -> str:
         "  ros__parameters:",
         "    device_info:" + ("" if offsets else " {}"),
     ]
-    for joint, (value, note) in offsets.items():
-        lines += [f"      {joint}:", f"        joint_offset: {ros_double(value)}  # {np.rad2deg(value):+.3f} deg, "
-                  f"{value / RAD_PER_TICK:+.1f} ticks{'; ' + note if note else ''}"]  # fmt: skip
+    for joint, (total, note) in offsets.items():
+        value = total - mounting.get(joint, 0.0)
+        lines.append(f"      {joint}:")
+        if mounting.get(joint):
+            lines.append(f"        mounting_offset: {ros_double(mounting[joint])}  # unchanged")
+        lines.append(f"        joint_offset: {ros_double(value)}  # {np.rad2deg(value):+.3f} deg, "
+                     f"{value / RAD_PER_TICK:+.1f} ticks{'; ' + note if note else ''}")  # fmt: skip
     return "\n".join(lines) + "\n"
