@@ -155,10 +155,13 @@ def _advice(free: str, structure: dict | None) -> str:
 
 def _unexplained_refusal(what: str, structure: dict) -> tuple[str, str]:
     """(what to do, why) when the free parameters cannot explain the held-out tags (`structure.unexplained`)."""
+    tested = structure.get("tested") or {}
+    scales = ", ".join(f"--free {p} {'could not be fitted' if v is None else f'{v:.1f}'}" for p, v in tested.items())
+    sets = f" Fitted on the same views, the whitened residual scale (1 = explained) is: {scales}." if tested else ""
     return what, (
         f"Held-out tags are off by {structure['view_shift_rms_px']:.2f} px RMS per axis, {structure['scale']:.1f} "
         f"times what detection noise ({structure['corner_noise_px']:.2f} px) and joint quantisation explain: "
-        f"{what}.")
+        f"{what}.{sets}")
 
 
 def _judge_measured_ground(
