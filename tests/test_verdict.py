@@ -57,9 +57,9 @@ WOLFGANG_CHECK = {"samples": 48, "stances": 16, "layouts": 3}  # `check_size` of
      "stays above the limit: 8.0 +- 1.0 cm (1 sigma) > 5 cm"),
     ({"before_m": 0.30, "after_m": 0.02, "after_std_m": 0.01}, True, "measured ground error at 4.5 m 2.0 +- 1.0 cm"),
     # above the limit, within 2 sigma of it: refused all the same, with the advice to measure it more precisely
-    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm (--ground-limit"
-     "-cm). The measurement is that uncertain: to measure it more precisely, list standing poses none of the fit's "
-     "in the robot config's floor.check_stances"),
+    ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02}, False, "7.0 +- 2.0 cm (1 sigma) > 5 cm "
+     "(floor.ground_check.limit or --ground-limit-cm). The measurement is that uncertain: to measure it more "
+     "precisely, list standing poses none of the fit's in the robot config's floor.check_stances"),
     ({"before_m": 0.30, "after_m": 0.07, "after_std_m": 0.02, "check": WOLFGANG_CHECK}, False, "uncertain: to "
      "measure it more precisely, take more held-out floor samples: `wolfcal capture --floor --check` 3 times"),
     # the same from a held-out capture smaller than the check's: what it lacks is named

@@ -74,6 +74,14 @@ def force_option() -> bool:
     return typer.Option(False, "--force", help=FORCE_HELP)
 
 
+CURRENT_HELP = ("The robot's present calibration: a bitbots_extrinsic_calibration YAML, a hardware interface file "
+                "with joint_offset values, or a folder of files wolfcal deployed before. Repeatable.")
+
+
+def current_option() -> list[Path]:
+    return typer.Option([], "--current", help=CURRENT_HELP)
+
+
 @app.command()
 @friendly_errors
 def intrinsics(
@@ -179,6 +187,7 @@ def fit(
     external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
                                          "one pose per sample instead of one per capture file."),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
+    current: list[Path] = current_option(),
     force: bool = force_option(),
 ) -> None:
     """Estimate the chosen free parameters from one or more captures."""
@@ -189,7 +198,7 @@ def fit(
                          mocap_moving=mocap_moving)
     with cache_enabled(not no_cache):
         run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force,
-                mocap=mocap, mocap_offsets=mocap_offset)
+                mocap=mocap, mocap_offsets=mocap_offset, current=current)
 
 
 @app.command()
@@ -205,24 +214,27 @@ def evaluate(
     ),
     force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
-    ground_limit: float = typer.Option(5.0, "--ground-limit-cm", help="Largest measured ground error at 4.5 m "
-                                       "that may be deployed [cm]."),
+    ground_limit: float | None = typer.Option(None, "--ground-limit-cm", help="Largest measured ground error that "
+                                              "may be deployed [cm] (default: the robot config's "
+                                              "floor.ground_check.limit, 5 cm)."),
     mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
                                       "camera by more than this [deg] and no floor samples measure the ground "
                                       "error."),
+    current: list[Path] = typer.Option([], "--current", help="The robot's present calibration, the 'before' model "
+                                       "(default: the one the fit started from). " + CURRENT_HELP.split(": ", 1)[1]),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
     import math
 
     from wolfcal.evaluate.pipeline import run_evaluate
-    from wolfcal.evaluate.verdict import VerdictLimits
     from wolfcal.vision.cache import cache_enabled
 
-    if ground_limit <= 0 or mount_limit <= 0:
+    if (ground_limit is not None and ground_limit <= 0) or mount_limit <= 0:
         raise WolfcalError("--ground-limit-cm and --mount-limit-deg must be positive")
     with cache_enabled(not no_cache):
-        limits = VerdictLimits(ground_limit / 100.0, math.radians(mount_limit))
-        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force, limits=limits)
+        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force,
+                               ground_limit_m=None if ground_limit is None else ground_limit / 100.0,
+                               mount_limit_rad=math.radians(mount_limit), current=current)
     if not metrics["deploy"]["written"]:
         raise DeployRefused("the verdict above withholds the deploy files; --deploy-worse writes them anyway")
 

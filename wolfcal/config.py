@@ -507,6 +507,16 @@ class FloorTagConfig:
 
 
 @dataclass(frozen=True)
+class GroundCheck:
+    """The deploy verdict's ground error (`floor.ground_check`): a ball seen `distance` [m] away must land within
+    `limit` [m] of where it lies. Defaults suit a KidSize field (9 x 6 m: 4.5 m is half its length); an AdultSize
+    field (14 x 9 m) sees balls farther away (7 m is half its length)."""
+
+    distance: float = 4.5  # [m]
+    limit: float = 0.05  # [m]
+
+
+@dataclass(frozen=True)
 class FloorConfig:
     """The venue ground check (DESIGN.md `floor:`): the floor is the plane of the standing soles."""
 
@@ -517,6 +527,7 @@ class FloorConfig:
     # standing poses of the held-out floor capture that checks a fit (`floor.check_stances`, `capture --floor
     # --check`), none of the fit's: a stance the fit saw reads the ticks whose rounding the fit took in
     check_stances: tuple[dict[str, float], ...] = ()
+    ground_check: GroundCheck = GroundCheck()  # the verdict's ground error distance and limit (`floor.ground_check`)
 
     @property
     def floor_stances(self) -> tuple[dict[str, float], ...]:
@@ -545,7 +556,7 @@ class FloorConfig:
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
     r = _Reader(path, data, "floor")
-    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances"))
+    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances", "ground_check"))
     soles = r.data["soles"]
     if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
         r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
@@ -575,7 +586,18 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         size = check_printed_edge(t.number("size", positive=True), f"{path}: '{t.sub('size')}'")
         tags.append(FloorTagConfig(tag_id, family, size, thickness))
-    return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances)
+    return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances, _ground_check(path, r.data))
+
+
+def _ground_check(path: Path, floor: dict) -> GroundCheck:
+    """`floor.ground_check: {distance, limit}` [m, m], each optional (defaults: `GroundCheck`)."""
+    if floor.get("ground_check") is None:
+        return GroundCheck()
+    r = _Reader(path, floor["ground_check"], "floor.ground_check")
+    r.check_keys((), ("distance", "limit"))
+    default = GroundCheck()
+    return GroundCheck(r.number("distance", default.distance, positive=True),
+                       r.number("limit", default.limit, positive=True))  # fmt: skip
 
 
 def _stances(r: _Reader, key: str) -> tuple[dict[str, float], ...]:

@@ -12,8 +12,9 @@ held-out captures can measure, each with the existing evaluation code of its sys
   is flattered), the base pose in the motion-capture frame per capture by a rigid registration of the torso markers
   (per marker its median over the capture), which no leg model changes; a marker in a sample that is off by more
   than 3 times the median distance and 1 mm under any model (a reflection) is left out for all rows;
-- ground error at 4.5 m [cm], from the head camera's held-out views of the floor tags (`floor_ground`: the real
-  floor fitted to the views under each model, the error of a ball seen 4.5 m away at the worst of three bearings);
+- ground error at the robot config's `floor.ground_check.distance` (default 4.5 m) [cm], from the head camera's
+  held-out views of the floor tags (`floor_ground`: the real floor fitted to the views under each model, the error
+  of a ball seen that far away at the worst of three bearings);
   one number per row with its 1-sigma, not a distribution.
 Each cell: mean and standard deviation over the held-out samples (views, markers) in the column's unit (ground:
 the error and its 1-sigma).
@@ -39,7 +40,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.external import foot_tag_grid_mm
 from wolfcal.evaluate.figures import AFTER, BEFORE, histograms_png
 from wolfcal.evaluate.floor_ground import measured_ground_errors
-from wolfcal.evaluate.ground import VERDICT_DISTANCE_M
+from wolfcal.evaluate.ground_figures import ground_check
 from wolfcal.evaluate.metrics import measure_tag_views, model_errors, outlier_samples
 from wolfcal.evaluate.pipeline import load_fit, refuse_fitted_captures
 from wolfcal.evaluate.report import render_html, render_markdown
@@ -151,12 +152,14 @@ def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Cap
 
 def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observations | None,
                    say: Callable, corner_inset: tuple[float, float]) -> list[Column]:  # fmt: skip
-    """The measured ground error at VERDICT_DISTANCE_M [cm] of every model, from held-out floor views (none
-    without them or when too few views measure it); a ball above a model's horizon is an infinite error.
-    corner_inset: the detector's inward corner bias on small floor tags [px] and its 1-sigma, from a fit."""
+    """The measured ground error at the robot config's `floor.ground_check.distance` [cm] of every model, from
+    held-out floor views (none without them or when too few views measure it); a ball above a model's horizon is an
+    infinite error. corner_inset: the detector's inward corner bias on small floor tags [px] and its 1-sigma, from a
+    fit."""
     if floor is None:
         return []
-    measured = measured_ground_errors(robot, floor, models, (VERDICT_DISTANCE_M,), corner_inset)
+    distance = ground_check(robot).distance
+    measured = measured_ground_errors(robot, floor, models, (distance,), corner_inset)
     if measured is None:
         say(f"floor: {floor.n_samples} sample(s) with floor tags, too few views to measure the ground error")
         return []
@@ -166,7 +169,7 @@ def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observat
         error, std = rows["rows"][0]["error_m"], rows["rows"][0]["std_m"]
         values[label] = np.array([np.inf if error is None else error * 100.0])
         sigma[label] = np.nan if std is None else std * 100.0
-    return [Column("ground_cm", f"ground error at {VERDICT_DISTANCE_M:g} m, measured on floor tags", "cm", "head",
+    return [Column("ground_cm", f"ground error at {distance:g} m, measured on floor tags", "cm", "head",
                    values, sigma)]  # fmt: skip
 
 
@@ -349,7 +352,8 @@ def run_compare(
         "columns": [{"key": col.key, "title": col.title, "unit": col.unit, "system": col.system} for col in columns],
         "table": {label: {col.key: _cell(col, label) for col in columns} for label in models},
         "not_measured": [] if any(col.key == "ground_cm" for col in columns) else [
-            f"ground error at {VERDICT_DISTANCE_M:g} m [cm] (needs held-out head-camera views of the floor tags)"],
+            f"ground error at {ground_check(robot).distance:g} m [cm] (needs held-out head-camera views of the floor "
+            "tags)"],
         "decision": decision,
     }  # fmt: skip
     _write_report(out_dir, metrics, columns, calibrations)

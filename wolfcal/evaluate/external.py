@@ -1,7 +1,8 @@
 """Held-out evaluation of external-camera captures: how well a model predicts what a tripod camera saw.
 
 Each held-out capture is its own placement: its camera pose is estimated with the chain held at the judged model
-(the nominal URDF "before", the calibration "after"), so only the model's chain is judged. Figures per camera:
+(the present calibration, else the nominal URDF, "before"; the calibration "after"), so only the model's chain is
+judged. Figures per camera:
 - reprojection RMS per axis [px] of the corners of the fit's tags (inlier views), and the max corner distance;
 - the study's tag-grid metric on each foot tag relative to the torso tag [mm]: T_torso_tag_foot_tag measured by PnP
   of both tags in the same image against the model's prediction; mean distance of a 5 x 4 grid on the foot tag;
@@ -71,13 +72,14 @@ def foot_tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> lis
 
 def external_metrics(
     robot: Robot, observations: dict[str, Observations], fitted: Corrections, truth: Corrections | None,
-    say: Callable[[str], None],
+    say: Callable[[str], None], before: Corrections | None = None,
 ) -> dict:
-    """Before/after figures of every external camera's held-out views (see the module docstring)."""
+    """Before (`before`, default the nominal URDF) / after figures of every external camera's held-out views (see
+    the module docstring)."""
     if not observations:
         raise WolfcalError("the held-out captures hold no external-camera views of the fit's tags")
     out: dict = {"meaning": __doc__.split("\n\n", 1)[1].strip(), "cameras": {}}
-    models = {"before": Corrections(), "after": fitted}
+    models = {"before": before if before is not None else Corrections(), "after": fitted}
     for name, obs in observations.items():
         say(f"external camera {name}: fitting each placement's pose with the chain held, before and after ...")
         rows = {}

@@ -25,7 +25,6 @@ from wolfcal.robot.robot import Robot
 
 DISTANCES_M = (1.0, 2.0, 4.5, 9.0)
 BEARINGS_RAD = tuple(np.deg2rad((-30.0, 0.0, 30.0)))
-VERDICT_DISTANCE_M = 4.5  # half a field: the distance the deploy verdict judges
 
 
 def ground_point(
@@ -93,7 +92,7 @@ def ground_errors(
 
 def predicted_ground_std(
     robot: Robot, camera: CameraModel, chain: ParameterSet, values: np.ndarray, covariance: np.ndarray,
-    distance: float = VERDICT_DISTANCE_M,
+    distance: float,
 ) -> float:
     """1-sigma ground error at `distance` [m] that the fit's covariance (P, P) of the chain parameter `values` (P,)
     [SI] implies: sqrt(trace(J C J^T)) of the landing point on the floor, worst bearing (J by central differences)."""

@@ -1,8 +1,11 @@
 """`wolfcal evaluate`: a fit + held-out captures (or k-fold cross-validation) -> report and files to deploy.
 
-Before = the input URDF (no corrections); after = the fit's corrections. Every error is measured on samples the
-judged model was not fitted on. The deploy files are written only when the verdict (`verdict`: pixels, whether the
-model explains the data, ground error) allows it, or with deploy_worse=True. This module only runs the steps;
+Before = the robot's present calibration (`--current` of the evaluation, else the one the fit started from, else the
+input URDF with no corrections); after = the model to deploy (`undetermined.deployable_model`: the present
+calibration with the fitted parameters' new totals, a parameter the data cannot determine held at its present value).
+Every error is measured on samples the judged model was not fitted on. The deploy files are written only when the
+verdict (`verdict`: pixels, whether the model explains the data, ground error) allows it, or with
+deploy_worse=True. This module only runs the steps;
 errors are `metrics` / `ground` / `crossval` / `structure`, the report's words `report_content`, its pictures
 `report_figures`, the files to deploy `deploy`.
 """
@@ -18,13 +21,21 @@ import numpy as np
 
 import wolfcal
 from wolfcal.atomic import make_folder, output_set, write_bytes_atomic, write_text_atomic
-from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
-from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
+from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, deploy_lines, write_or_withhold_deploy_files
+from wolfcal.evaluate.explaining import explaining_preset
 from wolfcal.evaluate.external import external_metrics
-from wolfcal.evaluate.floor_ground import measured_ground_errors
-from wolfcal.evaluate.ground import DISTANCES_M, VERDICT_DISTANCE_M, ground_errors, predicted_ground_std
+from wolfcal.evaluate.ground_figures import (
+    camera_turn,
+    ground_distances,
+    ground_rows,
+    ground_section,
+    measured_ground,
+    predicted_ground,
+    verdict_ground,
+    verdict_limits,
+)
 from wolfcal.evaluate.metrics import (
     HeldOutErrors,
     ModelErrors,
@@ -45,9 +56,11 @@ from wolfcal.evaluate.report_content import (
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.evaluate.structure import unexplained
-from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
+from wolfcal.evaluate.undetermined import deployable_model
+from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
+from wolfcal.io.current import CurrentCalibration, current_files, load_current
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
@@ -55,7 +68,6 @@ from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
-from wolfcal.robot.parameters import ParameterSet, build_parameter_set
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations, observations_of
@@ -119,34 +131,12 @@ def _observe(
     return samples, obs.only_tags(tags), tags, warnings, floor
 
 
-def _measured_ground(robot: Robot, floor: Observations | None, fitted: Corrections, held_out: bool,
-                     say: Callable[[str], None], corner_inset: tuple[float, float]) -> dict | None:  # fmt: skip
-    """`floor_ground.measured_ground_errors` of the held-out floor views, before and after (None: not measured)."""
-    if floor is None or not held_out:
-        return None
-    say("measuring the ground error on the held-out floor views ...")
-    return measured_ground_errors(robot, floor, {"before": Corrections(), "after": fitted}, DISTANCES_M, corner_inset)
-
-
-def _verdict_ground(measured: dict | None) -> dict | None:
-    """The verdict's {'before_m', 'after_m', 'after_std_m'} at 4.5 m (inf: the ball lies above the horizon)."""
-    if measured is None:
-        return None
-    k = DISTANCES_M.index(VERDICT_DISTANCE_M)
-    before, after = (measured["models"][m]["rows"][k] for m in ("before", "after"))
-    inf = float("inf")
-    return {"before_m": inf if before["error_m"] is None else before["error_m"],
-            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"],
-            "before_std_m": before["std_m"] or 0.0, "capture": measured.get("capture"),
-            "check": measured.get("check")}
-
-
 def _run_external_evaluate(
     robot: Robot, result: FitResult, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
-    out_dir: Path, deploy_worse: bool, say: Callable[[str], None],
+    out_dir: Path, deploy_worse: bool, say: Callable[[str], None], present: CurrentCalibration,
 ) -> dict:
     """Held-out external-camera captures (read: `loaded`): `external_metrics` before/after, metrics.json,
-    report.md, deploy files unless the reprojection error of any camera got worse."""
+    report.md, deploy files (totals on `present`) unless the reprojection error of any camera got worse."""
     samples, warnings = samples_of(loaded, robot, cameras=())
     names = [c.name for c in robot.config.external_cameras]
     observations, detect_warnings = detect_observations(samples, robot, cameras=names)
@@ -154,11 +144,11 @@ def _run_external_evaluate(
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
     truth = _truth_reference(captures)
-    figures = external_metrics(robot, observations, fitted, truth, say)
+    figures = external_metrics(robot, observations, fitted, truth, say, present.corrections)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     make_folder(out_dir)
     refused = "The calibration makes the held-out reprojection error worse." if worse else None
-    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse)
+    deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, deploy_worse, present)
     lines = [f"# wolfcal evaluation {robot.config.name}: held-out external-camera captures", "",
              f"fit: {fit_dir.resolve()}; captures: {', '.join(str(c) for c in captures)}", "",
              figures["meaning"], "", "| camera | model | RMS [px] | max [px] | tag grid [mm] mean +- std |",
@@ -203,41 +193,6 @@ def _truth_reference(captures: list[Path]) -> Corrections | None:
     return truths[0] if all(t.to_dict() == first for t in truths[1:]) else None
 
 
-def _ground_rows(
-    robot: Robot, camera: CameraModel, reference: Corrections, fitted: Corrections, say: Callable[[str], None]
-) -> tuple[list[dict], str | None]:
-    """`ground_errors` rows of the input URDF and the calibration [m], or none and why (no `floor:` config)."""
-    if robot.config.floor is None:
-        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
-                    "computed")
-    say("computing the ground error ...")
-    models = {"before": Corrections(), "after": fitted}
-    return ground_errors(robot, camera, reference, models, DISTANCES_M), None
-
-
-def _predicted_ground(
-    robot: Robot, camera: CameraModel, result: FitResult, tags: list[int], fitted: Corrections
-) -> float | None:
-    """1-sigma ground error at 4.5 m [m] from the fit's covariance of its chain parameters (None without floor)."""
-    covariance = result.covariance
-    if robot.config.floor is None or not covariance:
-        return None
-    chain = build_parameter_set(robot, result.free, {HEAD_CAMERA: tags}, result.side, result.fix_tags)
-    index = {name: i for i, name in enumerate(covariance["names"])}
-    keep = [k for k, name in enumerate(chain.names) if name in index]
-    cols = [index[chain.names[k]] for k in keep]
-    sub = ParameterSet([chain.parameters[k] for k in keep])
-    matrix = np.asarray(covariance["matrix"], dtype=float)[np.ix_(cols, cols)]
-    return predicted_ground_std(robot, camera, sub, sub.values_from(fitted), matrix)
-
-
-def camera_turn(robot: Robot, fitted: Corrections) -> float:
-    """Rotation angle of the fitted camera frame correction [rad] (0 without a head camera)."""
-    if robot.config.camera is None:
-        return 0.0
-    return float(np.linalg.norm(fitted.frames.get(robot.camera_joint, np.zeros(6))[3:]))
-
-
 REPORT_FILES = ("report.html", "report.md", "metrics.json")
 
 
@@ -258,31 +213,29 @@ PARAMETER_KEYS = ("name", "value", "std", "unit", "data_share", "display")  # of
 
 
 def _after(
-    robot: Robot, obs: Observations, views: TagViews, result: FitResult, held_out: list[Path] | None, folds: int,
-    say: Callable[[str], None],
+    robot: Robot, obs: Observations, views: TagViews, result: FitResult, fitted: Corrections,
+    present: CurrentCalibration, held_out: list[Path] | None, folds: int, say: Callable[[str], None],
 ) -> tuple[ModelErrors, list[Corrections], np.ndarray | None, str]:
-    """Errors of the calibrated model: on held-out captures (`held_out`) the fitted one, otherwise each sample under
-    the model of the cross-validation fold that left it out. Also the model per sample, the fold of each sample
-    (None when held out) and the sentence saying which."""
-    fitted = result.corrections
+    """Errors of the calibrated model: on held-out captures (`held_out`) the model to deploy (`fitted`), otherwise
+    each sample under the model to deploy of the cross-validation fold that left it out.
+    Also the model per sample, the fold of each sample (None when held out) and the sentence saying which."""
     if held_out is not None:
         note = held_out_note(held_out, result.captures)
         return model_errors(robot, obs, views, fitted), [fitted] * obs.n_samples, None, note
-    fold_of, models = cross_validate(robot, obs, result.options, folds, say)
+    fold_of, models = cross_validate(robot, obs, result.options, folds, say, present)
     after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
     return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs.n_samples)
 
 
 def _judge(
-    robot: Robot, obs: Observations, result: FitResult, sources: list[Path], held_out: bool, folds: int,
-    say: Callable[[str], None],
+    robot: Robot, obs: Observations, views: TagViews, result: FitResult, fitted: Corrections,
+    present: CurrentCalibration, sources: list[Path], held_out: bool, folds: int, say: Callable[[str], None],
 ) -> HeldOutErrors:
-    """Errors before and after (see `_after`), the outlier samples and the summaries; more than MAX_LEFT_OUT of the
-    samples left out is refused (WolfcalError)."""
-    views = measure_tag_views(robot, obs)
-    before = model_errors(robot, obs, views, Corrections())
-    after, after_of_sample, fold_of, mode_note = _after(robot, obs, views, result, sources if held_out else None,
-                                                       folds, say)  # fmt: skip
+    """Errors before (the present calibration) and after (see `_after`), the outlier samples and the summaries;
+    more than MAX_LEFT_OUT of the samples left out is refused (WolfcalError)."""
+    before = model_errors(robot, obs, views, present.corrections)
+    after, after_of_sample, fold_of, mode_note = _after(robot, obs, views, result, fitted, present,
+                                                       sources if held_out else None, folds, say)  # fmt: skip
     outliers = outlier_samples(before, after)
     check_left_out(
         {"samples": (int(outliers.sum()), obs.n_samples)},
@@ -294,16 +247,18 @@ def _judge(
                          summary(obs, views, before, outliers), summary(obs, views, after, outliers))  # fmt: skip
 
 
-def _ground_section(robot: Robot, from_truth: bool, rows: list[dict], measured: dict | None) -> dict:
-    """metrics['ground']: the ground error rows of the standing robot and the one measured on floor views."""
-    floor = robot.config.floor
-    return {
-        "reference": "simulator truth" if from_truth else "calibrated model",
-        "standing_pose_rad": dict(floor.standing) if floor else {},
-        "soles": list(floor.soles) if floor else [],
-        "rows": rows,
-        "measured": measured,
-    }
+def present_calibration(robot: Robot, result: FitResult, current: list[Path]) -> CurrentCalibration:
+    """The 'before' model: the evaluation's `--current` files, else the present calibration the fit started from
+    (empty: the input URDF). Files other than the fit's own are refused when the fit started from one."""
+    if not current:
+        return result.current_calibration
+    present = load_current(current, robot)
+    started = result.current_calibration
+    if result.current is not None and present.corrections.to_dict() != started.corrections.to_dict():
+        raise WolfcalError(
+            f"{', '.join(map(str, current))}: the fit started from another present calibration "
+            f"({', '.join(started.sources)}); leave out --current, or fit again with it")
+    return present
 
 
 @output_set()  # all outputs written as one set: nothing of a failed run replaces an earlier one
@@ -315,48 +270,65 @@ def run_evaluate(
     folds: int = 5,
     say: Callable[[str], None] = print,
     force: bool = False,
-    limits: VerdictLimits = VerdictLimits(),
+    ground_limit_m: float | None = None,
+    mount_limit_rad: float = MOUNT_LIMIT_RAD,
+    current: list[Path] | tuple[Path, ...] = (),
 ) -> dict:
     """The whole `wolfcal evaluate` job; returns the metrics written to out_dir/metrics.json.
 
-    With `captures` empty, k-fold cross-validation over the fit's own captures. The deploy files are written only
-    when the deploy verdict allows it (`verdict.deploy_verdict`: held-out reprojection RMS, whether the free
-    parameters explain the held-out data, the measured ground error; held-out external-camera captures alone: each
-    camera's reprojection RMS), or with `deploy_worse`; check `metrics['deploy']['written']`.
-    `before_after_table(metrics)` gives the terminal table. Outputs of an earlier run in out_dir are replaced only
-    with `force`; all are written as one set (`output_set`). More than MAX_LEFT_OUT of the samples left out as
-    outliers is refused (WolfcalError).
+    With `captures` empty, k-fold cross-validation over the fit's own captures. Before = the present calibration
+    (`present_calibration`: `current` files, else the fit's); after = the model to deploy (`deployable_model`). The
+    deploy files (totals) are written only when the deploy verdict allows it (`verdict.deploy_verdict`: held-out
+    reprojection RMS, whether the free parameters explain the held-out data, the measured ground error at the robot
+    config's `floor.ground_check` distance and limit, the limit overridden by `ground_limit_m` [m]; held-out
+    external-camera captures alone: each camera's reprojection RMS), or with `deploy_worse`; check
+    `metrics['deploy']['written']`. `before_after_table(metrics)` gives the terminal table. Outputs of an earlier
+    run in out_dir are replaced only with `force`; all are written as one set (`output_set`). More than
+    MAX_LEFT_OUT of the samples left out as outliers is refused (WolfcalError).
     """
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot = load_fit(fit_dir)
-    fitted = result.corrections
+    present = present_calibration(robot, result, list(current))
+    fitted, held_notes = deployable_model(result, present)
+    limits = verdict_limits(robot, ground_limit_m, mount_limit_rad)
+    distances = ground_distances(limits)
     held_out = bool(captures)
     refuse_fitted_captures(captures, result.captures)
     sources = [Path(c) for c in captures] if held_out else [Path(c) for c in result.captures]
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
-    inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
+    inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf,
+              *current_files(list(current))]  # fmt: skip
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
     intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):
-        return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say)
+        return _run_external_evaluate(robot, result, fitted, fit_dir, loaded, captures, out_dir, deploy_worse, say,
+                                      present)  # fmt: skip
     samples, obs, tags, warnings, floor = _observe(robot, result, loaded, sources, say)
-    errors = _judge(robot, obs, result, sources, held_out, folds, say)
+    views = measure_tag_views(robot, obs)
+    errors = _judge(robot, obs, views, result, fitted, present, sources, held_out, folds, say)
     truth = _truth_reference(sources)
-    ground_rows, no_ground = _ground_rows(robot, obs.camera, truth if truth is not None else fitted, fitted, say)
+    models = {"before": present.corrections, "after": fitted}
+    ground_table, no_ground = ground_rows(robot, obs.camera, truth, models, say, distances)
     if no_ground:
         warnings.append(no_ground)
     structure = unexplained(robot, obs, fitted, errors.after.residuals, ~errors.outliers)
-    predicted = _predicted_ground(robot, obs.camera, result, tags, fitted)
-    measured = _measured_ground(robot, floor, fitted, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0))
+    if structure["unexplained"]:
+        say("testing which free parameters explain the residuals ...")
+        structure.update(explaining_preset(robot, obs, views, result.options, present.corrections, ~errors.outliers))
+    predicted = predicted_ground(robot, obs.camera, result, tags, fitted, limits.ground_distance_m)
+    measured = measured_ground(robot, floor, models, held_out, say, result.estimate(CORNER_INSET) or (0.0, 0.0),
+                                distances)  # fmt: skip
     verdict = deploy_verdict(result.free, errors.summary_before["rms_px"], errors.summary_after["rms_px"], structure,
-                             _verdict_ground(measured), predicted, camera_turn(robot, fitted), limits)  # fmt: skip
+                             verdict_ground(measured, distances, limits.ground_distance_m), predicted,
+                             camera_turn(robot, fitted, present.corrections), limits)  # fmt: skip
+    verdict["notes"] += held_notes
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
     figures = report_figures(robot, obs, sample_by_key, errors, result.covariance)
     make_folder(out_dir)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
-                                            deploy_worse)  # fmt: skip
+                                            deploy_worse, present)  # fmt: skip
     metrics = {
         "wolfcal_version": wolfcal.__version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -372,9 +344,11 @@ def run_evaluate(
         "n_samples": obs.n_samples,
         "n_outliers": int(errors.outliers.sum()),
         "meanings": dict(MEANINGS),
+        "before_model": before_label(present),
+        "current": present.to_dict() if present.sources else None,
         "before": errors.summary_before,
         "after": errors.summary_after,
-        "ground": _ground_section(robot, truth is not None, ground_rows, measured),
+        "ground": ground_section(robot, truth is not None, ground_table, measured),
         "verdict": verdict,
         "structure": structure,
         "deploy": deploy,
@@ -388,7 +362,15 @@ def run_evaluate(
     _write_report(out_dir, metrics, figures)
     for line in before_after_table(metrics).splitlines():
         say(line)
-    for line in [verdict["message"], *verdict["refusals"][1:], *verdict["notes"]]:
+    for line in [verdict["message"], *verdict["refusals"][1:], *verdict["notes"], *deploy["warnings"]]:
+        say(line)
+    for line in deploy_lines(deploy, out_dir):
         say(line)
     say(f"report: {out_dir / 'report.html'}")
     return metrics
+
+
+def before_label(present: CurrentCalibration) -> str:
+    """What 'before' is: the present calibration's files, or the input URDF."""
+    return f"present calibration ({', '.join(Path(s).name for s in present.sources)})" if present.sources else \
+        "input URDF"

@@ -33,14 +33,24 @@ def headline_rows(metrics: dict) -> list[list[str]]:
     ]
     for row in metrics["ground"]["rows"]:
         before, after = row["models"]["before"], row["models"]["after"]
-        rows.append(
-            [
-                f"ground error, ball at {row['distance_m']:g} m [cm]",
-                _num(before["error_m"], 100, 1) if before["error_m"] is not None else "above horizon",
-                _num(after["error_m"], 100, 1) if after["error_m"] is not None else "above horizon",
-            ]
-        )
+        rows.append([f"ground error, ball at {row['distance_m']:g} m [cm]", ground_cell(before), ground_cell(after)])
     return rows
+
+
+NO_TRUTH = "n/a (no truth)"
+
+
+def ground_cell(entry: dict) -> str:
+    """A ground error [cm] of `ground.ground_errors`' model entry: n/a without a truth to measure it against, 'above
+    horizon' where the model puts the ball above it."""
+    if entry.get("no_truth"):
+        return NO_TRUTH
+    return "above horizon" if entry["error_m"] is None else _num(entry["error_m"], 100, 1)
+
+
+def column_headers(metrics: dict) -> list[str]:
+    """The before/after table's headers: what 'before' is (the present calibration or the input URDF)."""
+    return ["", f"before ({metrics.get('before_model', 'input URDF')})", "after (calibrated)"]
 
 
 def measured_ground_rows(metrics: dict) -> list[list[str]]:
@@ -60,7 +70,7 @@ def _measured(row: dict) -> str:
 
 def before_after_table(metrics: dict) -> str:
     """Plain-text before/after table for a terminal (with the measured ground error, a section of the report)."""
-    rows = [["", "before (input URDF)", "after (calibrated)"]] + headline_rows(metrics) + measured_ground_rows(metrics)
+    rows = [column_headers(metrics)] + headline_rows(metrics) + measured_ground_rows(metrics)
     widths = [max(len(r[i]) for r in rows) for i in range(3)]
     lines = [f"{r[0]:<{widths[0]}}  {r[1]:>{widths[1]}}  {r[2]:>{widths[2]}}" for r in rows]
     lines.insert(1, "-" * len(lines[0]))

@@ -11,8 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wolfcal.evaluate.deploy import DEPLOY_TABLE
 from wolfcal.evaluate.metrics import HeldOutErrors
-from wolfcal.evaluate.report import Block, headline_rows
+from wolfcal.evaluate.report import NO_TRUTH, Block, column_headers, headline_rows
 from wolfcal.observations import Observations
 
 INTRO = (
@@ -22,15 +23,6 @@ INTRO = (
     "sees better than the model in use today, on images the calibration was not computed from, and gives the files "
     "to load on the robot if it does."
 )
-DEPLOY_TEXT = """calibrated.urdf          the URDF with the calibration: camera (and any other frame) corrections in
-                         <origin>, encoder offsets as <calibration rising="offset"/> (ROS convention)
-calibrated_folded.urdf   the same model with each offset folded into its joint's <origin>, for
-                         robot_state_publisher and every tool that ignores <calibration>: publish it as
-                         robot_description with the encoder readings as they are
-joint_offsets.yaml       offset per joint [rad] for the hardware interface: add on read, subtract on write
-                         (use it with calibrated.urdf, never together with calibrated_folded.urdf)
-camera_correction.yaml   the camera correction alone: pose of the calibrated optical frame in the
-                         uncalibrated one, for a static-transform node (command below)"""
 MEANINGS = {
     "rms_px": "per-axis RMS of corner residuals sqrt(mean(du^2 + dv^2) / 2) [px], inlier samples",
     "max_px": "largest distance between a predicted and a detected corner [px], inlier samples",
@@ -109,7 +101,8 @@ def ground_text(reference_is_truth: bool, standing: dict[str, float], soles: lis
         )
     return (
         common + " Reference: the calibrated model (no ground truth is known for a real robot), so 'before' "
-        "is how far the calibration moves the ball, and 'after' is 0 by definition."
+        f"is how far the calibration moves the ball, and 'after' is {NO_TRUTH}: it cannot be measured against "
+        "itself (the ground error measured on held-out floor views, where there are any, is the measurement)."
     )
 
 
@@ -124,7 +117,7 @@ def ground_blocks(ground: dict) -> list[Block]:
             g = row["models"][model]
             cells += [
                 "above horizon" if g["landed_at_m"] is None else f"{g['landed_at_m']:.3f} m",
-                "n/a" if g["error_m"] is None else f"{g['error_m'] * 100:.1f} cm",
+                NO_TRUTH if g.get("no_truth") else "n/a" if g["error_m"] is None else f"{g['error_m'] * 100:.1f} cm",
             ]
         rows.append(cells)
     headers = ["ball at", "lands at, before", "error before", "lands at, after", "error after"]
@@ -193,11 +186,11 @@ def _headline_blocks(m: dict) -> list[Block]:
         ("h2", "Before and after"),
         (
             "p",
-            "Before: the input URDF as it is. After: with the calibration. Every number comes from "
-            f"samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
+            f"Before: {m.get('before_model', 'input URDF')} as it is. After: with the calibration. Every number "
+            f"comes from samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
             "outlier sample(s) left out of these numbers and marked in the table below).",
         ),
-        ("table", (["", "before (input URDF)", "after (calibrated)"], headline_rows(m), set())),
+        ("table", (column_headers(m), headline_rows(m), set())),
         (
             "p",
             "Reprojection RMS per axis: sqrt(mean(du^2 + dv^2) / 2) over all tag corners, in pixels "
@@ -248,13 +241,13 @@ def _per_sample_blocks(samples: list[dict], folds: bool) -> list[Block]:
 
 
 def _deploy_blocks(m: dict) -> list[Block]:
-    """The deploy files and the static-transform command, or why they were not written."""
+    """The deploy files (what each holds, where it goes on a Wolfgang), or why they were not written."""
     blocks: list[Block] = [("h2", "Files to deploy")]
     if m["deploy"]["written"]:
-        blocks.append(("p", "Written beside this report:"))
-        blocks.append(("pre", DEPLOY_TEXT))
-        blocks.append(("p", "Camera correction as a static transform:"))
-        blocks.append(("pre", m["camera_correction"]["static_transform_publisher"]))
+        blocks.append(("p", "Written beside this report; each holds the new total calibration, not the change:"))
+        rows = [[name, holds, where] for name, holds, where in DEPLOY_TABLE if name in m["deploy"]["files"]]
+        blocks.append(("table", (["file", "holds", "where it goes on a Wolfgang (bitbots_main)"], rows, set())))
+        blocks += [("p", w) for w in m["deploy"].get("warnings", [])]
     else:
         blocks.append(("banner", (False, m["deploy"]["reason"])))
     return blocks

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from wolfcal.errors import WolfcalError
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import check_preset
 from wolfcal.robot.presets import DEFAULT_PRESET
 
@@ -28,6 +29,9 @@ class FitOptions:
     mocap_moving: bool = False  # one base pose in the motion-capture frame per sample instead of one per source
     outlier: OutlierRule = FIT_VIEW_PX  # which tag views are left out (`wolfcal.outliers`; floor in px)
     noise_floor_px: float = NOISE_FLOOR_PX  # lower bound of a camera block's estimated noise [px per axis]
+    # the robot's present calibration (`--current`): the free parameters start from it and their priors centre on
+    # it; what it holds beyond them is held fixed. None: the input URDF's nominal model
+    current: Corrections | None = None
 
     def __post_init__(self) -> None:
         check_preset(self.free, self.side)  # before any file is read

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,7 @@ from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
 from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
+from wolfcal.io.current import current_files, load_current
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -50,6 +51,7 @@ class Fit:
     chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
     problem: Problem
     solution: Solution
+    held: Corrections = field(default_factory=Corrections)  # corrections held fixed under the free ones (--current)
 
     @property
     def params(self) -> ParameterSet:
@@ -63,8 +65,9 @@ class Fit:
 
     @property
     def corrections(self) -> Corrections:
-        """The fitted corrections of the robot model (offsets [rad], frame and tag-mount vectors [m, rad])."""
-        return self.chain.corrections(self.solution.values[: len(self.chain)])
+        """The fitted model's corrections (offsets [rad], frame and tag-mount vectors [m, rad]): the free
+        parameters' values (totals, not changes) with what the fit held fixed."""
+        return self.chain.corrections(self.solution.values[: len(self.chain)]).plus(self.held)
 
 
 def in_system(camera: str, system: str | None) -> bool:
@@ -112,30 +115,37 @@ def fit_observations(
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
-    camera_blocks = _camera_blocks(robot, used, options)
-    blocks: list[Block] = [*camera_blocks]
-    tags_by_camera = {b.camera_name: b.tag_ids for b in camera_blocks}
+    tags_by_camera = {name: list(obs.observed_tag_ids) for name, obs in used.items()}
     if floor is not None:
         tags_by_camera.setdefault(HEAD_CAMERA, [])
-        blocks += floor_blocks(robot, floor, options)
     chain = build_parameter_set(
         robot, options.free, tags_by_camera, options.side, options.fix_tags,
         tuple(mocap.links) if mocap is not None else (),
     )
-    blocks += [mocap] if mocap is not None else []
+    current = options.current or Corrections()
+    chain, held = chain.centred_on(current), chain.held(current)
+    blocks: list[Block] = [*_camera_blocks(robot, used, options, held)]
+    if floor is not None:
+        blocks += floor_blocks(robot, floor, options, held)
+    if mocap is not None:
+        mocap.fixed = held  # its starting base poses came from the nominal model
+        blocks.append(mocap)
     _check_enough_data(blocks, len(chain), options.free)
     problem = Problem(chain, blocks, block_sigmas(robot, blocks), robot.config.priors.encoder_noise, options.huber_k)
     solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
-    return Fit(robot, used, blocks, chain, problem, solution)
+    return Fit(robot, used, blocks, chain, problem, solution, held)
 
 
-def floor_blocks(robot: Robot, floor: Observations, options: FitOptions) -> list[Block]:
+def floor_blocks(
+    robot: Robot, floor: Observations, options: FitOptions, held: Corrections | None = None
+) -> list[Block]:
     """The blocks of the floor samples, checked (`check_floor_samples`): the floor tags' corners and, with two
-    soles, the sole closure."""
+    soles, the sole closure; `held`: corrections held fixed under the free parameters."""
     check_floor_samples(robot, floor)
-    floor_block = FloorBlock(robot, floor)
+    floor_block = FloorBlock(robot, floor, held)
     floor_block.outlier_rule = options.outlier
-    return [floor_block, SoleClosure(robot, floor)] if len(robot.config.floor_config().soles) == 2 else [floor_block]
+    two_soles = len(robot.config.floor_config().soles) == 2
+    return [floor_block, SoleClosure(robot, floor, held)] if two_soles else [floor_block]
 
 
 def block_sigmas(robot: Robot, blocks: Sequence[Block]) -> list[float]:
@@ -161,15 +171,18 @@ def _tags_used(
     return used
 
 
-def _camera_blocks(robot: Robot, used: dict[str, Observations], options: FitOptions) -> list[CameraBlock]:
-    """One camera block per camera: the head camera's, or an external camera's with its placement unknowns."""
+def _camera_blocks(
+    robot: Robot, used: dict[str, Observations], options: FitOptions, held: Corrections
+) -> list[CameraBlock]:
+    """One camera block per camera: the head camera's, or an external camera's with its placement unknowns;
+    `held`: corrections held fixed under the free parameters."""
     camera_blocks: list[CameraBlock] = []
     for name, obs in used.items():
         if name == HEAD_CAMERA:
-            block = CameraBlock(robot, obs, obs.observed_tag_ids)
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, fixed=held)
         else:
             placement, names = placements(obs, options.external_moving)
-            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
+            block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names, held)
         block.outlier_rule = options.outlier
         camera_blocks.append(block)
     return camera_blocks
@@ -325,13 +338,20 @@ def run_fit(
     force: bool = False,
     mocap: Sequence[Path] = (),
     mocap_offsets: Sequence[float] = (),
+    current: Sequence[Path] = (),
 ) -> FitResult:
     """The whole `wolfcal fit` job; returns the result that was written to out_dir/result.yaml.
     Existing outputs in out_dir are replaced only with `force`; the outputs are written as one set. Motion capture
     (--system mocap or all, or --mocap files): markers from the captures' Markers topic, or from the `mocap` files
-    (one per capture, clock offsets `mocap_offsets` [s] or estimated)."""
+    (one per capture, clock offsets `mocap_offsets` [s] or estimated). `current`: the robot's present calibration
+    (`io.current.load_current`): the fit starts from it and its result holds the new totals."""
     robot = load_robot(robot_path)
-    check_output_folder(out_dir, FIT_OUTPUTS, force, fit_inputs(robot, captures, mocap, intrinsics))
+    inputs = fit_inputs(robot, captures, mocap, intrinsics) + current_files(list(current))
+    check_output_folder(out_dir, FIT_OUTPUTS, force, inputs)
+    present = load_current(list(current), robot) if current else None
+    if present is not None:
+        options = replace(options, current=present.corrections)
+        say(f"starting from the present calibration in {', '.join(present.sources)}")
     markers: MarkerObservations | None = None
     warnings: list[str] = []
     if options.system == "mocap" or mocap:
@@ -348,7 +368,7 @@ def run_fit(
     with large_blocks_mapped():
         fit = fit_observations(robot, observations, options, say, markers)
         check_solution_left_out(fit, captures)
-        result = fit_result(fit, options, captures, intrinsics, warnings)
+        result = fit_result(fit, options, captures, intrinsics, warnings, present)
         write_fit(out_dir, fit, result)
     report_fit(result, fit, warnings, out_dir, say)
     return result

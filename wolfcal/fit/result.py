@@ -20,6 +20,7 @@ from wolfcal.fit.mocap_result import mocap_block_dict
 from wolfcal.fit.options import NOISE_FLOOR_PX, FitOptions
 from wolfcal.fit.solver import Solution
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
+from wolfcal.io.current import CurrentCalibration
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
@@ -69,8 +70,9 @@ def explain(params: ParameterSet, solution: Solution) -> list[str]:
     for name, share in zip(params.names, u.data_share):
         if share < DATA_SHARE_LIMIT and name in in_chain:
             lines.append(
-                f"{name}: only {share:.0%} of its information comes from the data; its value stays near the nominal "
-                "model (prior)."
+                f"{name}: only {share:.0%} of its information comes from the data; its value stays near its prior "
+                "(the nominal model, or the present calibration given with --current), and the evaluation deploys it "
+                "at its present value."
             )
     if u.condition_number > CONDITION_LIMIT and not lines:
         lines.append(
@@ -266,9 +268,12 @@ class FitResult:
     mocap_clock_offset_s: dict[str, float] | None = None
     # single corners of views kept left out as far off (blocks with a corner rule, the floor's; 0 in older files)
     n_outlier_corners: int = 0
+    # the robot's present calibration the fit started from (`--current`; `io.current.CurrentCalibration.to_dict`:
+    # sources, corrections, imu_offsets); absent: the input URDF's nominal model. `corrections` are totals.
+    current: dict | None = None
 
     HEAD_FIGURES: ClassVar[tuple[str, ...]] = ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")
-    OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s")
+    OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s", "current")
     KEY_ORDER: ClassVar[tuple[str, ...]] = (  # result.yaml's key order (fields not listed follow in field order)
         "version", "wolfcal_version", "created", "robot", "urdf", "captures", "intrinsics", "free", "side", "fix_tags",
         "system", "external_moving", "systems_used", "tags_used", "rms_meaning", "rms_before_px", "rms_after_px",
@@ -284,7 +289,13 @@ class FitResult:
             system=self.system, external_moving=self.external_moving, mocap_moving=self.mocap_moving,
             outlier=OutlierRule(float(self.outlier_rule["factor"]), float(self.outlier_rule["floor_px"])),
             noise_floor_px=self.noise_floor_px,
+            current=None if self.current is None else self.current_calibration.corrections,
         )  # fmt: skip
+
+    @property
+    def current_calibration(self) -> CurrentCalibration:
+        """The present calibration the fit started from (empty: the input URDF's nominal model)."""
+        return CurrentCalibration() if self.current is None else CurrentCalibration.from_dict(self.current, "result")
 
     def estimate(self, name: str) -> tuple[float, float] | None:
         """A fitted parameter's value and 1-sigma in its own unit (None: not among the fit's parameters)."""
@@ -328,7 +339,8 @@ class FitResult:
         return cls(**values)
 
 
-def _parameter_results(fit: Fit) -> list[ParameterResult]:
+def parameter_results(fit: Fit) -> list[ParameterResult]:
+    """result.yaml's row of every unknown of a solved fit: value, std, data share, what measured it."""
     u, params = fit.solution.uncertainty, fit.params
     return [
         ParameterResult(
@@ -351,9 +363,10 @@ def _noise_model(fit: Fit, blocks: list[dict]) -> dict:
 
 
 def fit_result(
-    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str]
+    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str],
+    current: CurrentCalibration | None = None,
 ) -> FitResult:
-    """The result of a fit, with the settings it ran with."""
+    """The result of a fit, with the settings it ran with and the present calibration it started from."""
     config, solution, params = fit.robot.config, fit.solution, fit.params
     u = solution.uncertainty
     blocks = [_block_dict(fit, k) for k in range(len(fit.blocks))]
@@ -382,7 +395,7 @@ def fit_result(
         n_corners_used=sum(b["n_units_used"] for b in blocks),
         converged=bool(solution.converged),
         condition_number=float(u.condition_number) if np.isfinite(u.condition_number) else None,
-        parameters=_parameter_results(fit),
+        parameters=parameter_results(fit),
         correlated_pairs=[{"a": a, "b": b, "correlation": round(c, 4)} for a, b, c in u.correlated_pairs(params.names)],
         covariance={"names": params.names, "matrix": np.round(u.covariance, 15).tolist()},
         explanations=explain(params, solution),
@@ -393,6 +406,7 @@ def fit_result(
         corrections=fit.corrections,
         mocap_moving=options.mocap_moving,
         mocap_clock_offset_s=next((b["mocap_clock_offset_s"] for b in blocks if b["system"] == "mocap"), None),
+        current=None if current is None else current.to_dict(),
     )  # fmt: skip
 
 

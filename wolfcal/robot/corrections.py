@@ -41,6 +41,13 @@ class Corrections:
             tags[tag_id] = tags.get(tag_id, np.zeros(6)) + vec
         return Corrections(offsets, frames, tags)
 
+    def overridden_by(self, other: Corrections) -> Corrections:
+        """These corrections with every offset, frame and tag mount that `other` holds replaced by its value (e.g.
+        the robot's present calibration with the fitted parameters' new totals)."""
+        frames = {k: np.asarray(v, float).copy() for k, v in {**self.frames, **other.frames}.items()}
+        tags = {k: np.asarray(v, float).copy() for k, v in {**self.tags, **other.tags}.items()}
+        return Corrections({**self.offsets, **other.offsets}, frames, tags)
+
     def to_dict(self) -> dict:
         return {
             "offsets": {k: float(v) for k, v in self.offsets.items()},

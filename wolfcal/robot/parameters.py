@@ -9,7 +9,7 @@ the config's `camera.name`, default `camera`; result.yaml says which URDF joint 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -70,6 +70,22 @@ class ParameterSet:
                        else out.tags.setdefault(int(p.target), np.zeros(6)))  # fmt: skip
                 vec[p.component] += value
         return out
+
+    def centred_on(self, corrections: Corrections) -> ParameterSet:
+        """The same parameters with their references (prior means and starting values) at the values `corrections`
+        hold (e.g. the robot's present calibration); parameters it does not hold stay at 0."""
+        return ParameterSet([replace(p, reference=float(v)) if p.in_chain else p
+                             for p, v in zip(self.parameters, self.values_from(corrections))])  # fmt: skip
+
+    def held(self, corrections: Corrections) -> Corrections:
+        """The part of `corrections` these parameters do not free (offsets of other joints, frames of other joints,
+        other tags' mounts): what a fit holds fixed under them."""
+        offsets = {p.target for p in self.parameters if p.kind == "offset"}
+        frames = {p.target for p in self.parameters if p.kind == "frame"}
+        tags = {int(p.target) for p in self.parameters if p.kind == "tag"}
+        return Corrections({k: v for k, v in corrections.offsets.items() if k not in offsets},
+                           {k: v for k, v in corrections.frames.items() if k not in frames},
+                           {k: v for k, v in corrections.tags.items() if k not in tags})  # fmt: skip
 
     def values_from(self, corrections: Corrections) -> np.ndarray:
         """The parameter values a `Corrections` object holds (e.g. a simulator's truth) [SI]."""
