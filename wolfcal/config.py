@@ -37,11 +37,21 @@ class TagConfig:
 
 @dataclass(frozen=True)
 class CameraConfig:
+    """The head camera. `frame` is its optical frame in the robot's model (z forward, x right, y down): the config's
+    `camera.frame` itself when `axes` is 'optical'; when 'body' (ROS REP 103: x forward, y left, z up), a frame
+    `<camera.frame>_optical` that the robot adds below the URDF link (`wolfcal.robot.robot.load_robot`)."""
+
     frame: str
     topic: str
     info_topic: str
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
     name: str = "camera"  # in the names of its pose correction's parameters (`camera.x ... camera.rz`)
+    axes: str = "optical"  # config `camera.axes`: how the URDF link `urdf_frame` is oriented, 'optical' | 'body'
+    urdf_frame: str = ""  # config `camera.frame`: the URDF link the camera is
+
+    def __post_init__(self) -> None:
+        if not self.urdf_frame:
+            object.__setattr__(self, "urdf_frame", self.frame)
 
 
 @dataclass(frozen=True)
@@ -292,13 +302,23 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
     return intrinsics
 
 
+CAMERA_AXES = ("optical", "body")
+
+
 def _camera(path: Path, data) -> CameraConfig:
     cam = _Reader(path, data, "camera")
-    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics"))
+    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics", "axes"))
     name = _parameter_name(cam, "camera")
+    axes = cam.string("axes", "optical")
+    if axes not in CAMERA_AXES:
+        cam.fail(f"'axes' must be 'optical' (z forward, x right, y down) or 'body' (x forward, y left, z up), "
+                 f"found {axes!r}")
+    link = cam.string("frame")
     return CameraConfig(
+        axes=axes,
+        urdf_frame=link,
         name=name,
-        frame=cam.string("frame"),
+        frame=link if axes == "optical" else f"{link}_optical",
         topic=cam.string("topic", "/camera/image_raw/compressed"),
         info_topic=cam.string("info_topic", "/camera/camera_info"),
         intrinsics=_intrinsics_path(cam, path.parent),
@@ -504,16 +524,28 @@ class FloorTagConfig:
 
 
 @dataclass(frozen=True)
+class SoleConfig:
+    """A sole given as `{link, xyz}`: the frame `frame` [m] at `xyz` in `link`, axes as the link's, which the robot
+    adds to its model (for URDFs without sole frames)."""
+
+    frame: str  # `<link>_sole`
+    link: str
+    xyz: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
 class FloorConfig:
     """The venue ground check (DESIGN.md `floor:`): the floor is the plane of the standing soles."""
 
-    soles: tuple[str, ...]  # links whose frames lie on the floor (z up) when the robot stands
+    soles: tuple[str, ...]  # frames that lie on the floor (z up) when the robot stands: URDF links or `added_soles`
     standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
     tags: tuple[FloorTagConfig, ...] = ()
     stances: tuple[dict[str, float], ...] = ()  # standing poses of the floor samples (`floor.stances`); () = standing
     # standing poses of the held-out floor capture that checks a fit (`floor.check_stances`, `capture --floor
     # --check`), none of the fit's: a stance the fit saw reads the ticks whose rounding the fit took in
     check_stances: tuple[dict[str, float], ...] = ()
+    added_soles: tuple[SoleConfig, ...] = ()  # soles given as {link, xyz}: frames the robot adds to its model
+    aim: tuple[str, ...] = ()  # `floor.aim`: the joints that aim the camera (pan, tilt); () = the default
 
     @property
     def floor_stances(self) -> tuple[dict[str, float], ...]:
@@ -542,10 +574,11 @@ class FloorConfig:
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
     r = _Reader(path, data, "floor")
-    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances"))
-    soles = r.data["soles"]
-    if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
-        r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
+    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances", "aim"))
+    soles, added_soles = _soles(path, r.data["soles"])
+    aim = r.data.get("aim", [])
+    if not isinstance(aim, list) or len(aim) > 2 or not all(isinstance(j, str) and j for j in aim):
+        r.fail("'aim' must list the one or two joints that aim the camera, e.g. [HeadPan, HeadTilt]")
     standing = _readings(r, r.data["standing"], "standing")
     stances, check_stances = (_stances(r, key) for key in ("stances", "check_stances"))
     tags_data = r.data.get("tags") or []
@@ -571,7 +604,29 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
         if thickness < 0:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         tags.append(FloorTagConfig(tag_id, family, t.number("size", positive=True), thickness))
-    return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances)
+    return FloorConfig(soles, standing, tuple(tags), stances, check_stances, added_soles, tuple(aim))
+
+
+def _soles(path: Path, data) -> tuple[tuple[str, ...], tuple[SoleConfig, ...]]:
+    """`floor.soles`: each a link name, or {link, xyz} for a sole frame at xyz [m] in the link (axes as the link's).
+    Returns the sole frames' names and the frames to add."""
+    if not isinstance(data, list) or not data:
+        raise WolfcalError(f"{path}: 'floor.soles' must be a non-empty list of links (or {{link, xyz}}) whose "
+                           "frames lie on the floor")
+    names: list[str] = []
+    added: list[SoleConfig] = []
+    for i, item in enumerate(data):
+        if isinstance(item, str) and item:
+            names.append(item)
+            continue
+        r = _Reader(path, item, f"floor.soles[{i}]")
+        r.check_keys(("link", "xyz"))
+        sole = SoleConfig(f"{r.string('link')}_sole", r.string("link"), r.vector3("xyz"))
+        if sole.frame in names:
+            r.fail(f"a second sole on link {sole.link!r}; give each sole its own link")
+        names.append(sole.frame)
+        added.append(sole)
+    return tuple(names), tuple(added)
 
 
 def _stances(r: _Reader, key: str) -> tuple[dict[str, float], ...]:

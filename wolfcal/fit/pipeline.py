@@ -149,13 +149,13 @@ def _tags_used(
     robot: Robot, observations: dict[str, Observations], options: FitOptions
 ) -> dict[str, Observations]:
     """Per camera, the observations of the tags the preset uses (cameras without one left out); an external camera
-    also keeps the tags fixed to the base, on which its pose rests."""
+    also keeps the tags on links the legs do not move, on which its pose rests."""
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
         if name != HEAD_CAMERA:
             tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
-                                             if robot.fixed_to_base(robot.config.tag(t).link)})
+                                             if robot.off_the_legs(robot.config.tag(t).link)})
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
     return used
