@@ -13,6 +13,7 @@ from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
+from wolfcal.fit.camera_axes import check_camera_axes
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
 from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
@@ -107,6 +108,8 @@ def fit_observations(
     else:
         observations = _systems(robot, observations, options)
     observations, floor = split_floor(robot, observations)
+    if HEAD_CAMERA in observations:
+        check_camera_axes(robot, observations[HEAD_CAMERA])
     used = _tags_used(robot, observations, options)
     if not used and mocap is None and floor is None:
         raise WolfcalError(

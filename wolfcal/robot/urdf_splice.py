@@ -76,7 +76,7 @@ def set_attributes(start_tag: str, values: dict[str, str]) -> str:
     for key, value in values.items():
         found = re.search(rf"(\s{re.escape(key)}\s*=\s*)(\"[^\"]*\"|'[^']*')", start_tag)
         if found is not None:
-            start_tag = f'{start_tag[:found.start(2)]}"{value}"{start_tag[found.end(2):]}'
+            start_tag = f'{start_tag[: found.start(2)]}"{value}"{start_tag[found.end(2) :]}'
         else:
             close = len(start_tag) - (2 if start_tag.endswith("/>") else 1)
             start_tag = f'{start_tag[:close].rstrip()} {key}="{value}"{start_tag[close:]}'
@@ -106,14 +106,16 @@ def apply_joint_edits(text: str, edits: dict[str, JointEdit]) -> str:
                 continue
             child = joint.child(tag)
             if child is not None:
-                pieces.append((child.start, child.start_end, set_attributes(text[child.start:child.start_end], values)))
+                pieces.append(
+                    (child.start, child.start_end, set_attributes(text[child.start : child.start_end], values))
+                )
                 continue
             element = set_attributes(f"<{tag}/>", values)
             if first:
                 pieces.append((joint.start_end, joint.start_end, f"{newline}{indent}{element}"))
                 continue
             close = text.rindex("<", joint.start, joint.end)  # the joint's end tag
-            if _line_indent(text, close) or text[close - 1:close] == "\n":  # the end tag begins its own line
+            if _line_indent(text, close) or text[close - 1 : close] == "\n":  # the end tag begins its own line
                 line_start = text.rfind("\n", 0, close) + 1
                 pieces.append((line_start, line_start, f"{indent}{element}{newline}"))
             else:
@@ -137,4 +139,3 @@ def _child_indent(text: str, joint: Element) -> str:
         if indent:
             return indent
     return _line_indent(text, joint.start) + "  "
-
