@@ -66,11 +66,18 @@ class ExternalCameraConfig:
 
 @dataclass(frozen=True)
 class ServoConfig:
-    port: str
+    port: str  # the first (or only) bus device
     baudrate: int
     protocol: float
     ids: dict[str, int]
     models: dict[str, int] = field(default_factory=dict)  # expected model number per joint (optional)
+    # bus device -> servo ids on it (config `servos.ports`, or `servos.port` with every id); empty: `port` has all
+    ports: dict[str, tuple[int, ...]] = field(default_factory=dict)
+
+    @property
+    def buses(self) -> dict[str, tuple[int, ...]]:
+        """Bus device -> the servo ids on it, every configured id on exactly one."""
+        return self.ports or {self.port: tuple(self.ids.values())}
 
 
 @dataclass(frozen=True)
@@ -261,7 +268,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
 
 def _servos(path: Path, data) -> ServoConfig:
     r = _Reader(path, data, "servos")
-    r.check_keys(("ids",), ("port", "baudrate", "protocol", "models"))
+    r.check_keys(("ids",), ("port", "ports", "baudrate", "protocol", "models"))
     ids = r.data["ids"]
     if not isinstance(ids, dict) or not ids:
         r.fail("'ids' must map joint names to servo ids")
@@ -276,13 +283,42 @@ def _servos(path: Path, data) -> ServoConfig:
     protocol = r.number("protocol", 2.0)
     if protocol != 2.0:
         r.fail(f"'protocol' must be 2 (Dynamixel Protocol 2.0), found {protocol!r}")
+    ports = _ports(r, set(ids.values()))
     return ServoConfig(
-        port=r.string("port", "/dev/ttyUSB0"),
+        port=next(iter(ports)) if ports else r.string("port", "/dev/ttyUSB0"),
         baudrate=int(r.number("baudrate", 1_000_000, positive=True)),
         protocol=protocol,
         ids={str(k): int(v) for k, v in ids.items()},
         models={str(k): int(v) for k, v in models.items()},
+        ports=ports,
     )
+
+
+def _ports(r: _Reader, ids: set[int]) -> dict[str, tuple[int, ...]]:
+    """`servos.ports: {device: [ids]}` (several buses): every id of `servos.ids` on exactly one device; {} without."""
+    if "ports" not in r.data:
+        return {}
+    if "port" in r.data:
+        r.fail("has both 'port' and 'ports'; give 'port' for one bus or 'ports' for several")
+    data = r.data["ports"]
+    if not isinstance(data, dict) or not data:
+        r.fail("'ports' must map bus devices to the servo ids on them, e.g. {/dev/ttyUSB0: [1, 2], /dev/ttyUSB1: [3]}")
+    ports: dict[str, tuple[int, ...]] = {}
+    seen: set[int] = set()
+    for device, listed in data.items():
+        ok = isinstance(device, str) and device and isinstance(listed, list) and listed
+        if not ok or not all(isinstance(i, int) and not isinstance(i, bool) for i in listed):
+            r.fail(f"'ports.{device}' must be a non-empty list of servo ids")
+        twice = sorted(seen & set(listed))
+        unknown = sorted(set(listed) - ids)
+        if twice or unknown or len(set(listed)) != len(listed):
+            what = f"id(s) {twice or listed} listed twice" if twice or not unknown else f"id(s) {unknown} not in 'ids'"
+            r.fail(f"'ports.{device}': {what}; each servo of 'ids' belongs on exactly one port")
+        seen |= set(listed)
+        ports[device] = tuple(listed)
+    if seen != ids:
+        r.fail(f"'ports' leaves servo id(s) {sorted(ids - seen)} of 'ids' on no port; list each on its bus")
+    return ports
 
 
 def _priors(path: Path, data) -> PriorConfig:
