@@ -7,6 +7,7 @@ ROS body axes and H1, OP3 and G1 have no sole frames: config keys alone (`camera
 from __future__ import annotations
 
 import difflib
+import json
 from pathlib import Path
 
 import numpy as np
@@ -75,3 +76,22 @@ def test_published_robot_deploys_the_fitted_model(tmp_path, name):
         assert changed and all(line.lstrip().startswith(("<origin", "<calibration")) for line in changed), changed[:3]
         if "\r\n" in source:
             assert text.count("\n") == text.count("\r\n"), f"{name}: {urdf.name} mixes line ends"
+
+
+@pytest.mark.slow
+def test_external_camera_rests_on_the_torso_tag_behind_waist_joints(tmp_path):
+    """G1: the torso tag hangs behind three waist joints, not fixed to the pelvis; the tripod's pose rests on it, the
+    leg fit frees the waist offsets too, and the held-out foot error is that of the config's soles ({link, xyz})."""
+    config = str(ROBOTS / "unitree_g1" / "robot.yaml")
+    run("simulate", "--robot", config, "--system", "external", "--out", str(tmp_path / "ext.mcap"), "--samples", "16",
+        "--offsets", "legs", "--seed", "3")  # fmt: skip
+    run("simulate", "--robot", config, "--system", "external", "--out", str(tmp_path / "held.mcap"), "--samples",
+        "8", "--truth", str(tmp_path / "ext.truth.yaml"), "--seed", "4")  # fmt: skip
+    run("fit", str(tmp_path / "ext.mcap"), "--robot", config, "--free", "leg", "--out", str(tmp_path / "fit"))
+    names = [p["name"] for p in yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())["parameters"]]
+    assert {"waist_yaw_joint.offset", "tripod.x", "tag42.x"} <= set(names)
+    run("evaluate", str(tmp_path / "fit"), "--capture", str(tmp_path / "held.mcap"), "--out", str(tmp_path / "rep"))
+    soles = json.loads((tmp_path / "rep" / "metrics.json").read_text())["external"]["sole_error_mm"]
+    assert set(soles["before"]) == {"left_ankle_roll_link_sole", "right_ankle_roll_link_sole"}
+    for sole, before in soles["before"].items():  # truth: leg offsets of a few degrees
+        assert soles["after"][sole] < 0.3 * before, sole
