@@ -218,3 +218,10 @@ def test_camera_axes_the_data_contradict_are_named(tmp_path, name, wrong, right)
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert f"'camera.axes' is '{wrong}' but " in result.output and f"the data fit '{right}'" in result.output
     assert not (tmp_path / "fit").exists()
+
+
+def test_config_naming_a_mimic_joint_is_told_its_master(tmp_path):
+    config = walker(tmp_path)
+    config.write_text(CONFIG + "sampling_ranges: {head: {l_hip: [-0.1, 0.1]}}\n")
+    with pytest.raises(WolfcalError, match=r"'sampling_ranges.head' names mimic joint\(s\) \(l_hip follows r_hip"):
+        load_robot(config)

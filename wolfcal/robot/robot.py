@@ -139,7 +139,7 @@ def load_robot(config_path: str | Path) -> Robot:
 
 
 def _with_config_frames(config: RobotConfig, model: KinematicModel) -> KinematicModel:
-    """The model with the frames the config adds: a body-axes camera's optical frame (rotated by R_BODY_OPTICAL
+    """The model with the frames the config adds: a body-axes camera's optical frame (rotated by T_BODY_OPTICAL
     from the camera link) and the soles given as {link, xyz}; a WolfcalError naming the key when a link is missing."""
     frames = []
     if config.camera is not None and config.camera.axes == "body":
@@ -154,6 +154,11 @@ def _with_config_frames(config: RobotConfig, model: KinematicModel) -> Kinematic
 def _check_movable(config: RobotConfig, model: KinematicModel, key: str, joints: Iterable[str]) -> None:
     """A WolfcalError naming the config's `key` when `joints` names joints that are not movable joints of the URDF."""
     unknown = [j for j in joints if j not in model.actuated_joint_names]
+    followed = {j: model.joints[j].mimic for j in unknown if j in model.joints}
+    mimics = [f"{j} follows {mimic[0]}" for j, mimic in followed.items() if mimic is not None]
+    if mimics:
+        raise WolfcalError(f"{config.path}: '{key}' names mimic joint(s) ({'; '.join(mimics)}, <mimic> in "
+                           f"{config.urdf}): name the joint each follows instead")
     if unknown:
         raise WolfcalError(
             f"{config.path}: '{key}' names joint(s) {', '.join(unknown)} that are not movable joints of {config.urdf}"
