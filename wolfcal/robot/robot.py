@@ -32,7 +32,9 @@ class Robot:
 
     @property
     def camera_joint(self) -> str:
-        """The joint whose origin places the camera frame: its frame correction is the camera extrinsic."""
+        """The joint whose origin places the camera's optical frame: its frame correction is the camera extrinsic,
+        in the optical frame. For `camera.axes: body` it is the fixed joint the robot adds below the camera link
+        (`KinematicModel.urdf_joint_of` names the URDF joint the correction is written to)."""
         return self.model.parent_joint(self.config.head_camera().frame).name
 
     def actuated_joints_to(self, links: list[str]) -> tuple[str, ...]:
