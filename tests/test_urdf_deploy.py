@@ -225,3 +225,11 @@ def test_config_naming_a_mimic_joint_is_told_its_master(tmp_path):
     config.write_text(CONFIG + "sampling_ranges: {head: {l_hip: [-0.1, 0.1]}}\n")
     with pytest.raises(WolfcalError, match=r"'sampling_ranges.head' names mimic joint\(s\) \(l_hip follows r_hip"):
         load_robot(config)
+
+
+def test_without_legs_named_only_links_fixed_to_the_base_are_off_the_legs(tmp_path):
+    config = walker(tmp_path)
+    config.write_text(CONFIG.replace(", side: right", "").replace(", side: left", "").split("floor:")[0])
+    robot = load_robot(config)
+    assert robot.leg_joints == () and robot.feet == ()
+    assert robot.off_the_legs("base") and not robot.off_the_legs("r_foot") and not robot.off_the_legs("head")

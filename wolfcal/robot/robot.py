@@ -71,8 +71,12 @@ class Robot:
 
     def off_the_legs(self, link: str) -> bool:
         """Whether no leg joint (`leg_joints`) moves `link` (e.g. the torso, also behind waist joints): a tag on it
-        can place an external camera."""
-        return not set(self.actuated_joints_to([link])) & set(self.leg_joints)
+        can place an external camera. A config that names no legs (no `side`, no soles): whether `link` is fixed to
+        the base."""
+        legs = self.leg_joints
+        if not legs:
+            return self.fixed_to_base(link)
+        return not set(self.actuated_joints_to([link])) & set(legs)
 
     def camera_and_leg_joints(self, sides: tuple[str, ...] = ("right", "left")) -> tuple[str, ...]:
         """The actuated joints between base and camera (none without a head camera), then those between base and
