@@ -95,3 +95,18 @@ def test_external_camera_rests_on_the_torso_tag_behind_waist_joints(tmp_path):
     assert set(soles["before"]) == {"left_ankle_roll_link_sole", "right_ankle_roll_link_sole"}
     for sole, before in soles["before"].items():  # truth: leg offsets of a few degrees
         assert soles["after"][sole] < 0.3 * before, sole
+
+
+@pytest.mark.slow
+def test_floor_views_aim_with_the_configured_joints_and_stand_on_configured_soles(tmp_path):
+    """G1: floor samples aimed with `floor.aim` (waist yaw and pitch), the floor the plane of the {link, xyz} soles;
+    a camera fit from them finds the simulated camera rotation to a few mrad."""
+    config = str(ROBOTS / "unitree_g1" / "robot.yaml")
+    run("simulate", "--robot", config, "--floor", "--out", str(tmp_path / "floor.mcap"), "--samples", "6")
+    run("fit", str(tmp_path / "floor.mcap"), "--robot", config, "--free", "camera", "--out", str(tmp_path / "fit"))
+    truth = load_corrections(tmp_path / "floor.truth.yaml", key="truth").frames["d435_link_optical"]
+    result = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())
+    fitted = Corrections.from_dict(result["corrections"]).frames["d435_link_optical"]
+    assert np.max(np.abs(fitted[3:] - truth[3:])) < 0.003
+    camera = [p for p in result["parameters"] if p["name"].startswith("camera.")]
+    assert len(camera) == 6 and all(p["urdf_joint"] == "d435_joint" for p in camera)
