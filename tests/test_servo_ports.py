@@ -18,9 +18,10 @@ from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.pipeline import run_capture
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
+from wolfcal.hardware import protocol as P
 from wolfcal.hardware.bus import BusError, rad_to_ticks
 from wolfcal.hardware.buses import ServoBuses
-from wolfcal.hardware.emulator import EmulatorProcess, Fault, read_true_angles, spec_from_config
+from wolfcal.hardware.emulator import EmulatorProcess, Fault, parse_fault, read_true_angles, spec_from_config
 from wolfcal.io.reader import read_capture
 from wolfcal.robot.corrections import Corrections
 
@@ -138,3 +139,19 @@ def test_scripted_capture_over_two_buses(tmp_path):
         for joint, value in pose.items():
             assert readings[joint] == pytest.approx(value, abs=2 * math.pi / 4096), joint
         assert np.isfinite(list(readings.values())).all() and len(readings) == len(config.servos.ids)
+
+
+def test_a_stale_reply_is_not_taken_for_the_answer():
+    """On a busy host the reply to a request the master gave up on can arrive just before the reply to the next
+    one, and the SDK takes any status packet of the right id: servo 1's 1-byte reply to a torque read must not
+    stand for its 8 bytes of position and velocity in the next sync read."""
+    config = load_robot_config(ROBOT)
+    with EmulatorProcess(spec_from_config(config, TRUTH)) as emu, ServoBuses(config.servos, emu.port) as buses:
+        bus = buses.buses[0]
+        first = bus.read_state()
+        emu.inject(Fault("stale", 1, 1))  # its next reply held back
+        assert bus.port is not None
+        _, result, _ = bus.ph.read1ByteTxRx(bus.port, 1, P.TORQUE_ENABLE[0])  # the reply is held back: no answer
+        assert result != 0
+        assert np.array_equal(bus.read_state().ticks, first.ticks)
+    assert parse_fault("stale:13") == Fault("stale", 13, 1, 0.0)  # `wolfcal emulate --fault stale:13`
