@@ -102,7 +102,7 @@ def test_a_placement_without_the_torso_tag_is_a_clear_error(other_robot):
     keep = ~((obs.tag_ids == 3) & second[obs.sample_index])
     obs.sample_index, obs.tag_ids = obs.sample_index[keep], obs.tag_ids[keep]
     obs.corner_index, obs.uv = obs.corner_index[keep], obs.uv[keep]
-    with pytest.raises(WolfcalError, match="placement2.mcap.*never saw a tag fixed to the base"):
+    with pytest.raises(WolfcalError, match="placement2.mcap.*never saw a tag on a link the legs do not move"):
         fit_observations(other_robot, obs, FitOptions(free="leg"))
 
 

@@ -353,7 +353,7 @@ def emulate(
     robot: Path | None = robot_option(),
     truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
     fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
-                                    "KIND: no-answer, crc, hw-error, missing, model, late. Repeatable."),
+                                    "KIND: no-answer, crc, hw-error, missing, model, late, stale. Repeatable."),
     operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
                                          "limp joints through (manual capture)."),
     hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),

@@ -40,11 +40,21 @@ class TagConfig:
 
 @dataclass(frozen=True)
 class CameraConfig:
+    """The head camera. `frame` is its optical frame in the robot's model (z forward, x right, y down): the config's
+    `camera.frame` itself when `axes` is 'optical'; when 'body' (ROS REP 103: x forward, y left, z up), a frame
+    `<camera.frame>_optical` that the robot adds below the URDF link (`wolfcal.robot.robot.load_robot`)."""
+
     frame: str
     topic: str
     info_topic: str
     intrinsics: Path | None = None  # camera_info YAML used when a capture carries none (and by the simulator)
     name: str = "camera"  # in the names of its pose correction's parameters (`camera.x ... camera.rz`)
+    axes: str = "optical"  # config `camera.axes`: how the URDF link `urdf_frame` is oriented, 'optical' | 'body'
+    urdf_frame: str = ""  # config `camera.frame`: the URDF link the camera is
+
+    def __post_init__(self) -> None:
+        if not self.urdf_frame:
+            object.__setattr__(self, "urdf_frame", self.frame)
 
 
 @dataclass(frozen=True)
@@ -59,11 +69,18 @@ class ExternalCameraConfig:
 
 @dataclass(frozen=True)
 class ServoConfig:
-    port: str
+    port: str  # the first (or only) bus device
     baudrate: int
     protocol: float
     ids: dict[str, int]
     models: dict[str, int] = field(default_factory=dict)  # expected model number per joint (optional)
+    # bus device -> servo ids on it (config `servos.ports`, or `servos.port` with every id); empty: `port` has all
+    ports: dict[str, tuple[int, ...]] = field(default_factory=dict)
+
+    @property
+    def buses(self) -> dict[str, tuple[int, ...]]:
+        """Bus device -> the servo ids on it, every configured id on exactly one."""
+        return self.ports or {self.port: tuple(self.ids.values())}
 
 
 @dataclass(frozen=True)
@@ -254,7 +271,7 @@ def _tag(path: Path, index: int, data) -> TagConfig:
 
 def _servos(path: Path, data) -> ServoConfig:
     r = _Reader(path, data, "servos")
-    r.check_keys(("ids",), ("port", "baudrate", "protocol", "models"))
+    r.check_keys(("ids",), ("port", "ports", "baudrate", "protocol", "models"))
     ids = r.data["ids"]
     if not isinstance(ids, dict) or not ids:
         r.fail("'ids' must map joint names to servo ids")
@@ -269,13 +286,42 @@ def _servos(path: Path, data) -> ServoConfig:
     protocol = r.number("protocol", 2.0)
     if protocol != 2.0:
         r.fail(f"'protocol' must be 2 (Dynamixel Protocol 2.0), found {protocol!r}")
+    ports = _ports(r, set(ids.values()))
     return ServoConfig(
-        port=r.string("port", "/dev/ttyUSB0"),
+        port=next(iter(ports)) if ports else r.string("port", "/dev/ttyUSB0"),
         baudrate=int(r.number("baudrate", 1_000_000, positive=True)),
         protocol=protocol,
         ids={str(k): int(v) for k, v in ids.items()},
         models={str(k): int(v) for k, v in models.items()},
+        ports=ports,
     )
+
+
+def _ports(r: _Reader, ids: set[int]) -> dict[str, tuple[int, ...]]:
+    """`servos.ports: {device: [ids]}` (several buses): every id of `servos.ids` on exactly one device; {} without."""
+    if "ports" not in r.data:
+        return {}
+    if "port" in r.data:
+        r.fail("has both 'port' and 'ports'; give 'port' for one bus or 'ports' for several")
+    data = r.data["ports"]
+    if not isinstance(data, dict) or not data:
+        r.fail("'ports' must map bus devices to the servo ids on them, e.g. {/dev/ttyUSB0: [1, 2], /dev/ttyUSB1: [3]}")
+    ports: dict[str, tuple[int, ...]] = {}
+    seen: set[int] = set()
+    for device, listed in data.items():
+        ok = isinstance(device, str) and device and isinstance(listed, list) and listed
+        if not ok or not all(isinstance(i, int) and not isinstance(i, bool) for i in listed):
+            r.fail(f"'ports.{device}' must be a non-empty list of servo ids")
+        twice = sorted(seen & set(listed))
+        unknown = sorted(set(listed) - ids)
+        if twice or unknown or len(set(listed)) != len(listed):
+            what = f"id(s) {twice or listed} listed twice" if twice or not unknown else f"id(s) {unknown} not in 'ids'"
+            r.fail(f"'ports.{device}': {what}; each servo of 'ids' belongs on exactly one port")
+        seen |= set(listed)
+        ports[device] = tuple(listed)
+    if seen != ids:
+        r.fail(f"'ports' leaves servo id(s) {sorted(ids - seen)} of 'ids' on no port; list each on its bus")
+    return ports
 
 
 def _priors(path: Path, data) -> PriorConfig:
@@ -295,13 +341,23 @@ def _intrinsics_path(r: _Reader, base: Path) -> Path | None:
     return intrinsics
 
 
+CAMERA_AXES = ("optical", "body")
+
+
 def _camera(path: Path, data) -> CameraConfig:
     cam = _Reader(path, data, "camera")
-    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics"))
+    cam.check_keys(("frame",), ("name", "topic", "info_topic", "intrinsics", "axes"))
     name = _parameter_name(cam, "camera")
+    axes = cam.string("axes", "optical")
+    if axes not in CAMERA_AXES:
+        cam.fail(f"'axes' must be 'optical' (z forward, x right, y down) or 'body' (x forward, y left, z up), "
+                 f"found {axes!r}")
+    link = cam.string("frame")
     return CameraConfig(
+        axes=axes,
+        urdf_frame=link,
         name=name,
-        frame=cam.string("frame"),
+        frame=link if axes == "optical" else f"{link}_optical",
         topic=cam.string("topic", "/camera/image_raw/compressed"),
         info_topic=cam.string("info_topic", "/camera/camera_info"),
         intrinsics=_intrinsics_path(cam, path.parent),
@@ -517,10 +573,20 @@ class GroundCheck:
 
 
 @dataclass(frozen=True)
+class SoleConfig:
+    """A sole given as `{link, xyz}`: the frame `frame` [m] at `xyz` in `link`, axes as the link's, which the robot
+    adds to its model (for URDFs without sole frames)."""
+
+    frame: str  # `<link>_sole`
+    link: str
+    xyz: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
 class FloorConfig:
     """The venue ground check (DESIGN.md `floor:`): the floor is the plane of the standing soles."""
 
-    soles: tuple[str, ...]  # links whose frames lie on the floor (z up) when the robot stands
+    soles: tuple[str, ...]  # frames that lie on the floor (z up) when the robot stands: URDF links or `added_soles`
     standing: dict[str, float]  # joint readings of the standing pose [rad] (joints not named: 0)
     tags: tuple[FloorTagConfig, ...] = ()
     stances: tuple[dict[str, float], ...] = ()  # standing poses of the floor samples (`floor.stances`); () = standing
@@ -528,6 +594,8 @@ class FloorConfig:
     # --check`), none of the fit's: a stance the fit saw reads the ticks whose rounding the fit took in
     check_stances: tuple[dict[str, float], ...] = ()
     ground_check: GroundCheck = GroundCheck()  # the verdict's ground error distance and limit (`floor.ground_check`)
+    added_soles: tuple[SoleConfig, ...] = ()  # soles given as {link, xyz}: frames the robot adds to its model
+    aim: tuple[str, ...] = ()  # `floor.aim`: the joints that aim the camera (pan, tilt); () = the default
 
     @property
     def floor_stances(self) -> tuple[dict[str, float], ...]:
@@ -556,10 +624,11 @@ class FloorConfig:
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
     """`floor:` with its soles, standing readings and floor tags; a floor tag must not also be a tag on a link."""
     r = _Reader(path, data, "floor")
-    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances", "ground_check"))
-    soles = r.data["soles"]
-    if not isinstance(soles, list) or not soles or not all(isinstance(s, str) and s for s in soles):
-        r.fail("'soles' must be a non-empty list of link names (the links whose frames lie on the floor)")
+    r.check_keys(("soles", "standing"), ("tags", "stances", "check_stances", "ground_check", "aim"))
+    soles, added_soles = _soles(path, r.data["soles"])
+    aim = r.data.get("aim", [])
+    if not isinstance(aim, list) or len(aim) > 2 or not all(isinstance(j, str) and j for j in aim):
+        r.fail("'aim' must list the one or two joints that aim the camera, e.g. [HeadPan, HeadTilt]")
     standing = _readings(r, r.data["standing"], "standing")
     stances, check_stances = (_stances(r, key) for key in ("stances", "check_stances"))
     tags_data = r.data.get("tags") or []
@@ -586,7 +655,8 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
             t.fail(f"'thickness' must not be negative, found {thickness!r}")
         size = check_printed_edge(t.number("size", positive=True), f"{path}: '{t.sub('size')}'")
         tags.append(FloorTagConfig(tag_id, family, size, thickness))
-    return FloorConfig(tuple(soles), standing, tuple(tags), stances, check_stances, _ground_check(path, r.data))
+    return FloorConfig(soles, standing, tuple(tags), stances, check_stances, _ground_check(path, r.data),
+                       added_soles, tuple(aim))  # fmt: skip
 
 
 def _ground_check(path: Path, floor: dict) -> GroundCheck:
@@ -598,6 +668,28 @@ def _ground_check(path: Path, floor: dict) -> GroundCheck:
     default = GroundCheck()
     return GroundCheck(r.number("distance", default.distance, positive=True),
                        r.number("limit", default.limit, positive=True))  # fmt: skip
+
+
+def _soles(path: Path, data) -> tuple[tuple[str, ...], tuple[SoleConfig, ...]]:
+    """`floor.soles`: each a link name, or {link, xyz} for a sole frame at xyz [m] in the link (axes as the link's).
+    Returns the sole frames' names and the frames to add."""
+    if not isinstance(data, list) or not data:
+        raise WolfcalError(f"{path}: 'floor.soles' must be a non-empty list of links (or {{link, xyz}}) whose "
+                           "frames lie on the floor")
+    names: list[str] = []
+    added: list[SoleConfig] = []
+    for i, item in enumerate(data):
+        if isinstance(item, str) and item:
+            names.append(item)
+            continue
+        r = _Reader(path, item, f"floor.soles[{i}]")
+        r.check_keys(("link", "xyz"))
+        sole = SoleConfig(f"{r.string('link')}_sole", r.string("link"), r.vector3("xyz"))
+        if sole.frame in names:
+            r.fail(f"a second sole on link {sole.link!r}; give each sole its own link")
+        names.append(sole.frame)
+        added.append(sole)
+    return tuple(names), tuple(added)
 
 
 def _stances(r: _Reader, key: str) -> tuple[dict[str, float], ...]:

@@ -2,7 +2,7 @@
 leg poses by and pose planning keeps its candidates by.
 
 Joint values are true angles [rad] (readings under the nominal model for a plan). A pose is good when the external
-camera sees the torso tag (every tag on a link rigidly fixed to the base) and at least one foot tag fully inside the
+camera sees the torso tag (every tag on a link the legs do not move) and at least one foot tag fully inside the
 image (margin 2 % of the width), at least 1.5 % of the width per edge, facing it (less than `MAX_ANGLE_RAD` off the
 viewing ray), and apart from every other tag in the image (bounding boxes grown by `SEPARATION` of their size must
 not overlap: a foot tag lifted in front of the torso tag would hide it or break its white border). The Wolfgang's
@@ -27,8 +27,8 @@ SEPARATION = 0.3  # share of a tag's image size kept free around it
 
 
 def base_tag_ids(robot: Robot) -> list[int]:
-    """The tags on links rigidly fixed to the base (no actuated joint between): the torso tag on the Wolfgang."""
-    return [t.id for t in robot.config.tags if not robot.actuated_joints_to([t.link])]
+    """The tags on links the legs do not move (`Robot.off_the_legs`): the torso tag, also behind waist joints."""
+    return [t.id for t in robot.config.tags if robot.off_the_legs(t.link)]
 
 
 def external_tag_poses(
@@ -73,11 +73,11 @@ def _apart(camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray) -> 
 
 
 def external_pose_ok(robot: Robot, visible: np.ndarray) -> np.ndarray:
-    """(N,) bool: every base-fixed tag and at least one other tag visible (visible: (N, T) over config.tag_ids)."""
+    """(N,) bool: every tag off the legs and at least one other tag visible (visible: (N, T) over config.tag_ids)."""
     fixed = np.isin(robot.config.tag_ids, base_tag_ids(robot))
     if not fixed.any():
         raise WolfcalError(
-            f"{robot.config.path}: no tag on a link fixed to '{robot.config.base_link}' (e.g. a torso tag); an "
-            "external camera needs one to tell the robot's pose"
+            f"{robot.config.path}: no tag on a link the legs do not move (e.g. a torso tag); an external camera "
+            "needs one to tell the robot's pose"
         )
     return np.all(visible[:, fixed], axis=1) & np.any(visible[:, ~fixed], axis=1)

@@ -3,10 +3,11 @@ stands) or off; best effort, so that a failing bus still gets every joint it can
 
 from __future__ import annotations
 
-from wolfcal.hardware.bus import BusError, DynamixelBus
+from wolfcal.hardware.bus import BusError
+from wolfcal.hardware.buses import ServoBuses
 
 
-def leave_torque(bus: DynamixelBus, initial: dict[str, bool], touched: list[str], mode: str) -> list[str]:
+def leave_torque(bus: ServoBuses, initial: dict[str, bool], touched: list[str], mode: str) -> list[str]:
     """Set the torque of the touched joints as `mode` (restore | on | off) says; returns the joints that failed."""
     wanted = {j: (initial[j] if mode == "restore" else mode == "on") for j in touched}
     turn_on = [j for j, on in wanted.items() if on]

@@ -34,7 +34,8 @@ from wolfcal.capture.session import CaptureSession, CaptureSummary
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.errors import WolfcalError
-from wolfcal.hardware.bus import BusError, DynamixelBus
+from wolfcal.hardware.bus import BusError
+from wolfcal.hardware.buses import ServoBuses
 from wolfcal.hardware.camera import CameraError
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.robot.robot import Robot, load_robot
@@ -60,7 +61,7 @@ def run_capture(
     mode = ("floor " if options.floor else "") + ("scripted" if script else "manual")
     status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
-    with stop_on_signals(), DynamixelBus(robot.config.servos, options.port) as bus:
+    with stop_on_signals(), ServoBuses(robot.config.servos, options.port) as bus:
         bus.ping_all()
         bus.check_hardware()
         if script:  # before anything moves: where the robot stands decides the joints no pose names
@@ -68,7 +69,7 @@ def run_capture(
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
             confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor)
-        writer = _open_outputs(options, robot, cameras, bus.port_name)
+        writer = _open_outputs(options, robot, cameras, bus.port_names)
         view = LiveView(status, coverage, console)
         sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
         session = CaptureSession(robot, bus, sources, writer, options, view, coverage, status)
@@ -98,7 +99,7 @@ def run_capture(
 
 
 def _checked_script(
-    options: CaptureOptions, robot: Robot, script: PoseScript, bus: DynamixelBus, status: Status, console: Console
+    options: CaptureOptions, robot: Robot, script: PoseScript, bus: ServoBuses, status: Status, console: Console
 ) -> PoseScript:
     """The script checked against collisions from where the robot stands now, before anything moves.
 
@@ -117,10 +118,10 @@ def _checked_script(
 
 
 def _open_outputs(
-    options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], port_name: str
+    options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], ports: list[str]
 ) -> CaptureWriter:
     """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
-    open_sources(cameras, robot, port_name)
+    open_sources(cameras, robot, ports)
     try:
         streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
         return CaptureWriter(options.out, robot.config, streams, options.image_format)

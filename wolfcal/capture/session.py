@@ -18,7 +18,8 @@ import numpy as np
 from wolfcal.capture.gating import StillnessWindow, why_not_sharp
 from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.view import Coverage, LiveView, Status
-from wolfcal.hardware.bus import DynamixelBus, JointState
+from wolfcal.hardware.bus import JointState
+from wolfcal.hardware.buses import ServoBuses
 from wolfcal.hardware.camera import CameraSource
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.robot.robot import Robot
@@ -42,7 +43,7 @@ class CaptureSession:
     def __init__(
         self,
         robot: Robot,
-        bus: DynamixelBus,
+        bus: ServoBuses,
         cameras: dict[str, CameraSource],
         writer: CaptureWriter,
         options: CaptureOptions,

@@ -24,12 +24,15 @@ DEFAULT_PLACEMENT = look_at(np.array([1.2, 0.0, 0.5]), TARGET_BASE)  # (4, 4) T_
 
 
 class SimCamera:
-    """Renders the robot as the bus emulator on `port` holds it (true angles, true frames and tags)."""
+    """Renders the robot as the bus emulators on `ports` hold it (true angles, true frames and tags; the truth file
+    of the first emulator that has one)."""
 
-    def __init__(self, robot: Robot, port: str, camera: CameraModel, seed: int = 0, external: str | None = None):
-        self.name, self.port, self.robot = "sim", port, robot
+    def __init__(
+        self, robot: Robot, ports: list[str], camera: CameraModel, seed: int = 0, external: str | None = None
+    ):
+        self.name, self.ports, self.robot = "sim", ports, robot
         self._read = read_true_angles
-        _, truth_path = read_true_angles(port)
+        truth_path = next((path for path in (read_true_angles(port)[1] for port in ports) if path), None)
         truth = load_truth(Path(truth_path)) if truth_path else Corrections()
         T_base_camera, floor_places = None, None
         if external is None and truth_path:
@@ -41,7 +44,9 @@ class SimCamera:
                               floor_places=floor_places)
 
     def grab(self) -> np.ndarray:
-        angles, _ = self._read(self.port)
+        angles: dict[str, float] = {}
+        for port in self.ports:
+            angles.update(self._read(port)[0])
         q_true = np.array([angles.get(n, 0.0) for n in self.robot.joint_names])
         return self.scene.render_true(q_true)
 

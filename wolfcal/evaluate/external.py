@@ -6,8 +6,8 @@ judged. Figures per camera:
 - reprojection RMS per axis [px] of the corners of the fit's tags (inlier views), and the max corner distance;
 - the study's tag-grid metric on each foot tag relative to the torso tag [mm]: T_torso_tag_foot_tag measured by PnP
   of both tags in the same image against the model's prediction; mean distance of a 5 x 4 grid on the foot tag;
-- with a simulator's truth beside the captures: the sole position error relative to the torso [mm], max over
-  random leg configurations.
+- with a simulator's truth beside the captures: the position error of the feet (`Robot.feet`: the config's
+  `floor.soles`, else the links of the leg tags) relative to the torso [mm], max over random leg configurations.
 """
 
 from __future__ import annotations
@@ -29,8 +29,6 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
 
-SOLES = ("r_sole", "l_sole")
-
 
 def _reprojection(robot: Robot, obs: Observations, model: Corrections) -> dict:
     """Per-axis RMS and max corner distance [px] with each placement's pose fitted and the chain held at `model`."""
@@ -43,7 +41,7 @@ def _reprojection(robot: Robot, obs: Observations, model: Corrections) -> dict:
 
 def foot_tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> list[float]:
     """Per sample with the torso tag and a foot tag fully seen: mean grid distance [mm] of each foot tag."""
-    fixed = [t for t in obs.observed_tag_ids if robot.fixed_to_base(robot.config.tag(t).link)]
+    fixed = [t for t in obs.observed_tag_ids if robot.off_the_legs(robot.config.tag(t).link)]
     moving = [t for t in obs.observed_tag_ids if t not in fixed]
     if not fixed or not moving:
         return []
@@ -91,11 +89,11 @@ def external_metrics(
                 "tag_grid_mm_std": round(float(np.std(grid)), 3) if grid else None,
             }
         out["cameras"][name] = {"n_samples": obs.n_samples, **rows}
-    if truth is not None:
+    if truth is not None and robot.feet:
         rng = np.random.default_rng(0)
         out["sole_error_mm"] = {
             label: {s: round(float(link_position_errors(robot, s, m, truth, 300, rng).max() * 1000), 3)
-                    for s in SOLES if s in robot.model.links}
+                    for s in robot.feet}
             for label, m in models.items()
         }  # fmt: skip
     return out

@@ -160,7 +160,7 @@ def _run_external_evaluate(
             grid = "-" if mean is None else f"{mean:.2f} +- {std:.2f}"
             lines.append(f"| {name} | {label} | {r['rms_px']:.3f} | {r['max_px']:.2f} | {grid} |")
     if "sole_error_mm" in figures:
-        lines += ["", "Sole position error relative to the torso against the simulator's truth, max over 300 random "
+        lines += ["", "Foot position error relative to the torso against the simulator's truth, max over 300 random "
                   "leg configurations [mm]: " + "; ".join(
                       f"{label}: " + ", ".join(f"{s} {v:.2f}" for s, v in e.items())
                       for label, e in figures["sole_error_mm"].items())]  # fmt: skip

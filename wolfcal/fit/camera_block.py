@@ -209,25 +209,27 @@ def initial_camera_poses(
     robot: Robot, obs: Observations, placement_of_sample: np.ndarray, n_placements: int,
     model: Corrections | None = None,
 ) -> list[np.ndarray]:
-    """T_base_camera (4, 4) per placement from PnP of the tags on links fixed to the base (e.g. the torso tag),
-    median over the placement's views; a clear error for a placement in which no such tag was seen."""
-    fixed = [t for t in obs.observed_tag_ids if robot.fixed_to_base(robot.config.tag(t).link)]
-    q0 = np.zeros((1, len(robot.joint_names)))
-    base_tag = {t: robot.model.link_poses(q0, [robot.config.tag(t).link], model, base=robot.config.base_link)[
-        robot.config.tag(t).link][0] @ robot.T_link_tag(t, model) for t in fixed}
+    """T_base_camera (4, 4) per placement from PnP of the tags on links the legs do not move (`Robot.off_the_legs`:
+    the torso tag, also behind waist joints), each placed by the model `model` at the sample's readings; median over
+    the placement's views; a clear error for a placement in which no such tag was seen."""
+    fixed = [t for t in obs.observed_tag_ids if robot.off_the_legs(robot.config.tag(t).link)]
+    links = list(dict.fromkeys(robot.config.tag(t).link for t in fixed))
     poses = []
     for k in range(n_placements):
         candidates = []
         for s in np.flatnonzero(placement_of_sample == k):
+            T_base_link = robot.model.link_poses(obs.q_measured[s : s + 1], links, model, base=robot.config.base_link)
             for t in fixed:
                 T_camera_tag = tag_pose_from_corners(robot, obs, int(s), t)
                 if T_camera_tag is not None:
-                    candidates.append(base_tag[t] @ invert_transform(T_camera_tag))
+                    T_base_tag = T_base_link[robot.config.tag(t).link][0] @ robot.T_link_tag(t, model)
+                    candidates.append(T_base_tag @ invert_transform(T_camera_tag))
         if not candidates:
             sources = sorted({obs.sources[s] for s in np.flatnonzero(placement_of_sample == k)})
-            fixed_ids = [tg.id for tg in robot.config.tags if robot.fixed_to_base(tg.link)]
+            fixed_ids = [tg.id for tg in robot.config.tags if robot.off_the_legs(tg.link)]
             raise WolfcalError(
-                f"{', '.join(sources)}: external camera '{obs.camera_name}' never saw a tag fixed to the base link "
+                f"{', '.join(sources)}: external camera '{obs.camera_name}' never saw a tag on a link the legs do "
+                "not move "
                 f"({'tag ' + ', '.join(map(str, fixed_ids)) if fixed_ids else 'none is configured'}) in this "
                 "placement, so its pose cannot be found; capture poses in which the torso tag is in view"
             )

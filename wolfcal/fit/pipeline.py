@@ -13,6 +13,7 @@ from wolfcal.atomic import output_set
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
+from wolfcal.fit.camera_axes import check_camera_axes
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
 from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
@@ -110,6 +111,8 @@ def fit_observations(
     else:
         observations = _systems(robot, observations, options)
     observations, floor = split_floor(robot, observations)
+    if HEAD_CAMERA in observations:
+        check_camera_axes(robot, observations[HEAD_CAMERA])
     used = _tags_used(robot, observations, options)
     if not used and mocap is None and floor is None:
         raise WolfcalError(
@@ -159,13 +162,13 @@ def _tags_used(
     robot: Robot, observations: dict[str, Observations], options: FitOptions
 ) -> dict[str, Observations]:
     """Per camera, the observations of the tags the preset uses (cameras without one left out); an external camera
-    also keeps the tags fixed to the base, on which its pose rests."""
+    also keeps the tags on links the legs do not move, on which its pose rests."""
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
         if name != HEAD_CAMERA:
             tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
-                                             if robot.fixed_to_base(robot.config.tag(t).link)})
+                                             if robot.off_the_legs(robot.config.tag(t).link)})
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
     return used

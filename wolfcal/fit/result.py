@@ -346,7 +346,7 @@ def parameter_results(fit: Fit) -> list[ParameterResult]:
         ParameterResult(
             name=p.name, value=float(v), std=float(s), unit=p.unit, prior_sigma=p.prior_sigma,
             data_share=round(float(share), 4), measured_by=by,
-            urdf_joint=p.target if p.kind in ("offset", "frame") else None,
+            urdf_joint=fit.robot.model.urdf_joint_of(p.target) if p.kind in ("offset", "frame") else None,
             display=f"{_display(v, p.unit)} +- {_display(s, p.unit)[1:]}",
         )
         for p, v, s, share, by in zip(params.parameters, fit.solution.values, u.std, u.data_share, _measured_by(fit))

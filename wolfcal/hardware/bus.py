@@ -228,8 +228,15 @@ class DynamixelBus:
 
         def attempt() -> int:
             result = group.txRxPacket()
+            # the SDK takes any status packet of the right id: on a busy host the late reply to an earlier request
+            # (of another length) can stand for this one's; such a read failed, and the stale bytes are dropped
+            short = next((sid for sid in self.ids if len(group.data_dict.get(sid) or []) < group.data_length), None)
+            if result == sdk.COMM_SUCCESS and short is not None and self.port is not None:
+                self.port.clearPort()
+                result = sdk.COMM_RX_CORRUPT
             # the SDK stops at the first servo that failed; its data is left empty
             culprit = next((sid for sid in self.ids if not group.data_dict.get(sid)), None)
+            culprit = short if culprit is None else culprit
             if result != sdk.COMM_SUCCESS and culprit is not None:
                 failed_at[culprit] += 1
             return result

@@ -41,7 +41,6 @@ FOLDER_FILES = (EXTRINSIC_FILE, HARDWARE_FILE, JOINT_OFFSETS_FILE, CAMERA_CORREC
 AGREE_RAD = 1e-6  # two files giving one value must agree to this [rad, m]
 
 # R_body_optical: the optical axes (z forward, x right, y down) in ROS body axes (x forward, y left, z up)
-BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 @dataclass
@@ -71,23 +70,16 @@ class CurrentCalibration:
                    {str(k): float(v) for k, v in (data.get("mounting_offsets") or {}).items()})  # fmt: skip
 
 
-def camera_axes_rotation(robot: Robot) -> np.ndarray:
-    """R_cameraframe_optical (3, 3): identity for an optical camera frame, BODY_FROM_OPTICAL for one with ROS body
-    axes (`camera.axes: body`)."""
-    axes = getattr(robot.config.head_camera(), "axes", "optical")  # `camera.axes`, optical where not configurable
-    return BODY_FROM_OPTICAL if axes == "body" else np.eye(3)
-
-
 def optical_rotation(robot: Robot, corrections: Corrections) -> np.ndarray:
-    """(3, 3) rotation of the camera correction between the optical frames: R_uncalibrated_calibrated."""
+    """(3, 3) rotation of the camera correction between the optical frames: R_uncalibrated_calibrated (the camera's
+    frame correction is in its optical frame, whatever `camera.axes` says of the URDF link)."""
     vec = corrections.frames.get(robot.camera_joint, np.zeros(6))
-    A = camera_axes_rotation(robot)
-    return A.T @ exp_so3(np.asarray(vec[3:], dtype=float)) @ A
+    return exp_so3(np.asarray(vec[3:], dtype=float))
 
 
 def _camera_vector(robot: Robot, R_optical: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    A = camera_axes_rotation(robot)
-    return np.concatenate([translation, log_so3(A @ R_optical @ A.T)])
+    """The camera's frame correction (x, y, z, rx, ry, rz) [m, rad] in its optical frame."""
+    return np.concatenate([translation, log_so3(R_optical)])
 
 
 def _joint_offsets(path: Path, data: dict) -> dict[str, float]:

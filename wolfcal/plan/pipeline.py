@@ -105,7 +105,7 @@ def used_tags(robot: Robot, options: PlanOptions, external: bool) -> list[int]:
     if options.free == "leg" and not external:
         tags = [t for t in tags if robot.config.tag(t).side is not None]
     if external:
-        tags = sorted(set(tags) | {t for t in robot.config.tag_ids if robot.fixed_to_base(robot.config.tag(t).link)})
+        tags = sorted(set(tags) | {t for t in robot.config.tag_ids if robot.off_the_legs(robot.config.tag(t).link)})
     return tags
 
 

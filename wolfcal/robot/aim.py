@@ -1,8 +1,9 @@
 """Where the standing robot aims its head: at a point on the floor (a ball), through a model.
 
 The robot stands in the pose of its config (`floor.standing`, `robot.floor.standing_pose`); the head aims with the
-last two movable joints before the camera (pan and tilt). The scripted floor capture and the floor plan aim at the
-floor points `AIM_DISTANCES_M` from the point below base_link at bearings `AIM_BEARINGS_DEG`.
+joints of `floor.aim`, by default the last two movable joints before the camera (pan and tilt). The scripted floor
+capture and the floor plan aim at the floor points `AIM_DISTANCES_M` from the point below base_link at bearings
+`AIM_BEARINGS_DEG`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,10 @@ AIM_BEARINGS_DEG = (-30.0, 0.0, 30.0)  # ... at these bearings from the floor's 
 
 
 def aim_joints(robot: Robot) -> list[str]:
-    """The joints that aim the camera: the last two movable joints between base and camera (pan, tilt), or one."""
+    """The joints that aim the camera: the config's `floor.aim`, else the last two movable joints between base and
+    camera (pan, tilt), or one."""
+    if robot.config.floor is not None and robot.config.floor.aim:
+        return list(robot.config.floor.aim)
     joints = [
         j.name
         for j in robot.model.joints_between(robot.config.base_link, robot.config.head_camera().frame)

@@ -43,6 +43,7 @@ class JointModel:
     lower: float = -np.inf
     upper: float = np.inf
     mimic: tuple[str, float, float] | None = None  # (master joint, multiplier, offset)
+    in_urdf: bool = True  # False: a fixed frame the robot config adds (a body-axes camera's optical frame, a sole)
 
     @property
     def actuated(self) -> bool:
@@ -68,6 +69,7 @@ class KinematicModel:
             raise WolfcalError(f"{source}: the URDF must form one tree, found roots {', '.join(roots)}")
         self.root = roots[0]
         self.links = parents | children
+        _check_mimics(self.joints, source)
         self.actuated_joint_names = [j.name for j in self.joints.values() if j.actuated]
         self._column = {n: i for i, n in enumerate(self.actuated_joint_names)}
         # Per joint, the last joint values and their motion: a fit walks the same readings again at every step, and
@@ -88,6 +90,33 @@ class KinematicModel:
         if not joints:
             raise WolfcalError(f"{path}: the URDF has no joints")
         return cls(joints, name=robot.get("name", "robot"), source=str(path))
+
+    def with_frames(self, frames: Iterable[tuple[str, str, np.ndarray]]) -> KinematicModel:
+        """This model with fixed frames added: (name, parent link, T_parent_frame (4, 4)) each, joined by a fixed
+        joint of the same name that is not in the URDF (`JointModel.in_urdf` False). A WolfcalError when a name is
+        taken or a parent is not a link."""
+        added = []
+        for name, parent, T in frames:
+            if name in self.links or name in self.joints:
+                raise WolfcalError(f"{self.source}: the URDF already has a link or joint named '{name}'")
+            self.require_link(parent, self.source)
+            added.append(JointModel(name, "fixed", parent, name, np.asarray(T, float), np.array([1.0, 0.0, 0.0]),
+                                    in_urdf=False))  # fmt: skip
+        return KinematicModel([*self.joints.values(), *added], self.name, self.source)
+
+    def urdf_joint_of(self, joint: str) -> str:
+        """The URDF joint a correction of `joint` is written to: itself, or for a frame the config added, the URDF
+        joint above it (`urdf_parent_joint`)."""
+        model = self.joints[joint]
+        return joint if model.in_urdf else self.urdf_parent_joint(model.parent).name
+
+    def urdf_parent_joint(self, link: str) -> JointModel:
+        """The joint of the URDF above `link`: its parent joint, or for a frame the config added, the URDF joint above
+        the link it hangs from."""
+        joint = self.parent_joint(link)
+        while not joint.in_urdf:
+            joint = self.parent_joint(joint.parent)
+        return joint
 
     # --- structure ------------------------------------------------------------------------------------------
     def require_link(self, link: str, where: str) -> None:
@@ -195,6 +224,20 @@ class KinematicModel:
         K = skew(joint.axis)
         out[:, :3, :3] = np.eye(3) + np.sin(values)[:, None, None] * K + (1.0 - np.cos(values))[:, None, None] * (K @ K)
         return out
+
+
+def _check_mimics(joints: dict[str, JointModel], source: str) -> None:
+    """Every mimic joint must follow a movable joint of the URDF that is not a mimic joint itself."""
+    for joint in joints.values():
+        if joint.mimic is None:
+            continue
+        master = joints.get(joint.mimic[0])
+        if master is None or not master.actuated:
+            why = "is not in the URDF" if master is None else "is not a movable joint without <mimic>"
+            raise WolfcalError(
+                f"{source}: joint '{joint.name}' mimics joint '{joint.mimic[0]}', which {why}; fix the <mimic "
+                f"joint=...> of '{joint.name}' to name a movable joint of this URDF"
+            )
 
 
 def _numbers(path: Path, joint: str, element: etree._Element | None, key: str, default: list[float]) -> np.ndarray:

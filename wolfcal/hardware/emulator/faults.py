@@ -3,7 +3,9 @@
 `no-answer` (the servo falls silent), `crc` (its replies are corrupted), `hw-error` (hardware error status bits:
 alert bit in every reply, torque off until REBOOT), `missing` (the id is not on the bus), `model` (it reports
 another model number), `late` (its next VALUE replies, default 3, come after the master has given up waiting, as
-on a busy host: they are dropped). Each may start some seconds after the emulator.
+on a busy host: they are dropped), `stale` (its next VALUE replies, default 1, come so late that they arrive just
+before its reply to the next instruction, as the answer to a request the master gave up on can on a busy host).
+Each may start some seconds after the emulator.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware import protocol as P
 from wolfcal.hardware.emulator.servo import EmulatedServo
 
-FAULT_KINDS = ("no-answer", "crc", "hw-error", "missing", "model", "late")
+FAULT_KINDS = ("no-answer", "crc", "hw-error", "missing", "model", "late", "stale")
 OVERLOAD = 32  # hw-error default: the overload bit of Hardware Error Status
 LATE_REPLIES = 3  # late default: replies that come too late
 
@@ -36,7 +38,7 @@ def parse_fault(text: str) -> Fault:
         fault = Fault(
             kind,
             int(sid),
-            int(value) if value else {"hw-error": OVERLOAD, "late": LATE_REPLIES}.get(kind, 0),
+            int(value) if value else {"hw-error": OVERLOAD, "late": LATE_REPLIES, "stale": 1}.get(kind, 0),
             float(after) if after else 0.0,
         )
     except ValueError:
@@ -65,6 +67,8 @@ def inject(servos: dict[int, EmulatedServo], fault: Fault) -> None:
         servo.write(P.MODEL_NUMBER, fault.value)
     elif fault.kind == "late":
         servo.late_replies = fault.value
+    elif fault.kind == "stale":
+        servo.stale_replies = fault.value
     elif fault.kind == "hw-error":
         servo.write(P.HARDWARE_ERROR_STATUS, fault.value)
         servo.write(P.TORQUE_ENABLE, 0)

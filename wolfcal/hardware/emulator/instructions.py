@@ -57,7 +57,12 @@ def _status(servo: EmulatedServo, error: int, params: bytes = b"") -> bytes:
     packet = bytearray(P.build_status(servo.sid, error | servo.error_byte(), params))
     if servo.corrupt:
         packet[-1] ^= 0x5A
-    return bytes(packet)
+    if servo.stale_replies:  # this reply comes so late that it arrives before the next one
+        servo.stale_replies -= 1
+        servo.held += bytes(packet)
+        return b""
+    held, servo.held = servo.held, b""
+    return held + bytes(packet)
 
 
 def _read(servo: EmulatedServo, addr: int, length: int) -> bytes:

@@ -35,6 +35,8 @@ class EmulatedServo:
         self.speed = 0.0
         self.silent = self.corrupt = self.missing = False
         self.late_replies = 0  # fault: replies still to come too late for the master (dropped)
+        self.stale_replies = 0  # fault: replies still to be held back until the next reply (sent before it)
+        self.held = b""  # replies held back, sent before the next one
         self.write(P.MODEL_NUMBER, spec.model)
         self.write(P.FIRMWARE_VERSION, FIRMWARE)
         self.write(P.ID, sid)

@@ -1,0 +1,134 @@
+"""The servos of a robot config on all their buses (`servos.ports`, e.g. the Wolfgang's four), in joint terms.
+
+`ServoBuses` offers what `DynamixelBus` offers for one port, over one `DynamixelBus` per device: `joints` fixes the
+array order (the config's `servos.ids` order, whatever bus a joint is on); reads are one sync read per bus, taken one
+after the other; writes go to the bus of each joint. A failure raises the `BusError` of the bus it happened on, which
+names that device.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import replace
+from typing import TypeVar
+
+import numpy as np
+
+from wolfcal.config import ServoConfig
+from wolfcal.errors import WolfcalError
+from wolfcal.hardware.bus import BusError, DynamixelBus, JointState
+
+Result = TypeVar("Result")
+
+
+class ServoBuses:
+    """Every configured servo, on one or more ports. Use as a context manager."""
+
+    def __init__(self, servos: ServoConfig, port: str | None = None, baudrate: int | None = None):
+        buses = servos.buses
+        if port is not None and len(buses) > 1:
+            raise WolfcalError(
+                f"--port {port}: the robot config lists {len(buses)} servo buses under 'servos.ports' "
+                f"({', '.join(buses)}); give their devices there instead of --port"
+            )
+        joint_of = {sid: joint for joint, sid in servos.ids.items()}
+        self.servos = servos
+        self.joints = list(servos.ids)
+        self.buses: list[DynamixelBus] = []
+        self.bus_of: dict[str, DynamixelBus] = {}
+        for device, ids in buses.items():
+            joints = [joint_of[sid] for sid in ids]
+            config = replace(servos, port=device, ids={j: servos.ids[j] for j in joints}, ports={},
+                             models={j: m for j, m in servos.models.items() if j in joints})  # fmt: skip
+            bus = DynamixelBus(config, port if port is not None else device, baudrate)
+            self.buses.append(bus)
+            self.bus_of.update({joint: bus for joint in joints})
+        self.port_names = [bus.port_name for bus in self.buses]
+        self.port_name = ", ".join(self.port_names)
+
+    # --- connection -----------------------------------------------------------------------------------------
+    def open(self) -> ServoBuses:
+        """Open every bus; when one cannot be opened, those already open are closed again."""
+        try:
+            for bus in self.buses:
+                bus.open()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        for bus in self.buses:
+            bus.close()
+
+    def recover_port(self) -> None:
+        for bus in self.buses:
+            bus.recover_port()
+
+    def __enter__(self) -> ServoBuses:
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _grouped(self, joints: Iterable[str]) -> dict[DynamixelBus, list[str]]:
+        groups: dict[DynamixelBus, list[str]] = {}
+        for joint in joints:
+            groups.setdefault(self.bus_of[joint], []).append(joint)
+        return groups
+
+    def _merged(self, per_bus: Callable[[DynamixelBus], dict[str, Result]]) -> dict[str, Result]:
+        merged: dict[str, Result] = {}
+        for bus in self.buses:
+            merged.update(per_bus(bus))
+        return merged
+
+    # --- checks ---------------------------------------------------------------------------------------------
+    def ping_all(self) -> dict[str, int]:
+        """Ping every servo on every bus; one BusError with the problems of all buses."""
+        models, problems = {}, []
+        for bus in self.buses:
+            try:
+                models.update(bus.ping_all())
+            except BusError as exc:
+                problems.append(str(exc))
+        if problems:
+            raise BusError("\n".join(problems))
+        return models
+
+    def hardware_errors(self) -> dict[str, int]:
+        return self._merged(DynamixelBus.hardware_errors)
+
+    def check_hardware(self) -> None:
+        for bus in self.buses:
+            bus.check_hardware()
+
+    # --- reading and writing ----------------------------------------------------------------------------------
+    def read_state(self) -> JointState:
+        """Present position and velocity of every joint: one sync read per bus, in `joints` order."""
+        ticks: dict[str, int] = {}
+        velocity: dict[str, int] = {}
+        for bus in self.buses:
+            state = bus.read_state()
+            ticks.update(zip(bus.joints, state.ticks))
+            velocity.update(zip(bus.joints, state.velocity_units))
+        return JointState(np.array([ticks[j] for j in self.joints]), np.array([velocity[j] for j in self.joints]))
+
+    def set_torque(self, joints: Iterable[str], on: bool) -> None:
+        for bus, group in self._grouped(joints).items():
+            bus.set_torque(group, on)
+
+    def torque_enabled(self) -> dict[str, bool]:
+        return self._merged(DynamixelBus.torque_enabled)
+
+    def set_profile_velocity(self, joints: Iterable[str], rad_s: float) -> None:
+        for bus, group in self._grouped(joints).items():
+            bus.set_profile_velocity(group, rad_s)
+
+    def set_goal_positions(self, goals: dict[str, float]) -> None:
+        """Goal positions [rad]: one sync write per bus."""
+        for bus, group in self._grouped(goals).items():
+            bus.set_goal_positions({joint: goals[joint] for joint in group})
+
+    def reboot(self, joint: str) -> None:
+        self.bus_of[joint].reboot(joint)
