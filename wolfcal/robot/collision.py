@@ -18,11 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.robot.collision_urdf import urdf_collision_segments
+from wolfcal.robot.collision_urdf import urdf_collision
+from wolfcal.robot.kinematics import JointModel
 from wolfcal.robot.robot import Robot
 
-REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other
-PAIR_CHUNK = 16  # capsule pairs checked at a time by `CollisionModel.collision_free`
+REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other [m]
+AXES_MEET_M = 0.01  # two joint axes closer than this form one two-axis joint (see `adjacent_bodies`) [m]
+CHECK_BLOCK = 2_000_000  # (configuration, capsule pair) distances computed at a time by `CollisionModel.scan`
 EXACT_BELOW_M = 0.05  # capsule pairs whose bounding spheres are further apart need no exact distance [m]
 
 
@@ -55,23 +57,37 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
 class CollisionModel:
     """Capsules of a robot's links and the body pairs to check; see the module docstring."""
 
-    def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray) -> None:
+    def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray,
+                 notes: list[str] | None = None) -> None:  # fmt: skip
         self.robot, self.capsules, self.source = robot, capsules, source
+        self.notes = list(notes or [])  # what the model left out, to be said once (missing meshes, pairs at rest)
+        self.body_of_link = _bodies(robot)
         self.links = sorted({c.link for c in capsules})
         self.radius = np.array([c.radius for c in capsules])
         self.body = np.array([c.body for c in capsules])
         i, j = np.triu_indices(len(capsules), k=1)
         keep = self.body[i] != self.body[j]
-        adjacent = _adjacent_bodies(robot, self.body_of_link)
+        adjacent = adjacent_bodies(robot, self.body_of_link, set(self.body.tolist()), rest)
         keep &= ~np.array([(self.body[a], self.body[b]) in adjacent for a, b in zip(i, j)], dtype=bool)
         self.pairs = np.stack([i[keep], j[keep]], axis=1)
         rest_distance = self._pair_clearance(np.atleast_2d(rest))[0]
-        touching = rest_distance < REST_CLEARANCE_M
+        body_pair = self.body[self.pairs].min(axis=1) * (len(self.body) + 1) + self.body[self.pairs].max(axis=1)
+        touching = np.isin(body_pair, body_pair[rest_distance < REST_CLEARANCE_M])  # whole body pairs
+        rest_pairs = sorted({self.link_pair(k) for k in np.flatnonzero(rest_distance < REST_CLEARANCE_M)})
+        if rest_pairs:
+            self.notes.append(f"{len(rest_pairs)} link pairs closer than {REST_CLEARANCE_M * 1000:.0f} mm in the "
+                              "rest pose are not checked against each other (parts built to touch, or bounds "
+                              "wider than the parts): " + ", ".join(f"{a}/{b}" for a, b in rest_pairs))  # fmt: skip
         self.pairs, self.rest_distance = self.pairs[~touching], rest_distance[~touching]
+        self.pair_group = np.unique(body_pair[~touching], return_inverse=True)[1].reshape(-1)  # (pairs,) body pair
+        self.group_bodies = np.array([self.body[self.pairs[self.pair_group == g][0]] for g in range(
+            int(self.pair_group.max()) + 1)]) if len(self.pairs) else np.zeros((0, 2), int)  # fmt: skip
+        self._sphere_link, self._sphere_centre, self._sphere_radius = self._body_spheres(rest)
 
-    @property
-    def body_of_link(self) -> dict[str, int]:
-        return _bodies(self.robot)
+    def link_pair(self, k: int) -> tuple[str, str]:
+        """The links (a, b) of checked capsule pair k, in name order."""
+        a, b = self.capsules[self.pairs[k, 0]].link, self.capsules[self.pairs[k, 1]].link
+        return (a, b) if a <= b else (b, a)
 
     def segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J)."""
@@ -112,21 +128,77 @@ class CollisionModel:
         d = self._pair_clearance(q, which)
         return d.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
 
-    def collision_free(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None) -> np.ndarray:
-        """(N,) bool: `clearance(q, which) >= clearance_m`, found faster: the pairs closest in the rest pose (most
-        often in contact) are checked first, PAIR_CHUNK at a time, and a configuration is dropped at its first pair
-        that is too close."""
+    def _body_spheres(self, rest: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Per body (index as `body`): the link its sphere is fixed to, the centre in that link's frame (B, 3) and
+        the radius (B,) [m] of a sphere containing all of the body's capsules (for `scan`'s first test)."""
+        n = int(self.body.max()) + 1 if len(self.body) else 0
+        a, b = (x[0] for x in self.segments(np.atleast_2d(rest)))
+        poses = self.robot.model.link_poses(np.atleast_2d(rest), self.links)
+        links, centres, radii = [""] * n, np.zeros((n, 3)), np.zeros(n)
+        for k in set(self.body.tolist()):
+            members = np.flatnonzero(self.body == k)
+            ends = np.concatenate([a[members], b[members]])
+            centre = 0.5 * (ends.min(axis=0) + ends.max(axis=0))
+            reach = np.maximum(np.linalg.norm(a[members] - centre, axis=1), np.linalg.norm(b[members] - centre, axis=1))
+            links[k] = self.capsules[members[0]].link
+            T = poses[links[k]][0]
+            centres[k], radii[k] = T[:3, :3].T @ (centre - T[:3, 3]), float(np.max(reach + self.radius[members]))
+        return links, centres, radii
+
+    def scan(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None,
+             stop_at_first: bool = True) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """(free (N,) bool: `clearance(q, which) >= clearance_m`, close (N, groups) bool: body pair g closer than
+        clearance_m), found by body pairs, the closest in the rest pose first: a body pair whose bounding spheres
+        are far enough apart needs no capsule distance; with stop_at_first a configuration is dropped at its first
+        body pair that is too close (its later entries in `close` stay False)."""
         a, b = self.segments(q)
-        order = np.flatnonzero(np.ones(len(self.pairs), bool) if which is None else which)
-        order = order[np.argsort(self.rest_distance[order], kind="stable")]
-        free, rows = np.ones(len(a), dtype=bool), np.arange(len(a))
-        for start in range(0, len(order), PAIR_CHUNK):
-            if not len(rows):
-                break
-            close = self._distances(a[rows], b[rows], self.pairs[order[start : start + PAIR_CHUNK]]).min(axis=1)
-            free[rows[close < clearance_m]] = False
-            rows = rows[close >= clearance_m]
-        return free
+        poses = self.robot.model.link_poses(np.atleast_2d(q), sorted(set(self._sphere_link) - {""}))
+        centre = np.zeros((len(a), len(self._sphere_link), 3))
+        for k, link in enumerate(self._sphere_link):
+            if link:
+                centre[:, k] = poses[link][:, :3, :3] @ self._sphere_centre[k] + poses[link][:, :3, 3]
+        mask = np.ones(len(self.pairs), bool) if which is None else which
+        groups = np.unique(self.pair_group[mask])
+        rest_order = [float(self.rest_distance[self.pair_group == g].min()) for g in groups]
+        mid, reach = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2) + self.radius  # (N, C) [m]
+        free, close = np.ones(len(a), dtype=bool), np.zeros((len(a), len(self.group_bodies)), dtype=bool)
+        for g in groups[np.argsort(rest_order, kind="stable")]:
+            rows = np.flatnonzero(free) if stop_at_first else np.arange(len(a))
+            i, j = self.group_bodies[g]
+            gap = np.linalg.norm(centre[rows, i] - centre[rows, j], axis=1) - self._sphere_radius[[i, j]].sum()
+            rows = rows[gap < clearance_m]
+            ci, cj = np.flatnonzero(self.body == i), np.flatnonzero(self.body == j)
+            step = max(1, CHECK_BLOCK // (len(ci) * len(cj)))
+            for start in range(0, len(rows), step):
+                chunk = rows[start : start + step]
+                # capsules that reach the other body's sphere, then every pair of those: its exact distance
+                near_i = (np.linalg.norm(mid[chunk][:, ci] - centre[chunk, j, None], axis=2) - reach[chunk][:, ci]
+                          < clearance_m + self._sphere_radius[j])  # fmt: skip
+                near_j = (np.linalg.norm(mid[chunk][:, cj] - centre[chunk, i, None], axis=2) - reach[chunk][:, cj]
+                          < clearance_m + self._sphere_radius[i])  # fmt: skip
+                n, x, y = np.nonzero(near_i[:, :, None] & near_j[:, None, :])
+                rn, ki, kj = chunk[n], ci[x], cj[y]
+                bound = np.linalg.norm(mid[rn, ki] - mid[rn, kj], axis=1) - reach[rn, ki] - reach[rn, kj]
+                rn, ki, kj = rn[bound < clearance_m], ki[bound < clearance_m], kj[bound < clearance_m]
+                d = segment_distance(a[rn, ki], b[rn, ki], a[rn, kj], b[rn, kj]) - self.radius[ki] - self.radius[kj]
+                hit = np.unique(rn[d < clearance_m])
+                free[hit], close[hit, g] = False, True
+        return free, close
+
+    def collision_free(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: `clearance(q, which) >= clearance_m` (`scan`)."""
+        return self.scan(q, clearance_m, which)[0]
+
+    def most_colliding(self, q: np.ndarray, clearance_m: float) -> tuple[str, str, float] | None:
+        """The link pair closer than clearance_m in the most of the configurations q (N, J), and that share; None
+        when every configuration is free."""
+        close = self.scan(q, clearance_m, stop_at_first=False)[1]
+        if not close.any():
+            return None
+        g = int(np.argmax(close.sum(axis=0)))
+        members = np.flatnonzero(self.pair_group == g)
+        k = members[int(np.argmin(self.rest_distance[members]))]
+        return (*self.link_pair(k), float(close[:, g].mean()))
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""
@@ -159,12 +231,42 @@ def _bodies(robot: Robot) -> dict[str, int]:
     return body
 
 
-def _adjacent_bodies(robot: Robot, body: dict[str, int]) -> set[tuple[int, int]]:
-    """Pairs of bodies joined by one moving joint (both orders)."""
-    out = set()
+def _axes_meet(robot: Robot, a: JointModel, b: JointModel, rest: np.ndarray) -> bool:
+    """Whether the axes of two moving joints pass within AXES_MEET_M of each other in the rest pose (lines)."""
+    poses = robot.model.link_poses(rest[None], [a.parent, b.parent])
+    lines = []
+    for joint in (a, b):
+        T = poses[joint.parent][0] @ joint.T_parent_origin
+        lines.append((T[:3, 3], T[:3, :3] @ joint.axis))
+    (p, u), (r, v) = lines
+    normal = np.cross(u, v)
+    if np.linalg.norm(normal) < 1e-9:  # parallel axes meet only if they coincide
+        gap = np.linalg.norm(np.cross(r - p, u)) / np.linalg.norm(u)
+    else:
+        gap = abs(float(np.dot(r - p, normal))) / np.linalg.norm(normal)
+    return bool(gap < AXES_MEET_M)
+
+
+def adjacent_bodies(robot: Robot, body: dict[str, int], solid: set[int], rest: np.ndarray) -> set[tuple[int, int]]:
+    """Pairs of bodies never checked against each other by their kinematics (both orders):
+    - bodies joined by one moving joint, bodies without capsules (not in `solid`) passed through as MoveIt's setup
+      assistant does (a body and its nearest ancestor with capsules are adjacent);
+    - the two outer bodies of a two-axis joint: two moving joints in a row whose axes meet (within AXES_MEET_M, in
+      the rest pose), as a hip's roll and pitch or an ankle's pitch and roll; the cross piece between them is built
+      to let them turn about each other within the joint limits."""
+    up: dict[int, tuple[int, JointModel]] = {}  # body -> (its parent body, the moving joint between them)
     for joint in robot.model.joints.values():
-        a, b = body[joint.parent], body[joint.child]
-        out |= {(a, b), (b, a)}
+        if body[joint.parent] != body[joint.child]:
+            up[body[joint.child]] = (body[joint.parent], joint)
+    out = set()
+    for child, (parent, joint) in up.items():
+        ancestor = parent
+        while ancestor not in solid and ancestor in up:
+            ancestor = up[ancestor][0]
+        out |= {(child, ancestor), (ancestor, child)}
+        if parent in up and _axes_meet(robot, up[parent][1], joint, rest):
+            grandparent = up[parent][0]
+            out |= {(child, grandparent), (grandparent, child)}
     return out
 
 
@@ -179,13 +281,20 @@ def rest_configuration(robot: Robot) -> np.ndarray:
     return np.array([rest.get(j, 0.0) for j in robot.joint_names])
 
 
-def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)."""
-    segments = urdf_collision_segments(robot.config.urdf)
-    unknown = sorted({link for link, *_ in segments} - robot.model.links)
+def _urdf_capsules(robot: Robot, body: dict[str, int]) -> tuple[list[Capsule], list[str]]:
+    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)
+    and a note naming the collision meshes not found (skipped)."""
+    urdf = urdf_collision(robot.config.urdf)
+    unknown = sorted({link for link, *_ in urdf.segments} - robot.model.links)
     if unknown:
         raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
-    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in segments]
+    notes = []
+    if urdf.missing_meshes:
+        links = sorted({link for names in urdf.missing_meshes.values() for link in names})
+        notes.append(f"{robot.config.urdf}: {len(urdf.missing_meshes)} collision meshes not found, skipped ("
+                     + ", ".join(urdf.missing_meshes) + f"); links without them: {', '.join(links)}. Put the meshes "
+                     "beside the URDF, or give 'collision_radii:' in the robot config")  # fmt: skip
+    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in urdf.segments], notes
 
 
 def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
@@ -205,12 +314,17 @@ def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
 
 
 def optional_collision_model(robot: Robot) -> CollisionModel | None:
-    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); None without either."""
+    """The robot's capsules (`collision_radii:` when given, else the URDF's <collision>); None without either."""
     body = _bodies(robot)
-    capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
+    capsules, notes = _config_capsules(robot, body), []
+    source = f"'collision_radii' of {robot.config.path}"
     if not capsules:
-        capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
-    return CollisionModel(robot, capsules, source, rest_configuration(robot)) if capsules else None
+        (capsules, notes), source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
+    if not capsules:
+        if notes:  # every collision shape was a mesh not found
+            raise WolfcalError(f"{notes[0]}; without them the robot has no collision geometry to plan with")
+        return None
+    return CollisionModel(robot, capsules, source, rest_configuration(robot), notes)
 
 
 def collision_model(robot: Robot) -> CollisionModel:
