@@ -105,6 +105,10 @@ def used_tags(robot: Robot, options: PlanOptions, external: bool) -> list[int]:
         tags = [t for t in tags if robot.config.tag(t).side is not None]
     if external:
         tags = sorted(set(tags) | {t for t in robot.config.tag_ids if robot.fixed_to_base(robot.config.tag(t).link)})
+    if not tags:
+        raise WolfcalError(f"{robot.config.path}: --free leg --system {options.system} needs tags on the feet marked "
+                           "'side: right' or 'side: left' under 'tags:' (none of "
+                           f"{', '.join(map(str, robot.config.tag_ids))} has one)")  # fmt: skip
     return tags
 
 
@@ -124,6 +128,10 @@ def seen_tags(robot: Robot, options: PlanOptions, tags: list[int], candidates: C
 def system_candidates(robot: Robot, options: PlanOptions, collisions: CollisionModel, rng: np.random.Generator,
                       say: Callable[[str], None]) -> tuple[PlanModelLike, Candidates, list[str]]:  # fmt: skip
     """The fit a plan is made for, its candidate poses and what the plan assumes, per measurement system."""
+    for warning in collisions.warnings:
+        say(f"warning: {warning}")
+    for note in collisions.notes:
+        say(f"note: {note}")
     say(f"drawing {options.candidates} candidate poses (collisions: capsules from {collisions.source}) ...")
     notes: list[str] = []
     model: PlanModelLike

@@ -58,9 +58,10 @@ class CollisionModel:
     """Capsules of a robot's links and the body pairs to check; see the module docstring."""
 
     def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray,
-                 notes: list[str] | None = None) -> None:  # fmt: skip
+                 warnings: list[str] | None = None) -> None:  # fmt: skip
         self.robot, self.capsules, self.source = robot, capsules, source
-        self.notes = list(notes or [])  # what the model left out, to be said once (missing meshes, pairs at rest)
+        self.warnings = list(warnings or [])  # geometry left out (collision meshes not found), to be said once
+        self.notes: list[str] = []  # pairs never checked because they touch at rest, to be said once
         self.body_of_link = _bodies(robot)
         self.links = sorted({c.link for c in capsules})
         self.radius = np.array([c.radius for c in capsules])
@@ -199,6 +200,19 @@ class CollisionModel:
         members = np.flatnonzero(self.pair_group == g)
         k = members[int(np.argmin(self.rest_distance[members]))]
         return (*self.link_pair(k), float(close[:, g].mean()))
+
+    def rejection_hint(self, q: np.ndarray, clearance_m: float) -> str:
+        """Why the model rejects the configurations q (N, J): the link pair too close in most of them and how to
+        change the model; empty when none is rejected."""
+        worst = self.most_colliding(q, clearance_m)
+        if worst is None:
+            return ""
+        a, b, share = worst
+        return (f"the collision model (capsules from {self.source}) puts {a} and {b} closer than "
+                f"{clearance_m * 1000:.0f} mm in {share:.0%} of the poses drawn; if these parts cannot touch on the "
+                f"robot, give 'collision_radii:' in {self.robot.config.path} (capsules between joint origins that "
+                f"replace the URDF's <collision>), or let them rest closer than {REST_CLEARANCE_M * 1000:.0f} mm in "
+                "'rest_pose:' (pairs touching at rest are never checked, as adjacent links in URDF tools)")
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""
