@@ -64,6 +64,9 @@ class CollisionModel:
         self.notes: list[str] = []  # pairs never checked because they touch at rest, to be said once
         self.body_of_link = _bodies(robot)
         self.links = sorted({c.link for c in capsules})
+        self._of_link = {link: np.array([k for k, c in enumerate(capsules) if c.link == link]) for link in self.links}
+        self._a_link = np.array([c.a_link for c in capsules]).reshape(-1, 3)  # (C, 3) [m]
+        self._b_link = np.array([c.b_link for c in capsules]).reshape(-1, 3)
         self.radius = np.array([c.radius for c in capsules])
         self.body = np.array([c.body for c in capsules])
         i, j = np.triu_indices(len(capsules), k=1)
@@ -74,7 +77,7 @@ class CollisionModel:
         rest_distance = self._pair_clearance(np.atleast_2d(rest))[0]
         body_pair = self.body[self.pairs].min(axis=1) * (len(self.body) + 1) + self.body[self.pairs].max(axis=1)
         touching = np.isin(body_pair, body_pair[rest_distance < REST_CLEARANCE_M])  # whole body pairs
-        rest_pairs = sorted({self.link_pair(k) for k in np.flatnonzero(rest_distance < REST_CLEARANCE_M)})
+        rest_pairs = sorted({self.link_pair(int(k)) for k in np.flatnonzero(rest_distance < REST_CLEARANCE_M)})
         if rest_pairs:
             self.notes.append(f"{len(rest_pairs)} link pairs closer than {REST_CLEARANCE_M * 1000:.0f} mm in the "
                               "rest pose are not checked against each other (parts built to touch, or bounds "
@@ -90,20 +93,28 @@ class CollisionModel:
         a, b = self.capsules[self.pairs[k, 0]].link, self.capsules[self.pairs[k, 1]].link
         return (a, b) if a <= b else (b, a)
 
-    def segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J)."""
-        poses = self.robot.model.link_poses(np.atleast_2d(q), self.links)
-        a = np.stack([poses[c.link][:, :3, :3] @ c.a_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
-        b = np.stack([poses[c.link][:, :3, :3] @ c.b_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
+    def segments(self, q: np.ndarray, links: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J); with `links`, only
+        their capsules are placed (the others are NaN)."""
+        links = self.links if links is None else links
+        poses = self.robot.model.link_poses(np.atleast_2d(q), links)
+        n = len(np.atleast_2d(q))
+        a, b = np.full((n, len(self.capsules), 3), np.nan), np.full((n, len(self.capsules), 3), np.nan)
+        for link in links:
+            k = self._of_link[link]
+            R, t = poses[link][:, :3, :3], poses[link][:, None, :3, 3]
+            a[:, k] = np.swapaxes(R @ self._a_link[k].T, 1, 2) + t
+            b[:, k] = np.swapaxes(R @ self._b_link[k].T, 1, 2) + t
         return a, b
 
     def pairs_moved_by(self, joints: list[str]) -> np.ndarray:
         """(pairs,) bool over the checked pairs: some of `joints` lies on the chain between the pair's two links, so
         their distance changes with it (the other pairs keep theirs whatever these joints do)."""
         names, model = set(joints), self.robot.model
-        return np.array([any(joint.name in names for joint in model.joints_between(self.capsules[i].link,
-                                                                                   self.capsules[j].link))
-                         for i, j in self.pairs], dtype=bool)  # fmt: skip
+        moved = [any(joint.name in names for joint in model.joints_between(self.capsules[self.pairs[k, 0]].link,
+                                                                           self.capsules[self.pairs[k, 1]].link))
+                 for k in (np.flatnonzero(self.pair_group == g)[0] for g in range(len(self.group_bodies)))]  # fmt: skip
+        return np.array(moved, dtype=bool)[self.pair_group] if len(self.pairs) else np.zeros(0, dtype=bool)
 
     def _pair_clearance(self, q: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
         """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]: exact below EXACT_BELOW_M,
@@ -146,20 +157,27 @@ class CollisionModel:
             centres[k], radii[k] = T[:3, :3].T @ (centre - T[:3, 3]), float(np.max(reach + self.radius[members]))
         return links, centres, radii
 
+    def _centres(self, q: np.ndarray) -> np.ndarray:
+        """(N, B, 3) centres of the bodies' bounding spheres in the root frame [m] at readings q (N, J)."""
+        q = np.atleast_2d(q)
+        poses = self.robot.model.link_poses(q, sorted(set(self._sphere_link) - {""}))
+        centre = np.zeros((len(q), len(self._sphere_link), 3))
+        for k, link in enumerate(self._sphere_link):
+            if link:
+                centre[:, k] = poses[link][:, :3, :3] @ self._sphere_centre[k] + poses[link][:, :3, 3]
+        return centre
+
     def scan(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None,
              stop_at_first: bool = True) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """(free (N,) bool: `clearance(q, which) >= clearance_m`, close (N, groups) bool: body pair g closer than
         clearance_m), found by body pairs, the closest in the rest pose first: a body pair whose bounding spheres
         are far enough apart needs no capsule distance; with stop_at_first a configuration is dropped at its first
         body pair that is too close (its later entries in `close` stay False)."""
-        a, b = self.segments(q)
-        poses = self.robot.model.link_poses(np.atleast_2d(q), sorted(set(self._sphere_link) - {""}))
-        centre = np.zeros((len(a), len(self._sphere_link), 3))
-        for k, link in enumerate(self._sphere_link):
-            if link:
-                centre[:, k] = poses[link][:, :3, :3] @ self._sphere_centre[k] + poses[link][:, :3, 3]
         mask = np.ones(len(self.pairs), bool) if which is None else which
         groups = np.unique(self.pair_group[mask])
+        bodies = set(self.group_bodies[groups].ravel().tolist())
+        a, b = self.segments(q, [link for link in self.links if self.body_of_link[link] in bodies])
+        centre = self._centres(q)
         rest_order = [float(self.rest_distance[self.pair_group == g].min()) for g in groups]
         mid, reach = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2) + self.radius  # (N, C) [m]
         free, close = np.ones(len(a), dtype=bool), np.zeros((len(a), len(self.group_bodies)), dtype=bool)
@@ -173,9 +191,10 @@ class CollisionModel:
             for start in range(0, len(rows), step):
                 chunk = rows[start : start + step]
                 # capsules that reach the other body's sphere, then every pair of those: its exact distance
-                near_i = (np.linalg.norm(mid[chunk][:, ci] - centre[chunk, j, None], axis=2) - reach[chunk][:, ci]
+                rows_i, rows_j = np.ix_(chunk, ci), np.ix_(chunk, cj)
+                near_i = (np.linalg.norm(mid[rows_i] - centre[chunk, j, None], axis=2) - reach[rows_i]
                           < clearance_m + self._sphere_radius[j])  # fmt: skip
-                near_j = (np.linalg.norm(mid[chunk][:, cj] - centre[chunk, i, None], axis=2) - reach[chunk][:, cj]
+                near_j = (np.linalg.norm(mid[rows_j] - centre[chunk, i, None], axis=2) - reach[rows_j]
                           < clearance_m + self._sphere_radius[i])  # fmt: skip
                 n, x, y = np.nonzero(near_i[:, :, None] & near_j[:, None, :])
                 rn, ki, kj = chunk[n], ci[x], cj[y]
@@ -224,12 +243,23 @@ class CollisionModel:
 
     def blocked(self, q: np.ndarray, origin: np.ndarray, points: np.ndarray, skip_bodies: np.ndarray) -> np.ndarray:
         """(N, K) bool: the straight line from `origin` (N, 3) to `points` (N, K, 3) (root frame [m]) passes
-        through a capsule; capsules of the bodies in skip_bodies (K, B) (-1: none) are ignored."""
+        through a capsule; capsules of the bodies in skip_bodies (K, B) (-1: none) are ignored. Bodies whose
+        bounding sphere the line misses are not looked at further."""
         a, b = self.segments(q)
-        d = segment_distance(origin[:, None, None, :], points[:, :, None, :], a[:, None], b[:, None])  # (N, K, C)
-        hit = d < self.radius
-        skip = np.any(self.body[None, :, None] == skip_bodies[:, None, :], axis=2)  # (K, C)
-        return np.any(hit & ~skip[None], axis=2)
+        centre = self._centres(q)
+        start = np.broadcast_to(origin[:, None, :], points.shape)
+        out = np.zeros(points.shape[:2], dtype=bool)
+        for k in set(self.body.tolist()):
+            near = segment_distance(start, points, centre[:, None, k], centre[:, None, k]) < self._sphere_radius[k]
+            near &= ~np.any(skip_bodies == k, axis=1)[None]
+            n, p = np.nonzero(near & ~out)
+            if not len(n):
+                continue
+            members = np.flatnonzero(self.body == k)
+            d = segment_distance(start[n, p][:, None], points[n, p][:, None], a[n][:, members], b[n][:, members])
+            hit = np.any(d < self.radius[members], axis=1)
+            out[n[hit], p[hit]] = True
+        return out
 
 
 def _bodies(robot: Robot) -> dict[str, int]:
@@ -330,15 +360,15 @@ def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
 def optional_collision_model(robot: Robot) -> CollisionModel | None:
     """The robot's capsules (`collision_radii:` when given, else the URDF's <collision>); None without either."""
     body = _bodies(robot)
-    capsules, notes = _config_capsules(robot, body), []
+    capsules, warnings = _config_capsules(robot, body), list[str]()
     source = f"'collision_radii' of {robot.config.path}"
     if not capsules:
-        (capsules, notes), source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
+        (capsules, warnings), source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
     if not capsules:
-        if notes:  # every collision shape was a mesh not found
-            raise WolfcalError(f"{notes[0]}; without them the robot has no collision geometry to plan with")
+        if warnings:  # every collision shape was a mesh not found
+            raise WolfcalError(f"{warnings[0]}; without them the robot has no collision geometry to plan with")
         return None
-    return CollisionModel(robot, capsules, source, rest_configuration(robot), notes)
+    return CollisionModel(robot, capsules, source, rest_configuration(robot), warnings)
 
 
 def collision_model(robot: Robot) -> CollisionModel:
