@@ -188,7 +188,8 @@ def _box_stl(path: Path, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def test_urdf_collision_meshes_and_primitives_are_bounded_by_capsules(tmp_path):
     from wolfcal.geometry import transform_from_xyz_rpy
-    from wolfcal.robot.collision import collision_model, segment_distance
+    from wolfcal.robot.collision import segment_distance
+    from wolfcal.robot.collision_sources import collision_model
     from wolfcal.robot.collision_urdf import BOX_SLACK_M
 
     robot0 = load_robot(WOLFGANG)
@@ -259,7 +260,7 @@ def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(ro
     from wolfcal.plan.candidates import draw_candidates, plan_camera
     from wolfcal.plan.information import PlanModel, factors, repeated_information
     from wolfcal.plan.pipeline import used_tags
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     options = PlanOptions(free="leg", system="external", poses=6, candidates=30)
     camera = plan_camera(robot, "external")
@@ -282,7 +283,8 @@ def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(ro
 
 def test_capsule_distances_are_exact_where_they_matter(robot):
     """The midpoint prefilter of the capsule pairs changes no distance below its limit (brute force on all pairs)."""
-    from wolfcal.robot.collision import EXACT_BELOW_M, collision_model, segment_distance
+    from wolfcal.robot.collision import EXACT_BELOW_M, segment_distance
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     q = np.random.default_rng(1).uniform(-1, 1, size=(2000, len(robot.joint_names)))
@@ -300,7 +302,7 @@ def test_collision_checks_split_by_the_head_joints_are_exact(robot):
     """The candidate draw checks the pairs the head does not move once per leg configuration and the others per
     head configuration: together (and in the early-exit order) they keep exactly the poses with clearance."""
     from wolfcal.plan.candidates import CLEARANCE_M
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     rng = np.random.default_rng(4)
@@ -335,7 +337,7 @@ def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk
         tag_views,
     )
     from wolfcal.plan.pipeline import used_tags
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     camera = plan_camera(robot, "head")
@@ -386,7 +388,7 @@ def test_mocap_plan_information_is_the_fits_and_its_poses_are_valid(robot, tmp_p
     their mounts can)."""
     from wolfcal.plan.information import factors
     from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     markers = used_markers(robot, "leg", "right")
     assert markers and all(robot.config.marker_config().marker(m).side in ("right", None) for m in markers)
@@ -422,7 +424,7 @@ def test_floor_plan_information_is_the_fits_and_every_planned_tag_is_seen_twice(
     from wolfcal.plan.candidates import plan_camera
     from wolfcal.plan.floor import FloorPlanModel, PosewiseFloorBlock, draw_floor_candidates, expected_places
     from wolfcal.plan.information import factors, plan_problem
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     camera, places = plan_camera(robot, "head"), expected_places(robot)
     cands = draw_floor_candidates(robot, camera, places, 60, np.random.default_rng(4), collision_model(robot))
@@ -504,7 +506,7 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
     from wolfcal.plan.information import PlanModel, fit_null_directions, fit_separated_std, predicted
     from wolfcal.plan.pipeline import used_tags
     from wolfcal.projection import observations_from_poses
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
     from wolfcal.robot.corrections import Corrections
 
     options = PlanOptions(free="head_camera", system="head")

@@ -35,7 +35,8 @@ from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.placement import expected_placement, placement_from_text
 from wolfcal.projection import visible_in_view
-from wolfcal.robot.collision import CollisionModel, rest_configuration
+from wolfcal.robot.collision import CollisionModel
+from wolfcal.robot.collision_sources import rest_configuration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 

@@ -34,7 +34,8 @@ from wolfcal.plan.information import (
 from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
 from wolfcal.plan.order import capture_order
 from wolfcal.plan.select import check_criterion, cover_twice, criterion_value, information, select
-from wolfcal.robot.collision import CollisionModel, collision_model, rest_configuration
+from wolfcal.robot.collision import CollisionModel
+from wolfcal.robot.collision_sources import collision_model, rest_configuration
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 

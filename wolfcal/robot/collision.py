@@ -1,14 +1,11 @@
 """The robot's body as capsules: self-collision and line of sight, vectorised over configurations.
 
-Geometry, in this order of preference:
-- the URDF's `<collision>` geometry, each shape bounded by a capsule (cylinder: its axis and radius; sphere: a point;
-  box: its longest edge, radius half the diagonal of the other two; mesh: that of its oriented bounding box; see
-  `wolfcal.robot.collision_urdf`);
-- otherwise `collision_radii: {link: m}` of the robot config: per listed link, capsules from the link's origin to
-  the origin of each of its child joints (a sphere at the origin for a link without children).
-Capsules of links joined by fixed joints form one body. Pairs never checked (as in MoveIt's allowed-collision
-matrix): bodies joined by one joint, and bodies touching in the rest pose (`rest_pose:`, others 0), where the robot
-stands without harm. Joint values are readings of the nominal model [rad]; lengths in metres, in the root frame.
+Capsules (`Capsule`, from `wolfcal.robot.collision_sources`) of links joined by fixed joints form one body. Body
+pairs never checked: those the kinematics rule out (`wolfcal.robot.collision_pairs`: joined by one joint, or the
+outer bodies of a two-axis joint), and whole body pairs that come closer than REST_CLEARANCE_M in the rest pose
+(`rest_pose:`, others 0), where the robot stands without harm (MoveIt's "Default" rule; said once in `notes`).
+Checks go body pair by body pair: a pair whose bounding spheres are far enough apart needs no capsule distance.
+Joint values are readings of the nominal model [rad]; lengths in metres, in the root frame.
 """
 
 from __future__ import annotations
@@ -17,13 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.errors import WolfcalError
-from wolfcal.robot.collision_urdf import urdf_collision
-from wolfcal.robot.kinematics import JointModel
+from wolfcal.robot.collision_pairs import adjacent_bodies, bodies
 from wolfcal.robot.robot import Robot
 
 REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other [m]
-AXES_MEET_M = 0.01  # two joint axes closer than this form one two-axis joint (see `adjacent_bodies`) [m]
 CHECK_BLOCK = 2_000_000  # (configuration, capsule pair) distances computed at a time by `CollisionModel.scan`
 EXACT_BELOW_M = 0.05  # capsule pairs whose bounding spheres are further apart need no exact distance [m]
 
@@ -62,7 +56,7 @@ class CollisionModel:
         self.robot, self.capsules, self.source = robot, capsules, source
         self.warnings = list(warnings or [])  # geometry left out (collision meshes not found), to be said once
         self.notes: list[str] = []  # pairs never checked because they touch at rest, to be said once
-        self.body_of_link = _bodies(robot)
+        self.body_of_link = bodies(robot)
         self.links = sorted({c.link for c in capsules})
         self._of_link = {link: np.array([k for k, c in enumerate(capsules) if c.link == link]) for link in self.links}
         self._a_link = np.array([c.a_link for c in capsules]).reshape(-1, 3)  # (C, 3) [m]
@@ -260,124 +254,3 @@ class CollisionModel:
             hit = np.any(d < self.radius[members], axis=1)
             out[n[hit], p[hit]] = True
         return out
-
-
-def _bodies(robot: Robot) -> dict[str, int]:
-    """Rigid body index of every link: links joined by fixed joints share one."""
-    model = robot.model
-    body: dict[str, int] = {}
-    for link in sorted(model.links, key=lambda name: len(model.path_from_root(name))):
-        joint = model.joint_to_child.get(link)
-        if joint is not None and joint.type == "fixed":
-            body[link] = body[joint.parent]
-        else:
-            body[link] = len(set(body.values()))
-    return body
-
-
-def _axes_meet(robot: Robot, a: JointModel, b: JointModel, rest: np.ndarray) -> bool:
-    """Whether the axes of two moving joints pass within AXES_MEET_M of each other in the rest pose (lines)."""
-    poses = robot.model.link_poses(rest[None], [a.parent, b.parent])
-    lines = []
-    for joint in (a, b):
-        T = poses[joint.parent][0] @ joint.T_parent_origin
-        lines.append((T[:3, 3], T[:3, :3] @ joint.axis))
-    (p, u), (r, v) = lines
-    normal = np.cross(u, v)
-    if np.linalg.norm(normal) < 1e-9:  # parallel axes meet only if they coincide
-        gap = np.linalg.norm(np.cross(r - p, u)) / np.linalg.norm(u)
-    else:
-        gap = abs(float(np.dot(r - p, normal))) / np.linalg.norm(normal)
-    return bool(gap < AXES_MEET_M)
-
-
-def adjacent_bodies(robot: Robot, body: dict[str, int], solid: set[int], rest: np.ndarray) -> set[tuple[int, int]]:
-    """Pairs of bodies never checked against each other by their kinematics (both orders):
-    - bodies joined by one moving joint, bodies without capsules (not in `solid`) passed through as MoveIt's setup
-      assistant does (a body and its nearest ancestor with capsules are adjacent);
-    - the two outer bodies of a two-axis joint: two moving joints in a row whose axes meet (within AXES_MEET_M, in
-      the rest pose), as a hip's roll and pitch or an ankle's pitch and roll; the cross piece between them is built
-      to let them turn about each other within the joint limits."""
-    up: dict[int, tuple[int, JointModel]] = {}  # body -> (its parent body, the moving joint between them)
-    for joint in robot.model.joints.values():
-        if body[joint.parent] != body[joint.child]:
-            up[body[joint.child]] = (body[joint.parent], joint)
-    out = set()
-    for child, (parent, joint) in up.items():
-        ancestor = parent
-        while ancestor not in solid and ancestor in up:
-            ancestor = up[ancestor][0]
-        out |= {(child, ancestor), (ancestor, child)}
-        if parent in up and _axes_meet(robot, up[parent][1], joint, rest):
-            grandparent = up[parent][0]
-            out |= {(child, grandparent), (grandparent, child)}
-    return out
-
-
-def rest_configuration(robot: Robot) -> np.ndarray:
-    """(J,) the rest pose of the robot config (`rest_pose:`, others 0) [rad]; unknown joints are refused."""
-    rest = robot.config.planning.rest_pose
-    unknown = sorted(set(rest) - set(robot.joint_names))
-    if unknown:
-        raise WolfcalError(
-            f"{robot.config.path}: 'rest_pose' names {', '.join(unknown)}, not movable joints of {robot.config.urdf}"
-        )
-    return np.array([rest.get(j, 0.0) for j in robot.joint_names])
-
-
-def _urdf_capsules(robot: Robot, body: dict[str, int]) -> tuple[list[Capsule], list[str]]:
-    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)
-    and a note naming the collision meshes not found (skipped)."""
-    urdf = urdf_collision(robot.config.urdf)
-    unknown = sorted({link for link, *_ in urdf.segments} - robot.model.links)
-    if unknown:
-        raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
-    notes = []
-    if urdf.missing_meshes:
-        links = sorted({link for names in urdf.missing_meshes.values() for link in names})
-        notes.append(f"{robot.config.urdf}: {len(urdf.missing_meshes)} collision meshes not found, skipped ("
-                     + ", ".join(urdf.missing_meshes) + f"); links without them: {', '.join(links)}. Put the meshes "
-                     "beside the URDF, or give 'collision_radii:' in the robot config")  # fmt: skip
-    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in urdf.segments], notes
-
-
-def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules from `collision_radii:` (see the module docstring)."""
-    radii = robot.config.planning.collision_radii
-    unknown = sorted(set(radii) - robot.model.links)
-    if unknown:
-        raise WolfcalError(
-            f"{robot.config.path}: 'collision_radii' names {', '.join(unknown)}, not links of {robot.config.urdf}"
-        )
-    capsules = []
-    for link, radius in radii.items():
-        children = [j for j in robot.model.joints.values() if j.parent == link]
-        ends = [j.T_parent_origin[:3, 3] for j in children] or [np.zeros(3)]
-        capsules += [Capsule(link, body[link], np.zeros(3), np.asarray(end, float), radius) for end in ends]
-    return capsules
-
-
-def optional_collision_model(robot: Robot) -> CollisionModel | None:
-    """The robot's capsules (`collision_radii:` when given, else the URDF's <collision>); None without either."""
-    body = _bodies(robot)
-    capsules, warnings = _config_capsules(robot, body), list[str]()
-    source = f"'collision_radii' of {robot.config.path}"
-    if not capsules:
-        (capsules, warnings), source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
-    if not capsules:
-        if warnings:  # every collision shape was a mesh not found
-            raise WolfcalError(f"{warnings[0]}; without them the robot has no collision geometry to plan with")
-        return None
-    return CollisionModel(robot, capsules, source, rest_configuration(robot), warnings)
-
-
-def collision_model(robot: Robot) -> CollisionModel:
-    """The robot's capsules (`optional_collision_model`); a clear error when it has none."""
-    model = optional_collision_model(robot)
-    if model is None:
-        raise WolfcalError(
-            f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
-            "poses cannot be checked for self-collision; add 'collision_radii: {link: metres}' (capsules between "
-            "joint origins) for the links of the body, e.g. collision_radii: {r_lower_leg: 0.04}"
-        )
-    return model
