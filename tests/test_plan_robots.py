@@ -106,6 +106,7 @@ def test_missing_collision_meshes_are_skipped_and_named(tmp_path):
     for mesh in ("torso_bumper.stl", "r_foot_cover.stl", "l_foot_cover.stl"):
         assert f"package://boxed_biped_description/meshes/{mesh}" in model.warnings[0]
     assert {"torso", "r_foot", "l_foot"} <= {c.link for c in model.capsules}  # their boxes are kept
+    assert "left without collision geometry" not in model.warnings[0]
 
 
 @pytest.mark.slow
@@ -126,6 +127,7 @@ def test_published_op3_without_meshes_or_radii_is_a_clear_error(tmp_path):
     result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "body.stl" in result.output and "collision_radii" in result.output
+    assert "left without collision geometry (never checked): body_link" in result.output
 
 
 def test_collision_radii_win_over_urdf_collision(tmp_path):
@@ -168,7 +170,19 @@ def test_model_rejecting_every_pose_names_the_pair(tmp_path):
                                       "--out", str(out)])  # fmt: skip
     assert result.exit_code == 2 and "Traceback" not in result.output and not out.exists()
     assert "puts l_foot and r_foot closer than 5 mm in 100% of the poses" in result.output, result.output
-    assert "collision_radii" in result.output and "rest_pose" in result.output
+    assert "collision_radii" in result.output and "collision_ignore: [[l_foot, r_foot]]" in result.output
+    # the fix it names: that pair never checked, and the plan finds its poses
+    data = yaml.safe_load(path.read_text())
+    data["collision_ignore"] = [["l_foot", "r_foot"]]
+    path.write_text(yaml.safe_dump(data))
+    assert len(collision_model(load_robot(path)).pairs) == 0
+
+
+def test_collision_ignore_names_links_of_the_urdf(tmp_path):
+    path = _wolfgang_copy(tmp_path, lambda d: d.update(collision_ignore=[["r_foot", "no_such_link"]]))
+    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "'collision_ignore' names no_such_link" in result.output
 
 
 @pytest.mark.parametrize("system", ["head", "external"])

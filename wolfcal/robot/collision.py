@@ -2,10 +2,11 @@
 
 Capsules (`Capsule`, from `wolfcal.robot.collision_sources`) of links joined by fixed joints form one body. Body
 pairs never checked: those the kinematics rule out (`wolfcal.robot.collision_pairs`: joined by one joint, or the
-outer bodies of a two-axis joint), and whole body pairs that come closer than REST_CLEARANCE_M in the rest pose
-(`rest_pose:`, others 0), where the robot stands without harm (MoveIt's "Default" rule; said once in `notes`).
-Checks go body pair by body pair: a pair whose bounding spheres are far enough apart needs no capsule distance.
-Joint values are readings of the nominal model [rad]; lengths in metres, in the root frame.
+outer bodies of a two-axis joint), those of the config's `collision_ignore:` link pairs, and whole body pairs that
+come closer than REST_CLEARANCE_M in the rest pose (`rest_pose:`, others 0), where the robot stands without harm
+(MoveIt's "Default" rule; said once in `notes`). Checks go body pair by body pair: a pair whose bounding spheres
+are far enough apart needs no capsule distance. Joint values are readings of the nominal model [rad]; lengths in
+metres, in the root frame.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ class CollisionModel:
         i, j = np.triu_indices(len(capsules), k=1)
         keep = self.body[i] != self.body[j]
         adjacent = adjacent_bodies(robot, self.body_of_link, set(self.body.tolist()), rest)
+        for a, b in robot.config.planning.collision_ignore:  # the config's pairs, as an SRDF's disable_collisions
+            adjacent |= {(self.body_of_link[a], self.body_of_link[b]), (self.body_of_link[b], self.body_of_link[a])}
         keep &= ~np.array([(self.body[a], self.body[b]) in adjacent for a, b in zip(i, j)], dtype=bool)
         self.pairs = np.stack([i[keep], j[keep]], axis=1)
         rest_distance = self._pair_clearance(np.atleast_2d(rest))[0]
@@ -225,8 +228,8 @@ class CollisionModel:
         return (f"the collision model (capsules from {self.source}) puts {a} and {b} closer than "
                 f"{clearance_m * 1000:.0f} mm in {share:.0%} of the poses drawn; if these parts cannot touch on the "
                 f"robot, give 'collision_radii:' in {self.robot.config.path} (capsules between joint origins that "
-                f"replace the URDF's <collision>), or let them rest closer than {REST_CLEARANCE_M * 1000:.0f} mm in "
-                "'rest_pose:' (pairs touching at rest are never checked, as adjacent links in URDF tools)")
+                f"replace the URDF's <collision>), or 'collision_ignore: [[{a}, {b}]]' there to never check this "
+                "pair (as an SRDF's disable_collisions)")
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""

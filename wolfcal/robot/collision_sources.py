@@ -40,10 +40,12 @@ def _urdf_capsules(robot: Robot, body: dict[str, int]) -> tuple[list[Capsule], l
         raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
     notes = []
     if urdf.missing_meshes:
-        links = sorted({link for names in urdf.missing_meshes.values() for link in names})
+        shaped = {link for link, *_ in urdf.segments}
+        bare = sorted({link for names in urdf.missing_meshes.values() for link in names} - shaped)
+        unchecked = f"; left without collision geometry (never checked): {', '.join(bare)}" if bare else ""
         notes.append(f"{robot.config.urdf}: {len(urdf.missing_meshes)} collision meshes not found, skipped ("
-                     + ", ".join(urdf.missing_meshes) + f"); links without them: {', '.join(links)}. Put the meshes "
-                     "beside the URDF, or give 'collision_radii:' in the robot config")  # fmt: skip
+                     + ", ".join(urdf.missing_meshes) + f"){unchecked}. Put the meshes where the URDF names them, "
+                     "or give 'collision_radii:' in the robot config")  # fmt: skip
     return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in urdf.segments], notes
 
 
@@ -74,6 +76,10 @@ def optional_collision_model(robot: Robot) -> CollisionModel | None:
         if warnings:  # every collision shape was a mesh not found
             raise WolfcalError(f"{warnings[0]}; without them the robot has no collision geometry to plan with")
         return None
+    unknown = sorted({link for pair in robot.config.planning.collision_ignore for link in pair} - robot.model.links)
+    if unknown:
+        raise WolfcalError(f"{robot.config.path}: 'collision_ignore' names {', '.join(unknown)}, not links of "
+                           f"{robot.config.urdf}")  # fmt: skip
     return CollisionModel(robot, capsules, source, rest_configuration(robot), warnings)
 
 
