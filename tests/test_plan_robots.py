@@ -200,7 +200,7 @@ def test_config_without_torso_tag_plans_or_says_why(tmp_path, system):
     if system == "head":  # the foot tags are all a head-camera leg plan needs
         assert result.exit_code == 0 and out.is_file(), result.output
     else:
-        assert result.exit_code == 2 and "no tag on a link fixed to" in result.output and not out.exists()
+        assert result.exit_code == 2 and "torso tag" in result.output and not out.exists()
 
 
 def test_config_without_leg_tags_is_a_clear_error(tmp_path):
