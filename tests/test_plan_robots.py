@@ -117,8 +117,8 @@ def test_missing_collision_meshes_are_skipped_and_named(tmp_path):
 @pytest.mark.slow
 def test_missing_collision_meshes_are_skipped_with_one_warning(tmp_path):
     out = tmp_path / "p.yaml"
-    result = CliRunner().invoke(app, ["plan", "--robot", str(_boxed(tmp_path)), "--poses", "4", "--candidates", "20",
-                                      "--out", str(out)])  # fmt: skip
+    args = ["plan", "--free", "leg", "--robot", str(_boxed(tmp_path)), "--poses", "4", "--candidates", "20"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.output.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1, result.output
@@ -129,7 +129,7 @@ def test_missing_collision_meshes_are_skipped_with_one_warning(tmp_path):
 
 def test_published_op3_without_meshes_or_radii_is_a_clear_error(tmp_path):
     path = _realdata_robot(tmp_path, "op3")
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
+    result = CliRunner().invoke(app, ["plan", "--free", "leg", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "body.stl" in result.output and "collision_radii" in result.output
     assert "left without collision geometry (never checked): body_link" in result.output
@@ -171,8 +171,8 @@ def test_model_rejecting_every_pose_names_the_pair(tmp_path):
     model = collision_model(load_robot(path))
     assert len(model.group_bodies) == 1 and model.clearance(np.zeros((1, len(model.robot.joint_names))))[0] < 0
     out = tmp_path / "p.yaml"
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--poses", "4", "--candidates", "20",
-                                      "--out", str(out)])  # fmt: skip
+    args = ["plan", "--free", "leg", "--robot", str(path), "--poses", "4", "--candidates", "20"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 2 and "Traceback" not in result.output and not out.exists()
     assert "puts l_foot and r_foot closer than 5 mm in 100% of the poses" in result.output, result.output
     assert "collision_radii" in result.output and "collision_ignore: [[l_foot, r_foot]]" in result.output
@@ -185,7 +185,7 @@ def test_model_rejecting_every_pose_names_the_pair(tmp_path):
 
 def test_collision_ignore_names_links_of_the_urdf(tmp_path):
     path = _wolfgang_copy(tmp_path, lambda d: d.update(collision_ignore=[["r_foot", "no_such_link"]]))
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
+    result = CliRunner().invoke(app, ["plan", "--free", "leg", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "'collision_ignore' names no_such_link" in result.output
 
@@ -194,7 +194,7 @@ def test_collision_ignore_names_links_of_the_urdf(tmp_path):
 def test_config_without_torso_tag_plans_or_says_why(tmp_path, system):
     path = _wolfgang_copy(tmp_path, lambda d: d.update(tags=[t for t in d["tags"] if t["id"] != 42]))
     out = tmp_path / "p.yaml"
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--system", system, "--poses", "4",
+    result = CliRunner().invoke(app, ["plan", "--free", "leg", "--robot", str(path), "--system", system, "--poses", "4",
                                       "--candidates", "20", "--out", str(out)])  # fmt: skip
     assert "Traceback" not in result.output
     if system == "head":  # the foot tags are all a head-camera leg plan needs
@@ -209,7 +209,7 @@ def test_config_without_leg_tags_is_a_clear_error(tmp_path):
             tag.pop("side", None)
 
     path = _wolfgang_copy(tmp_path, no_sides)
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
+    result = CliRunner().invoke(app, ["plan", "--free", "leg", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "'side: right' or 'side: left'" in result.output
 
