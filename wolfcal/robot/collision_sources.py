@@ -74,7 +74,7 @@ def optional_collision_model(robot: Robot) -> CollisionModel | None:
         (capsules, warnings), source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
     if not capsules:
         if warnings:  # every collision shape was a mesh not found
-            raise WolfcalError(f"{warnings[0]}; without them the robot has no collision geometry to plan with")
+            raise WolfcalError(f"{warnings[0]}; without them the robot has no collision geometry to check poses with")
         return None
     unknown = sorted({link for pair in robot.config.planning.collision_ignore for link in pair} - robot.model.links)
     if unknown:
