@@ -188,7 +188,9 @@ def _box_stl(path: Path, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def test_urdf_collision_meshes_and_primitives_are_bounded_by_capsules(tmp_path):
     from wolfcal.geometry import transform_from_xyz_rpy
-    from wolfcal.robot.collision import collision_model, segment_distance
+    from wolfcal.robot.collision import segment_distance
+    from wolfcal.robot.collision_sources import collision_model
+    from wolfcal.robot.collision_urdf import BOX_SLACK_M
 
     robot0 = load_robot(WOLFGANG)
     ankle = {side: robot0.model.joints[f"{side}AnklePitch"].T_parent_origin[:3, 3] for side in "RL"}
@@ -217,41 +219,39 @@ def test_urdf_collision_meshes_and_primitives_are_bounded_by_capsules(tmp_path):
     package.mkdir()
     (meshes).rename(package / "meshes")
     (package / "robot.urdf").write_text(text)
-    path = _config_copy(tmp_path, lambda d: d.update(urdf=str(package / "robot.urdf")))
+    path = _config_copy(tmp_path, lambda d: (d.update(urdf=str(package / "robot.urdf")), d.pop("collision_radii")))
     robot = load_robot(path)
     model = collision_model(robot)
     assert "<collision>" in model.source
-    by_link = {c.link: c for c in model.capsules}
+    by_link: dict[str, list] = {}
+    for c in model.capsules:
+        by_link.setdefault(c.link, []).append(c)
     assert set(by_link) == set(collisions)
-    for side in "RL":  # the shin's capsule: full length, radius half the 3 x 3 cm diagonal, containing every corner
-        c = by_link[f"{side.lower()}_lower_leg"]
-        assert np.linalg.norm(c.b_link - c.a_link) == pytest.approx(length, abs=1e-6)
-        assert c.radius == pytest.approx(0.015 * np.sqrt(2), abs=1e-6)
-        T = collisions[f"{side.lower()}_lower_leg"][1]
-        world = corners @ T[:3, :3].T
-        gaps = segment_distance(world, world, c.a_link, c.b_link)
-        assert np.all(gaps <= c.radius + 1e-6)
-        np.testing.assert_allclose(sorted([np.linalg.norm(c.a_link), np.linalg.norm(c.b_link)]), [0, length],
-                                   atol=1e-6)  # fmt: skip
-    torso = by_link["torso"]  # box: along its longest edge (z), radius half the diagonal of 0.1 x 0.16
-    np.testing.assert_allclose(sorted([torso.a_link[2], torso.b_link[2]]), [-0.05, 0.15], atol=1e-9)
-    assert torso.radius == pytest.approx(0.5 * np.hypot(0.1, 0.16))
-    assert by_link["head"].radius == 0.05 and np.allclose(by_link["head"].a_link, by_link["head"].b_link)
+
+    def covered(points: np.ndarray, link: str) -> np.ndarray:  # each point inside one of the link's capsules
+        return np.any([segment_distance(points, points, c.a_link, c.b_link) <= c.radius + 1e-9
+                       for c in by_link[link]], axis=0)  # fmt: skip
+
+    grid = np.stack(np.meshgrid(*[np.linspace(0, 1, 7)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    for side in "RL":  # the shin: capsules over its full length, containing the box, at most BOX_SLACK_M thicker
+        link = f"{side.lower()}_lower_leg"
+        T = collisions[link][1]
+        box = (corners.min(0) + grid * (corners.max(0) - corners.min(0))) @ T[:3, :3].T
+        assert covered(box, link).all()
+        for c in by_link[link]:
+            assert np.linalg.norm(c.b_link - c.a_link) == pytest.approx(length, abs=1e-6)
+            assert c.radius - 0.015 <= BOX_SLACK_M + 1e-12
+    torso_box = np.array([-0.05, -0.08, -0.05]) + grid * np.array([0.1, 0.16, 0.2])  # centred at z = 0.05
+    assert covered(torso_box, "torso").all()
+    assert all(c.radius - 0.05 <= BOX_SLACK_M + 1e-12 for c in by_link["torso"])  # not one capsule 9.4 cm thick
+    beyond = np.array([[0.05 + BOX_SLACK_M + 0.001, 0.0, 0.05]])  # just off the middle of the torso's front face
+    assert not covered(beyond, "torso").any()
+    head = by_link["head"][0]
+    assert head.radius == 0.05 and np.allclose(head.a_link, head.b_link)
     # the shins (5.6 cm apart at rest) cross when the hips roll inwards
     crossed = np.array([{"RHipRoll": 0.45, "LHipRoll": -0.45}.get(j, 0.0) for j in robot.joint_names])
     assert set(model.colliding_pair(crossed) or ()) == {"r_lower_leg", "l_lower_leg"}
     assert model.colliding_pair(np.zeros(len(robot.joint_names))) is None
-
-
-def test_missing_collision_mesh_is_a_clear_error(tmp_path):
-    text = (WOLFGANG / "wolfgang.urdf").read_text().replace(
-        '<link name="torso"/>', '<link name="torso"><collision><geometry><mesh filename="meshes/torso.stl"/>'
-        "</geometry></collision></link>")  # fmt: skip
-    (tmp_path / "robot.urdf").write_text(text)
-    path = _config_copy(tmp_path, lambda d: d.update(urdf=str(tmp_path / "robot.urdf")))
-    result = CliRunner().invoke(app, ["plan", "--robot", str(path), "--out", str(tmp_path / "p.yaml")])
-    assert result.exit_code != 0 and "Traceback" not in result.output
-    assert "torso.stl" in result.output and "not found" in result.output
 
 
 def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(robot):
@@ -260,7 +260,7 @@ def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(ro
     from wolfcal.plan.candidates import draw_candidates, plan_camera
     from wolfcal.plan.information import PlanModel, factors, repeated_information
     from wolfcal.plan.pipeline import used_tags
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     options = PlanOptions(free="leg", system="external", poses=6, candidates=30)
     camera = plan_camera(robot, "external")
@@ -283,7 +283,8 @@ def test_plan_information_is_the_fits_and_counts_the_repeated_torso_view_once(ro
 
 def test_capsule_distances_are_exact_where_they_matter(robot):
     """The midpoint prefilter of the capsule pairs changes no distance below its limit (brute force on all pairs)."""
-    from wolfcal.robot.collision import EXACT_BELOW_M, collision_model, segment_distance
+    from wolfcal.robot.collision import EXACT_BELOW_M, segment_distance
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     q = np.random.default_rng(1).uniform(-1, 1, size=(2000, len(robot.joint_names)))
@@ -301,7 +302,7 @@ def test_collision_checks_split_by_the_head_joints_are_exact(robot):
     """The candidate draw checks the pairs the head does not move once per leg configuration and the others per
     head configuration: together (and in the early-exit order) they keep exactly the poses with clearance."""
     from wolfcal.plan.candidates import CLEARANCE_M
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     rng = np.random.default_rng(4)
@@ -336,7 +337,7 @@ def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk
         tag_views,
     )
     from wolfcal.plan.pipeline import used_tags
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     model = collision_model(robot)
     camera = plan_camera(robot, "head")
@@ -387,7 +388,7 @@ def test_mocap_plan_information_is_the_fits_and_its_poses_are_valid(robot, tmp_p
     their mounts can)."""
     from wolfcal.plan.information import factors
     from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     markers = used_markers(robot, "leg", "right")
     assert markers and all(robot.config.marker_config().marker(m).side in ("right", None) for m in markers)
@@ -423,7 +424,7 @@ def test_floor_plan_information_is_the_fits_and_every_planned_tag_is_seen_twice(
     from wolfcal.plan.candidates import plan_camera
     from wolfcal.plan.floor import FloorPlanModel, PosewiseFloorBlock, draw_floor_candidates, expected_places
     from wolfcal.plan.information import factors, plan_problem
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
 
     camera, places = plan_camera(robot, "head"), expected_places(robot)
     cands = draw_floor_candidates(robot, camera, places, 60, np.random.default_rng(4), collision_model(robot))
@@ -505,16 +506,16 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
     from wolfcal.plan.information import PlanModel, fit_null_directions, fit_separated_std, predicted
     from wolfcal.plan.pipeline import used_tags
     from wolfcal.projection import observations_from_poses
-    from wolfcal.robot.collision import collision_model
+    from wolfcal.robot.collision_sources import collision_model
     from wolfcal.robot.corrections import Corrections
 
     options = PlanOptions(free="head_camera", system="head")
     camera = plan_camera(robot, "head")
     tags = used_tags(robot, options, False)
     cands = draw_candidates(robot, camera, tags, 40, np.random.default_rng(5), collision_model(robot))
-    seen = [t for t in tags if cands.visible[:, robot.config.tag_ids.index(t)].any()]
-    model = PlanModel(robot, camera, "head_camera", "both", seen)
     idx = np.arange(10)
+    seen = [t for t in tags if cands.visible[idx, robot.config.tag_ids.index(t)].any()]  # the tags the fit will see
+    model = PlanModel(robot, camera, "head_camera", "both", seen)
     plan_problem = model.problem(cands.q[idx], cands.visible[idx])
     assert [s.sigma for s in plan_problem.states] == [robot.config.priors.pixel_noise]
 

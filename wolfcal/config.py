@@ -711,25 +711,33 @@ def _readings(r: _Reader, data, key: str) -> dict[str, float]:
     return {str(k): float(v) for k, v in data.items()}
 
 
-# --- pose planning: `rest_pose:` and `collision_radii:` (both optional) ------------------------------------------
-PLANNING_KEYS = ("rest_pose", "collision_radii")
+# --- pose planning: `rest_pose:`, `collision_radii:`, `collision_ignore:` (all optional) ----------------------------
+PLANNING_KEYS = ("rest_pose", "collision_radii", "collision_ignore")
 
 
 @dataclass(frozen=True)
 class PlanningConfig:
-    """Where joints a planned pose leaves alone stand, and the capsule radii of a URDF without <collision>."""
+    """Where joints a planned pose leaves alone stand, capsule radii that replace the URDF's <collision>, and link
+    pairs never checked for self-collision (as `disable_collisions` in a MoveIt SRDF)."""
 
     rest_pose: dict[str, float] = field(default_factory=dict)  # joint -> reading [rad]; others 0
     collision_radii: dict[str, float] = field(default_factory=dict)  # link -> capsule radius [m]
+    collision_ignore: tuple[tuple[str, str], ...] = ()  # link pairs never checked against each other
 
 
 def _planning(path: Path, data: dict) -> PlanningConfig:
-    """`rest_pose: {joint: rad}` and `collision_radii: {link: m}` (names are checked against the URDF later)."""
-    out = {}
+    """`rest_pose: {joint: rad}`, `collision_radii: {link: m}` and `collision_ignore: [[link, link], ...]` (names
+    are checked against the URDF later)."""
+    out: dict = {}
     for key, positive in (("rest_pose", False), ("collision_radii", True)):
         value = data.get(key) or {}
         if not isinstance(value, dict):
             raise WolfcalError(f"{path}: '{key}' must map names to numbers, e.g. {{RKnee: -0.26}}")
         r = _Reader(path, value, key)
         out[key] = {str(k): r.number(k, positive=positive) for k in value}
+    pairs = data.get("collision_ignore") or []
+    if not isinstance(pairs, list) or not all(isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p)
+                                              for p in pairs):  # fmt: skip
+        raise WolfcalError(f"{path}: 'collision_ignore' must be a list of link pairs, e.g. [[r_hip_1, r_upper_leg]]")
+    out["collision_ignore"] = tuple((a, b) for a, b in pairs)
     return PlanningConfig(**out)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.robot.collision import optional_collision_model
+from wolfcal.robot.collision_sources import optional_collision_model
 from wolfcal.robot.robot import Robot
 from wolfcal.yamlfile import read_yaml
 

@@ -35,7 +35,8 @@ from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.placement import expected_placement, placement_from_text
 from wolfcal.projection import visible_in_view
-from wolfcal.robot.collision import CollisionModel, rest_configuration
+from wolfcal.robot.collision import CollisionModel
+from wolfcal.robot.collision_sources import rest_configuration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 
@@ -44,6 +45,8 @@ VIEWS_PER_BODY = 128  # head camera: configurations of the head drawn for each o
 MAX_DRAWN = 1_000_000  # configurations drawn at most
 HOPELESS_DRAWN = 100_000  # give up after this many configurations without a single candidate
 CLEARANCE_M = 0.005  # smallest distance kept between two bodies of a candidate pose [m]
+SELF_COLLISION_SHARE = 0.9  # a draw that finds nothing blames the collision model when it rejected this share
+HINT_POSES = 500  # random poses that tell which link pair the collision model rejects most
 
 
 @dataclass(frozen=True)
@@ -206,6 +209,8 @@ def draw_candidates(
 ) -> Candidates:
     """Up to n candidate poses (see the module docstring), the joints drawn within their limits shrunk by `margin`
     [rad]; a clear error when none shows the tags."""
+    if not tag_ids:
+        raise WolfcalError(f"{robot.config.path}: no tag of 'tags:' is one the {camera.name} camera's plan can use")
     joints = plan_joints(robot, camera, tag_ids)
     lo, hi = joint_bounds(robot, joints, margin)
     aim = [robot.model.column(j) for j in viewer_joints(robot, camera, joints)]
@@ -240,10 +245,12 @@ def draw_candidates(
     q, visible, drawn = draw_until(n, batch)
     if not len(q):
         what = "the tags fixed to the base and another tag" if camera.external else "a tag"
-        raise WolfcalError(
-            f"none of {drawn} random poses within the joint limits shows the {camera.name} camera {what} "
-            f"(tags {', '.join(map(str, tag_ids))}; left out: "
-            + ", ".join(f"{k} {v}" for k, v in rejected.items())
-            + "); check the tags' links and poses in the robot config, the camera's intrinsics and placement"
-        )
+        message = (f"none of {drawn} random poses within the joint limits shows the {camera.name} camera {what} "
+                   f"(tags {', '.join(map(str, tag_ids))}; left out: "
+                   + ", ".join(f"{k} {v}" for k, v in rejected.items()) + ")")  # fmt: skip
+        if rejected["self-collision"] >= SELF_COLLISION_SHARE * drawn:
+            sample = rng.uniform(lo, hi, size=(HINT_POSES, len(lo)))
+            raise WolfcalError(f"{message}: {collisions.rejection_hint(sample, CLEARANCE_M)}")
+        raise WolfcalError(f"{message}; check the tags' links and poses in the robot config, the camera's intrinsics "
+                           "and placement")  # fmt: skip
     return Candidates(q, visible, joints, drawn, rejected)

@@ -23,7 +23,7 @@ from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import block_sigmas, mocap_block
 from wolfcal.fit.problem import Problem
 from wolfcal.markers import MarkerObservations
-from wolfcal.plan.candidates import BATCH, CLEARANCE_M, Candidates, draw_until, joint_bounds
+from wolfcal.plan.candidates import BATCH, CLEARANCE_M, HINT_POSES, Candidates, draw_until, joint_bounds
 from wolfcal.plan.information import plan_problem
 from wolfcal.robot.collision import CollisionModel
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set
@@ -68,8 +68,9 @@ def draw_mocap_candidates(robot: Robot, names: list[str], n: int, rng: np.random
 
     q, visible, drawn = draw_until(n, batch)
     if not len(q):
+        hint = collisions.rejection_hint(rng.uniform(lo, hi, size=(HINT_POSES, len(lo))), CLEARANCE_M)
         raise WolfcalError(f"none of {drawn} random poses of {', '.join(joints)} within the joint limits is free of "
-                           "self-collision; check the joint limits and the collision geometry")  # fmt: skip
+                           f"self-collision: {hint}")  # fmt: skip
     return Candidates(q, visible, joints, drawn, {"self-collision": drawn - len(q)})
 
 

@@ -34,7 +34,8 @@ from wolfcal.plan.information import (
 from wolfcal.plan.mocap import MocapPlanModel, draw_mocap_candidates, used_markers
 from wolfcal.plan.order import capture_order
 from wolfcal.plan.select import check_criterion, cover_twice, criterion_value, information, select
-from wolfcal.robot.collision import CollisionModel, collision_model, rest_configuration
+from wolfcal.robot.collision import CollisionModel
+from wolfcal.robot.collision_sources import collision_model, rest_configuration
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.presets import DEFAULT_PRESET
 from wolfcal.robot.robot import Robot, load_robot
@@ -106,6 +107,10 @@ def used_tags(robot: Robot, options: PlanOptions, external: bool) -> list[int]:
         tags = [t for t in tags if robot.config.tag(t).side is not None]
     if external:
         tags = sorted(set(tags) | {t for t in robot.config.tag_ids if robot.off_the_legs(robot.config.tag(t).link)})
+    if not tags:
+        raise WolfcalError(f"{robot.config.path}: --free leg --system {options.system} needs tags on the feet marked "
+                           "'side: right' or 'side: left' under 'tags:' (none of "
+                           f"{', '.join(map(str, robot.config.tag_ids))} has one)")  # fmt: skip
     return tags
 
 
@@ -125,6 +130,10 @@ def seen_tags(robot: Robot, options: PlanOptions, tags: list[int], candidates: C
 def system_candidates(robot: Robot, options: PlanOptions, collisions: CollisionModel, rng: np.random.Generator,
                       say: Callable[[str], None]) -> tuple[PlanModelLike, Candidates, list[str]]:  # fmt: skip
     """The fit a plan is made for, its candidate poses and what the plan assumes, per measurement system."""
+    for warning in collisions.warnings:
+        say(f"warning: {warning}")
+    for note in collisions.notes:
+        say(f"note: {note}")
     say(f"drawing {options.candidates} candidate poses (collisions: capsules from {collisions.source}) ...")
     notes: list[str] = []
     model: PlanModelLike

@@ -1,14 +1,12 @@
 """The robot's body as capsules: self-collision and line of sight, vectorised over configurations.
 
-Geometry, in this order of preference:
-- the URDF's `<collision>` geometry, each shape bounded by a capsule (cylinder: its axis and radius; sphere: a point;
-  box: its longest edge, radius half the diagonal of the other two; mesh: that of its oriented bounding box; see
-  `wolfcal.robot.collision_urdf`);
-- otherwise `collision_radii: {link: m}` of the robot config: per listed link, capsules from the link's origin to
-  the origin of each of its child joints (a sphere at the origin for a link without children).
-Capsules of links joined by fixed joints form one body. Pairs never checked (as in MoveIt's allowed-collision
-matrix): bodies joined by one joint, and bodies touching in the rest pose (`rest_pose:`, others 0), where the robot
-stands without harm. Joint values are readings of the nominal model [rad]; lengths in metres, in the root frame.
+Capsules (`Capsule`, from `wolfcal.robot.collision_sources`) of links joined by fixed joints form one body. Body
+pairs never checked: those the kinematics rule out (`wolfcal.robot.collision_pairs`: joined by one joint, or the
+outer bodies of a two-axis joint), those of the config's `collision_ignore:` link pairs, and whole body pairs that
+come closer than REST_CLEARANCE_M in the rest pose (`rest_pose:`, others 0), where the robot stands without harm
+(MoveIt's "Default" rule; said once in `notes`). Checks go body pair by body pair: a pair whose bounding spheres
+are far enough apart needs no capsule distance. Joint values are readings of the nominal model [rad]; lengths in
+metres, in the root frame.
 """
 
 from __future__ import annotations
@@ -17,12 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.errors import WolfcalError
-from wolfcal.robot.collision_urdf import urdf_collision_segments
+from wolfcal.robot.collision_pairs import adjacent_bodies, bodies
 from wolfcal.robot.robot import Robot
 
-REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other
-PAIR_CHUNK = 16  # capsule pairs checked at a time by `CollisionModel.collision_free`
+REST_CLEARANCE_M = 0.005  # bodies closer than this in the rest pose are never checked against each other [m]
+CHECK_BLOCK = 2_000_000  # (configuration, capsule pair) distances computed at a time by `CollisionModel.scan`
 EXACT_BELOW_M = 0.05  # capsule pairs whose bounding spheres are further apart need no exact distance [m]
 
 
@@ -44,6 +41,7 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
     tiny = 1e-18
     denom = a * e - b * b
     s = np.where(denom > tiny, np.clip((b * f - c * e) / np.maximum(denom, tiny), 0.0, 1.0), 0.0)
+    s = np.where(e > tiny, s, np.where(a > tiny, np.clip(-c / np.maximum(a, tiny), 0.0, 1.0), 0.0))  # q a point
     t = np.where(e > tiny, (b * s + f) / np.maximum(e, tiny), 0.0)
     s = np.where(t < 0.0, np.where(a > tiny, np.clip(-c / np.maximum(a, tiny), 0.0, 1.0), 0.0), s)
     s = np.where(t > 1.0, np.where(a > tiny, np.clip((b - c) / np.maximum(a, tiny), 0.0, 1.0), 0.0), s)
@@ -55,38 +53,66 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
 class CollisionModel:
     """Capsules of a robot's links and the body pairs to check; see the module docstring."""
 
-    def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray) -> None:
+    def __init__(self, robot: Robot, capsules: list[Capsule], source: str, rest: np.ndarray,
+                 warnings: list[str] | None = None) -> None:  # fmt: skip
         self.robot, self.capsules, self.source = robot, capsules, source
+        self.warnings = list(warnings or [])  # geometry left out (collision meshes not found), to be said once
+        self.notes: list[str] = []  # pairs never checked because they touch at rest, to be said once
+        self.body_of_link = bodies(robot)
         self.links = sorted({c.link for c in capsules})
+        self._of_link = {link: np.array([k for k, c in enumerate(capsules) if c.link == link]) for link in self.links}
+        self._a_link = np.array([c.a_link for c in capsules]).reshape(-1, 3)  # (C, 3) [m]
+        self._b_link = np.array([c.b_link for c in capsules]).reshape(-1, 3)
         self.radius = np.array([c.radius for c in capsules])
         self.body = np.array([c.body for c in capsules])
         i, j = np.triu_indices(len(capsules), k=1)
         keep = self.body[i] != self.body[j]
-        adjacent = _adjacent_bodies(robot, self.body_of_link)
+        adjacent = adjacent_bodies(robot, self.body_of_link, set(self.body.tolist()), rest)
+        for a, b in robot.config.planning.collision_ignore:  # the config's pairs, as an SRDF's disable_collisions
+            adjacent |= {(self.body_of_link[a], self.body_of_link[b]), (self.body_of_link[b], self.body_of_link[a])}
         keep &= ~np.array([(self.body[a], self.body[b]) in adjacent for a, b in zip(i, j)], dtype=bool)
         self.pairs = np.stack([i[keep], j[keep]], axis=1)
         rest_distance = self._pair_clearance(np.atleast_2d(rest))[0]
-        touching = rest_distance < REST_CLEARANCE_M
+        body_pair = self.body[self.pairs].min(axis=1) * (len(self.body) + 1) + self.body[self.pairs].max(axis=1)
+        touching = np.isin(body_pair, body_pair[rest_distance < REST_CLEARANCE_M])  # whole body pairs
+        rest_pairs = sorted({self.link_pair(int(k)) for k in np.flatnonzero(rest_distance < REST_CLEARANCE_M)})
+        if rest_pairs:
+            self.notes.append(f"{len(rest_pairs)} link pairs closer than {REST_CLEARANCE_M * 1000:.0f} mm in the "
+                              "rest pose are not checked against each other (parts built to touch, or bounds "
+                              "wider than the parts): " + ", ".join(f"{a}/{b}" for a, b in rest_pairs))  # fmt: skip
         self.pairs, self.rest_distance = self.pairs[~touching], rest_distance[~touching]
+        self.pair_group = np.unique(body_pair[~touching], return_inverse=True)[1].reshape(-1)  # (pairs,) body pair
+        self.group_bodies = np.array([self.body[self.pairs[self.pair_group == g][0]] for g in range(
+            int(self.pair_group.max()) + 1)]) if len(self.pairs) else np.zeros((0, 2), int)  # fmt: skip
+        self._sphere_link, self._sphere_centre, self._sphere_radius = self._body_spheres(rest)
 
-    @property
-    def body_of_link(self) -> dict[str, int]:
-        return _bodies(self.robot)
+    def link_pair(self, k: int) -> tuple[str, str]:
+        """The links (a, b) of checked capsule pair k, in name order."""
+        a, b = self.capsules[self.pairs[k, 0]].link, self.capsules[self.pairs[k, 1]].link
+        return (a, b) if a <= b else (b, a)
 
-    def segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J)."""
-        poses = self.robot.model.link_poses(np.atleast_2d(q), self.links)
-        a = np.stack([poses[c.link][:, :3, :3] @ c.a_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
-        b = np.stack([poses[c.link][:, :3, :3] @ c.b_link + poses[c.link][:, :3, 3] for c in self.capsules], 1)
+    def segments(self, q: np.ndarray, links: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Capsule segment ends (N, C, 3) each, in the root frame, for joint readings q (N, J); with `links`, only
+        their capsules are placed (the others are NaN)."""
+        links = self.links if links is None else links
+        poses = self.robot.model.link_poses(np.atleast_2d(q), links)
+        n = len(np.atleast_2d(q))
+        a, b = np.full((n, len(self.capsules), 3), np.nan), np.full((n, len(self.capsules), 3), np.nan)
+        for link in links:
+            k = self._of_link[link]
+            R, t = poses[link][:, :3, :3], poses[link][:, None, :3, 3]
+            a[:, k] = np.swapaxes(R @ self._a_link[k].T, 1, 2) + t
+            b[:, k] = np.swapaxes(R @ self._b_link[k].T, 1, 2) + t
         return a, b
 
     def pairs_moved_by(self, joints: list[str]) -> np.ndarray:
         """(pairs,) bool over the checked pairs: some of `joints` lies on the chain between the pair's two links, so
         their distance changes with it (the other pairs keep theirs whatever these joints do)."""
         names, model = set(joints), self.robot.model
-        return np.array([any(joint.name in names for joint in model.joints_between(self.capsules[i].link,
-                                                                                   self.capsules[j].link))
-                         for i, j in self.pairs], dtype=bool)  # fmt: skip
+        moved = [any(joint.name in names for joint in model.joints_between(self.capsules[self.pairs[k, 0]].link,
+                                                                           self.capsules[self.pairs[k, 1]].link))
+                 for k in (np.flatnonzero(self.pair_group == g)[0] for g in range(len(self.group_bodies)))]  # fmt: skip
+        return np.array(moved, dtype=bool)[self.pair_group] if len(self.pairs) else np.zeros(0, dtype=bool)
 
     def _pair_clearance(self, q: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
         """(N, pairs) surface distance of each checked capsule pair (negative: overlap) [m]: exact below EXACT_BELOW_M,
@@ -112,21 +138,98 @@ class CollisionModel:
         d = self._pair_clearance(q, which)
         return d.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
 
+    def _body_spheres(self, rest: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Per body (index as `body`): the link its sphere is fixed to, the centre in that link's frame (B, 3) and
+        the radius (B,) [m] of a sphere containing all of the body's capsules (for `scan`'s first test)."""
+        n = int(self.body.max()) + 1 if len(self.body) else 0
+        a, b = (x[0] for x in self.segments(np.atleast_2d(rest)))
+        poses = self.robot.model.link_poses(np.atleast_2d(rest), self.links)
+        links, centres, radii = [""] * n, np.zeros((n, 3)), np.zeros(n)
+        for k in set(self.body.tolist()):
+            members = np.flatnonzero(self.body == k)
+            ends = np.concatenate([a[members], b[members]])
+            centre = 0.5 * (ends.min(axis=0) + ends.max(axis=0))
+            reach = np.maximum(np.linalg.norm(a[members] - centre, axis=1), np.linalg.norm(b[members] - centre, axis=1))
+            links[k] = self.capsules[members[0]].link
+            T = poses[links[k]][0]
+            centres[k], radii[k] = T[:3, :3].T @ (centre - T[:3, 3]), float(np.max(reach + self.radius[members]))
+        return links, centres, radii
+
+    def _centres(self, q: np.ndarray) -> np.ndarray:
+        """(N, B, 3) centres of the bodies' bounding spheres in the root frame [m] at readings q (N, J)."""
+        q = np.atleast_2d(q)
+        poses = self.robot.model.link_poses(q, sorted(set(self._sphere_link) - {""}))
+        centre = np.zeros((len(q), len(self._sphere_link), 3))
+        for k, link in enumerate(self._sphere_link):
+            if link:
+                centre[:, k] = poses[link][:, :3, :3] @ self._sphere_centre[k] + poses[link][:, :3, 3]
+        return centre
+
+    def scan(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None,
+             stop_at_first: bool = True) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """(free (N,) bool: `clearance(q, which) >= clearance_m`, close (N, groups) bool: body pair g closer than
+        clearance_m), found by body pairs, the closest in the rest pose first: a body pair whose bounding spheres
+        are far enough apart needs no capsule distance; with stop_at_first a configuration is dropped at its first
+        body pair that is too close (its later entries in `close` stay False)."""
+        mask = np.ones(len(self.pairs), bool) if which is None else which
+        groups = np.unique(self.pair_group[mask])
+        bodies = set(self.group_bodies[groups].ravel().tolist())
+        a, b = self.segments(q, [link for link in self.links if self.body_of_link[link] in bodies])
+        centre = self._centres(q)
+        rest_order = [float(self.rest_distance[self.pair_group == g].min()) for g in groups]
+        mid, reach = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=2) + self.radius  # (N, C) [m]
+        free, close = np.ones(len(a), dtype=bool), np.zeros((len(a), len(self.group_bodies)), dtype=bool)
+        for g in groups[np.argsort(rest_order, kind="stable")]:
+            rows = np.flatnonzero(free) if stop_at_first else np.arange(len(a))
+            i, j = self.group_bodies[g]
+            gap = np.linalg.norm(centre[rows, i] - centre[rows, j], axis=1) - self._sphere_radius[[i, j]].sum()
+            rows = rows[gap < clearance_m]
+            ci, cj = np.flatnonzero(self.body == i), np.flatnonzero(self.body == j)
+            step = max(1, CHECK_BLOCK // (len(ci) * len(cj)))
+            for start in range(0, len(rows), step):
+                chunk = rows[start : start + step]
+                # capsules that reach the other body's sphere, then every pair of those: its exact distance
+                rows_i, rows_j = np.ix_(chunk, ci), np.ix_(chunk, cj)
+                near_i = (np.linalg.norm(mid[rows_i] - centre[chunk, j, None], axis=2) - reach[rows_i]
+                          < clearance_m + self._sphere_radius[j])  # fmt: skip
+                near_j = (np.linalg.norm(mid[rows_j] - centre[chunk, i, None], axis=2) - reach[rows_j]
+                          < clearance_m + self._sphere_radius[i])  # fmt: skip
+                n, x, y = np.nonzero(near_i[:, :, None] & near_j[:, None, :])
+                rn, ki, kj = chunk[n], ci[x], cj[y]
+                bound = np.linalg.norm(mid[rn, ki] - mid[rn, kj], axis=1) - reach[rn, ki] - reach[rn, kj]
+                rn, ki, kj = rn[bound < clearance_m], ki[bound < clearance_m], kj[bound < clearance_m]
+                d = segment_distance(a[rn, ki], b[rn, ki], a[rn, kj], b[rn, kj]) - self.radius[ki] - self.radius[kj]
+                hit = np.unique(rn[d < clearance_m])
+                free[hit], close[hit, g] = False, True
+        return free, close
+
     def collision_free(self, q: np.ndarray, clearance_m: float, which: np.ndarray | None = None) -> np.ndarray:
-        """(N,) bool: `clearance(q, which) >= clearance_m`, found faster: the pairs closest in the rest pose (most
-        often in contact) are checked first, PAIR_CHUNK at a time, and a configuration is dropped at its first pair
-        that is too close."""
-        a, b = self.segments(q)
-        order = np.flatnonzero(np.ones(len(self.pairs), bool) if which is None else which)
-        order = order[np.argsort(self.rest_distance[order], kind="stable")]
-        free, rows = np.ones(len(a), dtype=bool), np.arange(len(a))
-        for start in range(0, len(order), PAIR_CHUNK):
-            if not len(rows):
-                break
-            close = self._distances(a[rows], b[rows], self.pairs[order[start : start + PAIR_CHUNK]]).min(axis=1)
-            free[rows[close < clearance_m]] = False
-            rows = rows[close >= clearance_m]
-        return free
+        """(N,) bool: `clearance(q, which) >= clearance_m` (`scan`)."""
+        return self.scan(q, clearance_m, which)[0]
+
+    def most_colliding(self, q: np.ndarray, clearance_m: float) -> tuple[str, str, float] | None:
+        """The link pair closer than clearance_m in the most of the configurations q (N, J), and that share; None
+        when every configuration is free."""
+        close = self.scan(q, clearance_m, stop_at_first=False)[1]
+        if not close.any():
+            return None
+        g = int(np.argmax(close.sum(axis=0)))
+        members = np.flatnonzero(self.pair_group == g)
+        k = members[int(np.argmin(self.rest_distance[members]))]
+        return (*self.link_pair(k), float(close[:, g].mean()))
+
+    def rejection_hint(self, q: np.ndarray, clearance_m: float) -> str:
+        """Why the model rejects the configurations q (N, J): the link pair too close in most of them and how to
+        change the model; empty when none is rejected."""
+        worst = self.most_colliding(q, clearance_m)
+        if worst is None:
+            return ""
+        a, b, share = worst
+        return (f"the collision model (capsules from {self.source}) puts {a} and {b} closer than "
+                f"{clearance_m * 1000:.0f} mm in {share:.0%} of the poses drawn; if these parts cannot touch on the "
+                f"robot, give 'collision_radii:' in {self.robot.config.path} (capsules between joint origins that "
+                f"replace the URDF's <collision>), or 'collision_ignore: [[{a}, {b}]]' there to never check this "
+                "pair (as an SRDF's disable_collisions)")
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""
@@ -138,88 +241,20 @@ class CollisionModel:
 
     def blocked(self, q: np.ndarray, origin: np.ndarray, points: np.ndarray, skip_bodies: np.ndarray) -> np.ndarray:
         """(N, K) bool: the straight line from `origin` (N, 3) to `points` (N, K, 3) (root frame [m]) passes
-        through a capsule; capsules of the bodies in skip_bodies (K, B) (-1: none) are ignored."""
+        through a capsule; capsules of the bodies in skip_bodies (K, B) (-1: none) are ignored. Bodies whose
+        bounding sphere the line misses are not looked at further."""
         a, b = self.segments(q)
-        d = segment_distance(origin[:, None, None, :], points[:, :, None, :], a[:, None], b[:, None])  # (N, K, C)
-        hit = d < self.radius
-        skip = np.any(self.body[None, :, None] == skip_bodies[:, None, :], axis=2)  # (K, C)
-        return np.any(hit & ~skip[None], axis=2)
-
-
-def _bodies(robot: Robot) -> dict[str, int]:
-    """Rigid body index of every link: links joined by fixed joints share one."""
-    model = robot.model
-    body: dict[str, int] = {}
-    for link in sorted(model.links, key=lambda name: len(model.path_from_root(name))):
-        joint = model.joint_to_child.get(link)
-        if joint is not None and joint.type == "fixed":
-            body[link] = body[joint.parent]
-        else:
-            body[link] = len(set(body.values()))
-    return body
-
-
-def _adjacent_bodies(robot: Robot, body: dict[str, int]) -> set[tuple[int, int]]:
-    """Pairs of bodies joined by one moving joint (both orders)."""
-    out = set()
-    for joint in robot.model.joints.values():
-        a, b = body[joint.parent], body[joint.child]
-        out |= {(a, b), (b, a)}
-    return out
-
-
-def rest_configuration(robot: Robot) -> np.ndarray:
-    """(J,) the rest pose of the robot config (`rest_pose:`, others 0) [rad]; unknown joints are refused."""
-    rest = robot.config.planning.rest_pose
-    unknown = sorted(set(rest) - set(robot.joint_names))
-    if unknown:
-        raise WolfcalError(
-            f"{robot.config.path}: 'rest_pose' names {', '.join(unknown)}, not movable joints of {robot.config.urdf}"
-        )
-    return np.array([rest.get(j, 0.0) for j in robot.joint_names])
-
-
-def _urdf_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules bounding the URDF's <collision> geometry (empty when it has none; `wolfcal.robot.collision_urdf`)."""
-    segments = urdf_collision_segments(robot.config.urdf)
-    unknown = sorted({link for link, *_ in segments} - robot.model.links)
-    if unknown:
-        raise WolfcalError(f"{robot.config.urdf}: <collision> of {', '.join(unknown)}, links the model does not have")
-    return [Capsule(link, body[link], a, b, radius) for link, a, b, radius in segments]
-
-
-def _config_capsules(robot: Robot, body: dict[str, int]) -> list[Capsule]:
-    """Capsules from `collision_radii:` (see the module docstring)."""
-    radii = robot.config.planning.collision_radii
-    unknown = sorted(set(radii) - robot.model.links)
-    if unknown:
-        raise WolfcalError(
-            f"{robot.config.path}: 'collision_radii' names {', '.join(unknown)}, not links of {robot.config.urdf}"
-        )
-    capsules = []
-    for link, radius in radii.items():
-        children = [j for j in robot.model.joints.values() if j.parent == link]
-        ends = [j.T_parent_origin[:3, 3] for j in children] or [np.zeros(3)]
-        capsules += [Capsule(link, body[link], np.zeros(3), np.asarray(end, float), radius) for end in ends]
-    return capsules
-
-
-def optional_collision_model(robot: Robot) -> CollisionModel | None:
-    """The robot's capsules (URDF <collision> if any, else `collision_radii:`); None without either."""
-    body = _bodies(robot)
-    capsules, source = _urdf_capsules(robot, body), f"<collision> of {robot.config.urdf}"
-    if not capsules:
-        capsules, source = _config_capsules(robot, body), f"'collision_radii' of {robot.config.path}"
-    return CollisionModel(robot, capsules, source, rest_configuration(robot)) if capsules else None
-
-
-def collision_model(robot: Robot) -> CollisionModel:
-    """The robot's capsules (`optional_collision_model`); a clear error when it has none."""
-    model = optional_collision_model(robot)
-    if model is None:
-        raise WolfcalError(
-            f"{robot.config.urdf} has no <collision> geometry and {robot.config.path} no 'collision_radii:', so "
-            "poses cannot be checked for self-collision; add 'collision_radii: {link: metres}' (capsules between "
-            "joint origins) for the links of the body, e.g. collision_radii: {r_lower_leg: 0.04}"
-        )
-    return model
+        centre = self._centres(q)
+        start = np.broadcast_to(origin[:, None, :], points.shape)
+        out = np.zeros(points.shape[:2], dtype=bool)
+        for k in set(self.body.tolist()):
+            near = segment_distance(start, points, centre[:, None, k], centre[:, None, k]) < self._sphere_radius[k]
+            near &= ~np.any(skip_bodies == k, axis=1)[None]
+            n, p = np.nonzero(near & ~out)
+            if not len(n):
+                continue
+            members = np.flatnonzero(self.body == k)
+            d = segment_distance(start[n, p][:, None], points[n, p][:, None], a[n][:, members], b[n][:, members])
+            hit = np.any(d < self.radius[members], axis=1)
+            out[n[hit], p[hit]] = True
+        return out

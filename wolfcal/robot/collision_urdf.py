@@ -1,16 +1,19 @@
 """The URDF's `<collision>` geometry as capsule segments that bound it (read with the project's strict URDF parser).
 
 Per `<collision>` element, in its link's frame [m]:
-- cylinder: its axis, radius as given; sphere: a point with its radius;
-- box: the segment along its longest edge (full length) with radius half the diagonal of the other two edges, so the
-  capsule contains the box;
+- cylinder: its axis, radius as given; capsule (urdfdom's `<capsule radius length>`): the same, `length` being the
+  part between the caps; sphere: a point with its radius;
+- box: capsules along its longest edge (full length) over strips of its middle edge, radius half the diagonal of a
+  strip's cross-section, so that their union contains the box (`box_capsules`);
 - mesh (`filename` relative to the URDF, `file://`, or `package://NAME/...` looked up in the URDF's folder and its
-  parents): the same capsule around the mesh's oriented bounding box (its vertices, scaled by `scale`; trimesh
-  reads STL, OBJ, PLY, DAE). A mesh is bounded, not modelled: a long bent link is fattened to its box.
+  parents): the capsules of the mesh's oriented bounding box (its vertices, scaled by `scale`; trimesh reads STL,
+  OBJ, PLY, DAE). A mesh is bounded, not modelled: a long bent link is fattened to its box. Published robot
+  descriptions often reference meshes they do not ship: a mesh not found is skipped and reported, never an error.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,15 +38,32 @@ def _numbers(urdf: Path, element: etree._Element, key: str, count: int, default:
     return values
 
 
-def box_capsule(T_link_box: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Capsule (start, end in the link frame, radius) containing a box of edges `size` (3,) centred at T_link_box."""
-    k = int(np.argmax(size))
-    half = 0.5 * size[k] * T_link_box[:3, k]
-    return T_link_box[:3, 3] - half, T_link_box[:3, 3] + half, 0.5 * float(np.linalg.norm(np.delete(size, k)))
+BOX_SLACK_M = 0.003  # a box is covered by capsules reaching at most about this far beyond its thinnest faces [m]
+BOX_STRIPS_MAX = 8  # capsules per box at most
 
 
-def mesh_path(urdf: Path, filename: str) -> Path:
-    """The file a mesh's `filename` names; a clear error when it is not found."""
+def box_capsules(T_link_box: np.ndarray, size: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Capsules (start, end in the link frame, radius) whose union contains a box of edges `size` (3,) centred at
+    T_link_box: the box is cut across its middle edge into strips; each strip's capsule runs along the longest edge
+    (full length) with radius half the diagonal of the strip's cross-section. Strips are added until the capsules
+    reach at most BOX_SLACK_M beyond the thinnest faces (at most BOX_STRIPS_MAX), so a plate is not bounded by one
+    capsule as thick as it is wide."""
+    long, mid, thin = np.argsort(size)[::-1]
+    width, depth = float(size[mid]), float(size[thin])
+    n = 1
+    while n < BOX_STRIPS_MAX and 0.5 * np.hypot(width / n, depth) - 0.5 * depth > BOX_SLACK_M:
+        n += 1
+    half = 0.5 * size[long] * T_link_box[:3, long]
+    radius = 0.5 * float(np.hypot(width / n, depth))
+    out = []
+    for k in range(n):
+        centre = T_link_box[:3, 3] + ((k + 0.5) / n - 0.5) * width * T_link_box[:3, mid]
+        out.append((centre - half, centre + half, radius))
+    return out
+
+
+def mesh_path(urdf: Path, filename: str) -> Path | None:
+    """The file a mesh's `filename` names, or None when it is not found."""
     if filename.startswith("file://"):
         tries = [Path(filename[len("file://"):])]
     elif filename.startswith("package://"):
@@ -52,11 +72,7 @@ def mesh_path(urdf: Path, filename: str) -> Path:
         tries = [f / package / rest for f in folders] + [f / rest for f in folders]
     else:
         tries = [urdf.parent / filename]
-    for path in tries:
-        if path.is_file():
-            return path
-    raise WolfcalError(f"{urdf}: collision mesh '{filename}' not found (looked at {tries[0]}); put the mesh there, or "
-                       "replace it by a box, cylinder or sphere")  # fmt: skip
+    return next((path for path in tries if path.is_file()), None)
 
 
 def mesh_box(urdf: Path, path: Path, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,32 +90,50 @@ def mesh_box(urdf: Path, path: Path, scale: np.ndarray) -> tuple[np.ndarray, np.
     return np.linalg.inv(T), np.asarray(extents, dtype=float)
 
 
-def urdf_collision_segments(urdf: str | Path) -> list[Segment]:
-    """Bounding capsules of every `<collision>` of the URDF (see the module docstring); empty when it has none."""
+@dataclass
+class UrdfCollision:
+    segments: list[Segment]  # bounding capsules of every <collision> whose geometry could be read
+    missing_meshes: dict[str, list[str]]  # mesh filename as written -> links whose <collision> names it (skipped)
+
+
+def _segments(urdf: Path, name: str, T: np.ndarray, shape: etree._Element) -> list[Segment] | None:
+    """Capsules of one <collision> shape of link `name` placed at T (link frame); None for a mesh not found."""
+    if shape.tag in ("cylinder", "capsule"):  # capsule (urdfdom): `length` of the part between the two caps
+        half = 0.5 * _numbers(urdf, shape, "length", 1)[0] * T[:3, 2]
+        capsules = [(T[:3, 3] - half, T[:3, 3] + half, _numbers(urdf, shape, "radius", 1)[0])]
+    elif shape.tag == "sphere":
+        capsules = [(T[:3, 3], T[:3, 3], _numbers(urdf, shape, "radius", 1)[0])]
+    elif shape.tag == "box":
+        capsules = box_capsules(T, _numbers(urdf, shape, "size", 3))
+    elif shape.tag == "mesh":
+        path = mesh_path(urdf, shape.get("filename", ""))
+        if path is None:
+            return None
+        T_mesh_box, size = mesh_box(urdf, path, _numbers(urdf, shape, "scale", 3, "1 1 1"))
+        capsules = box_capsules(T @ T_mesh_box, size)
+    else:
+        raise WolfcalError(f"{urdf}: link '{name}': <collision> geometry <{shape.tag}> is not a URDF shape")
+    return [(name, np.asarray(a, float), np.asarray(b, float), float(r)) for a, b, r in capsules]
+
+
+def urdf_collision(urdf: str | Path) -> UrdfCollision:
+    """Bounding capsules of every `<collision>` of the URDF (see the module docstring) and the collision meshes that
+    were not found (their <collision> is skipped); no segments when it has no <collision>."""
     urdf = Path(urdf)
-    segments: list[Segment] = []
-    for link in read_urdf_xml(urdf).getroot().iter("link"):
-        for collision in link.iter("collision"):
+    out = UrdfCollision([], {})
+    for link in read_urdf_xml(urdf).getroot().findall("link"):
+        name = link.get("name", "?")
+        for collision in link.findall("collision"):
             origin = collision.find("origin")
             T = np.eye(4) if origin is None else transform_from_xyz_rpy(
                 _numbers(urdf, origin, "xyz", 3, "0 0 0"), _numbers(urdf, origin, "rpy", 3, "0 0 0"))  # fmt: skip
             geometry = collision.find("geometry")
-            shape = None if geometry is None or not len(geometry) else geometry[0]
-            name = link.get("name", "?")
-            if shape is None:
+            if geometry is None or not len(geometry):
                 raise WolfcalError(f"{urdf}: link '{name}' has a <collision> without geometry")
-            if shape.tag == "cylinder":
-                half = 0.5 * _numbers(urdf, shape, "length", 1)[0] * T[:3, 2]
-                a, b, radius = T[:3, 3] - half, T[:3, 3] + half, _numbers(urdf, shape, "radius", 1)[0]
-            elif shape.tag == "sphere":
-                a, b, radius = T[:3, 3], T[:3, 3], _numbers(urdf, shape, "radius", 1)[0]
-            elif shape.tag == "box":
-                a, b, radius = box_capsule(T, _numbers(urdf, shape, "size", 3))
-            elif shape.tag == "mesh":
-                path = mesh_path(urdf, shape.get("filename", ""))
-                T_mesh_box, size = mesh_box(urdf, path, _numbers(urdf, shape, "scale", 3, "1 1 1"))
-                a, b, radius = box_capsule(T @ T_mesh_box, size)
+            shape = geometry[0]
+            segments = _segments(urdf, name, T, shape)
+            if segments is None:
+                out.missing_meshes.setdefault(shape.get("filename", ""), []).append(name)
             else:
-                raise WolfcalError(f"{urdf}: link '{name}': <collision> geometry <{shape.tag}> is not a URDF shape")
-            segments.append((name, np.asarray(a, float), np.asarray(b, float), float(radius)))
-    return segments
+                out.segments += segments
+    return out
