@@ -133,7 +133,7 @@ def test_undetermined_offset_is_held_and_the_model_kept(robot, tmp_path):
     result = run_fit([capture], CONFIG, tmp_path / "fit", FitOptions(free="leg"), say=quiet)
     share = {p.name: p.data_share for p in result.parameters}
     assert share["HeadTilt.offset"] < 0.5 < min(share["RKnee.offset"], share["camera.ry"])
-    deployed, notes = deployable_model(result, CurrentCalibration())
+    deployed, notes = deployable_model(result, CurrentCalibration(), robot)
     assert deployed.offsets["HeadTilt"] == 0.0
     assert deployed.offsets["RKnee"] == pytest.approx(result.corrections.offsets["RKnee"], abs=1e-4)
     assert any(n.startswith("HeadTilt.offset: only 30%") and "camera.rx" in n for n in notes), notes
@@ -143,7 +143,7 @@ def test_undetermined_offset_is_held_and_the_model_kept(robot, tmp_path):
     assert camera_rotation_error_deg(robot, q, result.corrections, naive) > 0.1  # the offset alone moves it
     assert camera_rotation_error_deg(robot, q, result.corrections, deployed) < 0.005
     present = CurrentCalibration(Corrections(offsets={"HeadTilt": 0.01}), None, ["wolfgang.yaml"])
-    held, _ = deployable_model(result, present)
+    held, _ = deployable_model(result, present, robot)
     assert held.offsets["HeadTilt"] == 0.01  # held at the present value, not at 0
 
 

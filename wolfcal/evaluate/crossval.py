@@ -50,5 +50,6 @@ def cross_validate(
         )
         fit = fit_observations(robot, obs.subset(train), options)
         rows = parameter_results(fit)
-        models.append(held_model(rows, fit.solution.uncertainty.covariance, present or CurrentCalibration())[0])
+        models.append(held_model(rows, fit.solution.uncertainty.covariance, present or CurrentCalibration(),
+                                 robot)[0])  # fmt: skip
     return fold_of, models

@@ -289,7 +289,7 @@ def run_evaluate(
     fit_dir, out_dir = Path(fit_dir), Path(out_dir)
     result, robot = load_fit(fit_dir)
     present = present_calibration(robot, result, list(current))
-    fitted, held_notes = deployable_model(result, present)
+    fitted, held_notes = deployable_model(result, present, robot)
     limits = verdict_limits(robot, ground_limit_m, mount_limit_rad)
     distances = ground_distances(limits)
     held_out = bool(captures)

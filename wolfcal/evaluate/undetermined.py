@@ -10,40 +10,55 @@ parameters it trades against thus carry what it did, and the model the data dete
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from wolfcal.fit.result import DATA_SHARE_LIMIT, FitResult, ParameterResult
 from wolfcal.io.current import CurrentCalibration
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import COMPONENTS, Parameter, ParameterSet
+from wolfcal.robot.robot import Robot
 
 MOVED_NOTE = {"rad": (np.rad2deg(1.0), "deg", 0.01), "m": (1000.0, "mm", 0.01)}  # unit -> (scale, shown, least)
 
 
-def _chain_parameter(p: ParameterResult) -> Parameter | None:
-    """The chain parameter a result row stands for (None: a measurement block's own unknown)."""
+def _chain_parameter(p: ParameterResult, model_joint: Callable[[str], str]) -> Parameter | None:
+    """The chain parameter a result row stands for (None: a measurement block's own unknown); `model_joint` maps
+    the URDF joint a row names to the robot model's joint it corrects."""
     head, _, component = p.name.rpartition(".")
     if component == "offset" and p.urdf_joint:
         return Parameter(p.name, "offset", p.urdf_joint, 0, p.unit, p.prior_sigma)
     if component in COMPONENTS and p.urdf_joint:
-        return Parameter(p.name, "frame", p.urdf_joint, COMPONENTS.index(component), p.unit, p.prior_sigma)
+        return Parameter(p.name, "frame", model_joint(p.urdf_joint), COMPONENTS.index(component), p.unit,
+                         p.prior_sigma)  # fmt: skip
     if component in COMPONENTS and head.startswith("tag") and head[3:].isdigit():
         return Parameter(p.name, "tag", head[3:], COMPONENTS.index(component), p.unit, p.prior_sigma)
     return None
 
 
-def deployable_model(result: FitResult, present: CurrentCalibration) -> tuple[Corrections, list[str]]:
+def deployable_model(result: FitResult, present: CurrentCalibration, robot: Robot) -> tuple[Corrections, list[str]]:
     """The model to deploy (totals: `present` with the fitted parameters replaced) and a sentence per parameter
     held at its present value. A fit without a covariance deploys its values as they are."""
-    return held_model(result.parameters, np.asarray(result.covariance.get("matrix") or [], dtype=float), present)
+    return held_model(result.parameters, np.asarray(result.covariance.get("matrix") or [], dtype=float), present,
+                      robot)  # fmt: skip
+
+
+def model_joint_of(robot: Robot) -> Callable[[str], str]:
+    """URDF joint -> the model joint whose frame correction is written to it: the camera's (`Robot.camera_joint`,
+    a joint the robot adds below a body-axes camera link) where it is written to that URDF joint, else itself."""
+    camera = robot.camera_joint if robot.config.camera is not None else None
+    written_to = robot.model.urdf_joint_of(camera) if camera is not None else None
+    return lambda urdf_joint: camera if camera is not None and urdf_joint == written_to else urdf_joint
 
 
 def held_model(
-    rows: list[ParameterResult], covariance: np.ndarray, present: CurrentCalibration
+    rows: list[ParameterResult], covariance: np.ndarray, present: CurrentCalibration, robot: Robot
 ) -> tuple[Corrections, list[str]]:
     """`deployable_model` of a fit's parameter rows (`fit.result.parameter_results`) and their covariance (P, P)
     [SI units of the parameters]."""
-    chain = [(i, c) for i, c in ((i, _chain_parameter(p)) for i, p in enumerate(rows)) if c is not None]
+    joint = model_joint_of(robot)
+    chain = [(i, c) for i, c in ((i, _chain_parameter(p, joint)) for i, p in enumerate(rows)) if c is not None]
     values = np.array([p.value for p in rows], dtype=float)
     params = ParameterSet([c for _, c in chain])
     index = [i for i, _ in chain]
