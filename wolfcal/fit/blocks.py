@@ -52,6 +52,8 @@ class FittedBlock:
     state: BlockState  # its final noise model and outlier sets
     local_values: np.ndarray  # (L,) the block's own unknowns at the solution [SI]
     residual: np.ndarray  # (U, dim) predicted minus measured at the solution [unit]
+    chain: ParameterSet  # the fit's robot-model parameters
+    chain_values: np.ndarray  # (Pc,) their values at the solution [SI]
 
 
 class Block:

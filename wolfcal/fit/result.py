@@ -101,7 +101,8 @@ def _block_dict(fit: Fit, k: int) -> dict:
     state, params = fit.problem.states[k], fit.problem.params
     residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
     local = fit.solution.values[state.start : state.start + len(state.block.nuisance)]
-    return state.block.report(FittedBlock(fit.solution.blocks[k], state, local, residual))
+    chain_values = fit.solution.values[: len(fit.chain)]
+    return state.block.report(FittedBlock(fit.solution.blocks[k], state, local, residual, fit.chain, chain_values))
 
 
 def external_camera_poses(fit: Fit) -> dict:

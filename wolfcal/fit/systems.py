@@ -38,10 +38,13 @@ class System:
     fit_blocks: str | None = None
     # --free presets this system adds, each -> 'module:attribute' of a function (robot) -> list of chain Parameters
     presets: tuple[tuple[str, str], ...] = ()
+    # its section of the robot config, under the system's name: 'module:attribute' of a parser (config path, data)
+    # -> a typed section (`RobotConfig.section`); None: the system has none (or config.py reads it)
+    config: str | None = None
     description: str = ""
 
     def load(self, part: str) -> Any:
-        """The part ('block', 'reader', 'simulator', 'planner', 'fit_blocks') imported; LookupError when the
+        """The part ('block', 'reader', 'simulator', 'planner', 'fit_blocks', 'config') imported; LookupError when the
         system has none."""
         return load_attribute(getattr(self, part), f"{self.name} system's {part}")
 
@@ -74,6 +77,12 @@ SYSTEMS: tuple[System, ...] = (
         "floor", "wolfcal.fit.floor_block:FloorBlock", "wolfcal.vision.observe:detect_observations",
         "wolfcal.sim.floor:floor_views", "wolfcal.plan.floor:draw_floor_candidates", selectable=False,
         description="tags lying on the floor seen by the head camera while the robot stands [px]",
+    ),
+    System(
+        "imu", "wolfcal.fit.imu_block:ImuBlock", "wolfcal.io.imu:read_standing", "wolfcal.sim.imu:simulate_imu",
+        None, fit_blocks="wolfcal.fit.imu_block:imu_fit_blocks",
+        presets=(("imu", "wolfcal.robot.imu_mount:imu_parameters"),), config="wolfcal.robot.imu_mount:parse_imu_config",
+        description="gravity in the IMU frame while the robot stands still, soles flat [rad]",
     ),
 )
 
@@ -114,6 +123,11 @@ def own_file_systems() -> tuple[System, ...]:
 def system_presets() -> dict[str, str]:
     """--free presets the systems add -> 'module:attribute' of their parameter function."""
     return {name: where for s in SYSTEMS for name, where in s.presets}
+
+
+def config_sections() -> dict[str, Any]:
+    """Robot config keys the systems add -> their parsers (imported)."""
+    return {s.name: s.load("config") for s in SYSTEMS if s.config}
 
 
 def block_class(system_name: str) -> Any:
