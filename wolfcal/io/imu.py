@@ -3,7 +3,8 @@
 One sample per still period: a run of IMU messages in which the robot held still, found from the data, never
 assumed. An IMU message is still when, over +-STILL_WINDOW_S around it, no axis of the accelerometer scatters by more
 than ACCEL_SCATTER_M_S2 (std) and the gyro's rate stays below GYRO_STILL_RAD_S (when the IMU reports one:
-angular_velocity_covariance[0] = -1 marks it absent). A still period is a run of still messages at least MIN_STILL_S
+angular_velocity_covariance[0] = -1 marks it absent), and no joint reading changes by more than one encoder tick in
+the window. A still period is a run of still messages at least MIN_STILL_S
 long after EDGE_S is trimmed from both ends, in which every joint stayed within one encoder tick. Its sample: the
 mean specific force in the IMU frame [m/s^2] (`linear_acceleration`, which ROS gives in m/s^2), the per-joint median
 reading [rad], the accelerometer's scatter and the number of messages. `orientation` (the IMU's own filter) is not
@@ -168,8 +169,9 @@ def _check_units(path: Path, topic: str, accel: np.ndarray) -> None:
                            f"(9.81 m/s^2) while the robot stands; check the IMU driver's units and the topic")
 
 
-def still_messages(stream: ImuStream) -> np.ndarray:
-    """(N,) bool: the stillness test of the module docstring for each IMU message."""
+def still_messages(stream: ImuStream, states: JointStates | None = None) -> np.ndarray:
+    """(N,) bool: the stillness test of the module docstring for each IMU message; with `states`, also no joint
+    reading changing by more than one encoder tick within the window (a stance change the IMU barely feels)."""
     t, n = stream.times_ns, len(stream.times_ns)
     half = STILL_WINDOW_S * 1e9
     lo = np.searchsorted(t, t - half, side="left")
@@ -185,6 +187,10 @@ def still_messages(stream: ImuStream) -> np.ndarray:
         rate = np.linalg.norm(stream.gyro, axis=1)
         fast = np.concatenate([[0], np.cumsum(rate > GYRO_STILL_RAD_S)])
         still &= (fast[hi] - fast[lo]) == 0
+    if states is not None:
+        moved = np.sort(np.concatenate([np.zeros(0, dtype=np.int64)] + [
+            s.times[1:][np.abs(np.diff(s.positions)) > ENCODER_TICK + 1e-9] for s in states.series.values()]))
+        still &= np.searchsorted(moved, t + half, side="right") == np.searchsorted(moved, t - half, side="left")
     return still if n else np.zeros(0, dtype=bool)
 
 
@@ -193,7 +199,7 @@ def standing_samples(path: Path, states: JointStates, stream: ImuStream, joint_n
     missing = [j for j in joint_names if j not in states.series]
     if missing:
         raise WolfcalError(f"{path}: the joint states lack {', '.join(missing[:5])}; record every joint")
-    still, t = still_messages(stream), stream.times_ns
+    still, t = still_messages(stream, states), stream.times_ns
     edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
     rows: list[tuple[np.ndarray, np.ndarray, float, int, int]] = []
     notes: list[str] = []
