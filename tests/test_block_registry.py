@@ -86,7 +86,7 @@ def toy_registered(monkeypatch):
 
 @pytest.mark.parametrize("entry", systems.SYSTEMS, ids=lambda s: s.name)
 def test_every_registered_part_can_be_loaded(entry):
-    for part in ("block", "reader", "simulator", "planner", "fit_blocks"):
+    for part in ("block", "reader", "simulator", "planner", "fit_blocks", "config", "evaluator"):
         if getattr(entry, part) is not None:
             assert callable(entry.load(part)), f"{entry.name}: {part}"
     for _, where in entry.presets:

@@ -4,6 +4,7 @@ message definition as rosbag2 stores it), still periods found from the data, bad
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -187,3 +188,20 @@ def test_fit_without_imu_messages_is_a_clear_error(robot, tmp_path):
     done = run("fit", str(path), "--robot", str(robot.config.path), "--free", "imu", "--out", str(tmp_path / "f"))
     assert done.exit_code == 2 and "no sensor_msgs/msg/Imu messages on /imu/data" in done.output, done.output
     assert str(path) in done.output and not (tmp_path / "f").exists()
+
+
+def test_evaluate_on_a_held_out_standing_recording(robot, tmp_path):
+    config = str(robot.config.path)
+    fit_on, held_out = tmp_path / "standing.mcap", tmp_path / "held_out.mcap"
+    assert run("simulate", "--robot", config, "--system", "imu", "--samples", "12", "--seed", "5",
+               "--out", str(fit_on)).exit_code == 0  # fmt: skip
+    done = run("simulate", "--robot", config, "--system", "imu", "--samples", "8", "--seed", "6",
+               "--truth", str(tmp_path / "standing.truth.yaml"), "--out", str(held_out))  # fmt: skip
+    assert done.exit_code == 0, done.output
+    assert run("fit", str(fit_on), "--robot", config, "--free", "imu", "--out", str(tmp_path / "fit")).exit_code == 0
+    done = run("evaluate", str(tmp_path / "fit"), "--capture", str(held_out), "--out", str(tmp_path / "report"))
+    assert done.exit_code == 0, done.output
+    metrics = json.loads((tmp_path / "report" / "metrics.json").read_text())
+    assert metrics["system"] == "imu" and metrics["n_samples"] == 8
+    assert metrics["after"]["rms_deg"] < 0.1 < metrics["before"]["rms_deg"], metrics
+    assert metrics["deploy"]["written"] and (tmp_path / "report" / "calibrated.urdf").is_file()

@@ -48,6 +48,7 @@ from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.verdict import VerdictLimits, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
+from wolfcal.fit.systems import evaluating_systems
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.io.truth import truth_paths
 from wolfcal.leftout import check_left_out
@@ -329,6 +330,10 @@ def run_evaluate(
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
+    for system in evaluating_systems() if held_out else ():  # held-out recordings a system judges alone
+        own = system.load("evaluator")(fit_dir, result, robot, sources, out_dir, deploy_worse, say)
+        if own is not None:
+            return own
     intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):

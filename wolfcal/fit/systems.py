@@ -41,11 +41,14 @@ class System:
     # its section of the robot config, under the system's name: 'module:attribute' of a parser (config path, data)
     # -> a typed section (`RobotConfig.section`); None: the system has none (or config.py reads it)
     config: str | None = None
+    # judges held-out recordings of its own (fit_dir, result, robot, captures, out_dir, deploy_worse, say) ->
+    # metrics.json's content, or None when the captures are not its own (the camera evaluation judges them)
+    evaluator: str | None = None
     description: str = ""
 
     def load(self, part: str) -> Any:
-        """The part ('block', 'reader', 'simulator', 'planner', 'fit_blocks', 'config') imported; LookupError when the
-        system has none."""
+        """The part ('block', 'reader', 'simulator', 'planner', 'fit_blocks', 'config', 'evaluator') imported;
+        LookupError when the system has none."""
         return load_attribute(getattr(self, part), f"{self.name} system's {part}")
 
 
@@ -81,7 +84,8 @@ SYSTEMS: tuple[System, ...] = (
     System(
         "imu", "wolfcal.fit.imu_block:ImuBlock", "wolfcal.io.imu:read_standing", "wolfcal.sim.imu:simulate_imu",
         None, fit_blocks="wolfcal.fit.imu_block:imu_fit_blocks",
-        presets=(("imu", "wolfcal.robot.imu_mount:imu_parameters"),), config="wolfcal.robot.imu_mount:parse_imu_config",
+        presets=(("imu", "wolfcal.robot.imu_mount:imu_parameters"),),
+        config="wolfcal.robot.imu_mount:parse_imu_config", evaluator="wolfcal.evaluate.imu:evaluate_held_out",
         description="gravity in the IMU frame while the robot stands still, soles flat [rad]",
     ),
 )
@@ -113,6 +117,11 @@ def planned_systems() -> tuple[str, ...]:
 def sampling_systems() -> tuple[str, ...]:
     """Keys of the robot config's `sampling_ranges`."""
     return tuple(s.name for s in SYSTEMS if s.sampling_ranges)
+
+
+def evaluating_systems() -> tuple[System, ...]:
+    """Systems that judge held-out recordings of their own (`System.evaluator`)."""
+    return tuple(s for s in SYSTEMS if s.evaluator)
 
 
 def own_file_systems() -> tuple[System, ...]:
