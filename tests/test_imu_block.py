@@ -150,3 +150,19 @@ def test_imu_link_must_exist_and_be_fixed(tmp_path):
         imu_joint(moving)
     with pytest.raises(WolfcalError, match="unknown key\\(s\\) under 'imu': rate"):
         robot_with_imu(tmp_path, imu={"frame": "imu_frame", "rate": 100})
+
+
+def test_a_bumped_still_period_is_left_out_alone(setup):
+    """One period's accelerometer turned by 1.5 deg (a knock on the table, a foot off the floor): left out, the
+    mount stays where the other periods put it."""
+    robot = setup[0]
+    _, truth, samples = scenario(setup, 3)
+    fixed = Corrections(offsets=truth.offsets)
+    clean = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
+                             own_blocks=[ImuBlock(robot, samples, fixed=fixed)])
+    c, s = np.cos(np.deg2rad(1.5)), np.sin(np.deg2rad(1.5))
+    samples.accel[7] = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]) @ samples.accel[7]
+    bumped = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
+                              own_blocks=[ImuBlock(robot, samples, fixed=fixed)])
+    assert bumped.solution.blocks[0].outlier_views == [(7, -1)]
+    assert np.abs(bumped.solution.values[:2] - clean.solution.values[:2]).max() * DEG < 0.01

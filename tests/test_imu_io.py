@@ -205,3 +205,27 @@ def test_evaluate_on_a_held_out_standing_recording(robot, tmp_path):
     assert metrics["system"] == "imu" and metrics["n_samples"] == 8
     assert metrics["after"]["rms_deg"] < 0.1 < metrics["before"]["rms_deg"], metrics
     assert metrics["deploy"]["written"] and (tmp_path / "report" / "calibrated.urdf").is_file()
+
+
+def test_legs_and_imu_in_one_fit_from_a_feet_capture_and_a_standing_recording(robot, tmp_path):
+    config = str(robot.config.path)
+    standing, feet = tmp_path / "standing.mcap", tmp_path / "feet.mcap"
+    assert run("simulate", "--robot", config, "--system", "imu", "--samples", "24", "--offsets", "legs", "--seed",
+               "3", "--out", str(standing)).exit_code == 0  # fmt: skip
+    done = run("simulate", "--robot", config, "--truth", str(tmp_path / "standing.truth.yaml"), "--binning", "4",
+               "--samples", "25", "--seed", "3", "--out", str(feet))  # fmt: skip
+    assert done.exit_code == 0, done.output
+    done = run("fit", str(feet), str(standing), "--robot", config, "--free", "leg,imu", "--out", str(tmp_path / "fit"))
+    assert done.exit_code == 0, done.output
+    result = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())
+    assert [b["system"] for b in result["blocks"]] == ["head", "imu"]
+    truth = yaml.safe_load((tmp_path / "standing.truth.yaml").read_text())["truth"]
+    fitted = {p["name"]: p for p in result["parameters"]}
+    expected = {"imu.rx": truth["frames"]["imu_frame_joint"][3], "imu.ry": truth["frames"]["imu_frame_joint"][4],
+                **{f"{j}.offset": v for j, v in truth["offsets"].items()}}
+    for name, true in expected.items():
+        if fitted[name]["data_share"] > 0.5:  # offsets the data inform (an ankle roll against its tag's mount not)
+            assert abs(fitted[name]["value"] - true) < 3 * fitted[name]["std"], (name, fitted[name], true)
+    assert abs(fitted["imu.rx"]["value"] - expected["imu.rx"]) < np.deg2rad(0.25)
+    assert abs(fitted["imu.ry"]["value"] - expected["imu.ry"]) < np.deg2rad(0.25)
+    assert any(c["a"].startswith("imu.") or c["b"].startswith("imu.") for c in result["correlated_pairs"])
