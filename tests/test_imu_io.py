@@ -229,3 +229,12 @@ def test_legs_and_imu_in_one_fit_from_a_feet_capture_and_a_standing_recording(ro
     assert abs(fitted["imu.rx"]["value"] - expected["imu.rx"]) < np.deg2rad(0.25)
     assert abs(fitted["imu.ry"]["value"] - expected["imu.ry"]) < np.deg2rad(0.25)
     assert any(c["a"].startswith("imu.") or c["b"].startswith("imu.") for c in result["correlated_pairs"])
+
+
+def test_a_standing_recording_without_the_imu_preset_is_refused_with_the_preset_to_add(robot, tmp_path):
+    path = tmp_path / "standing.mcap"
+    write(path, robot, [(3.0, True, UP)])
+    done = run("fit", str(path), "--robot", str(robot.config.path), "--free", "leg", "--out", str(tmp_path / "f"))
+    assert done.exit_code == 2 and "IMU data without images" in done.output and "--free leg,imu" in done.output
+    done = run("fit", str(path), "--robot", str(robot.config.path), "--system", "imu", "--out", str(tmp_path / "f"))
+    assert done.exit_code == 2 and "gravity cannot inform the camera" in done.output, done.output

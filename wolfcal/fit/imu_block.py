@@ -37,7 +37,7 @@ from wolfcal.io.imu import IMU, StandingSamples, read_standing, topics_of
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, cross
-from wolfcal.robot.imu_mount import imu_config, imu_joint
+from wolfcal.robot.imu_mount import IMU_KEY, imu_config, imu_joint
 from wolfcal.robot.parameters import Parameter, ParameterSet
 from wolfcal.robot.robot import Robot
 
@@ -177,19 +177,29 @@ def imu_fit_blocks(robot: Robot, captures: list[Path], options: FitOptions,
                    say) -> tuple[list[Block], list[Path]]:  # fmt: skip
     """The registry's fit builder: the IMU block of the captures that hold IMU messages on `imu.topic`, when
     --free names the imu preset (or --system imu); and the captures no camera reads (no image topic of the config).
-    Nothing without the preset: the IMU's data would otherwise be fitted with its mount held at the nominal one."""
+    Without the preset the IMU's data would be fitted with its mount held at the nominal one: a standing recording
+    (IMU data, no images) is then refused with the --free that takes it in."""
     wanted = "imu" in options.presets or options.system == "imu"
-    if not wanted:
+    if not wanted and IMU_KEY not in robot.config.sections:
         return [], []
     config = imu_config(robot, "--free imu and --system imu need the IMU's link and topic")
+    cameras = {robot.config.camera_topics(name)[0] for name in robot.config.camera_names}
+    topics = {Path(c): set(topics_of(Path(c))) for c in captures}
+    with_imu = [c for c, found in topics.items() if config.topic in found]
+    alone = [c for c in with_imu if not cameras & topics[c]]
+    if not wanted:
+        if alone:
+            raise WolfcalError(f"{', '.join(map(str, alone))}: IMU data without images; the IMU joins the fit with "
+                               f"--free {options.free},imu (or --free imu)")
+        return [], []
+    if options.chain_preset in (None, "camera", "head_camera") and "imu" not in options.presets:
+        raise WolfcalError(f"--system imu with --free {options.free}: gravity cannot inform the camera; use --free imu "
+                           "(the mount), --free leg (the legs, the mount known) or --free leg,imu")
     imu_joint(robot)  # a clear error for an IMU link the URDF lacks or moves, before any file is read
-    with_imu = [Path(c) for c in captures if config.topic in topics_of(Path(c))]
     if not with_imu:
         raise WolfcalError(f"{', '.join(map(str, captures))}: no {IMU} messages on {config.topic} (robot config "
                            "'imu.topic'); give a standing recording (`wolfcal capture --standing`)")
     samples = read_standing(with_imu, robot.config.joint_states_topic, config.topic, robot.joint_names)
     say(f"imu: {samples.n_samples} still period(s) from {len(with_imu)} recording(s)"
         + "".join(f"; {note}" for note in samples.notes))
-    cameras = {robot.config.camera_topics(name)[0] for name in robot.config.camera_names}
-    alone = [c for c in with_imu if not cameras & set(topics_of(c))]
     return [ImuBlock(robot, samples)], alone
