@@ -238,3 +238,14 @@ def test_a_standing_recording_without_the_imu_preset_is_refused_with_the_preset_
     assert done.exit_code == 2 and "IMU data without images" in done.output and "--free leg,imu" in done.output
     done = run("fit", str(path), "--robot", str(robot.config.path), "--system", "imu", "--out", str(tmp_path / "f"))
     assert done.exit_code == 2 and "gravity cannot inform the camera" in done.output, done.output
+
+
+def test_evaluate_without_a_held_out_recording_asks_for_one(robot, tmp_path):
+    config = str(robot.config.path)
+    recording = tmp_path / "standing.mcap"
+    done = run("simulate", "--robot", config, "--system", "imu", "--samples", "8", "--out", str(recording))
+    assert done.exit_code == 0, done.output
+    done = run("fit", str(recording), "--robot", config, "--free", "imu", "--out", str(tmp_path / "fit"))
+    assert done.exit_code == 0, done.output
+    done = run("evaluate", str(tmp_path / "fit"), "--out", str(tmp_path / "report"))
+    assert done.exit_code == 2 and "standing recordings the fit did not use" in done.output, done.output

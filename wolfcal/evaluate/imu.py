@@ -21,6 +21,7 @@ import numpy as np
 
 import wolfcal
 from wolfcal.atomic import output_set, write_text_atomic
+from wolfcal.errors import WolfcalError
 from wolfcal.io.imu import StandingSamples, read_standing, topics_of
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import floor_frames
@@ -50,8 +51,9 @@ def _figures(errors: np.ndarray) -> dict:
 
 def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: list[Path], out_dir: Path,
                       deploy_worse: bool, say: Callable[[str], None]) -> dict | None:  # fmt: skip
-    """The IMU check when every held-out capture is a standing recording (IMU topic, no camera topic); None
-    otherwise (the camera evaluation judges them). Returns metrics.json's content."""
+    """The IMU check when every capture is a standing recording (IMU topic, no camera topic); None otherwise (the
+    camera evaluation judges them). Returns metrics.json's content; a WolfcalError when they are the fit's own
+    (the check needs held-out recordings)."""
     from wolfcal.evaluate.deploy import write_or_withhold_deploy_files  # the deploy files' writer
 
     if "imu" not in robot.config.sections or not captures:
@@ -61,6 +63,9 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
     topics = [set(topics_of(Path(c))) for c in captures]
     if not all(config.topic in t and not cameras & t for t in topics):
         return None
+    if {str(Path(c).resolve()) for c in captures} <= set(result.captures):
+        raise WolfcalError(f"{', '.join(map(str, captures))}: the IMU is checked on standing recordings the fit did "
+                           "not use (no cross-validation over still periods): give one with --capture")
     samples = read_standing([Path(c) for c in captures], robot.config.joint_states_topic, config.topic,
                             robot.joint_names)  # fmt: skip
     before, after = gravity_errors(robot, samples, Corrections()), gravity_errors(robot, samples, result.corrections)

@@ -330,7 +330,7 @@ def run_evaluate(
     fit_folder = fit_dir if fit_dir.is_dir() else fit_dir.parent
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf]
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
-    for system in evaluating_systems() if held_out else ():  # held-out recordings a system judges alone
+    for system in evaluating_systems():  # recordings a system judges alone (held out, or its refusal)
         own = system.load("evaluator")(fit_dir, result, robot, sources, out_dir, deploy_worse, say)
         if own is not None:
             return own
