@@ -5,9 +5,9 @@ the floor's normal n (up) and the accelerometer's constant bias b. The kinematic
 (plus the fitted offsets): the mean z axis of the standing soles (config `floor.soles`, as the floor frame takes it),
 turned into the IMU frame through the IMU's fixed joint (its mount correction `imu.rx`, `imu.ry`, `wolfcal.robot.
 imu_mount`). Residual per still period s [rad]: the two tangent components E_s^T p of the predicted direction
-p = v / |v| at the measured direction m_s = f_s / |f_s| (E_s: two unit vectors orthogonal to m_s,
-fixed by the data; g_s = |f_s|; p from v below): the angle between measured and predicted gravity, split in two
-(its sine, within 0.05 % below 3 deg).
+p = v / |v| (v: the predicted specific force, below) at the measured direction m_s = f_s / |f_s| (E_s: two unit
+vectors orthogonal to m_s, fixed by the data; g_s = |f_s|): the angle between measured and predicted gravity, split
+in two (its sine, within 0.05 % below 3 deg).
 
 The bias b is the block's own unknown, `imu.bias_x|y|z` [m/s^2], with the configured bias level as its prior
 (`imu.bias`). While the soles are flat a bias across gravity (x, y) cannot be told from a tilt of the mount: both
@@ -15,9 +15,9 @@ turn the measured direction, by b/g, the same way in every stance a standing rob
 cosine of the torso's tilt, 1 % at 8 deg, far below what the joint readings' rounding moves). So it enters as exactly
 that turn, v = g (I + [beta]x) n + b_z e_z with beta = (-b_y, b_x, 0) / g: the data fix mount + bias, the priors
 split them, the fit reports the pair as moving together, and the mount's std carries the bias's share. (Fitted as
-the exact f = g n + b, that 1 % let the readings' rounding move the split by a prior's width.) b_z, along gravity,
-shows as an error that grows with the torso's tilt and is estimated. The bias is not deployed: the mount the fit
-reports is the effective one (true mount plus the bias's turn), which is what a team's offsets hold.
+the exact f = g n + b, that 1 % lets the readings' rounding move the split by up to a prior's width.) b_z, along
+gravity, shows as an error that grows with the torso's tilt and is estimated. The bias is not deployed: the mount
+the fit reports is the effective one (true mount plus the bias's turn), which is what a team's offsets hold.
 A turn of the mount about the IMU's z axis (`imu.rz`) leaves gravity unchanged while the torso stands upright: it is
 not estimated. Outlier unit: one still period (a bump or a step); noise: estimated from the data like the other
 blocks, within NOISE_MIN_RAD .. NOISE_MAX_RAD. Derivatives are analytic (`wolfcal.robot.derivatives`).
