@@ -249,3 +249,21 @@ def test_evaluate_without_a_held_out_recording_asks_for_one(robot, tmp_path):
     assert done.exit_code == 0, done.output
     done = run("evaluate", str(tmp_path / "fit"), "--out", str(tmp_path / "report"))
     assert done.exit_code == 2 and "standing recordings the fit did not use" in done.output, done.output
+
+
+def test_configured_stances_are_simulated_and_checked(tmp_path):
+    floor = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "wolfgang" / "robot.yaml").read_text())
+    stances = floor["floor"]["check_stances"][:3]
+    robot = robot_with_imu(tmp_path, imu={"frame": "imu_frame", "stances": stances})
+    recording = tmp_path / "standing.mcap"
+    done = run("simulate", "--robot", str(robot.config.path), "--system", "imu", "--samples", "3", "--out",
+               str(recording))  # fmt: skip
+    assert done.exit_code == 0, done.output
+    samples = read_standing([recording], "/joint_states", "/imu/data", robot.joint_names)
+    assert samples.n_samples == 3
+    column = robot.model.column("LHipYaw")
+    assert np.allclose(samples.q_measured[:, column], [s["LHipYaw"] for s in stances], atol=0.002)
+    bent = dict(stances[0], LAnkleRoll=0.3)
+    robot_with_imu(tmp_path, imu={"frame": "imu_frame", "stances": [bent]})
+    done = run("simulate", "--robot", str(robot.config.path), "--system", "imu", "--out", str(tmp_path / "x.mcap"))
+    assert done.exit_code == 2 and "'imu.stances[0]' is not a standing pose" in done.output, done.output

@@ -19,6 +19,7 @@ import numpy as np
 
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization
+from wolfcal.fit.mocap_result import mocap_block_dict
 from wolfcal.geometry import exp_so3, log_so3, right_jacobian_so3, rigid_registration, skew
 from wolfcal.markers import MarkerObservations
 from wolfcal.outliers import MOCAP_MARKER_M
@@ -77,8 +78,6 @@ class MocapBlock(Block):
         return self.obs.marker_index
 
     def report(self, fitted: FittedBlock) -> dict:
-        from wolfcal.fit.mocap_result import mocap_block_dict  # here: it reads the solver's result type
-
         return mocap_block_dict(self, fitted.result, fitted.local_values, fitted.residual)
 
     @property

@@ -22,6 +22,7 @@ from mcap_ros2.writer import Writer as Ros2Writer
 
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.encoders import encoder_readings
+from wolfcal.errors import WolfcalError
 from wolfcal.geometry import log_so3
 from wolfcal.io.imu import IMU, IMU_MSGDEF, StandingSamples
 from wolfcal.io.msgdefs import JOINT_STATE, MSGDEFS, stamp_dict
@@ -31,7 +32,7 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import floor_frames, moved_stance
 from wolfcal.robot.imu_mount import imu_config, imu_joint
 from wolfcal.robot.robot import Robot
-from wolfcal.robot.stances import stance_readings
+from wolfcal.robot.stances import STANDING_RULE, off_plane, sole_gaps, stance_readings
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.yamlfile import dump_yaml
 
@@ -71,9 +72,26 @@ def tilted_stances(robot: Robot) -> np.ndarray:
 
 
 def imu_stances(robot: Robot) -> np.ndarray:
-    """(K, J) readings of the stances a standing capture goes through: `imu.stances`, else `tilted_stances`."""
+    """(K, J) readings of the stances a standing recording goes through: `imu.stances` (each checked: movable
+    joints of the URDF, both soles on one plane under the nominal model), else `tilted_stances`."""
     config = imu_config(robot)
-    return stance_readings(config.stances, robot.model) if config.stances else tilted_stances(robot)
+    if not config.stances:
+        return tilted_stances(robot)
+    for i, stance in enumerate(config.stances):
+        unknown = [j for j in stance if j not in robot.joint_names]
+        if unknown:
+            raise WolfcalError(f"{robot.config.path}: 'imu.stances[{i}]' names {', '.join(unknown)}, not movable "
+                               f"joints of {robot.config.urdf}")
+    q = stance_readings(config.stances, robot.model)
+    soles = list(robot.config.floor_config("standing stances need 'floor.soles'").soles)[:2]
+    poses = robot.model.link_poses(q, soles, base=robot.config.base_link)
+    tilt, gap, bad = off_plane(sole_gaps(np.stack([poses[s] for s in soles])))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise WolfcalError(f"{robot.config.path}: 'imu.stances[{i}]' is not a standing pose: the soles are "
+                           f"{np.rad2deg(tilt[i]):.1f} deg and {gap[i] * 100:.1f} cm from one plane under the nominal "
+                           f"model ({STANDING_RULE})")
+    return q
 
 
 def imu_truth(robot: Robot, offset_joints: tuple[str, ...], rng: np.random.Generator, offset_rms: float = 0.025,
