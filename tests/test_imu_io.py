@@ -160,6 +160,7 @@ def run(*args: str):
     return CliRunner().invoke(app, list(args))
 
 
+@pytest.mark.slow
 def test_simulate_then_fit_the_mount_from_a_standing_recording(robot, tmp_path):
     config = str(robot.config.path)
     recording = tmp_path / "standing.mcap"
@@ -190,6 +191,7 @@ def test_fit_without_imu_messages_is_a_clear_error(robot, tmp_path):
     assert str(path) in done.output and not (tmp_path / "f").exists()
 
 
+@pytest.mark.slow
 def test_evaluate_on_a_held_out_standing_recording(robot, tmp_path):
     config = str(robot.config.path)
     fit_on, held_out = tmp_path / "standing.mcap", tmp_path / "held_out.mcap"
@@ -207,6 +209,7 @@ def test_evaluate_on_a_held_out_standing_recording(robot, tmp_path):
     assert metrics["deploy"]["written"] and (tmp_path / "report" / "calibrated.urdf").is_file()
 
 
+@pytest.mark.slow
 def test_legs_and_imu_in_one_fit_from_a_feet_capture_and_a_standing_recording(robot, tmp_path):
     config = str(robot.config.path)
     standing, feet = tmp_path / "standing.mcap", tmp_path / "feet.mcap"
@@ -240,6 +243,7 @@ def test_a_standing_recording_without_the_imu_preset_is_refused_with_the_preset_
     assert done.exit_code == 2 and "gravity cannot inform the camera" in done.output, done.output
 
 
+@pytest.mark.slow
 def test_evaluate_without_a_held_out_recording_asks_for_one(robot, tmp_path):
     config = str(robot.config.path)
     recording = tmp_path / "standing.mcap"
