@@ -142,14 +142,14 @@ def test_imu_link_must_exist_and_be_fixed(tmp_path):
     from wolfcal.errors import WolfcalError
     from wolfcal.robot.imu_mount import imu_joint
 
-    missing = robot_with_imu(tmp_path, imu={"frame": "imu_board"})
-    with pytest.raises(WolfcalError, match="'imu.frame' 'imu_board' is not a link of"):
+    missing = robot_with_imu(tmp_path, imu={"frame": "imu_chip"})
+    with pytest.raises(WolfcalError, match="'imu.frame' 'imu_chip' is not a link of"):
         imu_joint(missing)
     moving = robot_with_imu(tmp_path, imu={"frame": "neck"})
     with pytest.raises(WolfcalError, match="'imu.frame' 'neck' is attached by the revolute joint 'HeadPan'"):
         imu_joint(moving)
     with pytest.raises(WolfcalError, match="unknown key\\(s\\) under 'imu': rate"):
-        robot_with_imu(tmp_path, imu={"frame": "imu_frame", "rate": 100})
+        robot_with_imu(tmp_path, imu={"frame": "imu_board", "rate": 100})
 
 
 def test_a_bumped_still_period_is_left_out_alone(setup):
@@ -166,3 +166,12 @@ def test_a_bumped_still_period_is_left_out_alone(setup):
                               own_blocks=[ImuBlock(robot, samples, fixed=fixed)])
     assert bumped.solution.blocks[0].outlier_views == [(7, -1)]
     assert np.abs(bumped.solution.values[:2] - clean.solution.values[:2]).max() * DEG < 0.01
+
+
+def test_the_shipped_wolfgang_has_its_imu_on_a_fixed_joint():
+    from wolfcal.robot.imu_mount import imu_config, imu_joint
+    from wolfcal.robot.robot import load_robot
+
+    robot = load_robot(WOLFGANG)
+    assert imu_joint(robot) == "imu_frame_frame" and imu_config(robot).topic == "/imu/data"
+    assert [p.name for p in imu_parameters(robot)] == ["imu.rx", "imu.ry"]

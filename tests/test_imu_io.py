@@ -172,15 +172,15 @@ def test_simulate_then_fit_the_mount_from_a_standing_recording(robot, tmp_path):
     assert done.exit_code == 0, done.output
     assert "imu.rz (yaw of the mount) is not determined" in done.output
     result = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())
-    truth = yaml.safe_load((tmp_path / "standing.truth.yaml").read_text())["truth"]["frames"]["imu_frame_joint"]
+    truth = yaml.safe_load((tmp_path / "standing.truth.yaml").read_text())["truth"]["frames"]["imu_board_joint"]
     fitted = {p["name"]: p for p in result["parameters"]}
     for name, true in (("imu.rx", truth[3]), ("imu.ry", truth[4])):
         assert abs(fitted[name]["value"] - true) < 3 * fitted[name]["std"], (name, fitted[name], true)
-        assert fitted[name]["urdf_joint"] == "imu_frame_joint"
+        assert fitted[name]["urdf_joint"] == "imu_board_joint"
     imu = next(b for b in result["blocks"] if b["system"] == "imu")
     assert imu["rms_after_deg"] < 0.1 < imu["rms_before_deg"] and imu["n_samples"] == 12
     urdf = (tmp_path / "fit" / "calibrated.urdf").read_text()
-    assert 'rpy="0 0 1.5708"' not in urdf.split('name="imu_frame_joint"')[1].split("</joint>")[0]
+    assert 'rpy="0 0 1.5708"' not in urdf.split('name="imu_board_joint"')[1].split("</joint>")[0]
 
 
 def test_fit_without_imu_messages_is_a_clear_error(robot, tmp_path):
@@ -224,7 +224,7 @@ def test_legs_and_imu_in_one_fit_from_a_feet_capture_and_a_standing_recording(ro
     assert [b["system"] for b in result["blocks"]] == ["head", "imu"]
     truth = yaml.safe_load((tmp_path / "standing.truth.yaml").read_text())["truth"]
     fitted = {p["name"]: p for p in result["parameters"]}
-    expected = {"imu.rx": truth["frames"]["imu_frame_joint"][3], "imu.ry": truth["frames"]["imu_frame_joint"][4],
+    expected = {"imu.rx": truth["frames"]["imu_board_joint"][3], "imu.ry": truth["frames"]["imu_board_joint"][4],
                 **{f"{j}.offset": v for j, v in truth["offsets"].items()}}
     for name, true in expected.items():
         if fitted[name]["data_share"] > 0.5:  # offsets the data inform (an ankle roll against its tag's mount not)
@@ -258,7 +258,7 @@ def test_evaluate_without_a_held_out_recording_asks_for_one(robot, tmp_path):
 def test_configured_stances_are_simulated_and_checked(tmp_path):
     floor = yaml.safe_load((Path(__file__).resolve().parents[1] / "configs" / "wolfgang" / "robot.yaml").read_text())
     stances = floor["floor"]["check_stances"][:3]
-    robot = robot_with_imu(tmp_path, imu={"frame": "imu_frame", "stances": stances})
+    robot = robot_with_imu(tmp_path, imu={"frame": "imu_board", "stances": stances})
     recording = tmp_path / "standing.mcap"
     done = run("simulate", "--robot", str(robot.config.path), "--system", "imu", "--samples", "3", "--out",
                str(recording))  # fmt: skip
@@ -268,6 +268,6 @@ def test_configured_stances_are_simulated_and_checked(tmp_path):
     column = robot.model.column("LHipYaw")
     assert np.allclose(samples.q_measured[:, column], [s["LHipYaw"] for s in stances], atol=0.002)
     bent = dict(stances[0], LAnkleRoll=0.3)
-    robot_with_imu(tmp_path, imu={"frame": "imu_frame", "stances": [bent]})
+    robot_with_imu(tmp_path, imu={"frame": "imu_board", "stances": [bent]})
     done = run("simulate", "--robot", str(robot.config.path), "--system", "imu", "--out", str(tmp_path / "x.mcap"))
     assert done.exit_code == 2 and "'imu.stances[0]' is not a standing pose" in done.output, done.output

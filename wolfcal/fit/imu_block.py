@@ -184,7 +184,7 @@ def imu_fit_blocks(robot: Robot, captures: list[Path], options: FitOptions,
         return [], []
     config = imu_config(robot, "--free imu and --system imu need the IMU's link and topic")
     cameras = {robot.config.camera_topics(name)[0] for name in robot.config.camera_names}
-    topics = {Path(c): set(topics_of(Path(c))) for c in captures}
+    topics = {Path(c): _topics(Path(c), strict=wanted) for c in captures}
     with_imu = [c for c, found in topics.items() if config.topic in found]
     alone = [c for c in with_imu if not cameras & topics[c]]
     if not wanted:
@@ -203,3 +203,14 @@ def imu_fit_blocks(robot: Robot, captures: list[Path], options: FitOptions,
     say(f"imu: {samples.n_samples} still period(s) from {len(with_imu)} recording(s)"
         + "".join(f"; {note}" for note in samples.notes))
     return [ImuBlock(robot, samples)], alone
+
+
+def _topics(path: Path, strict: bool) -> set[str]:
+    """The file's topics; a file that cannot be read gives none unless `strict` (then its error): without the imu
+    preset the camera reader reports it."""
+    try:
+        return set(topics_of(path))
+    except WolfcalError:
+        if strict:
+            raise
+        return set()

@@ -21,7 +21,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mcapfile import check_mcap
+from wolfcal.io.mcapfile import check_mcap, is_finished, recover_hint, torn_error
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.recording import ENCODER_TICK, JointStates
 
@@ -107,10 +107,16 @@ class ImuStream:
 
 
 def topics_of(path: Path) -> dict[str, str]:
-    """Topic -> schema name of the channels of an MCAP file (from its summary; empty when it has none)."""
+    """Topic -> schema name of the channels of an MCAP file (from its summary; empty when it has none); a
+    WolfcalError for a file that is not one or was not closed properly."""
     check_mcap(path)
-    with path.open("rb") as handle:
-        summary = make_reader(handle).get_summary()
+    if not is_finished(path):
+        raise torn_error(path)
+    try:
+        with path.open("rb") as handle:
+            summary = make_reader(handle).get_summary()
+    except Exception as exc:  # the mcap library raises many types for damaged files
+        raise WolfcalError(f"{path}: damaged MCAP file ({type(exc).__name__}: {exc}); {recover_hint(path)}") from None
     if summary is None:
         return {}
     return {c.topic: summary.schemas[c.schema_id].name if c.schema_id in summary.schemas else ""
