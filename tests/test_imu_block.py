@@ -8,18 +8,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from conftest import WOLFGANG
 from imu_robot import robot_with_imu
 
 from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.errors import WolfcalError
 from wolfcal.fit.derivative_check import assert_block_derivatives
 from wolfcal.fit.imu_block import ImuBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import fit_observations
 from wolfcal.fit.result import explain, fit_result, summary_lines
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.imu_mount import imu_parameters
+from wolfcal.robot.imu_mount import imu_config, imu_joint, imu_parameters
 from wolfcal.robot.parameters import ParameterSet, offset_parameter
+from wolfcal.robot.robot import load_robot
 from wolfcal.sim.imu import imu_truth, random_bias, standing_samples_direct, tilted_stances
 from wolfcal.sim.scenario import synthetic_scenario
 from wolfcal.sim.simulate import offset_joints
@@ -139,9 +142,6 @@ def test_free_takes_a_list_of_presets_and_refuses_unknown_ones():
 
 
 def test_imu_link_must_exist_and_be_fixed(tmp_path):
-    from wolfcal.errors import WolfcalError
-    from wolfcal.robot.imu_mount import imu_joint
-
     missing = robot_with_imu(tmp_path, imu={"frame": "imu_chip"})
     with pytest.raises(WolfcalError, match="'imu.frame' 'imu_chip' is not a link of"):
         imu_joint(missing)
@@ -169,9 +169,16 @@ def test_a_bumped_still_period_is_left_out_alone(setup):
 
 
 def test_the_shipped_wolfgang_has_its_imu_on_a_fixed_joint():
-    from wolfcal.robot.imu_mount import imu_config, imu_joint
-    from wolfcal.robot.robot import load_robot
-
     robot = load_robot(WOLFGANG)
     assert imu_joint(robot) == "imu_frame_frame" and imu_config(robot).topic == "/imu/data"
     assert [p.name for p in imu_parameters(robot)] == ["imu.rx", "imu.ry"]
+
+
+def test_a_config_with_only_the_imu_needs_no_camera_or_tags(tmp_path):
+    robot = robot_with_imu(tmp_path)
+    config = yaml.safe_load(robot.config.path.read_text())
+    for key in ("camera", "external_cameras", "markers", "tags"):
+        config.pop(key)
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
+    imu_only = load_robot(tmp_path / "robot.yaml")
+    assert imu_only.config.camera is None and [p.name for p in imu_parameters(imu_only)] == ["imu.rx", "imu.ry"]
