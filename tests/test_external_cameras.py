@@ -92,7 +92,7 @@ def test_config_refuses_bad_external_cameras(tmp_path, cameras, message):
 
 def test_config_needs_some_camera(tmp_path):
     with pytest.raises(WolfcalError, match="needs a head camera"):
-        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None, markers=None))
+        load_robot_config(write_config(tmp_path, camera=None, external_cameras=None, markers=None, imu=None))
 
 
 # --- own capture files with several cameras ------------------------------------------------------------------

@@ -19,7 +19,7 @@ WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 def mocap_only_config(tmp_path: Path, **changes) -> Path:
     """The Wolfgang robot with only its markers (no camera, no tags); top-level keys replaced by `changes`."""
     data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
-    for key in ("camera", "external_cameras", "tags"):
+    for key in ("camera", "external_cameras", "tags", "imu"):
         data.pop(key)
     data["urdf"] = str(WOLFGANG / "wolfgang.urdf")
     data.update(changes)

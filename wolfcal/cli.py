@@ -14,6 +14,7 @@ import wolfcal.opencv_quiet  # noqa: F401  (OpenCV's own log lines off, set befo
 from wolfcal import __version__
 from wolfcal.config import default_robot
 from wolfcal.errors import DeployRefused, WolfcalError
+from wolfcal.fit.systems import selectable_systems, system_presets  # the registry: plain data
 from wolfcal.robot.presets import DEFAULT_PRESET
 
 app = typer.Typer(
@@ -170,14 +171,17 @@ def fit(
     captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
                                           "recordings of the joint states (and Markers, unless --mocap is given)."),
     robot: Path | None = robot_option(),
-    free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg."),
+    free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg, and the "
+                             f"measurement systems' presets ({' | '.join(system_presets())}), several joined by "
+                             "commas (leg,imu)."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
                                            "(head camera only)."),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
-    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: head | external | mocap | "
-                                      "all (default: every system the captures contain)."),
+    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: "
+                                      f"{' | '.join(selectable_systems())} (default: every system the captures "
+                                      "contain)."),
     mocap: list[Path] = typer.Option([], "--mocap", help="Motion-capture file (.c3d, Motive or Vicon .csv) of the "
                                      "session of each capture, in the same order. Repeatable."),
     mocap_offset: list[float] = typer.Option([], "--mocap-offset", help="Clock offset of each --mocap file [s]: "
@@ -288,7 +292,8 @@ def simulate(
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
     system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
                                "| all (both in every sample) | mocap (motion capture: FILE.mcap with joint states "
-                               "and Markers, and FILE.c3d)."),
+                               "and Markers, and FILE.c3d) | imu (a standing recording: joint states and "
+                               "sensor_msgs/msg/Imu, stances that turn and tilt the torso)."),
     external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
                                         "(default: the first)."),
     placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "

@@ -9,12 +9,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
 from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.systems import config_sections, sampling_systems  # the registry: plain data
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.vision.target_size import check_printed_edge
 from wolfcal.yamlfile import read_yaml
@@ -113,6 +114,14 @@ class RobotConfig:
     # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
     sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
     planning: PlanningConfig = field(default_factory=lambda: PlanningConfig())
+    # registered measurement systems' own sections (`System.config`: key -> its parsed, typed section)
+    sections: dict[str, Any] = field(default_factory=dict)
+
+    def section(self, key: str, why: str) -> Any:
+        """A measurement system's section (e.g. `imu:`); a WolfcalError naming the file when the config has none."""
+        if key not in self.sections:
+            raise WolfcalError(f"the robot config {self.path} has no '{key}:'; {why}")
+        return self.sections[key]
 
     def head_camera(self, why: str = "the head-camera system needs one") -> CameraConfig:
         """The head camera's config; a WolfcalError naming the file when the config has none."""
@@ -376,13 +385,12 @@ def _parameter_name(r: _Reader, default: str | None = None) -> str:
     return name
 
 
-SAMPLING_SYSTEMS = ("head", "external", "mocap")
 
 
 def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
     """`sampling_ranges: {head|external|mocap: {<joint>: [lo, hi]}}` [rad, true angles]; joints: load_robot."""
     r = _Reader(path, data, "sampling_ranges")
-    r.check_keys((), SAMPLING_SYSTEMS)
+    r.check_keys((), sampling_systems())
     out = {}
     for system, joints in r.data.items():
         if not isinstance(joints, dict) or not joints:
@@ -452,7 +460,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r.check_keys(
         ("name", "urdf", "base_link"),
         ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
-         "sampling_ranges", *PLANNING_KEYS),
+         "sampling_ranges", *PLANNING_KEYS, *config_sections()),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -460,8 +468,11 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     camera = _camera(path, r.data["camera"]) if r.data.get("camera") is not None else None
     external = _external_cameras(path, r.data["external_cameras"]) if r.data.get("external_cameras") else ()
     markers = _markers(path, r.data["markers"]) if r.data.get("markers") is not None else None
-    if camera is None and not external and markers is None:
-        r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:' or motion-capture 'markers:'")
+    sections = {key: parse(path, r.data[key]) for key, parse in config_sections().items()
+                if r.data.get(key) is not None}  # fmt: skip
+    if camera is None and not external and markers is None and not sections:
+        r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:', motion-capture 'markers:' or "
+               f"a measurement system's section ({', '.join(config_sections()) or 'none registered'})")
     _check_topics_distinct(path, camera, external)
     if camera is not None and camera.name in {c.name for c in external}:
         r.fail(f"'camera.name' {camera.name!r} is also an external camera's name; each camera needs its own name")
@@ -486,6 +497,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
         sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
         planning=_planning(path, r.data),
+        sections=sections,
     )
 
 

@@ -60,6 +60,7 @@ from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.pipeline import FIT_OUTPUTS, load_captures, samples_of
 from wolfcal.fit.result import FitResult, load_result
+from wolfcal.fit.systems import evaluating_systems
 from wolfcal.io.current import CurrentCalibration, current_files, load_current
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.io.truth import truth_paths
@@ -299,6 +300,10 @@ def run_evaluate(
     inputs = [*sources, *(fit_folder / name for name in FIT_OUTPUTS), robot.config.path, robot.config.urdf,
               *current_files(list(current))]  # fmt: skip
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
+    for system in evaluating_systems():  # recordings a system judges alone (held out, or its refusal)
+        own = system.load("evaluator")(fit_dir, result, robot, sources, out_dir, deploy_worse, say)
+        if own is not None:
+            return own
     intrinsics = Path(result.intrinsics) if result.intrinsics else None
     loaded = load_captures(robot, sources, intrinsics, say)  # read once, for whichever camera holds the views
     if held_out and not any(HEAD_CAMERA in c.cameras for c in loaded):

@@ -16,11 +16,12 @@ from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_axes import check_camera_axes
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
-from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
-from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
+from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.systems import ALL, load_attribute, own_file_systems, system_presets
 from wolfcal.io.current import current_files, load_current
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
@@ -38,8 +39,6 @@ from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.cache import hashing_ahead
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
-
-SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
 
 @dataclass
@@ -71,6 +70,9 @@ class Fit:
         return self.chain.corrections(self.solution.values[: len(self.chain)]).plus(self.held)
 
 
+CAMERA_SYSTEMS = (None, ALL, "head", "external")  # --system choices whose fit uses the cameras' tag views
+
+
 def in_system(camera: str, system: str | None) -> bool:
     """Whether a camera belongs to a --system: head -> the head camera, external -> any other; all (or no
     choice) -> every camera."""
@@ -84,9 +86,9 @@ def _systems(robot: Robot, observations: dict[str, Observations], options: FitOp
     if not chosen:
         found = ", ".join(sorted(observations)) or "none"
         raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
-    if options.free in ("camera", "head_camera"):
+    if options.chain_preset in ("camera", "head_camera"):
         robot.config.head_camera()  # a clear error when the robot config has no head camera
-    if options.free in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
+    if options.chain_preset in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
         raise WolfcalError(
             f"--free {options.free} estimates the head camera, but the captures used (--system {system}) hold no "
             "head-camera images; use --free leg for an external camera, or add a head-camera capture"
@@ -100,31 +102,30 @@ def fit_observations(
     options: FitOptions,
     say: Callable[[str], None] | None = None,
     markers: MarkerObservations | None = None,
+    own_blocks: Sequence[Block] = (),
 ) -> Fit:
-    """Choose the free parameters for the observed tags of each camera and the measured markers, check there is
-    enough data, solve."""
+    """Choose the free parameters for the observed tags of each camera, the measured markers and the blocks of
+    systems that read their own files (`own_file_blocks`), check there is enough data, solve."""
     if isinstance(observations, Observations):
         observations = {observations.camera_name: observations}
-    mocap = mocap_block(robot, markers, options)
-    if options.system == "mocap" or (mocap is not None and not observations):
-        observations = {}
+    mocap = mocap_block(robot, markers, options) if options.chain_preset is not None else None
+    if (options.system not in CAMERA_SYSTEMS or options.chain_preset is None
+            or (not observations and (mocap is not None or own_blocks))):
+        observations = {}  # no camera in the fit: --system names another, or no camera parameter is free
     else:
         observations = _systems(robot, observations, options)
     observations, floor = split_floor(robot, observations)
     if HEAD_CAMERA in observations:
         check_camera_axes(robot, observations[HEAD_CAMERA])
     used = _tags_used(robot, observations, options)
-    if not used and mocap is None and floor is None:
+    if not used and mocap is None and floor is None and not own_blocks:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
     tags_by_camera = {name: list(obs.observed_tag_ids) for name, obs in used.items()}
     if floor is not None:
         tags_by_camera.setdefault(HEAD_CAMERA, [])
-    chain = build_parameter_set(
-        robot, options.free, tags_by_camera, options.side, options.fix_tags,
-        tuple(mocap.links) if mocap is not None else (),
-    )
+    chain = chain_parameters(robot, options, tags_by_camera, tuple(mocap.links) if mocap is not None else ())
     current = options.current or Corrections()
     chain, held = chain.centred_on(current), chain.held(current)
     blocks: list[Block] = [*_camera_blocks(robot, used, options, held)]
@@ -133,10 +134,43 @@ def fit_observations(
     if mocap is not None:
         mocap.fixed = held  # its starting base poses came from the nominal model
         blocks.append(mocap)
+    blocks += list(own_blocks)
     _check_enough_data(blocks, len(chain), options.free)
     problem = Problem(chain, blocks, block_sigmas(robot, blocks), robot.config.priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
+    solution = solve(problem, progress=say)
     return Fit(robot, used, blocks, chain, problem, solution, held)
+
+
+def chain_parameters(
+    robot: Robot, options: FitOptions, tags_by_camera: dict[str, list[int]], marker_links: tuple[str, ...] = ()
+) -> ParameterSet:
+    """The free robot-model parameters of the --free presets: the robot model's preset (camera | head_camera |
+    leg, `build_parameter_set`) for the tags each camera uses and the markers' links, then each measurement
+    system's preset (`System.presets`, e.g. imu: the IMU's mount)."""
+    chain = ParameterSet([])
+    if options.chain_preset is not None:
+        chain = build_parameter_set(robot, options.chain_preset, tags_by_camera, options.side, options.fix_tags,
+                                    marker_links)  # fmt: skip
+    extra = system_presets()
+    for preset in options.presets:
+        if preset in extra:
+            chain = chain + ParameterSet(load_attribute(extra[preset], f"--free {preset} parameters")(robot))
+    return chain
+
+
+def own_file_blocks(
+    robot: Robot, captures: Sequence[Path], options: FitOptions, say: Callable[[str], None]
+) -> tuple[list[Block], set[Path]]:
+    """The blocks of the registered systems that read their own files (`System.fit_blocks`) and --system takes,
+    and the captures they used alone (no camera reads those)."""
+    blocks: list[Block] = []
+    used: set[Path] = set()
+    for entry in own_file_systems():
+        if options.system in (None, ALL, entry.name):
+            built, paths = entry.load("fit_blocks")(robot, list(captures), options, say)
+            blocks += built
+            used |= {Path(p) for p in paths}
+    return blocks, used
 
 
 def floor_blocks(
@@ -146,16 +180,15 @@ def floor_blocks(
     soles, the sole closure; `held`: corrections held fixed under the free parameters."""
     check_floor_samples(robot, floor)
     floor_block = FloorBlock(robot, floor, held)
-    floor_block.outlier_rule = options.outlier
+    floor_block.outlier_rule, floor_block.noise_min = options.outlier, options.noise_floor_px
     two_soles = len(robot.config.floor_config().soles) == 2
     return [floor_block, SoleClosure(robot, floor, held)] if two_soles else [floor_block]
 
 
 def block_sigmas(robot: Robot, blocks: Sequence[Block]) -> list[float]:
-    """The noise level each block starts from before the solver estimates it (px: the config's pixel noise; motion
-    capture and the sole closure [m]): the fit's and pose planning's whitening."""
-    pixel = robot.config.priors.pixel_noise
-    return [pixel if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M for b in blocks]
+    """The noise level each block starts from before the solver estimates it (`Block.start_noise`): the fit's and
+    pose planning's whitening."""
+    return [b.start_noise(robot.config.priors) for b in blocks]
 
 
 def _tags_used(
@@ -165,7 +198,7 @@ def _tags_used(
     also keeps the tags on links the legs do not move, on which its pose rests."""
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
-        tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
+        tag_ids = tags_for_preset(robot, options.chain_preset or "camera", obs.observed_tag_ids, options.side)
         if name != HEAD_CAMERA:
             tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
                                              if robot.off_the_legs(robot.config.tag(t).link)})
@@ -186,7 +219,7 @@ def _camera_blocks(
         else:
             placement, names = placements(obs, options.external_moving)
             block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names, held)
-        block.outlier_rule = options.outlier
+        block.outlier_rule, block.noise_min = options.outlier, options.noise_floor_px
         camera_blocks.append(block)
     return camera_blocks
 
@@ -215,10 +248,10 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
             raise WolfcalError("--system mocap: no marker data; give a ROS 2 recording with the robot config's "
                                "markers topic, or a motion-capture file with --mocap FILE")
         return None
-    if options.free in ("camera", "head_camera") and options.system == "mocap":
+    if options.chain_preset in ("camera", "head_camera") and options.system == "mocap":
         raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
                            "(no marker on the camera's optical frame); use --free leg with --system mocap")
-    if options.free == "leg" and options.side != "both":
+    if options.chain_preset == "leg" and options.side != "both":
         config = robot.config.marker_config()
         markers = markers.only_markers([n for n in markers.marker_names
                                         if config.marker(n).side in (options.side, None)])  # fmt: skip
@@ -359,9 +392,11 @@ def run_fit(
     warnings: list[str] = []
     if options.system == "mocap" or mocap:
         markers, warnings = read_markers(robot, captures, mocap, mocap_offsets, say)
+    own, own_captures = own_file_blocks(robot, captures, options, say)
+    camera_captures = [c for c in captures if Path(c) not in own_captures]
     observations: dict[str, Observations] = {}
-    if options.system != "mocap":
-        observations, camera_warnings = detect_captures(robot, captures, intrinsics, options, say)
+    if options.system in CAMERA_SYSTEMS and options.chain_preset is not None and camera_captures:
+        observations, camera_warnings = detect_captures(robot, camera_captures, intrinsics, options, say)
         warnings += camera_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
@@ -369,7 +404,7 @@ def run_fit(
     # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
     # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
     with large_blocks_mapped():
-        fit = fit_observations(robot, observations, options, say, markers)
+        fit = fit_observations(robot, observations, options, say, markers, own)
         check_solution_left_out(fit, captures)
         result = fit_result(fit, options, captures, intrinsics, warnings, present)
         write_fit(out_dir, fit, result)

@@ -113,7 +113,8 @@ def camera_in_floor(
 
 def moved_stance(robot: Robot, stance: Mapping[str, float], shift: Sequence[float]) -> dict[str, float]:
     """Readings [rad] of a stance with the torso moved by `shift` (dx, dy, dz [m] along the floor's axes, yaw [rad]
-    about the vertical through the base) from `stance` (joint -> rad; not stretched legs, where a knee could bend
+    about the vertical through the base; or dx, dy, dz, then a rotation vector rx, ry, rz [rad] about the floor's
+    axes through the base: a tilted torso) from `stance` (joint -> rad; not stretched legs, where a knee could bend
     either way), the soles (config `floor.soles`) kept where they stand, under the nominal model: the actuated
     joints between the base and the soles solved by least squares (each sole's position [m] and rotation [rad]),
     within their URDF limits, in ten steps along the move; other joints as in `stance`. Rounded to 0.1 mrad. A
@@ -137,10 +138,11 @@ def moved_stance(robot: Robot, stance: Mapping[str, float], shift: Sequence[floa
         rotation = log_so3(np.swapaxes(target[:, :3, :3], 1, 2) @ T[:, :3, :3])
         return np.concatenate([(T[:, :3, 3] - target[:, :3, 3]).ravel(), rotation.ravel()])
 
+    rotation = np.array([0.0, 0.0, shift[3]]) if len(shift) == 4 else np.asarray(shift[3:6], dtype=float)
     x = np.clip(q0[0, columns], lower, upper)
     for fraction in np.linspace(0.1, 1.0, 10):  # in steps from the standing pose: the legs stay on its branch
         T_new = T_floor_base.copy()
-        T_new[:3, :3] = exp_so3(np.array([0.0, 0.0, fraction * shift[3]])) @ T_floor_base[:3, :3]
+        T_new[:3, :3] = exp_so3(fraction * rotation) @ T_floor_base[:3, :3]
         T_new[:3, 3] += fraction * np.asarray(shift[:3])
         target = invert_transform(T_new) @ T_floor_base @ T_base_sole[:, 0]  # (K, 4, 4) the soles stay put
         x = least_squares(residuals, x, bounds=(lower, upper), xtol=1e-12, ftol=1e-12, args=(target,)).x
