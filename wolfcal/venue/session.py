@@ -179,6 +179,7 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, camer
             streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
             writer = CaptureWriter(next_part(options.out, phase.name), robot.config, streams)
             driver.writer = writer
+            driver.tag_ids = _tag_ids(robot, floor=phase.name != "feet")
 
             def taken(outcome: Taken, name: str = phase.name, label: str = LABELS[phase.name]) -> None:
                 nonlocal since
@@ -211,10 +212,10 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, camer
     _say_end(state, options, failure, failed, say)
 
 
-def _tag_ids(robot: Robot) -> set[int]:
-    """Every tag the head camera may see in a session: the robot's own and the floor tags."""
-    floor = robot.config.floor
-    return {t.id for t in robot.config.tags} | (set(floor.tag_ids) if floor is not None else set())
+def _tag_ids(robot: Robot, floor: bool = True) -> set[int]:
+    """The tags the head camera looks for in a phase: the robot's own, and (`floor`) the floor tags."""
+    floor_ids = set(robot.config.floor.tag_ids) if floor and robot.config.floor is not None else set()
+    return {t.id for t in robot.config.tags} | floor_ids
 
 
 def _say_end(state: SessionState, options: VenueOptions, failure: BaseException | None, failed: list[str],

@@ -86,14 +86,19 @@ class EmulatedServo:
         delta = target - self.angle
         if math.isinf(accel):
             move = math.copysign(min(abs(delta), vmax * dt), delta)
-        else:  # the speed that still stops at the goal, reached at most `accel` away from the present speed
-            wanted = math.copysign(min(vmax, math.sqrt(2.0 * accel * abs(delta))), delta)
-            speed = self.speed + max(-accel * dt, min(accel * dt, wanted - self.speed))
-            move = speed * dt
-            if move * delta > 0 and abs(move) >= abs(delta):
-                move = delta  # arrives within this step
+            speed = move / dt if dt > 0 and abs(delta) > 1e-12 else 0.0
+        else:  # speed up towards vmax, or slow down once the distance left is what stopping takes
+            toward = self.speed * math.copysign(1.0, delta)  # present speed towards the goal [rad/s]
+            if toward > 0 and toward**2 / (2.0 * accel) >= abs(delta):
+                toward -= accel * dt
+            else:
+                toward = min(vmax, toward + accel * dt)
+            speed = math.copysign(toward, delta)
+            move = 0.5 * (self.speed + speed) * dt
+            if move * delta > 0 and abs(move) >= abs(delta) or abs(delta) <= 1e-12:
+                move, speed = delta, 0.0  # arrives within this step
         self.angle += move
-        self.speed = move / dt if dt > 0 and abs(delta) > 1e-12 else 0.0
+        self.speed = speed
         self.write(P.MOVING, int(abs(target - self.angle) > 1e-12))
         self.update_present()
 
