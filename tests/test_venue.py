@@ -43,8 +43,17 @@ TRUTH = ROOT / "captures" / "floor_demo.truth.yaml"
 WAIT_S = 600.0  # generous: a whole session with its fit on a busy machine
 
 
-def emulator(robot) -> EmulatorProcess:
-    return EmulatorProcess(spec_from_config(robot.config, load_truth(TRUTH), truth_path=str(TRUTH)))
+def emulator(robot, truth: Path = TRUTH) -> EmulatorProcess:
+    return EmulatorProcess(spec_from_config(robot.config, load_truth(truth), truth_path=str(truth)))
+
+
+def truth_without_floor(tmp_path: Path) -> Path:
+    """The truth without its floor tags, for a robot config that has none."""
+    data = yaml.safe_load(TRUTH.read_text())
+    data.pop("floor_tags")
+    path = tmp_path / "truth.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
 
 
 def venue_command(port: str, *args: str, robot: Path = ROBOT) -> list[str]:
@@ -144,7 +153,7 @@ def test_interrupted_session_resumes_without_losing_a_sample(robot, tmp_path):
     The config has no floor tags: the session says so and checks by cross-validation alone."""
     config = robot_without(tmp_path, "floor")
     out = tmp_path / "session"
-    with emulator(robot) as emu:
+    with emulator(robot, truth_without_floor(tmp_path)) as emu:
         with DynamixelBus(robot.config.servos, emu.port) as bus:
             bus.set_torque(["HeadPan"], True)  # found on: restored on; every other joint found off
         found = torque(robot, emu.port)
@@ -204,7 +213,7 @@ def test_a_config_whose_poses_cannot_be_planned_falls_back_to_its_poses_file(rob
     """No collision geometry: the planner refuses, the session says so and takes the config's poses file."""
     config = robot_without(tmp_path, "floor", "collision_radii", poses=True)
     out, said = tmp_path / "session", []
-    with emulator(robot) as emu:
+    with emulator(robot, truth_without_floor(tmp_path)) as emu:
         figures = run_venue(VenueOptions(robot=config, out=out, camera="sim", port=emu.port, yes=True),
                             say=said.append)  # fmt: skip
     text = "\n".join(said)
