@@ -125,8 +125,12 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
             _drive_session(robot, options, bus, cameras, state, feet_script, feet.source, say, ask)
         finally:
             bus.close()
-    figures = check_session(robot, parts(options.out, "feet"), parts(options.out, "floor"),
-                            parts(options.out, "check"), options.out, options.current, say)
+    try:
+        figures = check_session(robot, parts(options.out, "feet"), parts(options.out, "floor"),
+                                parts(options.out, "check"), options.out, options.current, say)
+    except WolfcalError as exc:
+        raise type(exc)(f"{exc}\nthe samples are kept in {options.out}; `wolfcal venue --resume {options.out}` "
+                        "fits and checks them again") from None
     figures.update({"robot": str(robot.config.path), "plan": feet.source, "robot_time_s": state.robot_time_s,
                     "wall_time_s": time.monotonic() - wall_start, "runs": state.runs,
                     "samples": {p: len(state.done[p]) for p in state.done}})  # fmt: skip

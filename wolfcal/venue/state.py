@@ -49,6 +49,8 @@ def new_session(folder: Path, state: SessionState) -> None:
                            "or choose another folder")  # fmt: skip
     if folder.exists() and not folder.is_dir():
         raise WolfcalError(f"--out {folder}: is a file; give a folder for the session")
+    if folder.is_dir() and any(folder.iterdir()):
+        raise WolfcalError(f"--out {folder}: the folder holds other files; give a new or empty folder")
     folder.mkdir(parents=True, exist_ok=True)
     state.save(folder)
 
