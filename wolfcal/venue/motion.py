@@ -1,10 +1,11 @@
 """Driving the servos through a list of poses fast and safely, one sample per pose.
 
-Each pose: the goals are sent (the servos move along their profile: the session's velocity [rad/s] and
-acceleration [rad/s^2]); while they move, the previous pose's frames are checked (tags in view, sharp, corners
-still: `capture.gating.why_not_sharp`) and written as a sample; once every joint is within ARRIVAL_TICKS of its
-goal the stillness gate (`capture.gating.StillnessWindow`) decides when the robot is still, and the frames are
-grabbed at once, read between two bus readings that must agree. A pose whose frames fail the check is taken again
+Each pose: the goals are sent and the servos move along their profile (the session's velocity [rad/s] and
+acceleration [rad/s^2]); while they move, the previous pose's sample is written (image encoding and fsync). Once
+every joint is within ARRIVAL_TICKS of its goal, the stillness gate (`capture.gating.StillnessWindow`) decides when
+the robot is still; two frames are grabbed at once between two bus readings that must agree, and checked while the
+robot still holds the pose (tags in view, sharp, corners still: `capture.gating.why_not_sharp`), so that a failed
+check costs another still moment (up to GRAB_TRIES) instead of a move back. A pose that still fails is taken again
 once at the end. Poses reach this module already checked (URDF limits, self-collision): it sends nothing else.
 Angles are joint readings [rad]; times are on the monotonic clock [s].
 """

@@ -112,6 +112,9 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
     digest = robot_digest(robot.config.path, robot.config.urdf)
     if options.resume:
         state, notes = load_session(options.out, digest)
+        if state.plan_key != feet.key:
+            raise WolfcalError(f"--resume {options.out}: the session was started with other feet views (another "
+                               "--velocity or --feet-poses, or another wolfcal); resume it with the same options")
         for line in notes:
             say(line)
     else:
