@@ -30,7 +30,7 @@ from wolfcal.evaluate.deploy import DEPLOY_FILES
 from wolfcal.fit.result import load_result
 from wolfcal.hardware import protocol as P
 from wolfcal.hardware.bus import BusError, DynamixelBus
-from wolfcal.hardware.emulator import EmulatorProcess, load_truth, spec_from_config
+from wolfcal.hardware.emulator import EmulatorProcess, load_truth, read_true_angles, spec_from_config
 from wolfcal.hardware.emulator.servo import EmulatedServo, ServoSpec
 from wolfcal.io.reader import read_capture
 from wolfcal.venue.motion import move_time
@@ -220,3 +220,16 @@ def test_a_config_whose_poses_cannot_be_planned_falls_back_to_its_poses_file(rob
     assert "the feet views cannot be planned" in text and f"using {config / 'poses.yaml'} instead" in text
     assert "poses not checked for self-collision" in text and "lists no floor tags" in text
     assert figures["samples"]["feet"] == 6 and figures["held_out_floor"] is None
+
+
+def test_nothing_moves_without_the_operator_saying_so(robot, tmp_path):
+    with emulator(robot) as emu:
+        found, angles = torque(robot, emu.port), read_true_angles(emu.port)[0]
+        for ask, expected in ((None, "pass --yes to confirm without a terminal"), (lambda question: False,
+                                                                                    "not confirmed")):  # fmt: skip
+            options = VenueOptions(robot=ROBOT, out=tmp_path / expected.split()[0], camera="sim", port=emu.port)
+            with pytest.raises(WolfcalError, match=expected):
+                run_venue(options, say=lambda line: None, ask=ask)
+        after = torque(robot, emu.port)
+        assert read_true_angles(emu.port)[0] == angles
+    assert after == found and not any(after.values())
