@@ -233,3 +233,22 @@ def test_nothing_moves_without_the_operator_saying_so(robot, tmp_path):
         after = torque(robot, emu.port)
         assert read_true_angles(emu.port)[0] == angles
     assert after == found and not any(after.values())
+
+
+@pytest.mark.slow
+def test_a_killed_session_is_rescued_and_resumed(robot, tmp_path):
+    """SIGKILL leaves an unfinished capture part: --resume rescues its complete samples, then takes the rest."""
+    config = robot_without(tmp_path, "floor")
+    out = tmp_path / "session"
+    with emulator(robot, truth_without_floor(tmp_path)) as emu:
+        code, _ = run_until(venue_command(emu.port, "--out", str(out), robot=config), "  sample:", 2, signal.SIGKILL)
+        done = json.loads((out / "session.json").read_text())["done"]["feet"]
+        resumed = subprocess.run(venue_command(emu.port, "--resume", str(out), robot=config), cwd=ROOT,
+                                 capture_output=True, text=True, timeout=WAIT_S)  # fmt: skip
+    assert code == -signal.SIGKILL and len(done) >= 2
+    assert resumed.returncode == 0, resumed.stderr
+    rescued = int(resumed.stderr.split("rescued ")[1].split()[0])
+    assert rescued >= len(done) and "of an unfinished part into feet-1.mcap" in resumed.stderr
+    assert samples_in(robot, [out / "feet-1.mcap"]) == rescued and not list(out.glob("*.partial"))
+    final = json.loads((out / "session.json").read_text())["done"]["feet"]
+    assert final[: len(done)] == done and samples_in(robot, [out / "feet-1.mcap", out / "feet-2.mcap"]) >= len(final)

@@ -190,15 +190,16 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, camer
 
             def taken(outcome: Taken, name: str = phase.name, label: str = LABELS[phase.name]) -> None:
                 nonlocal since
-                if outcome.reason is None:
-                    state.done[name].append(outcome.name)
-                    say(f"  sample: {label} {outcome.name}, tags {', '.join(map(str, outcome.tags))}")
-                else:
-                    say(f"  {label} {outcome.name} not taken: {outcome.reason}")
                 now = time.monotonic()
                 state.robot_time_s += now - since
                 since = now
-                state.save(options.out)
+                if outcome.reason is None:
+                    state.done[name].append(outcome.name)
+                state.save(options.out)  # before it is said: a sample reported is a sample kept
+                if outcome.reason is None:
+                    say(f"  sample: {label} {outcome.name}, tags {', '.join(map(str, outcome.tags))}")
+                else:
+                    say(f"  {label} {outcome.name} not taken: {outcome.reason}")
 
             driver.drive(goals, poses, LABELS[phase.name], taken, check_first=phase.name == "feet"
                          and not state.done["feet"])  # fmt: skip
