@@ -29,7 +29,7 @@ from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.evaluate.deploy import DEPLOY_FILES
 from wolfcal.fit.result import load_result
 from wolfcal.hardware import protocol as P
-from wolfcal.hardware.bus import BusError, DynamixelBus
+from wolfcal.hardware.bus import DynamixelBus
 from wolfcal.hardware.emulator import EmulatorProcess, load_truth, read_true_angles, spec_from_config
 from wolfcal.hardware.emulator.servo import EmulatedServo, ServoSpec
 from wolfcal.io.reader import read_capture
@@ -178,16 +178,19 @@ def test_interrupted_session_resumes_without_losing_a_sample(robot, tmp_path):
 
 
 def test_a_port_where_nothing_answers_is_named(tmp_path):
-    master, slave = pty.openpty()
+    master, slave = pty.openpty()  # a serial line with nothing on the other end
     tty.setraw(slave)
     try:
-        options = VenueOptions(robot=ROBOT, out=tmp_path / "s", camera="sim", port=os.ttyname(slave), yes=True)
-        with pytest.raises(BusError, match="no servo answers on this port") as info:
-            run_venue(options, say=lambda line: None)
+        run = subprocess.run(venue_command(os.ttyname(slave), "--out", str(tmp_path / "s")), cwd=ROOT,
+                             capture_output=True, text=True, timeout=WAIT_S)  # fmt: skip
     finally:
         os.close(master)
         os.close(slave)
-    assert "--port names its servo bus" in str(info.value)
+    assert run.returncode == 3 and "Traceback" not in run.stderr, run.stderr
+    assert "no servo answers on this port" in run.stderr and "--port names its servo bus" in run.stderr
+    missing = subprocess.run(venue_command(str(tmp_path / "ttyUSB9"), "--out", str(tmp_path / "t")), cwd=ROOT,
+                             capture_output=True, text=True, timeout=WAIT_S)  # fmt: skip
+    assert missing.returncode == 3 and "cannot open the servo bus" in missing.stderr, missing.stderr
 
 
 def test_a_camera_that_shows_no_tag_stops_after_a_few_poses(robot, tmp_path):
