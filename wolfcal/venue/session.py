@@ -17,6 +17,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from wolfcal.atomic import write_text_atomic
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
@@ -27,6 +29,8 @@ from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.plan.order import capture_order
+from wolfcal.robot.floor import standing_pose
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.venue.check import check_session
 from wolfcal.venue.motion import PoseDriver, Taken
@@ -59,13 +63,24 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
             "not measured; the check is the cross-validation over the feet views alone")  # fmt: skip
         return phases
     standing = "stands on the floor among the floor tags (0.5-5 m in front of it), legs held by torque"
+    at = standing_pose(robot)
     for name, check in (("floor", False), ("check", True)):
         script, note = without_collisions(robot, floor_script(robot, options.velocity, check), start)
         script = check_views(robot, script) if check else script
         if note:
             say(f"note: {note}")
+        script, at = shortest_order(robot, script, at, start)
         phases.append(Phase(name, script, standing))
     return phases
+
+
+def shortest_order(robot: Robot, script: PoseScript, q_from: np.ndarray, start: dict[str, float]
+                   ) -> tuple[PoseScript, np.ndarray]:  # fmt: skip
+    """The script's poses in the order of the shortest moves from readings `q_from` (J,) [rad] (`plan.order`:
+    nearest neighbour, then 2-opt), joints no pose names at `start`; and the readings of its last pose."""
+    q = script.readings(robot.joint_names, start)
+    order, _ = capture_order(q, q_from, script.velocity)
+    return PoseScript([script.poses[k] for k in order], script.velocity), q[order[-1]]
 
 
 def _confirm(question: str, options: VenueOptions, ask: Ask | None, say: Callable[[str], None]) -> None:
@@ -174,8 +189,10 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, camer
                             options.acceleration, say)  # fmt: skip
         since = time.monotonic()
         goals = driver.torque_on(touched)
+        standing = False
         for phase, poses in todo:
-            if phase.name == "floor":  # the legs stand first, then the operator puts the robot on the floor
+            if phase.name != "feet" and not standing:  # the legs stand first, then the robot is put on the floor
+                standing = True
                 legs = floor_joints(robot)[0]
                 driver.move_only(goals, {j: q for j, q in poses[0].joints.items() if j in legs})
                 state.robot_time_s += time.monotonic() - since
