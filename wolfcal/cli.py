@@ -145,11 +145,14 @@ def venue(
                                     "files."),
     resume: Path | None = typer.Option(None, "--resume", help="Continue the interrupted session in this folder."),
     current: Path | None = typer.Option(None, "--current", help="The robot's present calibration (the team's deploy "
-                                        "files), recorded as 'before'."),
+                                        "files); recorded in the report."),
     yes: bool = typer.Option(False, "--yes", help="Switch torque on (and go on to the floor views) without asking."),
-    velocity: float = typer.Option(1.5, "--velocity", help="Safe speed of every move [rad/s]."),
-    acceleration: float = typer.Option(6.0, "--acceleration", help="Safe acceleration of every move [rad/s^2]."),
-    feet_poses: int = typer.Option(8, "--feet-poses", help="Planned feet views (planned once per robot config)."),
+    velocity: float | None = typer.Option(None, "--velocity", help="Safe speed of every move [rad/s] (default "
+                                          "1.5)."),
+    acceleration: float | None = typer.Option(None, "--acceleration", help="Safe acceleration of every move "
+                                              "[rad/s^2] (default 6)."),
+    feet_poses: int | None = typer.Option(None, "--feet-poses", help="Planned feet views, planned once per robot "
+                                          "config (default 8)."),
     binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default: 4)."),
     intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
                                            "the config's)."),
@@ -164,9 +167,11 @@ def venue(
         raise WolfcalError("give exactly one of --out DIR (a new session) or --resume DIR (continue one)")
     options = VenueOptions(
         robot=default_robot(robot), out=folder, camera=camera, port=port, current=current, yes=yes,
-        resume=resume is not None, velocity=velocity, acceleration=acceleration, feet_poses=feet_poses,
-        binning=binning, intrinsics=intrinsics, exit_torque=exit_torque,
+        resume=resume is not None, binning=binning, intrinsics=intrinsics, exit_torque=exit_torque,
     )
+    options.velocity = options.velocity if velocity is None else velocity
+    options.acceleration = options.acceleration if acceleration is None else acceleration
+    options.feet_poses = options.feet_poses if feet_poses is None else feet_poses
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     figures = run_venue(options, say=lambda line: typer.echo(line, err=True), ask=ask)
     if not figures["deploy"]["written"]:
