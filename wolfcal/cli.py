@@ -167,6 +167,50 @@ def capture(
 
 @app.command()
 @friendly_errors
+def venue(
+    robot: Path | None = robot_option(),
+    port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
+    camera: str = typer.Option(..., "--camera", help="Head camera: V4L index or /dev/video path, video file, image "
+                               "folder, or 'sim' (renders the robot served by `wolfcal emulate`)."),
+    out: Path | None = typer.Option(None, "--out", help="Session folder to create: captures, fit, report, deploy "
+                                    "files."),
+    resume: Path | None = typer.Option(None, "--resume", help="Continue the interrupted session in this folder."),
+    current: Path | None = typer.Option(None, "--current", help="The robot's present calibration (the team's deploy "
+                                        "files); recorded in the report."),
+    yes: bool = typer.Option(False, "--yes", help="Switch torque on (and go on to the floor views) without asking."),
+    velocity: float | None = typer.Option(None, "--velocity", help="Safe speed of every move [rad/s] (default "
+                                          "1.5)."),
+    acceleration: float | None = typer.Option(None, "--acceleration", help="Safe acceleration of every move "
+                                              "[rad/s^2] (default 6)."),
+    feet_poses: int | None = typer.Option(None, "--feet-poses", help="Planned feet views, planned once per robot "
+                                          "config (default 8)."),
+    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default: 4)."),
+    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
+                                           "the config's)."),
+    exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
+) -> None:
+    """Recalibrate the head camera in one session: planned feet views, floor views, fit, check, deploy files."""
+    from wolfcal.venue.options import VenueOptions
+    from wolfcal.venue.session import run_venue
+
+    folder = out if resume is None else resume
+    if folder is None or (out is not None and resume is not None):
+        raise WolfcalError("give exactly one of --out DIR (a new session) or --resume DIR (continue one)")
+    options = VenueOptions(
+        robot=default_robot(robot), out=folder, camera=camera, port=port, current=current, yes=yes,
+        resume=resume is not None, binning=binning, intrinsics=intrinsics, exit_torque=exit_torque,
+    )
+    options.velocity = options.velocity if velocity is None else velocity
+    options.acceleration = options.acceleration if acceleration is None else acceleration
+    options.feet_poses = options.feet_poses if feet_poses is None else feet_poses
+    ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
+    figures = run_venue(options, say=lambda line: typer.echo(line, err=True), ask=ask)
+    if not figures["deploy"]["written"]:
+        raise WolfcalError(figures["deploy"]["reason"])
+
+
+@app.command()
+@friendly_errors
 def fit(
     captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
                                           "recordings of the joint states (and Markers, unless --mocap is given)."),

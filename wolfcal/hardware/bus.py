@@ -304,6 +304,13 @@ class DynamixelBus:
         for joint in joints:
             self._write(joint, P.PROFILE_VELOCITY, units)
 
+    def set_profile_acceleration(self, joints: Iterable[str], rad_s2: float) -> None:
+        """Limit the acceleration of position moves to `rad_s2` (at least one unit of 214.577 rev/min^2); the
+        servo speeds up and slows down along a trapezoid of the profile velocity and this acceleration."""
+        units = max(1, int(round(rad_s2 / P.RAD_S2_PER_UNIT)))
+        for joint in joints:
+            self._write(joint, P.PROFILE_ACCELERATION, units)
+
     def set_goal_positions(self, goals: dict[str, float]) -> None:
         """Goal positions [rad] in one sync write (no reply: read back to confirm arrival)."""
         group = sdk.GroupSyncWrite(self.port, self.ph, P.GOAL_POSITION[0], 4)

@@ -25,6 +25,7 @@ FIRMWARE_VERSION = (6, 1)
 ID = (7, 1)
 TORQUE_ENABLE = (64, 1)
 HARDWARE_ERROR_STATUS = (70, 1)
+PROFILE_ACCELERATION = (108, 4)
 PROFILE_VELOCITY = (112, 4)
 GOAL_POSITION = (116, 4)
 MOVING = (122, 1)
@@ -44,6 +45,8 @@ HW_ERROR_BITS = {
 CENTRE_TICK = 2048
 RPM_PER_UNIT = 0.229  # present/profile velocity unit
 RAD_S_PER_UNIT = RPM_PER_UNIT * 2.0 * math.pi / 60.0  # velocity unit [rad/s]
+REV_PER_MIN2_PER_UNIT = 214.577  # profile acceleration unit (velocity-based profile)
+RAD_S2_PER_UNIT = REV_PER_MIN2_PER_UNIT * 2.0 * math.pi / 3600.0  # acceleration unit [rad/s^2]
 
 _CRC_TABLE: list[int] = []
 for _i in range(256):

@@ -1,8 +1,10 @@
 """One emulated servo: its control table and how its true angle [rad] moves.
 
 It reports what a real servo with a miscalibrated encoder would: present position = round((true angle - true
-offset) / (2 pi / 4096)) + 2048 ticks. With torque on the true angle moves towards the goal at the profile
-velocity; with torque off it stays where it is unless the emulated operator moves it.
+offset) / (2 pi / 4096)) + 2048 ticks. With torque on the true angle moves towards the goal along the velocity-based
+profile of the Dynamixel documentation: speed up at the profile acceleration (0: at once), cruise at the profile
+velocity (0: MAX_SPEED), slow down at the profile acceleration so as to stop at the goal (a trapezoid, or a
+triangle for a short move). With torque off it stays where it is unless the emulated operator moves it.
 """
 
 from __future__ import annotations
@@ -73,18 +75,32 @@ class EmulatedServo:
     def step(self, dt: float, operator_target: float | None, operator_speed: float) -> None:
         """Move for `dt` seconds: to the goal under torque, else to the operator's target [rad] at `operator_speed`
         [rad/s] when there is one."""
+        accel = math.inf
         if self.torque_on:
             target = (self.read(P.GOAL_POSITION, signed=True) - P.CENTRE_TICK) * RAD_PER_TICK + self.spec.offset
             profile = self.read(P.PROFILE_VELOCITY)
             vmax = profile * P.RAD_S_PER_UNIT if profile else MAX_SPEED
+            accel = self.read(P.PROFILE_ACCELERATION) * P.RAD_S2_PER_UNIT or math.inf
         elif operator_target is not None:
             target, vmax = operator_target, operator_speed
         else:
             target, vmax = self.angle, 0.0
         delta = target - self.angle
-        move = math.copysign(min(abs(delta), vmax * dt), delta)
+        if math.isinf(accel):
+            move = math.copysign(min(abs(delta), vmax * dt), delta)
+            speed = move / dt if dt > 0 and abs(delta) > 1e-12 else 0.0
+        else:  # speed up towards vmax, or slow down once the distance left is what stopping takes
+            toward = self.speed * math.copysign(1.0, delta)  # present speed towards the goal [rad/s]
+            if toward > 0 and toward**2 / (2.0 * accel) >= abs(delta):
+                toward -= accel * dt
+            else:
+                toward = min(vmax, toward + accel * dt)
+            speed = math.copysign(toward, delta)
+            move = 0.5 * (self.speed + speed) * dt
+            if move * delta > 0 and abs(move) >= abs(delta) or abs(delta) <= 1e-12:
+                move, speed = delta, 0.0  # arrives within this step
         self.angle += move
-        self.speed = move / dt if dt > 0 and abs(delta) > 1e-12 else 0.0
+        self.speed = speed
         self.write(P.MOVING, int(abs(target - self.angle) > 1e-12))
         self.update_present()
 

@@ -1,0 +1,71 @@
+"""What a venue session prints and writes at the end (report.md): times, the check's figures, the verdict, the
+deploy files; and, with the simulated camera, the camera's error against the simulator's truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.evaluate.accuracy import camera_pose_errors
+from wolfcal.fit.result import load_result
+from wolfcal.hardware.emulator import load_truth, read_true_angles
+from wolfcal.robot.robot import Robot
+from wolfcal.venue.check import FIT_FOLDER
+from wolfcal.venue.options import VenueOptions
+
+
+def truth_errors(robot: Robot, options: VenueOptions) -> dict | None:
+    """Largest camera pose error of the fit against the emulator's truth over the head joints' range [deg, mm]
+    (`evaluate.accuracy.camera_pose_errors`), when the camera is the simulated one and the emulator has a truth."""
+    if options.camera != "sim" or robot.config.servos is None:
+        return None
+    _, truth_path = read_true_angles(options.port or robot.config.servos.port)
+    if not truth_path:
+        return None
+    fitted = load_result(options.out / FIT_FOLDER).corrections
+    rotation, translation = camera_pose_errors(robot, fitted, load_truth(Path(truth_path)))
+    return {"rotation_deg": float(np.rad2deg(rotation.max())), "translation_mm": float(translation.max() * 1000)}
+
+
+def _px(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.3f} px"
+
+
+def report_lines(figures: dict) -> list[str]:
+    """The session's end in a few lines (also report.md)."""
+    cv, verdict, deploy = figures["cross_validation"], figures["verdict"], figures["deploy"]
+    samples = ", ".join(f"{k} {v}" for k, v in figures["samples"].items())
+    lines = [
+        f"# wolfcal venue: {figures['robot']}",
+        "",
+        f"robot time {figures['robot_time_s']:.1f} s, wall time {figures['wall_time_s']:.1f} s "
+        f"({figures['runs']} run(s)); samples: {samples}; poses: {figures['plan']}",
+        f"cross-validation over the session's views ({cv['folds']} folds, {cv['samples']} feet views, "
+        f"{cv['outlier_samples']} left out): reprojection RMS per axis {_px(cv['before']['rms_px'])} (input URDF) "
+        f"-> {_px(cv['after']['rms_px'])} (calibrated); the folds' camera poses lie within "
+        f"{cv['fold_spread']['rotation_deg']:.3f} deg and {cv['fold_spread']['translation_mm']:.2f} mm of the fit",
+    ]
+    floor = figures["held_out_floor"]
+    if floor is not None:
+        k = [r["distance_m"] for r in floor["models"]["after"]["rows"]].index(4.5)
+        before, after = (floor["models"][m]["rows"][k] for m in ("before", "after"))
+        cm = lambda r: "above the horizon" if r["error_m"] is None else (  # noqa: E731
+            f"{r['error_m'] * 100:.1f} +- {r['std_m'] * 100:.1f} cm")
+        lines.append(f"held-out floor views ({floor['capture']['samples']} in {floor['capture']['stances']} stances): "
+                     f"ground error at 4.5 m {cm(before)} -> {cm(after)} (1 sigma)")  # fmt: skip
+    else:
+        lines.append("held-out floor views: none measured (no floor tags, or too few held-out views of them)")
+    truth = figures.get("truth")
+    if truth is not None:
+        lines.append(f"against the simulator's truth: camera within {truth['rotation_deg']:.4f} deg and "
+                     f"{truth['translation_mm']:.3f} mm (largest over the head joints' range)")  # fmt: skip
+    lines += ["", verdict["message"], *[f"- {r}" for r in verdict["refusals"]], *[f"- {n}" for n in verdict["notes"]]]
+    if deploy["written"]:
+        lines.append(f"deploy files: {', '.join(deploy['files'])} in {Path(figures['fit']).parent}")
+    else:
+        lines.append(deploy["reason"])
+    if deploy.get("current"):
+        lines.append(f"--current {deploy['current']}: recorded; the deploy files hold the calibration on the "
+                     "input URDF")
+    return lines
