@@ -206,7 +206,7 @@ def venue(
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     figures = run_venue(options, say=lambda line: typer.echo(line, err=True), ask=ask)
     if not figures["deploy"]["written"]:
-        raise WolfcalError(figures["deploy"]["reason"])
+        raise DeployRefused(figures["deploy"]["reason"])
 
 
 @app.command()

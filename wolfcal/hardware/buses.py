@@ -125,6 +125,10 @@ class ServoBuses:
         for bus, group in self._grouped(joints).items():
             bus.set_profile_velocity(group, rad_s)
 
+    def set_profile_acceleration(self, joints: Iterable[str], rad_s2: float) -> None:
+        for bus, group in self._grouped(joints).items():
+            bus.set_profile_acceleration(group, rad_s2)
+
     def set_goal_positions(self, goals: dict[str, float]) -> None:
         """Goal positions [rad]: one sync write per bus."""
         for bus, group in self._grouped(goals).items():

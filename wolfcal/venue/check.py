@@ -5,11 +5,12 @@
 - Cross-validation over the session's own views (`evaluate.crossval`): each sample's tags on the feet judged by the
   model fitted without its fold; the spread of the folds' camera poses around the full fit says how far one view
   more or less moves the answer.
-- Held-out floor views (the check phase's stances, none of the fit's): the measured ground error at 4.5 m before
-  and after (`evaluate.floor_ground`).
-- The deploy verdict of `wolfcal evaluate` (`evaluate.verdict.deploy_verdict`) on these, and the deploy files
-  through `write_deploy`, the one place that writes them.
-"Before" is the input URDF; `--current` (the robot's present calibration) is taken and recorded, not yet applied.
+- Held-out floor views (the check phase's stances, none of the fit's): the measured ground error before and after
+  at the robot config's `floor.ground_check` distance (`evaluate.floor_ground`).
+- The deploy verdict of `wolfcal evaluate` (`evaluate.verdict.deploy_verdict`) on these, and the deploy files of the
+  model to deploy (`evaluate.undetermined.deployable_model`) through `write_deploy`, the one place that writes them.
+"Before" is the robot's present calibration (`--current`, `io.current.load_current`), else the input URDF; the fit
+starts from it and the deploy files hold the new totals.
 """
 
 from __future__ import annotations
@@ -24,14 +25,21 @@ from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.evaluate.crossval import fold_assignment
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
 from wolfcal.evaluate.floor_ground import measured_ground_errors
-from wolfcal.evaluate.ground import DISTANCES_M
+from wolfcal.evaluate.ground_figures import (
+    camera_turn,
+    ground_distances,
+    predicted_ground,
+    verdict_ground,
+    verdict_limits,
+)
 from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_errors, outlier_samples, summary
-from wolfcal.evaluate.pipeline import _predicted_ground, _verdict_ground, camera_turn
 from wolfcal.evaluate.structure import unexplained
-from wolfcal.evaluate.verdict import deploy_verdict
+from wolfcal.evaluate.undetermined import deployable_model
+from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import check_solution_left_out, detect_captures, fit_observations, write_fit
 from wolfcal.fit.result import fit_result
+from wolfcal.io.current import CurrentCalibration, load_current
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
@@ -43,11 +51,11 @@ CHECK_FILES = ("metrics.json", "report.md", *DEPLOY_FILES)
 
 
 def write_deploy(robot: Robot, fitted: Corrections, out_dir: Path, refused: str | None,
-                 current: Path | None) -> dict:  # fmt: skip
-    """The deploy files of a session (or their refusal): metrics.json's 'deploy' record. `current`: the robot's
-    present calibration file, recorded; the deploy files hold the fitted model on top of the input URDF."""
-    record = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, False)
-    record["current"] = str(current) if current is not None else None
+                 present: CurrentCalibration) -> dict:  # fmt: skip
+    """The deploy files of a session (or their refusal): metrics.json's 'deploy' record, with the present
+    calibration's files ('current'); the files hold the model to deploy `fitted` (totals)."""
+    record = write_or_withhold_deploy_files(robot, fitted, out_dir, refused, False, present)
+    record["current"] = ", ".join(present.sources) or None
     return record
 
 
@@ -130,7 +138,10 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
                   out_dir: Path, current: Path | None, say: Callable[[str], None]) -> dict:  # fmt: skip
     """Fit, cross-validation, held-out floor check, verdict and deploy files of a session in `out_dir`; returns
     the figures for metrics.json (the caller adds the session's times and writes it)."""
-    options = FitOptions(free="camera")
+    present = load_current([current], robot) if current is not None else CurrentCalibration()
+    options = FitOptions(free="camera", current=present.corrections if current is not None else None)
+    limits = verdict_limits(robot, None, MOUNT_LIMIT_RAD)
+    distances = ground_distances(limits)
     fit_parts = feet_parts + floor_parts
     head, warnings = session_views(robot, feet_parts, floor_parts, options, say)
     head = without_single_floor_views(robot, head, say)
@@ -138,11 +149,13 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
     say(f"fitting the camera on {head.n_samples} views ...")
     fit = fit_observations(robot, observations, options)
     check_solution_left_out(fit, fit_parts)
-    result = fit_result(fit, options, fit_parts, None, warnings)
+    result = fit_result(fit, options, fit_parts, None, warnings, present if current is not None else None)
     write_fit(out_dir / FIT_FOLDER, fit, result)
-    fitted = fit.corrections
+    fitted, held_notes = deployable_model(result, present, robot)
+    warnings += held_notes
+    before = present.corrections
     say("checking it on views the fit did not use: cross-validation over the session's views ...")
-    crossval = cross_validation(robot, head, fit.tag_ids, Corrections(), options, fitted, say)
+    crossval = cross_validation(robot, head, fit.tag_ids, before, options, fitted, say)
     measured = None
     if check_parts:
         say("measuring the ground error on the held-out floor views ...")
@@ -151,13 +164,13 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
         if HEAD_CAMERA in held and set(held[HEAD_CAMERA].observed_tag_ids) & set(floor_ids):
             floor = held[HEAD_CAMERA].only_tags(floor_ids)
             inset = result.estimate(CORNER_INSET) or (0.0, 0.0)
-            measured = measured_ground_errors(robot, floor, {"before": Corrections(), "after": fitted}, DISTANCES_M,
+            measured = measured_ground_errors(robot, floor, {"before": before, "after": fitted}, distances,
                                               inset)  # fmt: skip
-    predicted = _predicted_ground(robot, head.camera, result, fit.tag_ids, fitted)
+    predicted = predicted_ground(robot, head.camera, result, fit.tag_ids, fitted, limits.ground_distance_m)
     verdict = deploy_verdict("camera", crossval["before"]["rms_px"], crossval["after"]["rms_px"],
-                             crossval["structure"], _verdict_ground(measured), predicted,
-                             camera_turn(robot, fitted))  # fmt: skip
-    deploy = write_deploy(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"], current)
+                             crossval["structure"], verdict_ground(measured, distances, limits.ground_distance_m),
+                             predicted, camera_turn(robot, fitted, before), limits)  # fmt: skip
+    deploy = write_deploy(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"], present)
     return {"fit": str(out_dir / FIT_FOLDER), "samples_fitted": head.n_samples, "cross_validation": crossval,
             "held_out_floor": measured, "verdict": verdict, "deploy": deploy,
             "camera_correction": camera_correction(robot, fitted), "warnings": warnings}  # fmt: skip

@@ -22,7 +22,8 @@ import numpy as np
 from wolfcal.capture.gating import GateSettings, StillnessWindow, why_not_sharp
 from wolfcal.capture.poses import Pose
 from wolfcal.errors import WolfcalError
-from wolfcal.hardware.bus import DynamixelBus, JointState, rad_to_ticks
+from wolfcal.hardware.bus import JointState, rad_to_ticks
+from wolfcal.hardware.buses import ServoBuses
 from wolfcal.hardware.camera import CameraSource
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.venue.seen import what_the_camera_sees
@@ -72,7 +73,7 @@ class Grabbed:
 class PoseDriver:
     """The bus, cameras and capture writer of one phase; `drive` takes the poses in order."""
 
-    def __init__(self, bus: DynamixelBus, cameras: dict[str, CameraSource], tag_ids: set[int], families: list[str],
+    def __init__(self, bus: ServoBuses, cameras: dict[str, CameraSource], tag_ids: set[int], families: list[str],
                  gates: GateSettings, velocity: float, acceleration: float, say: Callable[[str], None]):  # fmt: skip
         self.bus, self.cameras = bus, cameras
         self.writer: CaptureWriter | None = None  # the phase's capture part, set before `drive`

@@ -27,7 +27,8 @@ from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.poses import PoseScript, check_collisions
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
 from wolfcal.errors import WolfcalError
-from wolfcal.hardware.bus import BusError, DynamixelBus
+from wolfcal.hardware.bus import BusError
+from wolfcal.hardware.buses import ServoBuses
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.plan.order import capture_order
 from wolfcal.robot.floor import standing_pose
@@ -94,19 +95,20 @@ def _confirm(question: str, options: VenueOptions, ask: Ask | None, say: Callabl
         raise WolfcalError("not confirmed: nothing was moved after this point; --resume continues the session")
 
 
-def _open_bus(robot: Robot, options: VenueOptions) -> DynamixelBus:
-    """The bus, with every servo answering; a port where nothing answers is named as such."""
+def _open_bus(robot: Robot, options: VenueOptions) -> ServoBuses:
+    """The servo buses (`servos.port` or `servos.ports`, or --port), with every servo answering; a port where
+    nothing answers is named as such."""
     servos = robot.config.servos
     if servos is None:
         raise WolfcalError(f"{robot.config.path}: no 'servos' section (port, ids): the session needs the servo bus")
-    bus = DynamixelBus(servos, options.port).open()
+    bus = ServoBuses(servos, options.port).open()
     try:
         try:
             bus.torque_enabled()
         except BusError as exc:
             raise BusError(f"{bus.port_name}: no servo answers on this port ({exc}); check that the robot is "
                            f"powered, that --port names its servo bus (the config says {servos.port}) and the baud "
-                           f"rate ({bus.baudrate})") from None  # fmt: skip
+                           f"rate ({servos.baudrate})") from None  # fmt: skip
         bus.ping_all()
         bus.check_hardware()
     except BaseException:
@@ -161,7 +163,7 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
     return figures
 
 
-def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, cameras: dict[str, CaptureCamera],
+def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras: dict[str, CaptureCamera],
                    state: SessionState, feet: PoseScript, plan_source: str, say: Callable[[str], None],
                    ask: Ask | None) -> None:  # fmt: skip
     """Every phase's poses not yet taken, the torque left as chosen on every way out."""
@@ -178,7 +180,7 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: DynamixelBus, camer
         say(f"  {k}. {len(poses)} {LABELS[phase.name]}s: the robot {phase.robot_must}")
     initial = bus.torque_enabled()
     _confirm(f"Switch torque on for {len(touched)} joints and start moving?", options, ask, say)
-    open_sources(cameras, robot, bus.port_name)
+    open_sources(cameras, robot, bus.port_names)
     failure: BaseException | None = None
     writer: CaptureWriter | None = None
     try:
