@@ -90,9 +90,9 @@ def cluttered_scene(dims: FieldDimensions, rng: np.random.Generator, robots: int
         side = rng.choice([-1.0, 1.0])
         along = rng.uniform(-hx - 1.0, hx + 1.0)
         across = side * (hy + BORDER_STRIP + rng.uniform(0.3, 1.5))
-        color = tuple(float(c) for c in rng.uniform(20, 255, 3))
+        b, g, r = (float(c) for c in rng.uniform(20, 255, 3))
         boxes.append(
-            Box(np.array([along - 0.25, across - 0.15, 0.0]), np.array([along + 0.25, across + 0.15, 1.75]), color)
+            Box(np.array([along - 0.25, across - 0.15, 0.0]), np.array([along + 0.25, across + 0.15, 1.75]), (b, g, r))
         )
     wall = hy + BORDER_STRIP + 2.5
     end = hx + BORDER_STRIP + 2.5
