@@ -10,6 +10,7 @@ import pytest
 
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.derivative_check import assert_block_derivatives
 from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.pipeline import FitOptions, fit_observations
 from wolfcal.geometry import transform_from_xyz_rpy
@@ -51,27 +52,7 @@ def test_analytic_derivatives_match_finite_differences():
     rng = np.random.default_rng(2)
     x_chain, x_local = rng.normal(0, 0.02, len(chain)), block.nuisance.references + rng.normal(0, 0.01,
                                                                                              len(block.nuisance))
-    lin = block.linearize(x_chain, x_local, chain)
-    h = 1e-6
-    for i in range(len(chain)):
-        step = np.zeros(len(chain))
-        step[i] = h
-        fd = (block.linearize(x_chain + step, x_local, chain).residual
-              - block.linearize(x_chain - step, x_local, chain).residual) / (2 * h)  # fmt: skip
-        assert np.allclose(lin.jac_chain[:, :, i], fd, atol=1e-7), chain.names[i]
-    dense = np.zeros(lin.residual.shape + (len(block.nuisance),))
-    for u in range(block.n_units):
-        dense[u][:, lin.local_cols[u]] = lin.jac_local[u]
-    for i in range(len(block.nuisance)):
-        step = np.zeros(len(block.nuisance))
-        step[i] = h
-        fd = (block.linearize(x_chain, x_local + step, chain).residual
-              - block.linearize(x_chain, x_local - step, chain).residual) / (2 * h)  # fmt: skip
-        assert np.allclose(dense[:, :, i], fd, atol=1e-7), block.nuisance.names[i]
-    block.q_measured = obs.q_measured.copy()
-    block.q_measured[:, robot.model.column("LKnee")] += h
-    fd = (block.linearize(x_chain, x_local, chain).residual - lin.residual) / h
-    assert np.allclose(lin.joint_sensitivity[:, :, robot.model.column("LKnee")], fd, atol=1e-5)
+    assert_block_derivatives(block, chain, x_chain, x_local)
 
 
 def test_initial_base_pose_comes_from_the_torso_markers():

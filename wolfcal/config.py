@@ -15,6 +15,7 @@ import numpy as np
 
 from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.systems import sampling_systems  # the registry: plain data, imports nothing of wolfcal
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.yamlfile import read_yaml
 
@@ -317,13 +318,12 @@ def _parameter_name(r: _Reader, default: str | None = None) -> str:
     return name
 
 
-SAMPLING_SYSTEMS = ("head", "external", "mocap")
 
 
 def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
     """`sampling_ranges: {head|external|mocap: {<joint>: [lo, hi]}}` [rad, true angles]; joints: load_robot."""
     r = _Reader(path, data, "sampling_ranges")
-    r.check_keys((), SAMPLING_SYSTEMS)
+    r.check_keys((), sampling_systems())
     out = {}
     for system, joints in r.data.items():
         if not isinstance(joints, dict) or not joints:

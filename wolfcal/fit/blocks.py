@@ -9,7 +9,7 @@ camera's pose per placement). The problem and the solver know blocks only throug
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -18,6 +18,11 @@ from wolfcal.graph import connected_components
 from wolfcal.observations import Observations
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.parameters import ParameterSet
+
+if TYPE_CHECKING:
+    from wolfcal.config import PriorConfig
+    from wolfcal.fit.problem import BlockState
+    from wolfcal.fit.solver import BlockResult
 
 
 class TagViewBlock(Protocol):
@@ -39,13 +44,31 @@ class Linearization:
     joint_sensitivity: np.ndarray  # (U, dim, J) d(residual)/d(joint readings) [unit / rad]
 
 
+@dataclass
+class FittedBlock:
+    """What a solved fit knows of one block, for its part of result.yaml (`Block.report`)."""
+
+    result: BlockResult  # the solver's figures of the block
+    state: BlockState  # its final noise model and outlier sets
+    local_values: np.ndarray  # (L,) the block's own unknowns at the solution [SI]
+    residual: np.ndarray  # (U, dim) predicted minus measured at the solution [unit]
+
+
 class Block:
-    """Base of the measurement blocks; subclasses set the fields and implement `linearize`."""
+    """Base of the measurement blocks; subclasses set the fields and implement `linearize`.
+
+    A block describes itself to the solver and the result writer, which know no block by name: its unit and what one
+    unit is called, the bounds and starting value of its estimated noise level, its part of result.yaml (`report`)
+    and the lines the console summary shows of that part (`summary_lines`)."""
 
     name: str  # e.g. 'head camera', 'external camera tripod'
-    system: str  # 'head' | 'external' | ...
-    unit: str  # 'px' | 'm'
+    system: str  # the registry's system name (`wolfcal.fit.systems`): 'head' | 'external' | 'floor' | ...
+    unit: str  # of the measured numbers: 'px' | 'm' | 'rad'
+    unit_name: str = "unit"  # what one unit is, in messages: 'corner', 'marker', ...
     dim: int  # measured numbers per unit
+    noise_min: float  # lower bound of the estimated noise level per measured number [unit]
+    noise_max: float  # upper bound [unit]
+    noise_start: float  # the noise level the fit starts from before estimating it [unit]
     outlier_rule: OutlierRule  # which views are left out (`wolfcal.outliers`; floor in the block's unit)
     # which single units of the views kept are left out (None: none; `OutlierRule.limit` of the robust scale of the
     # units' conditional residuals, `solver.flag_units`)
@@ -95,6 +118,44 @@ class Block:
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         raise NotImplementedError
+
+    def start_noise(self, priors: PriorConfig) -> float:
+        """The noise level per measured number [unit] the fit and pose planning start from (the robot config's
+        priors may set it, e.g. the pixel noise). Default: `noise_start`."""
+        return self.noise_start
+
+    def report(self, fitted: FittedBlock) -> dict:
+        """The block's entry in result.yaml's `blocks`. Every entry holds `name`, `system`, `unit` (of its figures),
+        `n_samples`, `n_outlier_samples`, `n_outlier_views`, `n_units_used` and `samples` (one dict per sample),
+        and the figures its `summary_lines` read. Default: the common keys and the RMS before/after."""
+        b = fitted.result
+        return {
+            "name": b.name, "system": b.system, "unit": b.unit,
+            "rms_meaning": f"per-axis RMS of the residuals in {b.unit}, inlier units",
+            f"rms_before_{b.unit}": round(b.rms_before, 6), f"rms_after_{b.unit}": round(b.rms_after, 6),
+            f"max_after_{b.unit}": round(b.max_after, 6), f"noise_sigma_{b.unit}": round(b.sigma, 6),
+            "n_samples": len(self.q_measured), "n_outlier_samples": int(np.sum(b.outlier_samples)),
+            "n_outlier_views": len(b.outlier_views), "n_units_used": b.n_units,
+            "samples": [{"index": i, f"rms_before_{b.unit}": round(float(b.sample_rms_before[i]), 6),
+                         f"rms_after_{b.unit}": round(float(b.sample_rms_after[i]), 6),
+                         "outlier": bool(b.outlier_samples[i])} for i in range(len(self.q_measured))],
+        }  # fmt: skip
+
+    @staticmethod
+    def summary_lines(entry: dict) -> list[str]:
+        """The console's lines of a block's result.yaml entry (`report`), also of a file read back: samples, left
+        out, units used, RMS before -> after (lengths in mm)."""
+        u = entry["unit"]
+        what, used = ("reprojection", "corners") if u == "px" else ("residual", "residuals")
+        scale, shown = (1000.0, "mm") if u == "m" else (1.0, u)
+        return [
+            f"{entry['name']}: {entry['n_samples']} samples ({entry['n_outlier_samples']} left out as outliers, "
+            f"{entry['n_outlier_views']} outlier view(s) in all"
+            + (f", {entry['n_outlier_corners']} single corner(s) far off" if entry.get("n_outlier_corners") else "")
+            + f"), {used} used: {entry['n_units_used']}",
+            f"  {what} RMS (per axis, inliers): {entry[f'rms_before_{u}'] * scale:.3f} {shown} before -> "
+            f"{entry[f'rms_after_{u}'] * scale:.3f} {shown} after (max {entry[f'max_after_{u}'] * scale:.3f} {shown})",
+        ]
 
 
 def held_joint_groups(q_measured: np.ndarray, sample_of_unit: np.ndarray) -> np.ndarray:

@@ -15,8 +15,11 @@ from dataclasses import fields
 
 import numpy as np
 
+from wolfcal.config import PriorConfig
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.blocks import Block, FittedBlock, Linearization
+from wolfcal.fit.options import NOISE_FLOOR_PX
+from wolfcal.fit.tag_report import tag_view_report
 from wolfcal.geometry import (
     exp_so3,
     invert_transform,
@@ -43,8 +46,9 @@ CHUNK_SAMPLES = 512
 class CameraBlock(Block):
     """Corners of the tags one camera saw; see the module docstring."""
 
-    unit, dim = "px", 2
+    unit, unit_name, dim = "px", "corner", 2
     outlier_rule = FIT_VIEW_PX
+    noise_min, noise_max = NOISE_FLOOR_PX, 50.0  # the floor is the fit's setting (`FitOptions.noise_floor_px`)
 
     def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
                  placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None,
@@ -83,6 +87,13 @@ class CameraBlock(Block):
         _, labels = np.unique(np.stack([fixed, key, self.tag_col, self.obs.corner_index], axis=1), axis=0,
                               return_inverse=True)
         return labels.ravel()
+
+    def start_noise(self, priors: PriorConfig) -> float:
+        """The configured corner detection noise (`priors.pixel_noise`) [px]."""
+        return priors.pixel_noise
+
+    def report(self, fitted: FittedBlock) -> dict:
+        return tag_view_report(self, fitted)
 
     # --- the external camera's pose ----------------------------------------------------------------------------
     def _pose_parameters(self, names: list[str]) -> ParameterSet:

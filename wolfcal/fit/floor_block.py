@@ -25,8 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wolfcal.config import PriorConfig
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization, held_joint_groups
+from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
+from wolfcal.fit.options import NOISE_FLOOR_PX
+from wolfcal.fit.tag_report import tag_view_report
 from wolfcal.geometry import invert_transform, tag_corners
 from wolfcal.observations import Observations
 from wolfcal.outliers import FIT_VIEW_PX, FLOOR_CORNER_PX, SOLE_CLOSURE_M
@@ -85,9 +88,10 @@ def _standing_chain(robot: Robot, q: np.ndarray, chain: ParameterSet, values: np
 class FloorBlock(Block):
     """Corners of the floor tags the head camera saw while the robot stood; see the module docstring."""
 
-    system, unit, dim = "floor", "px", 2
+    system, unit, unit_name, dim = "floor", "px", "corner", 2
     outlier_rule = FIT_VIEW_PX
     unit_rule = FLOOR_CORNER_PX
+    noise_min, noise_max = NOISE_FLOOR_PX, 50.0  # the floor is the fit's setting (`FitOptions.noise_floor_px`)
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()
@@ -116,6 +120,13 @@ class FloorBlock(Block):
     def joint_reading_groups(self) -> np.ndarray:
         """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
         return held_joint_groups(self.q_measured, self.sample_of_unit)
+
+    def start_noise(self, priors: PriorConfig) -> float:
+        """The configured corner detection noise (`priors.pixel_noise`) [px]."""
+        return priors.pixel_noise
+
+    def report(self, fitted: FittedBlock) -> dict:
+        return tag_view_report(self, fitted)
 
     def _rings(self) -> np.ndarray:
         """(V, 4, 2) the detected corners of each view [px], NaN where one is missing."""
@@ -222,8 +233,10 @@ def _disagreement_derivatives(sole_poses: np.ndarray, twists: np.ndarray) -> np.
 class SoleClosure(Block):
     """Both standing soles on one plane, once per floor sample; see the module docstring."""
 
-    name, system, unit, dim = "sole closure", "floor", "m", 4
+    name, system, unit, unit_name, dim = "sole closure", "floor", "m", "sample", 4
     outlier_rule = SOLE_CLOSURE_M
+    noise_min, noise_max = 1e-5, 0.1
+    noise_start = 1e-3  # [m], before it is estimated
 
     def __init__(self, robot: Robot, obs: Observations, fixed: Corrections | None = None) -> None:
         self.robot, self.obs, self.fixed = robot, obs, fixed or Corrections()
@@ -238,6 +251,9 @@ class SoleClosure(Block):
     def joint_reading_groups(self) -> np.ndarray:
         """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
         return held_joint_groups(self.q_measured, self.sample_of_unit)
+
+    def report(self, fitted: FittedBlock) -> dict:
+        return tag_view_report(self, fitted)
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import Block, Linearization
+from wolfcal.fit.blocks import Block, FittedBlock, Linearization
 from wolfcal.geometry import exp_so3, log_so3, right_jacobian_so3, rigid_registration, skew
 from wolfcal.markers import MarkerObservations
 from wolfcal.outliers import MOCAP_MARKER_M
@@ -37,9 +37,10 @@ MOCAP_NOISE_START_M = 0.0003  # starting noise level per axis [m] before it is e
 class MocapBlock(Block):
     """Markers measured by motion capture; see the module docstring."""
 
-    system, unit, dim = "mocap", "m", 3
+    system, unit, unit_name, dim = "mocap", "m", "marker", 3
     outlier_rule = MOCAP_MARKER_M
     name = "motion capture"
+    noise_min, noise_max, noise_start = 1e-5, 0.1, MOCAP_NOISE_START_M
 
     def __init__(self, robot: Robot, obs: MarkerObservations, moving: bool = False,
                  fixed: Corrections | None = None) -> None:
@@ -74,6 +75,11 @@ class MocapBlock(Block):
         """(U,) one noise level per marker: a marker seen at a grazing angle or through a reflection-prone spot is
         noisier than the others."""
         return self.obs.marker_index
+
+    def report(self, fitted: FittedBlock) -> dict:
+        from wolfcal.fit.mocap_result import mocap_block_dict  # here: it reads the solver's result type
+
+        return mocap_block_dict(self, fitted.result, fitted.local_values, fitted.residual)
 
     @property
     def marker_names(self) -> list[str]:

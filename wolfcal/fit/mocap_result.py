@@ -5,12 +5,15 @@ motion-capture files."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wolfcal.fit.mocap_block import MocapBlock
-from wolfcal.fit.solver import BlockResult
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
+
+if TYPE_CHECKING:
+    from wolfcal.fit.mocap_block import MocapBlock
+    from wolfcal.fit.solver import BlockResult
 
 
 def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, residual: np.ndarray) -> dict:

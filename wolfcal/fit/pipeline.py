@@ -15,11 +15,12 @@ from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
-from wolfcal.fit.mocap_block import MOCAP_NOISE_START_M, MocapBlock
+from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
-from wolfcal.fit.solver import MIN_SIGMA, Solution, solve
+from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.systems import ALL, load_attribute, own_file_systems, system_presets
 from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
@@ -36,8 +37,6 @@ from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.cache import hashing_ahead
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
-
-SOLE_NOISE_M = 1e-3  # starting noise of the sole closure [m], before it is estimated
 
 
 @dataclass
@@ -67,6 +66,9 @@ class Fit:
         return self.chain.corrections(self.solution.values[: len(self.chain)])
 
 
+CAMERA_SYSTEMS = (None, ALL, "head", "external")  # --system choices whose fit uses the cameras' tag views
+
+
 def in_system(camera: str, system: str | None) -> bool:
     """Whether a camera belongs to a --system: head -> the head camera, external -> any other; all (or no
     choice) -> every camera."""
@@ -80,9 +82,9 @@ def _systems(robot: Robot, observations: dict[str, Observations], options: FitOp
     if not chosen:
         found = ", ".join(sorted(observations)) or "none"
         raise WolfcalError(f"--system {system}: the captures hold no such camera's tag views (cameras found: {found})")
-    if options.free in ("camera", "head_camera"):
+    if options.chain_preset in ("camera", "head_camera"):
         robot.config.head_camera()  # a clear error when the robot config has no head camera
-    if options.free in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
+    if options.chain_preset in ("camera", "head_camera") and HEAD_CAMERA not in chosen:
         raise WolfcalError(
             f"--free {options.free} estimates the head camera, but the captures used (--system {system}) hold no "
             "head-camera images; use --free leg for an external camera, or add a head-camera capture"
@@ -96,19 +98,21 @@ def fit_observations(
     options: FitOptions,
     say: Callable[[str], None] | None = None,
     markers: MarkerObservations | None = None,
+    own_blocks: Sequence[Block] = (),
 ) -> Fit:
-    """Choose the free parameters for the observed tags of each camera and the measured markers, check there is
-    enough data, solve."""
+    """Choose the free parameters for the observed tags of each camera, the measured markers and the blocks of
+    systems that read their own files (`own_file_blocks`), check there is enough data, solve."""
     if isinstance(observations, Observations):
         observations = {observations.camera_name: observations}
-    mocap = mocap_block(robot, markers, options)
-    if options.system == "mocap" or (mocap is not None and not observations):
-        observations = {}
+    mocap = mocap_block(robot, markers, options) if options.chain_preset is not None else None
+    if (options.system not in CAMERA_SYSTEMS or options.chain_preset is None
+            or (not observations and (mocap is not None or own_blocks))):
+        observations = {}  # no camera in the fit: --system names another, or no camera parameter is free
     else:
         observations = _systems(robot, observations, options)
     observations, floor = split_floor(robot, observations)
     used = _tags_used(robot, observations, options)
-    if not used and mocap is None and floor is None:
+    if not used and mocap is None and floor is None and not own_blocks:
         raise WolfcalError(
             f"no tag of the {options.side} side was detected; the leg preset with --side {options.side} needs one"
         )
@@ -118,15 +122,44 @@ def fit_observations(
     if floor is not None:
         tags_by_camera.setdefault(HEAD_CAMERA, [])
         blocks += floor_blocks(robot, floor, options)
-    chain = build_parameter_set(
-        robot, options.free, tags_by_camera, options.side, options.fix_tags,
-        tuple(mocap.links) if mocap is not None else (),
-    )
-    blocks += [mocap] if mocap is not None else []
+    chain = chain_parameters(robot, options, tags_by_camera, tuple(mocap.links) if mocap is not None else ())
+    blocks += ([mocap] if mocap is not None else []) + list(own_blocks)
     _check_enough_data(blocks, len(chain), options.free)
     problem = Problem(chain, blocks, block_sigmas(robot, blocks), robot.config.priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say, min_sigma={**MIN_SIGMA, "px": options.noise_floor_px})
+    solution = solve(problem, progress=say)
     return Fit(robot, used, blocks, chain, problem, solution)
+
+
+def chain_parameters(
+    robot: Robot, options: FitOptions, tags_by_camera: dict[str, list[int]], marker_links: tuple[str, ...] = ()
+) -> ParameterSet:
+    """The free robot-model parameters of the --free presets: the robot model's preset (camera | head_camera |
+    leg, `build_parameter_set`) for the tags each camera uses and the markers' links, then each measurement
+    system's preset (`System.presets`, e.g. imu: the IMU's mount)."""
+    chain = ParameterSet([])
+    if options.chain_preset is not None:
+        chain = build_parameter_set(robot, options.chain_preset, tags_by_camera, options.side, options.fix_tags,
+                                    marker_links)  # fmt: skip
+    extra = system_presets()
+    for preset in options.presets:
+        if preset in extra:
+            chain = chain + ParameterSet(load_attribute(extra[preset], f"--free {preset} parameters")(robot))
+    return chain
+
+
+def own_file_blocks(
+    robot: Robot, captures: Sequence[Path], options: FitOptions, say: Callable[[str], None]
+) -> tuple[list[Block], set[Path]]:
+    """The blocks of the registered systems that read their own files (`System.fit_blocks`) and --system takes,
+    and the captures they used alone (no camera reads those)."""
+    blocks: list[Block] = []
+    used: set[Path] = set()
+    for entry in own_file_systems():
+        if options.system in (None, ALL, entry.name):
+            built, paths = entry.load("fit_blocks")(robot, list(captures), options, say)
+            blocks += built
+            used |= {Path(p) for p in paths}
+    return blocks, used
 
 
 def floor_blocks(robot: Robot, floor: Observations, options: FitOptions) -> list[Block]:
@@ -134,15 +167,14 @@ def floor_blocks(robot: Robot, floor: Observations, options: FitOptions) -> list
     soles, the sole closure."""
     check_floor_samples(robot, floor)
     floor_block = FloorBlock(robot, floor)
-    floor_block.outlier_rule = options.outlier
+    floor_block.outlier_rule, floor_block.noise_min = options.outlier, options.noise_floor_px
     return [floor_block, SoleClosure(robot, floor)] if len(robot.config.floor_config().soles) == 2 else [floor_block]
 
 
 def block_sigmas(robot: Robot, blocks: Sequence[Block]) -> list[float]:
-    """The noise level each block starts from before the solver estimates it (px: the config's pixel noise; motion
-    capture and the sole closure [m]): the fit's and pose planning's whitening."""
-    pixel = robot.config.priors.pixel_noise
-    return [pixel if b.unit == "px" else MOCAP_NOISE_START_M if b.system == "mocap" else SOLE_NOISE_M for b in blocks]
+    """The noise level each block starts from before the solver estimates it (`Block.start_noise`): the fit's and
+    pose planning's whitening."""
+    return [b.start_noise(robot.config.priors) for b in blocks]
 
 
 def _tags_used(
@@ -152,7 +184,7 @@ def _tags_used(
     also keeps the tags fixed to the base, on which its pose rests."""
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
-        tag_ids = tags_for_preset(robot, options.free, obs.observed_tag_ids, options.side)
+        tag_ids = tags_for_preset(robot, options.chain_preset or "camera", obs.observed_tag_ids, options.side)
         if name != HEAD_CAMERA:
             tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
                                              if robot.fixed_to_base(robot.config.tag(t).link)})
@@ -170,7 +202,7 @@ def _camera_blocks(robot: Robot, used: dict[str, Observations], options: FitOpti
         else:
             placement, names = placements(obs, options.external_moving)
             block = CameraBlock(robot, obs, obs.observed_tag_ids, True, placement, names)
-        block.outlier_rule = options.outlier
+        block.outlier_rule, block.noise_min = options.outlier, options.noise_floor_px
         camera_blocks.append(block)
     return camera_blocks
 
@@ -199,10 +231,10 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
             raise WolfcalError("--system mocap: no marker data; give a ROS 2 recording with the robot config's "
                                "markers topic, or a motion-capture file with --mocap FILE")
         return None
-    if options.free in ("camera", "head_camera") and options.system == "mocap":
+    if options.chain_preset in ("camera", "head_camera") and options.system == "mocap":
         raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
                            "(no marker on the camera's optical frame); use --free leg with --system mocap")
-    if options.free == "leg" and options.side != "both":
+    if options.chain_preset == "leg" and options.side != "both":
         config = robot.config.marker_config()
         markers = markers.only_markers([n for n in markers.marker_names
                                         if config.marker(n).side in (options.side, None)])  # fmt: skip
@@ -336,9 +368,11 @@ def run_fit(
     warnings: list[str] = []
     if options.system == "mocap" or mocap:
         markers, warnings = read_markers(robot, captures, mocap, mocap_offsets, say)
+    own, own_captures = own_file_blocks(robot, captures, options, say)
+    camera_captures = [c for c in captures if Path(c) not in own_captures]
     observations: dict[str, Observations] = {}
-    if options.system != "mocap":
-        observations, camera_warnings = detect_captures(robot, captures, intrinsics, options, say)
+    if options.system in CAMERA_SYSTEMS and options.chain_preset is not None and camera_captures:
+        observations, camera_warnings = detect_captures(robot, camera_captures, intrinsics, options, say)
         warnings += camera_warnings
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
@@ -346,7 +380,7 @@ def run_fit(
     # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
     # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
     with large_blocks_mapped():
-        fit = fit_observations(robot, observations, options, say, markers)
+        fit = fit_observations(robot, observations, options, say, markers, own)
         check_solution_left_out(fit, captures)
         result = fit_result(fit, options, captures, intrinsics, warnings)
         write_fit(out_dir, fit, result)

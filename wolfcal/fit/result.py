@@ -6,19 +6,17 @@ from __future__ import annotations
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar, cast
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 import wolfcal
 from wolfcal.atomic import atomic_output
 from wolfcal.errors import WolfcalError
-from wolfcal.fit.blocks import TagViewBlock
-from wolfcal.fit.camera_block import CameraBlock
-from wolfcal.fit.mocap_block import MocapBlock
-from wolfcal.fit.mocap_result import mocap_block_dict
+from wolfcal.fit.blocks import FittedBlock
 from wolfcal.fit.options import NOISE_FLOOR_PX, FitOptions
 from wolfcal.fit.solver import Solution
+from wolfcal.fit.systems import block_class
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 from wolfcal.outliers import FIT_VIEW_PX, OutlierRule
 from wolfcal.robot.corrections import Corrections
@@ -99,91 +97,22 @@ def _measured_by(fit: Fit) -> list[list[str]]:
 
 
 def _block_dict(fit: Fit, k: int) -> dict:
-    """The result of one measurement block: residuals, noise, outliers, per-sample errors."""
-    b, block = fit.solution.blocks[k], fit.blocks[k]
-    if isinstance(block, MocapBlock):
-        state = fit.problem.states[k]
-        values = fit.solution.values[state.start : state.start + len(block.nuisance)]
-        params = fit.problem.params
-        residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
-        return mocap_block_dict(block, b, values, residual)
-    views = cast(TagViewBlock, block)
-    obs = views.obs
-    unit = b.unit
-    tags = obs.tags_by_sample()  # once for all samples
-    outlier_tags: dict[int, list[int]] = {}
-    for s, t in sorted(b.outlier_views):
-        outlier_tags.setdefault(s, []).append(t)
-    rule = block.unit_rule  # single corners left out one by one (None: the block has no such rule)
-    corners = _outlier_corners(fit, k) if rule is not None else None
-    samples = []
-    for i in range(obs.n_samples):
-        samples.append({
-            "index": i,
-            "source": Path(obs.sources[i]).name,
-            "stamp_ns": int(obs.stamps_ns[i]),
-            "tags": tags[i],
-            f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
-            f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
-            "outlier": bool(b.outlier_samples[i]),
-            "outlier_tags": outlier_tags.get(i, []),
-            **({"outlier_corners": corners.get(i, [])} if corners is not None else {}),
-        })  # fmt: skip
-    corner_keys = {} if rule is None or corners is None else {
-        # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
-        "n_outlier_corners": sum(len(c) for c in corners.values()),
-        "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
-    }
-    return {
-        "name": b.name,
-        "system": b.system,
-        "camera": views.camera_name,
-        "unit": unit,
-        "tags_used": views.tag_ids,
-        "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views"
-        + (", single corners left out excluded" if rule is not None else ""),
-        f"rms_before_{unit}": round(b.rms_before, 4),
-        f"rms_after_{unit}": round(b.rms_after, 4),
-        f"max_after_{unit}": round(b.max_after, 4),
-        f"noise_sigma_{unit}": round(b.sigma, 4),
-        "n_samples": obs.n_samples,
-        "n_outlier_samples": sum(s["outlier"] for s in samples),
-        "n_outlier_views": len(b.outlier_views),
-        **corner_keys,
-        "n_units_used": b.n_units,
-        "samples": samples,
-    }
-
-
-CORNER_RULE_MEANING = (
-    "a corner of a view kept is left out when its distance from where the fit puts it, less what the view's share of "
-    "the joint-reading errors explains, exceeds max(floor_px, factor * the robust per-axis scale of the corners "
-    "counted) [px]"
-)
-
-
-def _outlier_corners(fit: Fit, k: int) -> dict[int, list[list[int]]]:
-    """Sample -> [tag id, corner index] of each single corner the fit left out of block k's views kept
-    (`Block.unit_rule`, e.g. `outliers.FLOOR_CORNER_PX`; the solver's final outlier sets). Only for a block with a
-    unit rule: its units are the detected corners, one per row of its observations."""
-    obs, state = cast(TagViewBlock, fit.blocks[k]).obs, fit.problem.states[k]
-    out: dict[int, list[list[int]]] = {}
-    for m in np.flatnonzero(state.excluded_units):
-        out.setdefault(int(obs.sample_index[m]), []).append([int(obs.tag_ids[m]), int(obs.corner_index[m])])
-    return out
+    """The result of one measurement block (`Block.report`: residuals, noise, outliers, per-sample errors)."""
+    state, params = fit.problem.states[k], fit.problem.params
+    residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
+    local = fit.solution.values[state.start : state.start + len(state.block.nuisance)]
+    return state.block.report(FittedBlock(fit.solution.blocks[k], state, local, residual))
 
 
 def external_camera_poses(fit: Fit) -> dict:
     """T_base_camera of every external camera placement, as xyz [m] and rpy [rad] with the 4x4 matrix."""
     out = {}
     for block in fit.blocks:
-        if not isinstance(block, CameraBlock):
-            continue
         for name in dict.fromkeys(p.target for p in block.nuisance.parameters if p.kind == "pose"):
             idx = [i for i, p in enumerate(fit.params.parameters) if p.kind == "pose" and p.target == name]
             T = transform_from_twist_params(fit.solution.values[idx])
             out[name] = {
-                "camera": block.camera_name,
+                "camera": getattr(block, "camera_name", block.name),
                 "xyz": [float(v) for v in T[:3, 3]],
                 "rpy": [float(v) for v in matrix_to_rpy(T[:3, :3])],
                 "T_base_camera": np.round(T, 12).tolist(),
@@ -425,18 +354,7 @@ def summary_lines(result: FitResult) -> list[str]:
     """A short human summary of a fit result."""
     lines = []
     for b in result.blocks:
-        u = b["unit"]
-        # pixels: tag corners; lengths (motion capture in mm, the sole closure in m): residuals shown in mm
-        what, used = ("reprojection", "corners") if u == "px" else ("residual", "residuals")
-        scale, shown = (1000.0, "mm") if u == "m" else (1.0, u)
-        lines += [
-            f"{b['name']}: {b['n_samples']} samples ({b['n_outlier_samples']} left out as outliers, "
-            f"{b['n_outlier_views']} outlier view(s) in all"
-            + (f", {b['n_outlier_corners']} single corner(s) far off" if b.get("n_outlier_corners") else "")
-            + f"), {used} used: {b['n_units_used']}",
-            f"  {what} RMS (per axis, inliers): {b[f'rms_before_{u}'] * scale:.3f} {shown} before -> "
-            f"{b[f'rms_after_{u}'] * scale:.3f} {shown} after (max {b[f'max_after_{u}'] * scale:.3f} {shown})",
-        ]
+        lines += block_class(b["system"]).summary_lines(b)  # each block's own lines (`Block.summary_lines`)
     lines += [
         f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.1f}",
         "parameters (value +- std, share of information from data):",

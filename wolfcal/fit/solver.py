@@ -22,15 +22,10 @@ import numpy as np
 from wolfcal.fit.blocks import Linearization
 from wolfcal.fit.lm import levenberg_marquardt, marginal_std
 from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median, weighted_median_above
-from wolfcal.fit.options import NOISE_FLOOR_PX
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, information_uncertainty
 from wolfcal.observations import rms_by
 
-# Bounds of a block's estimated noise per unit; the pixel floor is the fit's setting (`FitOptions.noise_floor_px`,
-# see there why).
-MIN_SIGMA = {"px": NOISE_FLOOR_PX, "m": 1e-5}
-MAX_SIGMA = {"px": 50.0, "m": 0.1}
 # A round's solve (before its outlier and noise update) stops once a step gains less than this in cost (half the
 # whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
 # linear arms would otherwise take many small steps. The solve after the last round converges fully.
@@ -73,7 +68,7 @@ class BlockResult:
 
     name: str
     system: str
-    unit: str  # 'px' | 'm'
+    unit: str  # the block's unit ('px', 'm', ...)
     sigma: float  # noise per measured number of the final noise model [unit]
     rms_before: float  # inlier units, per axis, nominal model [unit]
     rms_after: float
@@ -173,12 +168,12 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
     return weighted_median_above(np.abs(w, out=w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
 
 
-def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float, floor: float) -> float:
+def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
-    not below `floor` [unit]); returns the residual scale reached (`residual_scale`, from the search's own
-    standardised numbers unless setting the level decomposed the groups again)."""
+    within the block's `noise_min` .. `noise_max` [unit]); returns the residual scale reached (`residual_scale`,
+    from the search's own standardised numbers unless setting the level decomposed the groups again)."""
     standardized = state.noise_model.standardizer(residual.ravel())
-    lo, hi = np.log(floor), np.log(MAX_SIGMA[state.block.unit])
+    lo, hi = np.log(state.block.noise_min), np.log(state.block.noise_max)
     # The scale falls as the level grows: at or below 1 at the floor, every step of the search goes down (the same
     # steps, without evaluating them; the level of a block more precise than the floor, e.g. rendered captures).
     at_floor = not _scale_above_one(*standardized(float(np.exp(lo))), n_params)
@@ -316,7 +311,7 @@ def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
 
 
 def _update_noise(
-    problem: Problem, lins: list[Linearization], n_params: int, rows_total: int, min_sigma: dict[str, float]
+    problem: Problem, lins: list[Linearization], n_params: int, rows_total: int
 ) -> tuple[float, list[str]]:
     """Re-estimate each block's noise level (its share of the free parameters by rows); the largest relative change
     of a block's level or of a unit's level within it, and one progress note per block."""
@@ -324,15 +319,15 @@ def _update_noise(
     for state, lin in zip(problem.states, lins):
         previous = state.sigma
         share = n_params * lin.residual.size / rows_total
-        scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
+        scale = estimate_noise(state, lin.residual, share)
         change = estimate_class_scales(state, lin, problem)
         if change > 0.0:  # the noise model changed shape: decompose again, then the block's level
             state.rebuild(lin)
-            scale = estimate_noise(state, lin.residual, share, min_sigma[state.block.unit])
+            scale = estimate_noise(state, lin.residual, share)
         largest = max(largest, abs(state.sigma / previous - 1.0), change)
         notes.append(
             f"{state.block.name}: {int(state.excluded.sum())} outlier view(s)"
-            + (f" and {int(state.excluded_units.sum())} single {'corner' if state.block.unit == 'px' else 'marker'}(s)"
+            + (f" and {int(state.excluded_units.sum())} single {state.block.unit_name}(s)"
                if state.excluded_units.any() else "")
             + f", noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"
@@ -354,9 +349,7 @@ def _for_noise_update(problem: Problem, lins: list[Linearization]) -> list[Linea
             for state, lin in zip(problem.states, lins)]  # fmt: skip
 
 
-def _update_round(
-    problem: Problem, z: np.ndarray, rows_total: int, min_sigma: dict[str, float]
-) -> tuple[bool, float, list[str]]:
+def _update_round(problem: Problem, z: np.ndarray, rows_total: int) -> tuple[bool, float, list[str]]:
     """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`): whether an outlier
     set changed, the largest relative change of a noise level, progress notes. The linearisations live only here."""
     lins = problem.evaluate(z)
@@ -365,17 +358,15 @@ def _update_round(
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
     lins = _for_noise_update(problem, lins)
-    change, notes = _update_noise(problem, lins, len(problem.params), rows_total, min_sigma)
+    change, notes = _update_noise(problem, lins, len(problem.params), rows_total)
     for state in problem.states:  # the next solve's linearisations are not kept beside this one's sensitivities
         state.release_sensitivities()
     return changed, change, notes
 
 
-def solve(
-    problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
-    min_sigma: dict[str, float] = MIN_SIGMA,
-) -> Solution:
-    """Solve with outlier rounds (module docstring); `min_sigma`: floor of each unit's estimated noise."""
+def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
+    """Solve with outlier rounds (module docstring); each block's noise level stays within its `noise_min` ..
+    `noise_max`."""
     say = progress or (lambda _msg: None)
     for state in problem.states:  # see `_update_round`
         state.release_sensitivities()
@@ -387,7 +378,7 @@ def solve(
         result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL,
                                      std_tol=ROUND_STD_TOL)
         z, evaluations = result.x, evaluations + result.nfev
-        changed, change, notes = _update_round(problem, z, rows_total, min_sigma)
+        changed, change, notes = _update_round(problem, z, rows_total)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and change < ROUND_NOISE_TOL:
             break
@@ -405,7 +396,7 @@ def solve(
             say(f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
                 f"{'an outlier set' if changed else f'noise {change:.1%}'}); the solution is the last solve's")
             break
-        changed, change, notes = _update_round(problem, z, rows_total, min_sigma)
+        changed, change, notes = _update_round(problem, z, rows_total)
         if not changed and change < FIXED_POINT_TOL:
             break
         say(f"final solve {final_index + 1}: the noise model at its solution differs ("

@@ -17,6 +17,7 @@ import numpy as np
 
 from wolfcal.atomic import write_text_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.fit.systems import planned_systems
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.outputs import check_outputs
 from wolfcal.plan.candidates import Candidates, draw_candidates, plan_camera
@@ -38,7 +39,6 @@ from wolfcal.robot.collision import CollisionModel, collision_model, rest_config
 from wolfcal.robot.parameters import ParameterSet, check_preset, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 
-PLAN_SYSTEMS = ("head", "external", "mocap", "floor")  # a new measurement system adds its candidates and model
 # --criterion when none is given, per (system, preset): the one that planned the more accurate calibration in
 # bench/bench_plan.py; D for the others
 DEFAULT_CRITERION = {("head", "head_camera"): "I", ("external", "leg"): "I"}
@@ -62,8 +62,8 @@ class PlanOptions:
         check_preset(self.free, self.side)
         criterion = DEFAULT_CRITERION.get((self.system, self.free), "D") if self.criterion is None else self.criterion
         object.__setattr__(self, "criterion", check_criterion(criterion))
-        if self.system not in PLAN_SYSTEMS:
-            raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(PLAN_SYSTEMS)}")
+        if self.system not in planned_systems():
+            raise WolfcalError(f"--system {self.system!r}: plan supports {', '.join(planned_systems())}")
         if self.poses < 1 or self.candidates < self.poses:
             raise WolfcalError("--poses must be at least 1 and --candidates at least --poses")
         if not 0 < self.velocity <= 6:

@@ -23,6 +23,7 @@ from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_pose_ok, external_visibility
+from wolfcal.fit.systems import ALL, simulated_systems, system
 from wolfcal.io.truth import external_truth_entry, truth_paths
 from wolfcal.io.writer import CaptureWriter
 from wolfcal.observations import HEAD_CAMERA
@@ -43,7 +44,6 @@ from wolfcal.vision.render import motion_blur
 from wolfcal.yamlfile import dump_yaml
 
 OFFSET_SETS = ("none", "head", "legs", "all")
-SYSTEMS = ("head", "external", "all", "mocap")
 START_NS = 1_700_000_000_000_000_000
 FLOOR_DISTANCE_M = (0.5, 5.0)  # floor tags lie this far from the robot (`--floor`)
 
@@ -146,8 +146,8 @@ def simulate_capture(
         raise WolfcalError(f"{out}: the capture file name must end in .mcap")
     if options.samples < 1:
         raise WolfcalError("--samples must be at least 1")
-    if options.system not in SYSTEMS:
-        raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(SYSTEMS)}")
+    if options.system not in simulated_systems():
+        raise WolfcalError(f"--system {options.system!r} must be one of {', '.join(simulated_systems())}")
     robot = load_robot(robot_path)
     if options.floor and (options.system != "head" or options.poses is not None):
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
@@ -159,19 +159,31 @@ def simulate_capture(
     if options.poses is not None:
         options = replace(options, samples=len(planned_readings(robot, options.poses)))
     inputs = [robot.config.path, robot.config.urdf] + [p for p in (options.truth_file, options.poses) if p]
-    if options.system == "mocap":  # a motion-capture session: wolfcal.sim.mocap
-        check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
-        spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
-        truth = random_truth(robot, spec, np.random.default_rng(options.seed))
-        if options.truth_file is not None:
-            truth = load_corrections(options.truth_file, key="truth")
-        with output_set():
-            simulate_mocap(robot, out, options.samples, options.seed + 1, truth, say=say)
-        return truth
+    simulator = simulate_cameras if options.system == ALL else system(options.system).load("simulator")
+    return simulator(robot, out, options, camera, say, force, inputs)
+
+
+def simulate_cameras(robot: Robot, out: Path, options: SimOptions, camera: CameraModel | None,
+                     say: Callable[[str], None], force: bool, inputs: list[Path]) -> Corrections:  # fmt: skip
+    """The head and external cameras' simulator (the registry's, `wolfcal.fit.systems`): a capture file of tag
+    images; `inputs` may not be overwritten."""
     cameras = _cameras(robot, options, camera)
     check_outputs([out, *truth_paths(out)], force, inputs)
     with output_set():
         return _simulate(robot, out, options, cameras, say)
+
+
+def simulate_mocap_session(robot: Robot, out: Path, options: SimOptions, camera: CameraModel | None,
+                           say: Callable[[str], None], force: bool, inputs: list[Path]) -> Corrections:  # fmt: skip
+    """The motion-capture simulator (`wolfcal.sim.mocap`): FILE.mcap with joint states and Markers, FILE.c3d."""
+    check_outputs([out, out.with_suffix(".c3d"), *truth_paths(out)], force, inputs)
+    spec = TruthSpec(**{**asdict(options.truth), "offset_joints": offset_joints(robot, options.offsets)})
+    truth = random_truth(robot, spec, np.random.default_rng(options.seed))
+    if options.truth_file is not None:
+        truth = load_corrections(options.truth_file, key="truth")
+    with output_set():
+        simulate_mocap(robot, out, options.samples, options.seed + 1, truth, say=say)
+    return truth
 
 
 def _simulate(
