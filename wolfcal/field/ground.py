@@ -53,3 +53,13 @@ def _resize(coarse: np.ndarray, w: int, h: int, stride: int) -> np.ndarray:
     rows = np.minimum(np.round(np.arange(h) / stride).astype(int), coarse.shape[0] - 1)
     cols = np.minimum(np.round(np.arange(w) / stride).astype(int), coarse.shape[1] - 1)
     return coarse[np.ix_(rows, cols)]
+
+
+def camera_on_field(T_floor_camera: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """T_field_camera (..., 4, 4) of cameras T_floor_camera (..., 4, 4) on a robot whose floor frame stands at
+    pose (x, y, yaw) [m, m, rad] on the field."""
+    x, y, yaw = pose
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    T[:2, 3] = x, y
+    return T @ T_floor_camera

@@ -137,30 +137,37 @@ def distance_to_lines(lines: FieldLines, points: np.ndarray) -> np.ndarray:
     return best
 
 
-def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For field points (N, 2): the signed distance [m] to the nearest line and that line's unit normal (N, 2) at
-    the nearest point, so that distance = normal . (point - nearest point). Used to linearise residuals."""
+def nearest_line(lines: FieldLines, points: np.ndarray) -> np.ndarray:
+    """(N,) index of the nearest line of each field point (N, 2): a segment's row in `lines.segments`, or
+    `len(lines.segments)` for the centre circle."""
     p = np.asarray(points, float).reshape(-1, 2)
     a, b = lines.segments[:, 0], lines.segments[:, 1]
     ab = b - a
     t = np.clip(np.einsum("nsk,sk->ns", p[:, None, :] - a[None], ab) / np.einsum("sk,sk->s", ab, ab), 0.0, 1.0)
-    offsets = p[:, None, :] - (a[None] + t[..., None] * ab[None])  # (N, S, 2)
-    distances = np.linalg.norm(offsets, axis=-1)
+    distances = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=-1)
+    circle = np.abs(np.linalg.norm(p, axis=1) - lines.circle_radius)
+    return np.where(circle < distances.min(axis=1), len(ab), distances.argmin(axis=1))
+
+
+def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For field points (N, 2): the signed offset [m] from the nearest line and that line's unit normal (N, 2), so
+    that offset = normal . (point - a point of the line): a straight line's fixed normal (its direction turned left),
+    the circle's outward radial. The offset is smooth across the line (a residual without a kink at zero); beyond a
+    segment's end it is the offset from the segment's extension."""
+    p = np.asarray(points, float).reshape(-1, 2)
+    a, b = lines.segments[:, 0], lines.segments[:, 1]
+    ab = b - a
+    t = np.clip(np.einsum("nsk,sk->ns", p[:, None, :] - a[None], ab) / np.einsum("sk,sk->s", ab, ab), 0.0, 1.0)
+    distances = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=-1)  # (N, S)
     best = distances.argmin(axis=1)
     rows = np.arange(len(p))
-    offset = offsets[rows, best]
-    segment_distance = distances[rows, best]
+    normal = _segment_normals(ab)[best]
+    offset = np.einsum("nk,nk->n", normal, p - a[best])
     radius = np.linalg.norm(p, axis=1)
-    circle_offset = radius - lines.circle_radius
-    use_circle = np.abs(circle_offset) < segment_distance
-    with np.errstate(invalid="ignore", divide="ignore"):
-        normal = np.where(
-            segment_distance[:, None] > 1e-12, offset / segment_distance[:, None], _segment_normals(ab)[best]
-        )
-        radial = np.where(radius[:, None] > 1e-12, p / radius[:, None], np.array([1.0, 0.0]))
+    use_circle = np.abs(radius - lines.circle_radius) < distances[rows, best]
+    radial = p / np.maximum(radius, 1e-12)[:, None]
     normal = np.where(use_circle[:, None], radial, normal)
-    signed = np.where(use_circle, circle_offset, segment_distance)
-    return signed, normal
+    return np.where(use_circle, radius - lines.circle_radius, offset), normal
 
 
 def _segment_normals(ab: np.ndarray) -> np.ndarray:

@@ -122,6 +122,10 @@ def fit_observations(
     if floor is not None:
         tags_by_camera.setdefault(HEAD_CAMERA, [])
         blocks += floor_blocks(robot, floor, options)
+    for own in own_blocks:  # a system of its own that sees with a camera (field lines) frees that camera's mount
+        camera_name = getattr(own, "camera_name", None)
+        if camera_name:
+            tags_by_camera.setdefault(camera_name, [])
     chain = chain_parameters(robot, options, tags_by_camera, tuple(mocap.links) if mocap is not None else ())
     blocks += ([mocap] if mocap is not None else []) + list(own_blocks)
     _check_enough_data(blocks, len(chain), options.free)

@@ -75,6 +75,11 @@ SYSTEMS: tuple[System, ...] = (
         "wolfcal.sim.floor:floor_views", "wolfcal.plan.floor:draw_floor_candidates", selectable=False,
         description="tags lying on the floor seen by the head camera while the robot stands [px]",
     ),
+    System(
+        "field", "wolfcal.fit.field_block:FieldBlock", "wolfcal.field.observe:field_observations",
+        "wolfcal.sim.field:simulate_field_capture", None, fit_blocks="wolfcal.fit.field_block:field_blocks",
+        description="the white lines of a RoboCup field seen by the head camera while the robot stands [px]",
+    ),
 )
 
 
