@@ -15,6 +15,7 @@ import numpy as np
 
 from wolfcal.encoders import QUANTISATION_NOISE
 from wolfcal.errors import WolfcalError
+from wolfcal.field.model import FieldDimensions, field_dimensions
 from wolfcal.fit.systems import config_sections, sampling_systems  # the registry: plain data
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.vision.target_size import check_printed_edge
@@ -111,6 +112,7 @@ class RobotConfig:
     external_cameras: tuple[ExternalCameraConfig, ...] = ()
     markers: MarkersConfig | None = None  # motion-capture markers on the robot (`markers:`), None when absent
     floor: FloorConfig | None = None  # the venue ground check (`floor:`), None when not configured
+    playing_field: FieldConfig | None = None  # the RoboCup field whose lines the head camera sees (`field:`)
     # system ('head' | 'external') -> joint -> (lo, hi) true angles [rad] for simulated poses (`wolfcal.robot.ranges`)
     sampling_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
     planning: PlanningConfig = field(default_factory=lambda: PlanningConfig())
@@ -140,6 +142,12 @@ class RobotConfig:
         if self.floor is None:
             raise WolfcalError(f"the robot config {self.path} has no 'floor:'; {why}")
         return self.floor
+
+    def field_config(self, why: str = "field views need it") -> FieldConfig:
+        """The field's config; a WolfcalError naming the file when the config has none."""
+        if self.playing_field is None:
+            raise WolfcalError(f"the robot config {self.path} has no 'field:'; {why}")
+        return self.playing_field
 
     def external_camera(self, name: str) -> ExternalCameraConfig:
         """The external camera called `name`; a WolfcalError listing the configured ones otherwise."""
@@ -460,7 +468,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r.check_keys(
         ("name", "urdf", "base_link"),
         ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
-         "sampling_ranges", *PLANNING_KEYS, *config_sections()),
+         "field", "sampling_ranges", *PLANNING_KEYS, *config_sections()),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -495,6 +503,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
         external_cameras=external,
         markers=markers,
         floor=_floor(path, r.data["floor"], tags) if r.data.get("floor") is not None else None,
+        playing_field=_field(path, r.data["field"]) if r.data.get("field") is not None else None,
         sampling_ranges=_sampling_ranges(path, r.data["sampling_ranges"]) if "sampling_ranges" in r.data else {},
         planning=_planning(path, r.data),
         sections=sections,
@@ -631,6 +640,27 @@ class FloorConfig:
     @property
     def tag_ids(self) -> list[int]:
         return [t.id for t in self.tags]
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """The RoboCup field (DESIGN.md `field:`): its markings and where the robot is placed for field views."""
+
+    dimensions: FieldDimensions
+    robot_at: tuple[float, float, float]  # x, y [m], yaw [rad] of the standing robot's floor frame on the field
+
+
+def _field(path: Path, data) -> FieldConfig:
+    """`field:` with the field's `dimensions` [m] and the robot's place `robot_at: {x, y, yaw}` [m, m, rad]."""
+    r = _Reader(path, data, "field")
+    r.check_keys(("dimensions", "robot_at"))
+    dimensions = r.data["dimensions"]
+    if not isinstance(dimensions, dict):
+        r.fail("'dimensions' must be a mapping of the field's sizes [m] (see the robot config reference)")
+    at = _Reader(path, r.data["robot_at"], "field.robot_at")
+    at.check_keys(("x", "y", "yaw"))
+    return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"),
+                       (at.number("x"), at.number("y"), at.number("yaw")))  # fmt: skip
 
 
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:

@@ -63,7 +63,7 @@ def _poses(robot: Robot, q: np.ndarray, model: Corrections) -> tuple[np.ndarray,
 
 
 @dataclass
-class _StandingChain:
+class StandingChain:
     """The soles and the camera at one parameter vector, in the chain's root frame, with their twists."""
 
     T_root_soles: np.ndarray  # (K, S, 4, 4)
@@ -72,8 +72,8 @@ class _StandingChain:
     twists_camera: np.ndarray  # (S, J + P, 6)
 
 
-def _standing_chain(robot: Robot, q: np.ndarray, chain: ParameterSet, values: np.ndarray,
-                    fixed: Corrections) -> _StandingChain:  # fmt: skip
+def standing_chain(robot: Robot, q: np.ndarray, chain: ParameterSet, values: np.ndarray,
+                    fixed: Corrections) -> StandingChain:  # fmt: skip
     """Poses and twists of the soles and the head camera for readings q (S, J) under the chain's values."""
     frame, soles = robot.config.head_camera().frame, list(robot.config.floor_config().soles)
     d = ChainDerivatives(robot, q, chain.corrections(values).plus(fixed), chain, [frame, *soles], [])
@@ -81,7 +81,7 @@ def _standing_chain(robot: Robot, q: np.ndarray, chain: ParameterSet, values: np
     def twists(link: str) -> np.ndarray:
         return np.concatenate([d.twist_q(link), d.twist_p(link)], axis=1)
 
-    return _StandingChain(np.stack([d.T_root[s] for s in soles]), np.stack([twists(s) for s in soles]),
+    return StandingChain(np.stack([d.T_root[s] for s in soles]), np.stack([twists(s) for s in soles]),
                           d.T_root[frame], twists(frame))  # fmt: skip
 
 
@@ -183,7 +183,7 @@ class FloorBlock(Block):
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         p_floor, dp_place = self._floor_points(local_values)
         s, n_joints = self.sample_of_unit, self.q_measured.shape[1]
-        c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
+        c = standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
         T_root_floor = floor_frames(c.T_root_soles)[s]  # (M, 4, 4)
         twist = floor_frame_twists(c.T_root_soles, c.twists_soles)[s] - c.twists_camera[s]  # floor against camera
         p_root = np.einsum("mij,mj->mi", T_root_floor[:, :3, :3], p_floor) + T_root_floor[:, :3, 3]
@@ -256,7 +256,7 @@ class SoleClosure(Block):
         return tag_view_report(self, fitted)
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
-        c = _standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
+        c = standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
         d = _disagreement_derivatives(c.T_root_soles, c.twists_soles)
         n_joints = self.q_measured.shape[1]
         return Linearization(residual=sole_gaps(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,

@@ -125,6 +125,10 @@ def fit_observations(
     tags_by_camera = {name: list(obs.observed_tag_ids) for name, obs in used.items()}
     if floor is not None:
         tags_by_camera.setdefault(HEAD_CAMERA, [])
+    for own in own_blocks:  # a system of its own that sees with a camera (field lines) frees that camera's mount
+        camera_name = getattr(own, "camera_name", None)
+        if camera_name:
+            tags_by_camera.setdefault(camera_name, [])
     chain = chain_parameters(robot, options, tags_by_camera, tuple(mocap.links) if mocap is not None else ())
     current = options.current or Corrections()
     chain, held = chain.centred_on(current), chain.held(current)

@@ -88,6 +88,11 @@ SYSTEMS: tuple[System, ...] = (
         config="wolfcal.robot.imu_mount:parse_imu_config", evaluator="wolfcal.evaluate.imu:evaluate_held_out",
         description="gravity in the IMU frame while the robot stands still, soles flat [rad]",
     ),
+    System(
+        "field", "wolfcal.fit.field_block:FieldBlock", "wolfcal.field.observe:field_observations",
+        "wolfcal.sim.field:simulate_field_capture", None, fit_blocks="wolfcal.fit.field_block:field_blocks",
+        description="the white lines of a RoboCup field seen by the head camera while the robot stands [px]",
+    ),
 )
 
 

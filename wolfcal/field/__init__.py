@@ -1,0 +1,1 @@
+"""RoboCup field lines: the field model, rendered views for simulation, and line detection in camera images."""

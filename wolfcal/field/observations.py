@@ -1,0 +1,38 @@
+"""Line points of field views: what the field block fits, whether read from captures or simulated."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+
+
+@dataclass(frozen=True)
+class FieldObservations:
+    """Line points the head camera saw in standing samples, one robot placement per capture file."""
+
+    joint_names: list[str]
+    q_measured: np.ndarray  # (S, J) encoder readings [rad]
+    stamps_ns: np.ndarray  # (S,)
+    sources: list[str]  # (S,) capture file of each sample
+    placement: np.ndarray  # (S,) index of the robot's placement (capture file) of each sample
+    starts: np.ndarray  # (P, 3) the field pose each placement's search found: x, y [m], yaw [rad]
+    camera: CameraModel
+    sample_index: np.ndarray  # (M,) sample of each line point
+    uv: np.ndarray  # (M, 2) line point [px]
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.q_measured.shape[0])
+
+
+MAX_POINTS_PER_VIEW = 120  # line points kept per view, spread over what it found
+
+
+def spread(points: np.ndarray, n: int = MAX_POINTS_PER_VIEW) -> np.ndarray:
+    """Indices of at most n of the points (in detection order), evenly spread."""
+    if not len(points):
+        return np.zeros(0, dtype=int)
+    return np.unique(np.linspace(0, len(points) - 1, min(len(points), n)).astype(int))

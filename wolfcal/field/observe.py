@@ -1,0 +1,101 @@
+"""Field captures -> line points: each capture file is one placement of the robot on the field.
+
+Each sample's head image (colour: the turf is told from the lines by its green) is searched for line points
+(`wolfcal.field.detect`) no wider than a line would appear under the nominal model at the configured place
+(`field.robot_at`); at most `MAX_POINTS_PER_VIEW` points of a view are kept, spread over it. Then the robot's place
+is searched around the configured one (`wolfcal.field.place`): the fit starts there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.field.detect import detect_line_points
+from wolfcal.field.ground import camera_on_field, expected_line_width
+from wolfcal.field.model import field_lines, mirrored_pose
+from wolfcal.field.observations import FieldObservations, spread
+from wolfcal.field.place import DistanceMap, search_place
+from wolfcal.io.reader import read_capture
+from wolfcal.observations import HEAD_CAMERA
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor
+from wolfcal.robot.robot import Robot
+
+MIN_POINTS = 200  # fewer line points in a placement's views cannot place the robot and turn the camera
+FAR_FROM_CONFIGURED = (0.45, np.deg2rad(15.0))  # [m, rad]: a place found further off is said
+
+
+def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], None]) -> FieldObservations:
+    """Line points of every field capture (module docstring); WolfcalError naming the file when a capture holds no
+    colour head images or too few line points."""
+    config = robot.config.field_config("a field capture needs the field's dimensions and where the robot stands")
+    lines = field_lines(config.dimensions)
+    distance_map = DistanceMap(lines)
+    configured = np.asarray(config.robot_at, float)
+    q_all: list[np.ndarray] = []
+    uv_all: list[np.ndarray] = []
+    sample_of: list[np.ndarray] = []
+    starts: list[np.ndarray] = []
+    stamps: list[int] = []
+    sources: list[str] = []
+    placement: list[int] = []
+    camera: CameraModel | None = None
+    for k, path in enumerate(captures):
+        samples = read_capture(path, robot.config).samples_of(HEAD_CAMERA)
+        if not samples:
+            raise WolfcalError(f"{path}: no head-camera images; a field capture holds the head camera's views")
+        q = np.stack([s.joint_positions(robot.joint_names) for s in samples])
+        T_floor_camera = camera_in_floor(robot, q, Corrections())[0]
+        first, views = len(stamps), []
+        for i, sample in enumerate(samples):
+            image, camera = sample.images[HEAD_CAMERA].decode(), sample.images[HEAD_CAMERA].camera
+            if image.ndim != 3:
+                raise WolfcalError(f"{path}: the head image at t={sample.stamp_ns} ns is grey; field lines are told "
+                                   "from the turf by colour: capture field views in colour (bgr8)")  # fmt: skip
+            widths = expected_line_width(camera, camera_on_field(T_floor_camera[i], configured),
+                                         config.dimensions.line_width)  # fmt: skip
+            found = detect_line_points(image, widths).uv
+            found = found[spread(found)]
+            uv_all.append(found)
+            sample_of.append(np.full(len(found), first + i))
+            views.append(found)
+        points = np.vstack(views)
+        say(f"{path}: {len(points)} line points in {len(samples)} views")
+        if len(points) < MIN_POINTS:
+            raise WolfcalError(f"{path}: only {len(points)} field-line points in {len(samples)} views (at least "
+                               f"{MIN_POINTS} needed): aim the head at the field's lines, not at the sky or beyond "
+                               "the border")  # fmt: skip
+        assert camera is not None
+        search = search_place(distance_map, robot, q, np.concatenate(
+            [np.full(len(v), i) for i, v in enumerate(views)]), points, camera, configured)  # fmt: skip
+        _say_place(path, search.pose, configured, say)
+        q_all.append(q)
+        stamps += [s.stamp_ns for s in samples]
+        sources += [str(path)] * len(samples)
+        placement += [k] * len(samples)
+        starts.append(search.pose)
+    assert camera is not None
+    return FieldObservations(list(robot.joint_names), np.vstack(q_all), np.asarray(stamps, np.int64), sources,
+                             np.asarray(placement), np.asarray(starts), camera, np.concatenate(sample_of),
+                             np.vstack(uv_all))  # fmt: skip
+
+
+def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, say: Callable[[str], None]) -> None:
+    """The place found, the field's symmetry, and a warning when the place is far from the configured one."""
+    mirror = np.round(mirrored_pose(*found), 2)
+    say(f"{path}: the robot stands at x {found[0]:+.2f} m, y {found[1]:+.2f} m, yaw {np.rad2deg(found[2]):+.1f} deg "
+        f"(field.robot_at: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
+        f"field's point symmetry fits the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that "
+        "field.robot_at names is assumed")  # fmt: skip
+    off = np.linalg.norm(found[:2] - configured[:2]), abs(np.remainder(found[2] - configured[2] + np.pi, 2 * np.pi)
+                                                           - np.pi)  # fmt: skip
+    if off[0] > FAR_FROM_CONFIGURED[0] or off[1] > FAR_FROM_CONFIGURED[1]:
+        say(
+            f"warning: {path}: the lines fit best {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from "
+            "field.robot_at; check where the robot stood and correct field.robot_at"
+        )

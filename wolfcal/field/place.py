@@ -1,0 +1,121 @@
+"""Where the robot stands on the field, before the fit: a search around the configured place.
+
+The line points of a placement's views are put on the floor through the nominal model with the camera pitched by
+each of `PITCHES` (a camera several degrees off moves far points by metres); each candidate pose (x, y, yaw) of the
+floor frame on the field is scored by the mean distance of those points from the nearest line, truncated at
+`TRUNCATE_M` (points on no line count alike), looked up in a distance map of the field at `RASTER_M`. A coarse
+grid around `field.robot_at` for every pitch, then a finer one around the best. The field is point-symmetric: the
+mirrored pose scores the same, so the search stays on the configured half.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.field.model import FieldLines
+from wolfcal.field.scene import BORDER_STRIP
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor
+from wolfcal.robot.robot import Robot
+
+RASTER_M = 0.02  # distance map resolution [m]
+TRUNCATE_M = 0.25  # a point further from every line than this counts as this far [m]
+SEARCH_M = 0.6  # the coarse grid reaches this far from the configured place [m]
+SEARCH_YAW = np.deg2rad(20.0)
+PITCHES = np.deg2rad(np.arange(-8.0, 8.5, 1.0))  # camera pitch corrections tried [rad]
+COARSE_POINTS = 400  # points the coarse grid scores
+
+
+@dataclass(frozen=True)
+class PlaceSearch:
+    """The search's outcome for one placement."""
+
+    pose: np.ndarray  # (3,) best x, y [m], yaw [rad]
+    pitch: float  # the camera pitch correction that placed the points best [rad]
+    score_m: float  # mean truncated distance of the points at the best pose [m]
+    configured_score_m: float  # the same at the configured place [m]
+
+
+class DistanceMap:
+    """Distance [m] from the nearest line of a field, on a raster covering the carpet."""
+
+    def __init__(self, lines: FieldLines) -> None:
+        extent = np.abs(lines.segments).max(axis=(0, 1)) + BORDER_STRIP
+        self.origin = -extent
+        size = np.ceil(2 * extent / RASTER_M).astype(int) + 1
+        canvas = np.full((size[1], size[0]), 255, np.uint8)
+        for start, end in lines.segments:
+            a, b = self._pixel(start), self._pixel(end)
+            cv2.line(canvas, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 0, 1)
+        centre = self._pixel(np.zeros(2))
+        cv2.circle(canvas, (int(centre[0]), int(centre[1])), int(round(lines.circle_radius / RASTER_M)), 0, 1)
+        self.distance = cv2.distanceTransform(canvas, cv2.DIST_L2, 5) * RASTER_M
+
+    def _pixel(self, points: np.ndarray) -> np.ndarray:
+        return np.round((np.asarray(points) - self.origin) / RASTER_M).astype(int)
+
+    def truncated_mean(self, points: np.ndarray) -> np.ndarray:
+        """Mean over the last-but-one axis of each point set's truncated distance; points (..., N, 2) [m]."""
+        pixel = np.floor((points - self.origin) / RASTER_M + 0.5).astype(int)
+        h, w = self.distance.shape
+        inside = (pixel[..., 0] >= 0) & (pixel[..., 0] < w) & (pixel[..., 1] >= 0) & (pixel[..., 1] < h)
+        d = self.distance[np.clip(pixel[..., 1], 0, h - 1), np.clip(pixel[..., 0], 0, w - 1)]
+        return np.where(inside, np.minimum(d, TRUNCATE_M), TRUNCATE_M).mean(axis=-1)
+
+
+def _placed(ground: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(K, N, 2) field points of floor points (N, 2) for floor-frame poses (K, 3) on the field."""
+    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    x = poses[:, 0:1] + c * ground[None, :, 0] - s * ground[None, :, 1]
+    y = poses[:, 1:2] + s * ground[None, :, 0] + c * ground[None, :, 1]
+    return np.stack([x, y], axis=-1)
+
+
+def _grid(centre: np.ndarray, reach: float, yaw_reach: float, steps: int) -> np.ndarray:
+    axes = (np.linspace(-r, r, steps) for r in (reach, reach, yaw_reach))
+    return centre + np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def _best(field: DistanceMap, ground: np.ndarray, candidates: np.ndarray) -> tuple[np.ndarray, float]:
+    scores = np.concatenate([field.truncated_mean(_placed(ground, chunk))
+                             for chunk in np.array_split(candidates, max(1, len(candidates) // 256))])  # fmt: skip
+    k = int(np.argmin(scores))
+    return candidates[k], float(scores[k])
+
+
+def search_place(field: DistanceMap, robot: Robot, q: np.ndarray, view_of_point: np.ndarray, uv: np.ndarray,
+                 camera: CameraModel, configured: np.ndarray) -> PlaceSearch:  # fmt: skip
+    """The best pose of the floor frame near `configured` (x, y, yaw) for line points uv (N, 2) [px] of views
+    `view_of_point` (N,) taken at readings q (S, J) (module docstring)."""
+    configured = np.asarray(configured, float)
+    coarse = np.unique(np.linspace(0, len(uv) - 1, min(len(uv), COARSE_POINTS)).astype(int))
+    best: tuple[float, np.ndarray, float] | None = None  # score, pose, pitch
+    grounds = {}
+    for pitch in PITCHES:
+        model = Corrections(frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, pitch, 0.0, 0.0])})
+        ground = ground_points_at(camera, camera_in_floor(robot, q, model)[0][view_of_point], uv)
+        grounds[float(pitch)] = ground
+        finite = np.all(np.isfinite(ground[coarse]), axis=1)
+        pose, score = _best(field, ground[coarse][finite], _grid(configured, SEARCH_M, SEARCH_YAW, 13))
+        if best is None or score < best[0]:
+            best = (score, pose, float(pitch))
+    assert best is not None
+    _, pose, pitch = best
+    ground = grounds[pitch][np.all(np.isfinite(grounds[pitch]), axis=1)]
+    pose, score = _best(field, ground, _grid(pose, 0.1, np.deg2rad(3.0), 11))
+    configured_score = float(field.truncated_mean(_placed(ground, configured[None]))[0])
+    return PlaceSearch(pose, pitch, score, configured_score)
+
+
+def ground_points_at(camera: CameraModel, T_floor_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, 2) floor points [m] of pixels uv (N, 2) seen from cameras T_floor_camera (N, 4, 4); NaN above the
+    horizon."""
+    rays = np.einsum("nij,nj->ni", T_floor_camera[:, :3, :3], camera.unproject(uv))
+    origin = T_floor_camera[:, :3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(rays[:, 2] < 0, -origin[:, 2] / rays[:, 2], np.nan)
+    return origin[:, :2] + s[:, None] * rays[:, :2]

@@ -1,0 +1,212 @@
+"""Field blocks: the head camera sees the white lines of a RoboCup field while the robot stands on it.
+
+The robot stands with both soles on the field; its floor frame (`robot.floor.floor_frames`: origin midway between
+the standing soles, z up) lies on the field at an unknown place: T_field_floor = Trans(x, y, 0) @ Rz(yaw), the
+block's own unknowns `field_pose.x|y|yaw` [m, m, rad] (one place per capture file: `field_pose@k.` with several),
+started from a search around the config's `field.robot_at` (`wolfcal.field.place`). Each detected line point's
+ray meets the floor at a ground point; its residual is the distance of that point from the nearest field line
+(`wolfcal.field.model`, the association redone at every linearisation), divided by the ground length of one pixel
+across that line at that place under the nominal model, so it reads in pixels and far points count as near ones.
+
+What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
+holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
+pairs from the correlations. The field's point symmetry is handled before the fit (`wolfcal.field.place`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.field.model import FieldLines, field_lines, nearest_line, nearest_line_normal
+from wolfcal.field.observations import FieldObservations
+from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
+from wolfcal.fit.floor_block import standing_chain
+from wolfcal.fit.options import FitOptions
+from wolfcal.outliers import OutlierRule
+from wolfcal.projection import BEHIND_CAMERA_PX
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.derivatives import cross
+from wolfcal.robot.floor import camera_in_floor, floor_frame_twists, floor_frames
+from wolfcal.robot.parameters import Parameter, ParameterSet
+from wolfcal.robot.robot import Robot
+
+PLACE_PRIOR_M = 0.3  # how far the robot may stand from `field.robot_at` [m]
+YAW_PRIOR_RAD = 0.2  # [rad] (about 10 deg)
+LINE_BIAS_PX = 0.3  # a line's points in one view share the detector's error across that line (blur, shading) [px]
+VIEW_RULE = OutlierRule(4.0, 3.0)  # a view whose points are off by 4x the median view's and 3 px is left out
+LINE_POINT_RULE = OutlierRule(4.0, 2.0)  # and a single point (a robot's leg, the ball) off by 2 px of a view kept
+
+
+def field_pose_names(n_placements: int) -> list[str]:
+    """The prefix of each placement's unknowns: 'field_pose', or 'field_pose@1', 'field_pose@2', ..."""
+    return ["field_pose"] if n_placements == 1 else [f"field_pose@{k + 1}" for k in range(n_placements)]
+
+
+class FieldBlock(Block):
+    """Line points of the field seen while the robot stood; see the module docstring."""
+
+    name, system, unit, unit_name, dim = "field", "field", "px", "line point", 1
+    outlier_rule, unit_rule = VIEW_RULE, LINE_POINT_RULE
+    # the noise level starts at, and each line's shared detection error in a view is at least, LINE_BIAS_PX
+    noise_min, noise_max, noise_start = 0.05, 20.0, LINE_BIAS_PX
+
+    def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
+                 weighted_at: Corrections | None = None) -> None:  # fmt: skip
+        """`weighted_at`: the model whose pixel scale on the ground weighs the points (default: `fixed`, the
+        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too."""
+        self.robot, self.obs, self.lines, self.fixed = robot, obs, lines, fixed or Corrections()
+        self.tag_ids: list[int] = []
+        self.camera_name = "head"
+        self.q_measured = obs.q_measured
+        self.sample_of_unit = obs.sample_index
+        self.view_of_unit = obs.sample_index  # a view is one image; its points are left out one by one too
+        self.view_labels = [(s, -1) for s in range(obs.n_samples)]
+        self.placement_of_unit = obs.placement[obs.sample_index]
+        self.rays = obs.camera.unproject(obs.uv)  # (M, 3) in the optical frame
+        T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, weighted_at or self.fixed)
+        T_floor_camera = T_floor_camera[obs.sample_index]
+        self.ground_gradient = _ground_gradient(obs.camera, T_floor_camera, obs.uv)
+        self.line_of_unit = _lines_seen(obs, lines, T_floor_camera)
+        names = field_pose_names(len(obs.starts))
+        self.nuisance = ParameterSet([
+            Parameter(f"{name}.{c}", "field", name, i, "m" if i < 2 else "rad",
+                      PLACE_PRIOR_M if i < 2 else YAW_PRIOR_RAD, float(obs.starts[k, i]))
+            for k, name in enumerate(names) for i, c in enumerate(("x", "y", "yaw"))
+        ])  # fmt: skip
+
+    def reweighted(self, chain: ParameterSet, values: np.ndarray) -> FieldBlock:
+        """The same points weighted at a solution (chain values, then this block's own), starting there: the pixel
+        scale on the ground changes steeply with the camera's pitch, so weights taken at a nominal model several
+        degrees off misstate how far each point is off in the image."""
+        local = values[len(chain) :]
+        obs = replace(self.obs, starts=local.reshape(-1, 3))
+        model = chain.corrections(values[: len(chain)]).plus(self.fixed)
+        return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model)
+
+    def shared_labels(self) -> np.ndarray:
+        """(U,) the points of one line in one view share the detector's error across that line (its width, blur
+        and shading are the same along it): one label per (view, line) where the block was weighted."""
+        _, labels = np.unique(np.stack([self.sample_of_unit, self.line_of_unit], axis=1), axis=0,
+                              return_inverse=True)  # fmt: skip
+        return labels.ravel()
+
+    def joint_reading_groups(self) -> np.ndarray:
+        """The standing legs hold one pose in every field sample: their readings' error is shared by all."""
+        return held_joint_groups(self.q_measured, self.sample_of_unit)
+
+    def report(self, fitted: FittedBlock) -> dict:
+        entry = super().report(fitted)
+        names = field_pose_names(len(self.obs.starts))
+        poses = fitted.local_values.reshape(-1, 3)
+        entry["field_poses"] = {
+            name: {"x_m": round(float(x), 5), "y_m": round(float(y), 5), "yaw_rad": round(float(yaw), 6)}
+            for name, (x, y, yaw) in zip(names, poses)
+        }
+        entry["n_line_points"] = len(self.obs.uv)
+        return entry
+
+    def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
+        s, k = self.sample_of_unit, self.placement_of_unit
+        n_joints = self.q_measured.shape[1]
+        c = standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
+        T_root_floor = floor_frames(c.T_root_soles)[s]  # (M, 4, 4)
+        twist = floor_frame_twists(c.T_root_soles, c.twists_soles)[s] - c.twists_camera[s]  # floor against camera
+        R_root_camera, t_root_camera = c.T_root_camera[s, :3, :3], c.T_root_camera[s, :3, 3]
+        d_root = np.einsum("mij,mj->mi", R_root_camera, self.rays)
+        R_floor_root = np.swapaxes(T_root_floor[:, :3, :3], 1, 2)
+        o = np.einsum("mij,mj->mi", R_floor_root, t_root_camera - T_root_floor[:, :3, 3])  # camera in the floor
+        d = np.einsum("mij,mj->mi", R_floor_root, d_root)
+        # the floor moves against the camera by `twist`: the ray moves against the floor by its opposite
+        do = -np.einsum("mij,mcj->mci", R_floor_root, twist[..., :3] + cross(twist[..., 3:], t_root_camera[:, None]))
+        dd = -np.einsum("mij,mcj->mci", R_floor_root, cross(twist[..., 3:], d_root[:, None]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = -o[:, 2] / d[:, 2]  # ray length to the floor
+            g = o[:, :2] + scale[:, None] * d[:, :2]  # (M, 2) ground point in the floor frame [m]
+            dg = (
+                do[..., :2]
+                - (do[..., 2:3] / d[:, None, 2:3]) * d[:, None, :2]
+                + scale[:, None, None] * (dd[..., :2] - dd[..., 2:3] * d[:, None, :2] / d[:, None, 2:3])
+            )
+        x, y, yaw = local_values.reshape(-1, 3)[k].T
+        cos, sin = np.cos(yaw), np.sin(yaw)
+        R = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], axis=1)  # (M, 2, 2) floor -> field
+        turned = np.einsum("mij,mj->mi", R, g)
+        p = turned + np.stack([x, y], axis=1)
+        offset, normal = nearest_line_normal(self.lines, p)
+        on_circle = np.abs(np.linalg.norm(p, axis=1) - self.lines.circle_radius) <= np.abs(offset) + 1e-12
+        A = R @ self.ground_gradient  # (M, 2, 2) d(field point)/d(pixel), held at the nominal model's
+        m = np.einsum("mji,mj->mi", A, normal)  # how far across the line one pixel step moves [m/px]
+        weight = 1.0 / np.maximum(np.linalg.norm(m, axis=1), 1e-9)  # [px/m]
+        residual = (offset * weight)[:, None]
+        grad = weight[:, None] * normal  # d(residual)/d(field point) [px/m]
+        if on_circle.any():  # the circle's normal turns with the point, and the weight with it
+            radius = np.linalg.norm(p[on_circle], axis=1)
+            n = normal[on_circle]
+            Am = np.einsum("mij,mj->mi", A[on_circle], m[on_circle])
+            across = Am - np.einsum("mi,mi->m", n, Am)[:, None] * n
+            grad[on_circle] -= (offset[on_circle] * weight[on_circle] ** 3 / radius)[:, None] * across
+        dp = np.einsum("mij,mcj->mci", R, dg)  # (M, J + P, 2) field-point motion per column
+        d_columns = np.einsum("mi,mci->mc", grad, dp)
+        dp_dyaw = np.stack([-turned[:, 1], turned[:, 0]], axis=1)
+        # the weight turns with the robot too: A = R(yaw) G
+        dA_dyaw = np.stack([np.stack([-sin, -cos], -1), np.stack([cos, -sin], -1)], axis=1) @ self.ground_gradient
+        dm_dyaw = np.einsum("mji,mj->mi", dA_dyaw, normal)
+        dweight_dyaw = -(weight**3) * np.einsum("mi,mi->m", m, dm_dyaw)
+        d_yaw = np.einsum("mi,mi->m", grad, dp_dyaw) + offset * dweight_dyaw
+        jac_local = np.stack([grad[:, 0], grad[:, 1], d_yaw], axis=1)[:, None, :]
+        bad = ~(np.isfinite(residual[:, 0]) & (scale > 0) & np.all(np.isfinite(d_columns), axis=1))
+        residual[bad], d_columns[bad], jac_local[bad] = BEHIND_CAMERA_PX, 0.0, 0.0
+        local_cols = 3 * k[:, None] + np.arange(3)
+        return Linearization(residual=residual, jac_chain=d_columns[:, None, n_joints:], jac_local=jac_local,
+                             local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
+
+
+def _lines_seen(obs: FieldObservations, lines: FieldLines, T_floor_camera: np.ndarray) -> np.ndarray:
+    """(M,) the nearest line (`nearest_line`) of each point seen from cameras T_floor_camera (M, 4, 4) of a robot
+    standing at its placement's start."""
+    rays = np.einsum("mij,mj->mi", T_floor_camera[:, :3, :3], obs.camera.unproject(obs.uv))
+    origin = T_floor_camera[:, :3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = origin[:, :2] - (origin[:, 2] / rays[:, 2])[:, None] * rays[:, :2]
+    x, y, yaw = obs.starts[obs.placement[obs.sample_index]].T
+    field = np.stack(
+        [x + np.cos(yaw) * g[:, 0] - np.sin(yaw) * g[:, 1], y + np.sin(yaw) * g[:, 0] + np.cos(yaw) * g[:, 1]], axis=1
+    )
+    return nearest_line(lines, np.nan_to_num(field))
+
+
+def _ground_gradient(camera: CameraModel, T_floor_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(M, 2, 2) d(ground point in the floor frame [m]) / d(pixel) at each line point (M, 2) seen from cameras
+    T_floor_camera (M, 4, 4): one-pixel steps along u and v; NaN where a ray misses the floor."""
+
+    def ground(points: np.ndarray) -> np.ndarray:
+        rays = np.einsum("mij,mj->mi", T_floor_camera[:, :3, :3], camera.unproject(points))
+        origin = T_floor_camera[:, :3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(rays[:, 2] < 0, -origin[:, 2] / rays[:, 2], np.nan)
+        return origin[:, :2] + s[:, None] * rays[:, :2]
+
+    here = ground(uv)
+    return np.stack([ground(uv + [1.0, 0.0]) - here, ground(uv + [0.0, 1.0]) - here], axis=2)
+
+
+def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
+                 say: Callable[[str], None] | None) -> tuple[list[Block], list[Path]]:  # fmt: skip
+    """The fit builder of the field system (`wolfcal.fit.systems`): with `--system field` every capture is a field
+    capture. Its block is solved once and weighted again at that solution (`FieldBlock.reweighted`)."""
+    if options.system != "field":
+        return [], []
+    from wolfcal.field.observe import field_observations
+    from wolfcal.fit.pipeline import fit_observations
+
+    tell = say or (lambda _: None)
+    obs = field_observations(robot, list(captures), tell)
+    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions))
+    first = fit_observations(robot, {}, options, own_blocks=[block])
+    tell("weighting the line points at the first solution ...")
+    return [block.reweighted(first.chain, first.solution.values)], list(captures)
