@@ -1,4 +1,4 @@
-"""The floor block on synthetic corners (no images), the setting of `tests/test_floor_fit.py`: true ground error at
+"""The floor block on synthetic corners (no images), the setting of `tests/fit/test_floor_fit.py`: true ground error at
 4.5 m (worst of the bearings -30, 0, +30 deg) before, after a fit on feet samples only, and after one on feet + floor
 samples.
 

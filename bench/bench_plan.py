@@ -9,7 +9,7 @@ while the robot stands, offsets on the head; the tags laid within 5 cm and 0.3 r
 Per seed: a random truth; 12 planned poses (2000 candidates, `--criterion`, default the plan's) against 30 and 12
 random valid candidates. Observations are tag corners projected at the true kinematics with 0.15 px Gaussian
 noise (marker positions for `mocap`) and quantised encoder readings (no rendering; `wolfcal simulate --poses`
-renders a plan, see tests/test_plan.py), fitted by `fit_observations`.
+renders a plan, see tests/plan/test_plan.py), fitted by `fit_observations`.
 Reported, median over the seeds:
 - true error: sole position max over 500 random leg poses (leg presets), or camera position and rotation max over
   the head range; raw, and with the estimate's error along the directions its data do not inform removed

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 import yourdfpy
 from mcap_ros2.writer import Writer as Ros2Writer
-from test_mocap_io import JOINT_STATE_DEF, MARKERS_DEF, T0, write_c3d
+from mocap_recordings import JOINT_STATE_DEF, MARKERS_DEF, T0, write_c3d
 
 from wolfcal.config import load_robot_config
 

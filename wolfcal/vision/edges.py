@@ -6,7 +6,7 @@ edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola
 corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected. All
 8 edges of a tag are sampled with one `cv2.remap` and fitted with batched normal equations (no per-edge
 Python loop; with every profile on its own and two iterations it gives the corners of the per-edge loop it
-replaced to ~1e-6 px, tests/test_edges.py compares the two). A call costs ~0.5-1 ms per iteration whatever the
+replaced to ~1e-6 px, tests/vision/test_edge_refinement.py compares the two). A call costs ~0.5-1 ms per iteration whatever the
 number of tags (numpy's per-operation cost), so `refine_tags` takes the tags of several images at once. The
 edges of large cells have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled
 after one iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows,

@@ -1,0 +1,142 @@
+"""The field system: the head camera's mount and the robot's place on the field from the white lines alone, against
+simulated truth; the block's derivatives; the field config; bad field captures."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.config import load_robot_config
+from wolfcal.errors import WolfcalError
+from wolfcal.field.model import KIDSIZE, field_lines
+from wolfcal.fit.derivative_check import assert_block_derivatives
+from wolfcal.fit.field_block import FieldBlock
+from wolfcal.fit.options import FitOptions
+from wolfcal.fit.pipeline import fit_observations
+from wolfcal.geometry import exp_so3, log_so3
+from wolfcal.io.writer import CaptureWriter
+from wolfcal.robot.parameters import build_parameter_set
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.field import synthetic_field
+from wolfcal.sim.truth import TruthSpec, random_truth
+
+ROOT = Path(__file__).resolve().parents[2]
+WOLFGANG = ROOT / "configs" / "wolfgang"
+CAMERA = load_camera_info(WOLFGANG / "basler_acA2040.yaml").binned(4)
+DIMENSIONS = {name: getattr(KIDSIZE, name) for name in KIDSIZE.__dataclass_fields__}
+
+
+def field_robot(folder: Path, **field) -> Path:
+    """The Wolfgang config with a KidSize field (or `field` given), written to folder/robot.yaml."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str(WOLFGANG / data["urdf"])
+    data["camera"]["intrinsics"] = str(WOLFGANG / data["camera"]["intrinsics"])
+    data.pop("external_cameras", None)
+    data["field"] = field or {"dimensions": DIMENSIONS, "robot_at": {"x": -3.0, "y": 0.0, "yaw": 0.0}}
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return folder / "robot.yaml"
+
+
+def test_the_block_derivatives_match_central_differences(tmp_path):
+    robot = load_robot(field_robot(tmp_path))
+    rng = np.random.default_rng(1)
+    truth = random_truth(robot, TruthSpec(), rng)
+    pose = np.array([-3.1, 0.15, 0.05])
+    obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 3, rng)
+    block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    for preset in ("camera", "leg"):  # the camera's mount; the head and camera chain with the standing legs
+        chain = build_parameter_set(robot, preset, {"head": []})
+        values = np.array([truth.frames[robot.camera_joint][i] if p.kind == "frame" else 0.0
+                           for i, p in zip([p.component for p in chain.parameters], chain.parameters)])  # fmt: skip
+        assert_block_derivatives(block, chain, values, pose, rtol=1e-4)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_the_camera_and_the_place_come_out_of_line_points(tmp_path, seed):
+    """Exact line points with 0.3 px noise, 12 views from a robot up to 0.3 m and 10 deg from where it was meant to
+    stand, the camera several degrees off: rotation within 0.05 deg, place within 5 cm and 0.5 deg, every estimate
+    within 3 reported std."""
+    robot = load_robot(field_robot(tmp_path))
+    rng = np.random.default_rng(seed)
+    truth = random_truth(robot, TruthSpec(), rng)
+    pose = np.array([-3.0, 0.0, 0.0]) + rng.uniform([-0.3, -0.3, -0.17], [0.3, 0.3, 0.17])
+    obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 12, rng)
+    options = FitOptions(free="camera", system="field")
+    block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    first = fit_observations(robot, {}, options, own_blocks=[block])
+    fit = fit_observations(robot, {}, options, own_blocks=[block.reweighted(first.chain, first.solution.values)])
+    estimate = dict(zip(fit.params.names, fit.solution.values))
+    std = dict(zip(fit.params.names, fit.solution.std))
+    true_camera = truth.frames[robot.camera_joint]
+    rotation = np.array([estimate[f"camera.{c}"] for c in ("rx", "ry", "rz")])
+    assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.05
+    assert np.hypot(estimate["field_pose.x"] - pose[0], estimate["field_pose.y"] - pose[1]) < 0.05
+    assert abs(np.rad2deg(estimate["field_pose.yaw"] - pose[2])) < 0.5
+    truths = dict(zip([f"camera.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")], true_camera))
+    truths.update({"field_pose.x": pose[0], "field_pose.y": pose[1], "field_pose.yaw": pose[2]})
+    z = {name: (estimate[name] - value) / std[name] for name, value in truths.items()}
+    assert max(abs(v) for v in z.values()) < 3.0, z
+
+
+def test_the_field_config_is_read_and_checked(tmp_path):
+    config = load_robot_config(field_robot(tmp_path))
+    assert config.field_config().dimensions == KIDSIZE and config.field_config().robot_at == (-3.0, 0.0, 0.0)
+    bad = field_robot(tmp_path, dimensions={**DIMENSIONS, "penalty_area_width": 7.0},
+                      robot_at={"x": -3.0, "y": 0.0, "yaw": 0.0})  # fmt: skip
+    with pytest.raises(WolfcalError, match="'field.dimensions'.*penalty area must be narrower than the field"):
+        load_robot_config(bad)
+    with pytest.raises(WolfcalError, match="field.robot_at.*missing key"):
+        load_robot_config(field_robot(tmp_path, dimensions=DIMENSIONS, robot_at={"x": 1.0}))
+
+
+def write_capture(path: Path, robot_path: Path, image: np.ndarray, n: int = 3) -> None:
+    """A capture of n standing samples, each with this head image (binned 4x)."""
+    robot = load_robot(robot_path)
+    full = load_camera_info(WOLFGANG / "basler_acA2040.yaml")
+    q = np.zeros(len(robot.joint_names))
+    with CaptureWriter(path, robot.config, {"head": (full, (4, 4))}) as writer:
+        for i in range(n):
+            writer.add_sample(10**18 + i * 10**9, robot.joint_names, q, None, {"head": image})
+
+
+def fit_command(capture: Path, robot: Path, out: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "wolfcal.cli", "fit", str(capture), "--robot", str(robot),
+                           "--system", "field", "--free", "camera", "--out", str(out)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=600)  # fmt: skip
+
+
+def test_views_without_lines_and_grey_views_are_refused(tmp_path):
+    robot = field_robot(tmp_path)
+    sky = np.zeros((384, 512, 3), np.uint8)
+    sky[:] = (230, 200, 160)  # a view of the hall's ceiling: no turf, no lines
+    write_capture(tmp_path / "sky.mcap", robot, sky)
+    result = fit_command(tmp_path / "sky.mcap", robot, tmp_path / "fit")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "sky.mcap: only 0 field-line points in 3 views" in result.stderr + result.stdout
+    write_capture(tmp_path / "grey.mcap", robot, np.full((384, 512), 90, np.uint8))
+    result = fit_command(tmp_path / "grey.mcap", robot, tmp_path / "fit")
+    assert result.returncode == 2 and "is grey; field lines are told from the turf by colour" in result.stderr
+    assert not (tmp_path / "fit").exists()
+
+
+@pytest.mark.slow
+def test_a_rendered_field_capture_calibrates_the_camera(tmp_path):
+    """`simulate --system field` then `fit --system field`: rendered 512x384 colour views with clutter."""
+    robot = field_robot(tmp_path)
+    capture = tmp_path / "field.mcap"
+    subprocess.run([sys.executable, "-m", "wolfcal.cli", "simulate", "--robot", str(robot), "--system", "field",
+                    "--samples", "10", "--binning", "4", "--seed", "5", "--out", str(capture)],
+                   cwd=ROOT, check=True, capture_output=True, timeout=600)  # fmt: skip
+    result = fit_command(capture, robot, tmp_path / "fit")
+    assert result.returncode == 0, result.stderr
+    truth = yaml.safe_load((tmp_path / "field.truth.yaml").read_text())
+    params = {p["name"]: p for p in yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())["parameters"]}
+    true_camera = np.array(truth["truth"]["frames"][load_robot(robot).camera_joint])
+    rotation = np.array([params[f"camera.{c}"]["value"] for c in ("rx", "ry", "rz")])
+    assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.1
+    pose = truth["field_pose"]
+    assert np.hypot(params["field_pose.x"]["value"] - pose["x"], params["field_pose.y"]["value"] - pose["y"]) < 0.05
