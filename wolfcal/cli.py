@@ -9,9 +9,11 @@ from pathlib import Path
 
 import typer
 
-import wolfcal.blas_threads  # noqa: F401  (first of wolfcal's: one BLAS thread, set before numpy loads)
+from wolfcal.blas_threads import one_blas_thread
 from wolfcal.config import default_robot
 from wolfcal.errors import WolfcalError
+
+one_blas_thread()  # the command line process: see wolfcal.blas_threads
 
 app = typer.Typer(
     help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.",

@@ -42,22 +42,14 @@ from wolfcal.io.cdr import camera_info_key, compressed_image, image_of, joint_st
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import (
-    channel_decoder,
-    check_mcap,
-    is_finished,
-    iter_message_heads,
-    message_count,
-    recover_hint,
-    torn_error,
-)
+from wolfcal.io.mcapfile import channel_decoder, check_mcap, is_finished, message_count, recover_hint, torn_error
+from wolfcal.io.message_heads import iter_message_heads
 from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
-from wolfcal.memory import buffers_from_heap, in_own_arena
 
 
 def read_captures(
@@ -85,7 +77,6 @@ def read_capture(
     check_mcap(path)
     if not is_finished(path):
         raise torn_error(path)
-    buffers_from_heap()  # the file's chunks and image messages: not mapped afresh each (`wolfcal.memory`)
     try:
         with path.open("rb") as handle:
             return _read(path, handle, robot_config, intrinsics, progress)
@@ -202,7 +193,7 @@ def _pass_one(
     names_seen: dict[bytes, list[str]] = {}  # a JointState's name list by its bytes (`joint_state`)
     # with the checks remembered, of a png only its header is read from the file (`_png_head`)
     messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
-    for count, (schema, channel, message, complete, _) in enumerate(messages):
+    for count, (schema, channel, message, complete) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
@@ -291,13 +282,12 @@ def _read(
     taken_ns = time.time_ns()
     known = _Checks.remembered(path) if caching() else None
     for checks in (known, None) if known is not None else (None,):
-        # on a thread of its own: the pass's message buffers do not spread the heap the samples live in (`in_own_arena`)
         one_pass = partial(_pass_one, path, reader, config, found.cameras, info_cameras, progress, handle=handle,
                            known=checks)  # fmt: skip
         try:
-            read = in_own_arena(partial(one_pass, DISORDER_NS))
+            read = one_pass(DISORDER_NS)
         except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-            read = in_own_arena(partial(one_pass, None))
+            read = one_pass(None)
         if checks is None or read.checks.images == checks.images:
             break
         known = None  # the memo counted other images: not the file it was taken of; checked again

@@ -25,10 +25,9 @@ multiprocessing, a script that uses it must guard its top level with `if __name_
 from __future__ import annotations
 
 import os
-import threading
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sized
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
 from typing import TYPE_CHECKING, Any
@@ -36,7 +35,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.memory import buffers_from_heap, release_thread_heap
 
 if TYPE_CHECKING:
     from wolfcal.vision.tags import PendingTags
@@ -204,7 +202,6 @@ def _found_on_workers(
     if not head:
         return
     batch = batch or task_size(head[0], processes)
-    buffers_from_heap()  # image buffers: not mapped afresh each (`wolfcal.memory`)
     depth = 2 * workers  # tasks under way
     stream = chain(head, source)
     if workers == 1 or (total if total is not None else len(head)) <= IN_PROCESS:
@@ -221,8 +218,6 @@ def _found_on_workers(
                 yield from pending.popleft().result()
         while pending:
             yield from pending.popleft().result()
-        if not processes:
-            _release_worker_heaps(pool, workers)
     except BrokenProcessPool:
         shutdown_pool()
         raise WolfcalError(
@@ -238,23 +233,6 @@ def _found_on_workers(
             import cv2
 
             cv2.setNumThreads(opencv_threads)
-
-
-def _release_worker_heaps(pool: Executor, workers: int) -> None:
-    """Each detection thread hands back its heap's free top (`release_thread_heap`: the decoded images' room, kept
-    by glibc for the next ones): one task per thread, each held at a barrier until all run, so that no thread takes
-    two."""
-    barrier = threading.Barrier(workers)
-
-    def release() -> None:
-        try:
-            barrier.wait(timeout=60.0)
-        except threading.BrokenBarrierError:  # a thread did not come: the others release their own all the same
-            pass
-        release_thread_heap()
-
-    for task in [pool.submit(release) for _ in range(workers)]:
-        task.result()
 
 
 def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:
