@@ -229,7 +229,7 @@ class Problem:
         factor R (J = Q R, (P, P)), updated chunk by chunk, else None. With `curvature`, the first is instead the
         Huber loss's own second derivative (the whitened rows' J^T J over the rows within huber_k: the loss is
         linear beyond), what a Newton step needs: J^T J of the square-root residuals counts a far row as if its
-        loss curved, and steps along such rows then fall short by up to 10x, converging by a few percent per step."""
+        loss curved, and steps along such rows then fall far short, converging by a few percent per step."""
         n = len(self.params)
         H, g, R = np.zeros((n, n)), np.zeros(n), np.zeros((0, n)) if triangular and n <= DENSE_LIMIT else None
         for state, lin in zip(self.states, self.evaluate(z)):

@@ -4,7 +4,7 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 (`image_topic` / `info_topic`); a file may hold any of them (at least one), see `capture_topics`. A capture file
 (written by `CaptureWriter`) holds one JointState per sample, with the stamp of the sample's images: every image is
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
-kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
+kept only when the robot was still, and kept frames of different cameras within 0.02 s of each other form one sample
 (see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
 camera only). One pass: frames are paired with the joint states as they are read (`wolfcal.io.pairing`: a window
 of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
@@ -297,7 +297,7 @@ def _read(
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,
                                 pairing.bad_joints)  # fmt: skip
-    del reader  # its index of the file's chunks (~0.7 kB a chunk)
+    del reader  # its index of the file's chunks
     frames: list[_Frame] = []
     for name in found.cameras:
         frames += _keep_frames(path, config, name, read, intrinsics, skipped)

@@ -3,7 +3,7 @@
 Where: `$WOLFCAL_CACHE_DIR`, else `$XDG_CACHE_HOME/wolfcal/detections`, else `~/.cache/wolfcal/detections`.
 Not beside the capture: capture folders are often read-only (a USB stick, a shared data set, the repository's
 demo captures) and travel with the data; an entry keyed by content stays valid wherever the file is copied.
-Entries are small (corners only: ~0.3 kB per image); delete the folder at any time.
+Entries are small (corners only); delete the folder at any time.
 
 Key: one entry per (capture file, camera), named by the XXH3-128 hash of the file's whole content (size and mtime
 are not enough: an edited or re-recorded file can keep both), the camera name, and the detector settings
