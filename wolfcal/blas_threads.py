@@ -1,9 +1,9 @@
 """One BLAS thread for the command line process (`one_blas_thread`, which `wolfcal.cli` calls when it loads).
 
-The fit's matrices are tall and thin (thousands of rows, tens of columns): BLAS threads gain nothing on them and
-only contend with each other and with other busy processes. Parallel work (tag detection) runs on threads of its
-own. A user's own setting (any of BLAS_VARIABLES in the environment) is kept. threadpoolctl limits the BLAS
-libraries loaded when it is called: numpy's, which this module loads first.
+The fit's matrices are tall and thin (thousands of rows, tens of columns): BLAS threads gain nothing on them
+and only contend with each other and with other busy processes. Parallel work (tag detection) runs on threads
+of its own. A user's own setting (any of BLAS_VARIABLES in the environment) is kept. threadpoolctl limits the
+BLAS libraries loaded when it is called: numpy's, which this module loads first.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
 """Reading only the first bytes of large messages of an MCAP file: the one fast path beside mcap's own reader.
 
 A fit from cached detections needs of each image message only its stamp and, for a png, its size: reading the
-images' bytes of a multi-GB recording (as `McapReader.iter_messages` does, chunk by chunk) would make a cached fit
-wait for the disk. `iter_message_heads` gives the messages `iter_messages` gives, in its order, but of an image in
-an uncompressed chunk reads only its head. It parses the chunk records of the MCAP specification itself, so it is
-checked against mcap's reader (`tests/test_message_heads.py`); `WOLFCAL_MESSAGE_HEADS=0` in the environment (or
-`ENABLED = False`) turns it off, and then every message is read whole by mcap's reader.
+images' bytes of a multi-GB recording (as `McapReader.iter_messages` does, chunk by chunk) would make a cached
+fit wait for the disk. `iter_message_heads` gives the messages `iter_messages` gives, in its order, but of an
+image in an uncompressed chunk reads only its head. It parses the chunk records of the MCAP specification
+itself, so it is checked against mcap's reader (`tests/test_message_heads.py`); `WOLFCAL_MESSAGE_HEADS=0` in
+the environment (or `ENABLED = False`) turns it off, and then every message is read whole by mcap's reader.
 """
 
 from __future__ import annotations
@@ -41,11 +41,12 @@ def iter_message_heads(
     head_bytes: int,
     enough: Callable[[Schema | None, bytes], bool],
 ) -> Iterator[Head]:
-    """`reader.iter_messages(topics)`: the same messages in the same order (log time, then place in the file), but
-    of a message on one of the `heads` topics in an uncompressed chunk only the first `head_bytes` of its data are
-    read when `enough(schema, those bytes)` says so (e.g. an image whose header is all a reader needs): its other
-    bytes are skipped, not read from the file. Files without a chunk index or with compressed chunks, and every
-    file while `ENABLED` is False, are read whole (`iter_messages`). `handle`: the file `reader` reads."""
+    """`reader.iter_messages(topics)`: the same messages in the same order (log time, then place in the file),
+    but of a message on one of the `heads` topics in an uncompressed chunk only the first `head_bytes` of its
+    data are read when `enough(schema, those bytes)` says so (e.g. an image whose header is all a reader
+    needs): its other bytes are skipped, not read from the file. Files without a chunk index or with
+    compressed chunks, and every file while `ENABLED` is False, are read whole (`iter_messages`). `handle`:
+    the file `reader` reads."""
     summary = reader.get_summary()
     wanted = {c.id for c in summary.channels.values() if c.topic in topics} if summary else set()
     chunks = [c for c in summary.chunk_indexes if wanted & c.message_index_offsets.keys()] if summary else []
@@ -53,10 +54,11 @@ def iter_message_heads(
         for schema, channel, message in reader.iter_messages(topics=topics):
             yield Head(schema, channel, message, True)
         return
-    # the order of `iter_messages`: by log time, then chunk offset, then place in the chunk; a chunk is read when
-    # its first log time comes up
-    queue: list[tuple[int, int, int, Head | ChunkIndex]] = [(c.message_start_time, c.chunk_start_offset, -1, c)
-                                                            for c in chunks]  # fmt: skip
+    # the order of `iter_messages`: by log time, then chunk offset, then place in the chunk; a chunk is read
+    # when its first log time comes up
+    queue: list[tuple[int, int, int, Head | ChunkIndex]] = [
+        (c.message_start_time, c.chunk_start_offset, -1, c) for c in chunks
+    ]
     heapq.heapify(queue)
     while queue:
         _, _, _, item = heapq.heappop(queue)
@@ -81,8 +83,8 @@ def _chunk_heads(
     head_bytes: int,
     enough: Callable[[Schema | None, bytes], bool],
 ) -> Iterator[tuple[int, Head]]:
-    """(index of the record in the chunk, message) of the wanted messages of one uncompressed chunk, read record by
-    record (see `iter_message_heads`)."""
+    """(index of the record in the chunk, message) of the wanted messages of one uncompressed chunk, read
+    record by record (see `iter_message_heads`)."""
     handle.seek(chunk.chunk_start_offset + 1 + 8 + _CHUNK_FIXED.size)
     (length,) = struct.unpack("<I", _exactly(handle, 4))
     handle.seek(length, io.SEEK_CUR)  # the compression's name ('')
@@ -93,7 +95,9 @@ def _chunk_heads(
         opcode, length = struct.unpack("<BQ", _exactly(handle, 9))
         position += 9 + length
         if opcode == _OPCODE_MESSAGE:
-            channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(_exactly(handle, _MESSAGE_FIXED.size))
+            channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(
+                _exactly(handle, _MESSAGE_FIXED.size)
+            )
             size = length - _MESSAGE_FIXED.size
             if channel_id in wanted:
                 channel = summary.channels[channel_id]
