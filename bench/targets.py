@@ -68,6 +68,7 @@ def fit_speed(trees: dict[str, Path], rounds: int, say) -> dict:
                 **floor,
                 **fit,
                 "cached_process_wall": process.wall,
+                "cached_process_cpu": process.cpu,
                 "cached_process_peak_mb": process.peak_mb,
                 "first_over_floor_wall": fit["first_wall"] / floor["floor_wall"],
                 "first_over_floor_cpu": fit["first_cpu"] / floor["floor_cpu"],

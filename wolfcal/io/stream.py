@@ -1,9 +1,9 @@
 """Encoded images read back from MCAP files by location, as a stream.
 
 The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
-back when they are needed (detection, a figure): one pass over the part of the file they span, each image's
-bytes handed on and then dropped, so a long recording's images never sit in memory together.
-"""
+back when they are needed (detection, a figure) with mcap's reader: passes over the part of the file they
+span, each image's bytes handed on and then dropped, so a long recording's images never sit in memory
+together. """
 
 from __future__ import annotations
 
@@ -35,11 +35,11 @@ WINDOW = 256  # images looked up per pass over the part of the file they span
 def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
     """The encoded bytes of the image at each location, in the order given.
 
-    Consecutive locations in one file are read in passes over the time span of up to `WINDOW` of them, in the
-    file's order (what a pass keeps of its images and of the file's chunks grows with the images it looks up, not
-    with the recording); an image that comes before its turn waits in memory until then (none waits when the order
-    given is the file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the
-    file changed since it was read)."""
+    Consecutive locations in one file are read in passes of `McapReader.iter_messages` over the time span of
+    up to `WINDOW` of them, in the file's order (a pass holds the chunks it is reading and the images waiting
+    for their turn, not the recording); an image that comes before its turn waits in memory until then (none
+    waits when the order given is the file's, e.g. samples in stamp order). WolfcalError naming the file when
+    an image is not found (the file changed since it was read)."""
     for path, run in groupby(locations, key=lambda location: location.path):
         yield from _stream_file(path, run)
 
@@ -62,8 +62,8 @@ def _stream_window(
     decoders: dict[int, Callable],
     wanted: list[ImageLocation],
 ) -> Iterator[bytes]:
-    """The images at `wanted` (one file), in that order, from one pass of mcap's reader over the time span they
-    cover."""
+    """The images at `wanted` (one file), in that order, from one pass of mcap's reader over the time span
+    they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
