@@ -12,7 +12,7 @@ another order (2 orders, corner rows shuffled too), when 1e-7 px is added to eve
 when the solver's rounds stop elsewhere (ROUND_STD_TOL 0.03 and ROUND_COST_TOL 1e-4, or 0.3 and 1e-2); with the
 solve's CPU time and linearisations. Cases: the shipped demo captures (`wolfcal demo`'s two fits, the external
 camera demo), synthetic corners (head camera 25/100/400 samples with outliers, external camera 30/120), a motion-capture
-session (tests/mocap_session.py), bench_table's cached captures when present (24, 40, 400 samples) and, with
+session (tests/mocap_session.py), the harness's 24-sample camera capture when present and, with
 --floor-dir (a `bench_floor.py --keep` folder), its feet + floor fits.
 """
 
@@ -46,7 +46,7 @@ from wolfcal.vision.observe import detect_observations  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "wolfgang"
-BENCH_TABLE = Path(tempfile.gettempdir()) / "wolfcal_bench_table"
+BENCH_DATA = Path(tempfile.gettempdir()) / "wolfcal_bench"
 TRIPOD = CameraModel(1920, 1080, np.array([[1400.0, 0, 959.5], [0, 1400.0, 539.5], [0, 0, 1]]), np.zeros(5))
 
 
@@ -124,10 +124,8 @@ def cases(floor_dir: Path | None) -> dict[str, Case]:
         "synthetic 400": synthetic(400, 0.15, 0.05), "external 30": synthetic(30, 0.15, None),
         "external 120": synthetic(120, 0.4, None), "mocap": mocap_session,
     }  # fmt: skip
-    for name, free in (("sim_24_b1_none_s1", {"free": "camera"}), ("sim_40_b1_all_s2", {"free": "leg", "side": "both"}),
-                       ("sim_400_b4_all_s400", {"free": "leg", "side": "both"})):
-        if (BENCH_TABLE / f"{name}.mcap").is_file():
-            out[f"bench {name.split('_')[1]}"] = from_captures(CONFIG, [BENCH_TABLE / f"{name}.mcap"], **free)
+    if (BENCH_DATA / "camera_24.mcap").is_file():  # the harness's camera capture (bench/run.py --parts fit)
+        out["bench 24"] = from_captures(CONFIG, [BENCH_DATA / "camera_24.mcap"], free="camera")
     for folder in sorted(floor_dir.glob("*_tags*")) if floor_dir else []:
         free = {"free": folder.name.split("_")[0], "side": "both"}
         out[f"floor {folder.name}"] = from_captures(folder / "robot_standing.yaml",

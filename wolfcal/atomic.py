@@ -1,9 +1,9 @@
 """Atomic file output: write to a temporary file in the target folder, fsync, rename over the target.
 
 Scratch files (`atomic_output(path, scratch=True)`: cache entries, which only save time) are renamed without
-fsync and at once, never staged in an output set: an fsync of the file and its folder waits for the disk (10-400 ms
-each on a shared machine, more than the rest of a cached fit), and a crash may then leave a scratch file empty or
-torn, which its reader must detect and ignore (`wolfcal.vision.cache` checks every entry whole and keyed).
+fsync and at once, never staged in an output set: an fsync of the file and its folder waits for the disk, often
+longer than the rest of a cached fit, and a crash may then leave a scratch file empty or torn, which its reader
+must detect and ignore (`wolfcal.vision.cache` checks every entry whole and keyed).
 
 `output_set()` makes the outputs of one command a set: inside it, every atomic write (and `replace_file`,
 `remove_output`) is staged as a temporary file beside its target, and nothing replaces or removes a target

@@ -9,13 +9,15 @@ from pathlib import Path
 
 import typer
 
-import wolfcal.blas_threads  # noqa: F401  (first of wolfcal's: one BLAS thread, set before numpy loads)
 import wolfcal.opencv_quiet  # noqa: F401  (OpenCV's own log lines off, set before OpenCV loads)
 from wolfcal import __version__
+from wolfcal.blas_threads import one_blas_thread
 from wolfcal.config import default_robot
 from wolfcal.errors import DeployRefused, WolfcalError
 from wolfcal.fit.systems import selectable_systems, system_presets  # the registry: plain data
 from wolfcal.robot.presets import DEFAULT_PRESET
+
+one_blas_thread()  # the command line process: see wolfcal.blas_threads
 
 app = typer.Typer(
     help="Kinematic calibration of humanoid robots: camera intrinsics, pose capture, fitting, evaluation.\n\n"

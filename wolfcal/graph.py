@@ -1,6 +1,7 @@
 """Connected components of an undirected graph given by its edges, in numpy (the fit's noise groups: samples of
 one still pose, readings linked by a shared detection error). scipy.sparse.csgraph does the same but loads
-scipy.sparse.linalg and scipy.linalg with it, about a sixth of `wolfcal fit`'s import time."""
+scipy.sparse, scipy.sparse.linalg and scipy.linalg with it, which a dense fit otherwise never imports (the
+import would cost a fit from cached detections about as much as the rest of it; see `wolfcal.fit.columns`)."""
 
 from __future__ import annotations
 

@@ -80,7 +80,7 @@ def pixel_jacobian(camera: CameraModel, p_camera: np.ndarray) -> np.ndarray:
 def tag_pose_from_pixels(camera: CameraModel, uv: np.ndarray, size: float) -> np.ndarray | None:
     """T_camera_tag (4, 4) measured from the four detected corners (4, 2) [px] of one tag of edge `size` [m] alone
     (cv2.solvePnP, SOLVEPNP_IPPE_SQUARE, on undistorted normalised points), or None when PnP fails."""
-    import cv2  # here, not at the top: a fit from cached detections never loads OpenCV (45 ms of CPU, 20 MB)
+    import cv2  # here, not at the top: a fit from cached detections does not load OpenCV
 
     xy = camera.undistort_normalized(camera.pixels_to_normalized(uv))
     ok, rvec, tvec = cv2.solvePnP(tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None,

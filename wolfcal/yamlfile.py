@@ -1,8 +1,8 @@
 """YAML in and out: input files with errors that name the file and say what to do; output with the C emitter.
 
 PyYAML's C bindings (libyaml: `CSafeLoader`, `CSafeDumper`) are used where PyYAML was built with them, the
-pure-Python ones otherwise; same safe subset, same output. The C emitter writes a large file like an
-intrinsics report's detections.yaml about 10x faster (bench/bench_detection.py). `dump_yaml_pieces` gives the same
+pure-Python ones otherwise; same safe subset, same output, and the C emitter writes a large file like an
+intrinsics report's detections.yaml many times faster. `dump_yaml_pieces` gives the same
 text in small pieces (a long fit's result.yaml without the whole document's node tree in memory).
 """
 

@@ -307,27 +307,19 @@ def test_per_view_statistics_and_noise_level_are_those_of_the_dense_whitening(ro
     monkeypatch.setattr(solver, "GroupedWhitening", DenseWhitening)
     np.testing.assert_allclose(solver.view_rms(state, lin), thin_rms, rtol=1e-9)
     assert np.array_equal(solver.flag_outliers(state, lin), flagged)
-    state.rebuild(lin)  # the solve released its noise model's joint sensitivities (`release_sensitivities`)
     state.whitening = DenseWhitening(state.noise_model.group_of_row, state.noise_model.shared, state.row_scale)
     dense_scale = [solver.residual_scale(state, lin.residual, sigma, 10.0) for sigma in (0.05, 0.2, 1.0)]
     np.testing.assert_allclose(thin_scale, dense_scale, rtol=1e-9)
 
 
-def test_a_solved_noise_model_holds_no_joint_sensitivities_and_asks_for_a_rebuild(robot, camera):
-    """After the solve each block's noise model keeps its factors but not the (R, J) joint sensitivities it was
-    decomposed from (memory); setting a level that needs the groups decomposed again (the repeating detection
-    error's size follows the level) is an error until `rebuild`, which gives the solve's own model back."""
+def test_a_level_set_after_the_solve_decomposes_the_groups_again(robot, camera):
+    """After the solve, setting a level that needs the groups decomposed again (the repeating detection error's
+    size follows the level) rebuilds the factors at that size; setting the solve's level back gives its model."""
     fit = fit_observations(robot, repeated_frames(robot, camera, 4), FitOptions(free="leg", side="both"))
     state = fit.problem.states[0]
-    assert state.released and state.noise_model.shared.A.shape == (state.noise_model.n_rows, 0)
     assert np.any(state.noise_model.shared.label >= 0)  # a repeating detection error: its size follows the level
-    s2 = state.noise_model.s2.copy()
-    with pytest.raises(RuntimeError, match="rebuild first"):
-        state.set_sigma(4.0 * state.sigma)
-    assert state.sigma == fit.solution.blocks[0].sigma  # left as it was
-    params = fit.problem.params
-    state.rebuild(fit.problem.evaluate((fit.solution.values - params.references) / params.prior_sigmas)[0])
-    assert not state.released and state.noise_model.shared.A.shape[1] > 0
-    np.testing.assert_allclose(state.noise_model.s2, s2, rtol=1e-9)
-    state.set_sigma(4.0 * state.sigma)
+    sigma, s2 = state.sigma, state.noise_model.s2.copy()
+    assert state.set_sigma(4.0 * sigma)
     assert state.noise_model.shared.tau == pytest.approx(state.sigma)
+    assert state.set_sigma(sigma)
+    np.testing.assert_allclose(state.noise_model.s2, s2, rtol=1e-9)

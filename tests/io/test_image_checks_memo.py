@@ -149,37 +149,3 @@ def test_compressed_image_layout_reads_as_the_ros_decoder(frame_id, image_format
         assert bytes(image) == bytes(decoded.data) == payload
         assert compressed_image(data[:-1], SimpleNamespace(name=COMPRESSED_IMAGE), 7) is None
         assert compressed_image(data, SimpleNamespace(name="sensor_msgs/msg/Image"), 7) is None
-
-
-@pytest.mark.parametrize("compression", ["none", "zstd"])
-def test_message_heads_come_as_iter_messages_gives_them(tmp_path, compression):
-    """`iter_message_heads`: the messages of `iter_messages` in its order (log times out of order across and within
-    chunks, equal log times), of the head topics only the first bytes when they are enough; compressed chunks whole."""
-    import random
-
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
-
-    from wolfcal.io.mcapfile import iter_message_heads
-
-    path = tmp_path / "mixed.mcap"
-    rng = random.Random(3)
-    with path.open("wb") as handle:
-        writer = Writer(handle, chunk_size=3000, compression=CompressionType[compression.upper()])
-        writer.start()
-        schema = writer.register_schema("s", "raw", b"")
-        big, small, other = (writer.register_channel(t, "raw", schema) for t in ("/big", "/small", "/other"))
-        for k in range(200):
-            channel = rng.choice([big, small, other])
-            size = rng.choice([0, 5, 100, 2000]) if channel == big else 8
-            writer.add_message(channel, log_time=rng.randrange(50), data=bytes([k % 256]) * size, publish_time=0)
-        writer.finish()
-    with path.open("rb") as handle:
-        reader = make_reader(handle)
-        expected = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(topics=["/big", "/small"])]
-        heads = list(iter_message_heads(reader, handle, ["/big", "/small"], {"/big"}, 50, lambda _, head: head[0] % 2))
-    assert [(h.channel.topic, h.message.log_time) for h in heads] == [e[:2] for e in expected]
-    for head, (topic, _, data) in zip(heads, expected, strict=True):
-        short = compression == "none" and topic == "/big" and len(data) > 50 and data[0] % 2
-        assert head.complete == (not short)
-        assert head.message.data == (data[:50] if short else data)

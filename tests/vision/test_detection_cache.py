@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import threading
 from pathlib import Path
 
 import cv2
@@ -18,7 +17,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io import filememo
 from wolfcal.vision import cache
 from wolfcal.vision.batch import detect_encoded, iter_detect_encoded, task_size
-from wolfcal.vision.cache import DetectorSettings, cache_enabled, cached_detect, hashing_ahead
+from wolfcal.vision.cache import DetectorSettings, cache_enabled, cached_detect
 from wolfcal.vision.edges import TAGS_PER_PASS
 from wolfcal.vision.render import render_targets
 from wolfcal.vision.tags import detect_tags
@@ -201,12 +200,12 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
 
 
 
-def test_a_first_run_hashes_beside_the_detection_and_a_copied_capture_still_finds_its_entry(
+def test_a_first_run_saves_its_entry_and_a_copied_capture_finds_it(
     capture, images, tmp_path, monkeypatch
 ):
-    """A path never hashed is hashed while its images are detected: the same detections and entry as hashing
-    first; a copy of a cached capture (a new path, the same content) is answered by the entry, whatever its images
-    would have given (reversed here, so a fresh detection would show)."""
+    """A path never hashed is hashed and its detections saved; a copy of a cached capture (a new path, the same
+    content) is answered by the entry, whatever its images would have given (reversed
+    here, so a fresh detection would show)."""
     folder = tmp_path / "cache"
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(folder))
     path, stamps = capture
@@ -220,36 +219,6 @@ def test_a_first_run_hashes_beside_the_detection_and_a_copied_capture_still_find
     copy.write_bytes(path.read_bytes())
     assert_same(cached_detect(copy, "head", stamps, iter(images[::-1]), settings), fresh(images))
     assert len(entries(folder)) == 1
-
-def test_hashing_ahead_gives_the_entry_of_hashing_beside_the_detection(capture, images, tmp_path, monkeypatch):
-    """Inside `hashing_ahead`, a capture never hashed is hashed from the start and `cached_detect` takes that hash:
-    the same detections and the same entry as without it; a copy of the cached capture finds its entry; a path
-    whose digest is remembered, or that is not a file, is not hashed; leaving stops what was not taken."""
-    path, stamps = capture
-    settings = DetectorSettings.of(FAMILIES)
-    monkeypatch.setattr(filememo, "RACY_NS", 0)
-    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "beside"))
-    cached_detect(path, "head", stamps, iter(images), settings)
-    monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "ahead"))
-    with hashing_ahead([path, tmp_path / "missing.mcap"]):
-        assert list(cache._ahead) == [os.path.abspath(path)]
-        assert_same(cached_detect(path, "head", stamps, iter(images), settings), fresh(images))
-        assert not cache._ahead
-    assert [e.name for e in entries(tmp_path / "ahead")] == [e.name for e in entries(tmp_path / "beside")]
-    copy = tmp_path / "moved" / "capture.mcap"
-    copy.parent.mkdir()
-    copy.write_bytes(path.read_bytes())
-    with hashing_ahead([path, copy]):
-        assert list(cache._ahead) == [os.path.abspath(copy)]  # the capture's digest is remembered
-        assert_same(cached_detect(copy, "head", stamps, iter(images[::-1]), settings), fresh(images))
-    other = tmp_path / "other.mcap"
-    other.write_bytes(path.read_bytes()[::-1])
-    with hashing_ahead([other]):
-        pass  # never taken: stopped
-    assert not cache._ahead and not any(t.name.startswith("wolfcal-hash") for t in threading.enumerate())
-    with cache_enabled(False), hashing_ahead([other]):
-        assert not cache._ahead
-
 
 def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))

@@ -37,9 +37,8 @@ from wolfcal.robot.robot import Robot
 
 POSE_PRIOR_M = 1.0  # weak priors of an external camera's pose: the data decide it [m]
 POSE_PRIOR_RAD = 1.0  # [rad]
-# Samples linearised at a time: bounds the per-sample poses and twists and the per-corner twists (about 6 KB per
-# corner: 18 MB at 512 samples of 6 corners) of a long recording; a few hundred keep numpy's per-call overhead small
-# (a 400-sample leg fit's linearisation: 8.8-9.4 ms CPU in one chunk, 12-13 ms in four of 128).
+# Samples linearised at a time: bounds the per-sample poses and twists and the per-corner twists of a long
+# recording; a few hundred keep numpy's per-call overhead small
 CHUNK_SAMPLES = 512
 
 

@@ -4,9 +4,10 @@ Q (R, K) is block diagonal over the noise groups: a group's columns (its shared 
 hold its rows and no others. Stored by columns in scipy's csc layout (column c: values data[indptr[c]:indptr[c+1]]
 in rows indices[...], a group's columns consecutive, each listing the group's rows in one order), so no R x K
 matrix is formed. Products with dense matrices run group by group: groups of the same shape in one batched
-matrix product (a group's rows gathered once, not once per column). The dense fit path then needs no
-scipy.sparse, whose import (its array-API layer loads numpy.f2py and numpy.testing) was 40 % of `wolfcal fit`'s
-start-up (0.46 -> 0.28 s CPU); a sparse Jacobian (more than DENSE_LIMIT unknowns) still uses it, through `as_scipy`.
+matrix product (a group's rows gathered once, not once per column). Why not scipy.sparse: the dense fit path
+then does not import it (its array-API layer loads numpy.f2py and numpy.testing), an import that costs about as
+much as the rest of a fit from cached detections (docs/performance.md); a sparse Jacobian (more than DENSE_LIMIT
+unknowns) still uses scipy.sparse, through `as_scipy`.
 """
 
 from __future__ import annotations
@@ -133,9 +134,8 @@ class _Selection(ColumnMatrix):
     products run on its source's batches (`_groups`) of those groups: the values are views of the source's where a
     shape's groups in the selection are consecutive (a chunk of consecutive groups: always), the rows and columns
     renumbered copies (one number per row or column, not per value), so the same numbers as a copy of the columns
-    would give. A chunked 6000-frame camera fit (480k values in its noise factors) held the chunks' values twice
-    (their csc copy, 7.5 MB with the rows' numbers, and their batches, 3.6 MB) at the peak of its solve; the csc
-    layout is copied out only when asked for (`data`, `indices`, `indptr`: a sparse Jacobian's `as_scipy`)."""
+    would give, without holding the chunk's values twice; the csc layout is copied out only when asked for (`data`,
+    `indices`, `indptr`: a sparse Jacobian's `as_scipy`)."""
 
     def __init__(self, source: ColumnMatrix, columns: np.ndarray, row_map: np.ndarray, n_rows: int) -> None:
         self.source, self.columns, self.row_map = source, np.asarray(columns, dtype=np.int64), row_map

@@ -134,8 +134,7 @@ class GroupedWhitening:
             rows = self.rows[ends[first] : ends[end]]
             columns = np.flatnonzero((self.group_of_column >= first) & (self.group_of_column < end))
             Q = self.Q.select(columns, position - ends[first], len(rows))
-            # the part's factors are given: its rows' joint sensitivities are not copied (A without columns; 5.7 MB
-            # of a 6000-frame fit's chunks)
+            # the part's factors are given: its rows' joint sensitivities are not copied (A without columns)
             shared = self.shared
             part = SharedErrors(np.empty((len(rows), 0)), shared.sigma_q, shared.reading[rows], shared.label[rows],
                                 shared.axis[rows], shared.tau)  # fmt: skip
@@ -336,7 +335,7 @@ class GroupedWhitening:
                 entries = np.repeat(t, per_column)
                 entries *= Q.data
                 sums = np.bincount(key, entries)  # per (row, eigenspace)
-                del entries  # one number per value of Q, not kept beside the sums (a 6000-frame fit: 3.3 MB each)
+                del entries  # one number per value of Q, not kept beside the sums (as large as Q)
                 np.compress(on, sums, out=values[n_own:])  # no copy of the kept sums beside them
                 del sums
                 values[n_own:] /= root_share
@@ -373,10 +372,8 @@ def weighted_median(values: np.ndarray, weights: np.ndarray, width: float = MEDI
     rows, enough to move a fit's noise model and with it its estimates by a sizable fraction of a standard
     deviation), a continuous function of the values where they lie closer than 2 `width` around the median; NaN
     for no values. Found within a window around the values' plain median that holds it, narrowed by bisection to
-    about `width` (a few passes over the values), sorting only the values whose spread reaches into the window (a
-    1000-sample fit's 150k standardised numbers: sorting them all took 5x as long; a 6000-frame fit's 390k
-    eigenspace numbers, most within the first window: the narrowed one holds a tenth of them, and the sort's
-    arrays no longer make the solve's peak memory)."""
+    about `width` (a few passes over the values), sorting only the values whose spread reaches into the window
+    (usually a small share of them)."""
     if values.size == 0:
         return float("nan")
     half = 0.5 * float(np.sum(weights))

@@ -14,7 +14,7 @@ from wolfcal.robot.presets import DEFAULT_PRESET, PRESETS
 
 # Floor of a pixel block's estimated noise [px]: the detector's systematic error. Its corner errors of 0.02-0.05 px
 # repeat across poses for each tag corner (they do not average out), and tag mounts absorb part of them, so the
-# residuals alone would understate it (measured: bench/bench_vision.py, tests/robot/test_other_robot.py).
+# residuals alone would understate it (measured: docs/accuracy.md, tests/robot/test_other_robot.py).
 NOISE_FLOOR_PX = 0.05
 
 

@@ -27,7 +27,6 @@ from wolfcal.io.reader import read_capture, require_cameras
 from wolfcal.io.samples import Capture, Sample
 from wolfcal.leftout import check_left_out
 from wolfcal.markers import MarkerObservations
-from wolfcal.memory import large_blocks_mapped, release_freed_memory
 from wolfcal.observations import HEAD_CAMERA, Observations
 from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
@@ -36,7 +35,6 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.vision.cache import hashing_ahead
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
 
@@ -405,13 +403,10 @@ def run_fit(
     for name, obs in observations.items():
         say(f"{name} camera: {obs.n_samples} sample(s) with tags, {len(obs.uv)} corners")
     say(f"fitting --free {options.free} ...")
-    # the solve's large transient arrays do not stay on the heap (wolfcal/memory.py); not while reading and detecting,
-    # whose image buffers would then be mapped afresh each time (8 s more system time per 600 frames)
-    with large_blocks_mapped():
-        fit = fit_observations(robot, observations, options, say, markers, own)
-        check_solution_left_out(fit, captures)
-        result = fit_result(fit, options, captures, intrinsics, warnings, present)
-        write_fit(out_dir, fit, result)
+    fit = fit_observations(robot, observations, options, say, markers, own)
+    check_solution_left_out(fit, captures)
+    result = fit_result(fit, options, captures, intrinsics, warnings, present)
+    write_fit(out_dir, fit, result)
     report_fit(result, fit, warnings, out_dir, say)
     return result
 
@@ -448,17 +443,14 @@ def detect_captures(
     detected tag corners [px] with the joint readings of their samples; and the warnings of reading and detection
     (frames skipped, repeated images)."""
     required = (HEAD_CAMERA,) if options.system == "head" else ()
-    with hashing_ahead(captures):  # a first run's hashes for the detection cache beside the reading
-        samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
-        release_freed_memory()  # the reader's heap between image buffers: detection starts from the samples
-        say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
-        names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
-        wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
-        observations, detect_warnings = detect_observations(
-            samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
-        )
+    samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
+    say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
+    names = dict.fromkeys([HEAD_CAMERA, *robot.config.camera_names])
+    wanted = None if options.system in (None, "all") else [n for n in names if in_system(n, options.system)]
+    observations, detect_warnings = detect_observations(
+        samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
+    )
     warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
-    release_freed_memory()  # the detection threads' image buffers: the fit starts from the corners
     return observations, warnings
 
 

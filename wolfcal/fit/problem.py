@@ -58,7 +58,6 @@ class BlockState:
         self.classes = block.noise_classes()  # (U,) fixed: derived once
         self.unit_scale = np.ones(block.n_units)  # (U,) each unit's noise level relative to sigma (its class's)
         self.whitening: GroupedWhitening | None = None
-        self.released = False  # the noise model's joint sensitivities let go (`release_sensitivities`)
 
     def shared_size(self, sigma: float) -> float:
         """Size of a repeating detection error per axis [the block's unit] at the noise level `sigma`."""
@@ -101,7 +100,7 @@ class BlockState:
     def rebuild(self, lin: Linearization) -> None:
         """Noise groups over the inlier units at this linearisation (left-out views are in no group): units that
         share a joint reading or a repeating detection error are in one group."""
-        self.whitening, self.released = None, False  # the old factors go before the new ones are built (memory)
+        self.whitening = None  # the old factors go before the new ones are built
         shared = self.shared_errors(lin)
         reading = self.reading_of_unit
         group_of_unit = reading
@@ -123,24 +122,12 @@ class BlockState:
         tau = self.shared_size(sigma)
         shared = self.noise_model.shared
         again = shared.tau != tau and np.any(shared.label >= 0)
-        if again and self.released:
-            raise RuntimeError(f"{self.block.name}: noise level set after the noise model's joint sensitivities "
-                               "were released (call rebuild first)")
         self.sigma = sigma
         if again:
             groups, row_scale = self.noise_model.group_of_row, self.noise_model.row_scale
-            self.whitening = None  # the old factors go before the new ones are built (memory)
+            self.whitening = None  # the old factors go before the new ones are built
             self.whitening = GroupedWhitening(groups, replace(shared, tau=tau), row_scale)
         return bool(again)
-
-    def release_sensitivities(self) -> None:
-        """Let go of the joint sensitivities (R, J) the noise model was decomposed from (a view of the linearisation
-        it was built at): the solver's steps linearise elsewhere, and the old sensitivities would stay beside the new
-        ones (5.7 MB of a 6000-frame fit's). The factors stay; a `set_sigma` that has to decompose the groups again
-        then needs a `rebuild` first."""
-        model = self.noise_model
-        model.shared = replace(model.shared, A=np.empty((len(model.group_of_row), 0)))  # not a view: that would keep A
-        self.released = True
 
     def whiten(self, M, split: bool = True):
         """The block's rows (R,) or (R, P) whitened at its noise level: `GroupedWhitening.split` (R + K rows, what
@@ -242,7 +229,7 @@ class Problem:
         factor R (J = Q R, (P, P)), updated chunk by chunk, else None. With `curvature`, the first is instead the
         Huber loss's own second derivative (the whitened rows' J^T J over the rows within huber_k: the loss is
         linear beyond), what a Newton step needs: J^T J of the square-root residuals counts a far row as if its
-        loss curved, and steps along such rows then fall short by up to 10x, converging by a few percent per step."""
+        loss curved, and steps along such rows then fall far short, converging by a few percent per step."""
         n = len(self.params)
         H, g, R = np.zeros((n, n)), np.zeros(n), np.zeros((0, n)) if triangular and n <= DENSE_LIMIT else None
         for state, lin in zip(self.states, self.evaluate(z)):

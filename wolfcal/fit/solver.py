@@ -15,7 +15,7 @@ solve happened to stop), and `uncertainty` at the solution.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -335,20 +335,6 @@ def _update_noise(
     return largest, notes
 
 
-def _for_noise_update(problem: Problem, lins: list[Linearization]) -> list[Linearization]:
-    """The linearisations `_update_noise` needs: a block without noise classes uses only its residuals and joint
-    sensitivities there (the classes' leverages need its Jacobian by the unknowns), so that Jacobian is let go,
-    and with it the problem's cached linearisation: the next solve linearises again at the same point (one
-    linearisation per round, 0.04 s of CPU for the 6000-frame camera fit's 17900 corners), while the noise-level
-    search, the peak of that fit's solve, no longer holds its 4.9 MB (57 -> 51 MB above the solve's start)."""
-    if all(state.classes.max(initial=0) > 0 for state in problem.states):
-        return lins
-    problem.forget_linearization()
-    return [lin if state.classes.max(initial=0) > 0 else
-            replace(lin, jac_chain=np.empty((*lin.residual.shape, 0)), jac_local=None, local_cols=None)
-            for state, lin in zip(problem.states, lins)]  # fmt: skip
-
-
 def _update_round(problem: Problem, z: np.ndarray, rows_total: int) -> tuple[bool, float, list[str]]:
     """Outlier sets, noise groups and noise levels at z (`_update_outliers`, `_update_noise`): whether an outlier
     set changed, the largest relative change of a noise level, progress notes. The linearisations live only here."""
@@ -357,10 +343,7 @@ def _update_round(problem: Problem, z: np.ndarray, rows_total: int) -> tuple[boo
         state.whitening = None
     changed = _update_outliers(problem, lins)
     problem.linearize(z)
-    lins = _for_noise_update(problem, lins)
     change, notes = _update_noise(problem, lins, len(problem.params), rows_total)
-    for state in problem.states:  # the next solve's linearisations are not kept beside this one's sensitivities
-        state.release_sensitivities()
     return changed, change, notes
 
 
@@ -368,8 +351,6 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     """Solve with outlier rounds (module docstring); each block's noise level stays within its `noise_min` ..
     `noise_max`."""
     say = progress or (lambda _msg: None)
-    for state in problem.states:  # see `_update_round`
-        state.release_sensitivities()
     z = np.zeros(len(problem.params))
     before = [r.copy() for r in problem.raw_residuals(z)]
     rows_total = sum(r.size for r in before)

@@ -64,7 +64,7 @@ def information_uncertainty(
     from the information's eigenvalues (which lose what lies below 1e-8 of the largest singular value: a nearly
     singular problem reads infinite). `triangular` may be a function giving R (or None), called only where the
     eigenvalues would not do (a condition number from them of EIGEN_CONDITION_LIMIT or more): R costs a fit's
-    whitened Jacobian formed and factored chunk by chunk, 3x the normal equations."""
+    whitened Jacobian formed and factored chunk by chunk, several times the cost of the normal equations."""
     n = len(prior_sigmas)
     cov_z = np.linalg.inv(information + np.eye(n))
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))

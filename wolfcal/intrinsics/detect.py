@@ -2,13 +2,13 @@
 
 Pixels follow OpenCV (centre of the top-left pixel is (0, 0)). Checkerboards: by default ("classic") the
 `findChessboardCorners` search (`findChessboardCornersSB` where it fails) on a copy halved (pyrDown) to at
-most 1000 px, then `cornerSubPix` at full size with a window sized from the corner spacing. On rendered boards
-with blur and noise this was about 2x more accurate than the corners of `findChessboardCornersSB` (method
-"sb") and 10-100x faster (bench/bench_intrinsics.py). Sharp real photographs want smaller windows, so every
+most 1000 px, then `cornerSubPix` at full size with a window sized from the corner spacing: on rendered boards
+with blur and noise more accurate than the corners of `findChessboardCornersSB` (method "sb") and much faster
+(docs/accuracy.md). Sharp real photographs want smaller windows, so every
 view also carries its corners refined with the half-windows of `WINDOWS` (capped at the spacing-sized one),
 and `wolfcal.intrinsics.refine_choice` keeps the window the data fit best. ChArUco boards:
-`cv2.aruco.CharucoDetector`, then `cornerSubPix` with a half-window of 0.1 corner spacing (measured: 0.11 px
-RMS against 0.13 px for the detector's own corners; wider windows reach into the markers and bias them).
+`cv2.aruco.CharucoDetector`, then `cornerSubPix` with a half-window of 0.1 corner spacing (more accurate than
+the detector's own corners; wider windows reach into the markers and bias them).
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def _find_coarse(small: np.ndarray, size: tuple[int, int], fallback: bool) -> np
     """Pixel-level corners: the classic search (two threshold settings), else the sector-based one.
 
     FAST_CHECK only for live frames (`fallback` False), where most frames may show no board: on images with a
-    board it made the search 2-3x slower (OpenCV 5) and missed 1 in 20 boards (bench/bench_detection.py).
+    board it made the search slower (OpenCV 5) and missed some boards.
     """
     base = cv2.CALIB_CB_ADAPTIVE_THRESH | (0 if fallback else cv2.CALIB_CB_FAST_CHECK)
     for flags in (base | cv2.CALIB_CB_NORMALIZE_IMAGE, base):
@@ -96,7 +96,7 @@ def _checkerboard_classic(
 ) -> tuple[np.ndarray, tuple[tuple[int, np.ndarray], ...]] | None:
     """Corners refined with the spacing-sized window, and with each of `WINDOWS` capped at it (files only)."""
     small, factor = gray, 1
-    while max(small.shape) > _CLASSIC_MAX_SIDE:  # Gaussian pyramid: 10x faster than an INTER_AREA resize
+    while max(small.shape) > _CLASSIC_MAX_SIDE:  # Gaussian pyramid: faster than an INTER_AREA resize
         small, factor = cv2.pyrDown(small), factor * 2
     corners = _find_coarse(small, (board.cols, board.rows), fallback)
     if corners is None:

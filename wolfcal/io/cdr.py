@@ -66,8 +66,7 @@ def image_of(
 def camera_info_key(data: bytes, schema, log_time: int) -> tuple[int, bytes] | None:
     """(header stamp [ns] (`msgdefs.stamp_ns`), the message's bytes without its stamp) of a little-endian CDR
     sensor_msgs/CameraInfo message: messages with the same key hold the same frame and intrinsics, so a reader decodes
-    one of them (the general decoder took 0.7 ms a message, 16 of the 44 ms of reading a 24-sample capture); None
-    for anything else."""
+    one of them (the general decoder is slow per message); None for anything else."""
     if schema is None or schema.name != CAMERA_INFO or data[:2] != b"\x00\x01" or len(data) < 12:
         return None
     sec, nanosec = struct.unpack_from("<iI", data, 4)
@@ -78,8 +77,8 @@ def joint_state(
     data: bytes, schema, log_time: int, names_seen: dict[bytes, list[str]]
 ) -> tuple[int, list[str], tuple[float, ...], tuple[float, ...]] | None:
     """(header stamp [ns] (`msgdefs.stamp_ns`), names, positions [rad], velocities [rad/s]) of a little-endian CDR
-    sensor_msgs/JointState message, read from its layout (the general decoder took 0.1 ms a message, a quarter of
-    reading a capture of 1000 samples); None for anything else (the caller decodes it with the general decoder).
+    sensor_msgs/JointState message, read from its layout (a recording holds many, and the general decoder is slow
+    per message); None for anything else (the caller decodes it with the general decoder).
     `names_seen`: the name lists read so far by their bytes (a recording repeats one or two lists)."""
     if schema is None or schema.name != JOINT_STATE or data[:2] != b"\x00\x01":
         return None

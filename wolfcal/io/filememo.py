@@ -10,13 +10,14 @@ change is not trusted (a write within the same clock tick could keep every time)
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from collections.abc import Generator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
+
+import xxhash
 
 from wolfcal.atomic import atomic_output
 
@@ -53,8 +54,12 @@ def identity_and_memo(path: Path, kind: str) -> tuple[list[int], Path]:
     memo of `kind` (e.g. 'digest') in the cache folder (named by the hash of its resolved path)."""
     info = os.stat(path)
     identity = [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns]
-    name = hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:40]
-    return identity, cache_dir() / f"{name}.{kind}.json"
+    return identity, cache_dir() / f"{name_digest(str(Path(path).resolve()))}.{kind}.json"
+
+
+def name_digest(text: str) -> str:
+    """The name of a cache file for `text` (a key or a path): its XXH3-128 hex digest (`wolfcal.vision.cache`)."""
+    return xxhash.xxh3_128(text.encode()).hexdigest()
 
 
 def read_memo(path: Path, kind: str) -> dict | None:

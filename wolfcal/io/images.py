@@ -5,13 +5,9 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from zlib import crc32
 
 import numpy as np
-
-try:  # ISA-L's checksums (python-isal): zlib's values, 5x faster (75 MB: CRC-32 3.6 vs 18 ms, Adler-32 4.3 vs 21 ms)
-    from isal.isal_zlib import adler32, crc32
-except ImportError:  # a platform without its wheels: zlib's own
-    from zlib import adler32, crc32
 
 from wolfcal.errors import WolfcalError
 
@@ -20,13 +16,11 @@ JPEG_SIGNATURE = b"\xff\xd8"
 PNG_HEAD = 64  # bytes of a png that give its kind and size (signature, IHDR)
 JPEG_QUALITY = 95
 # png as wolfcal writes it: stored (zlib level 0), rows unfiltered. A standard png that any tool opens, the size of
-# the raw pixels (+0.1 %), decoded 5-10x faster than deflated (the fit decodes every image: inflating and unfiltering
-# were a quarter to two fifths of a first run's detection) and encoded 10-25x faster (bench/bench_image_storage.py:
-# 512x384 0.15-0.26 vs 1.9 ms to decode, 2048x1536 2.6-3.8 vs 25-27 ms); deflated files were 1.9-2.8x smaller on
-# simulated and photo-like images. Filtering alone costs most of a stored png's decoding (0.7 ms at 512x384 with it).
+# the raw pixels, several times faster to encode and decode than a deflated one (which is 2-3x smaller): the fit
+# decodes every image, and a capture is written while the robot waits.
 PNG_COMPRESSION = 0
-# IDAT chunks of up to 1 MiB (OpenCV's largest; 8 KiB by default): one chunk per 512x384 image instead of 25, so
-# `image_damage` checks a few checksums per image instead of hundreds (2048x1536: 4 chunks instead of 385)
+# IDAT chunks of up to 1 MiB (OpenCV's largest; 8 KiB by default): a few chunk checksums per image for
+# `image_damage` instead of hundreds
 PNG_CHUNK_BYTES = 1 << 20
 # JPEG start-of-frame markers (baseline, progressive, lossless, ...): they carry the image size
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
@@ -42,12 +36,12 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
             f"cannot store an image of shape {image.shape} and type {image.dtype}: "
             "give (H, W) mono8 or (H, W, 3) bgr8 uint8 images"
         )
-    import cv2  # here, not at the top: a fit from cached detections never loads OpenCV (45 ms of CPU, 20 MB)
+    import cv2  # here, not at the top: a fit from cached detections does not load OpenCV
 
     encoding = "mono8" if image.ndim == 2 else "bgr8"
     if image_format == "png":
         params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION]
-        if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # recent OpenCV; older: libpng filters (0.7 ms at 512x384)
+        if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # recent OpenCV; older ones filter the rows (slower to decode)
             params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE,
                        cv2.IMWRITE_PNG_ZLIBBUFFER_SIZE, PNG_CHUNK_BYTES]  # fmt: skip
         ok, buffer = cv2.imencode(".png", image, params)
@@ -61,54 +55,11 @@ def encode_image(image: np.ndarray, image_format: str) -> tuple[bytes, str]:
 
 
 def decode_gray(data: bytes | memoryview) -> np.ndarray | None:
-    """8-bit gray (H, W) image of an encoded png or jpeg (as OpenCV's IMREAD_GRAYSCALE gives it); None if it cannot
-    be decoded. A png as wolfcal writes mono8 images (stored, unfiltered: `PNG_COMPRESSION`) is read by
-    `_stored_gray` without a decoder: its pixels lie in the file as they are, and its zlib checksum is verified
-    (2048x1536: 1.6 ms of CPU against OpenCV's 2.7-4.2 ms, which also checks each chunk's CRC: the reader has
-    checked those of every image it read from a capture file, `image_damage`; 512x384: 0.10 against 0.17 ms). Any
-    other image goes to OpenCV."""
-    gray = _stored_gray(data)
-    if gray is not None:
-        return gray
+    """8-bit gray (H, W) image of an encoded png or jpeg (OpenCV's IMREAD_GRAYSCALE: a colour jpeg decodes only its
+    luma); None if it cannot be decoded."""
     import cv2
 
     return cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if len(data) else None
-
-
-def _stored_gray(data: bytes | memoryview) -> np.ndarray | None:
-    """The pixels (H, W) of an 8-bit gray, non-interlaced png whose zlib stream is made of stored blocks only and
-    whose rows are all unfiltered, with its zlib checksum (Adler-32 of the rows) verified; None for any other
-    image (or one that is damaged: then OpenCV says so)."""
-    view = memoryview(data)
-    if len(view) < 33 or bytes(view[: len(PNG_SIGNATURE)]) != PNG_SIGNATURE or bytes(view[12:16]) != b"IHDR":
-        return None
-    width, height, depth, colour, _, _, interlace = struct.unpack_from(">IIBBBBB", view, 16)
-    if depth != 8 or colour != 0 or interlace != 0 or width == 0 or height == 0:
-        return None
-    parts = [view[pos + 8 : pos + 8 + length] for chunk, pos, length in _png_chunks(view) if chunk == b"IDAT"]
-    # stored blocks (<= 64 KiB) run across the IDAT chunks: the chunks' data in one array (copied by numpy: joining
-    # them as bytes took 1.7 ms at 2048x1536, copying 0.2 ms)
-    stream = _concatenated(parts)
-    size = (width + 1) * height  # each row: its filter byte, then the pixels
-    if size > 1 << 31 or len(stream) < 2 or stream[0] & 0x0F != 8 or stream[1] & 0x20:  # deflate, no dictionary
-        return None
-    out = np.empty(size, np.uint8)
-    pos, filled, last = 2, 0, False
-    while not last:
-        if pos + 5 > len(stream) or stream[pos] & 0x06:  # cut short, or a compressed block
-            return None
-        last = bool(stream[pos] & 1)
-        count, complement = struct.unpack_from("<HH", stream, pos + 1)
-        if count ^ complement != 0xFFFF or filled + count > size or pos + 5 + count > len(stream):
-            return None
-        out[filled : filled + count] = np.frombuffer(stream, np.uint8, count, pos + 5)
-        filled, pos = filled + count, pos + 5 + count
-    if filled != size or pos + 4 > len(stream) or adler32(out.data) != struct.unpack_from(">I", stream, pos)[0]:
-        return None
-    rows = out.reshape(height, width + 1)
-    if rows[:, 0].any():  # a filtered row
-        return None
-    return rows[:, 1:]
 
 
 def _png_chunks(view: memoryview) -> Iterator[tuple[bytes, int, int]]:
@@ -123,18 +74,6 @@ def _png_chunks(view: memoryview) -> Iterator[tuple[bytes, int, int]]:
         if chunk == b"IEND":
             return
         pos += 12 + length
-
-
-def _concatenated(parts: list[memoryview]) -> memoryview:
-    """The bytes of `parts` one after the other (the only part itself: no copy)."""
-    if len(parts) == 1:
-        return parts[0]
-    joined = np.empty(sum(len(part) for part in parts), np.uint8)
-    start = 0
-    for part in parts:
-        joined[start : start + len(part)] = np.frombuffer(part, np.uint8)
-        start += len(part)
-    return joined.data
 
 
 def image_kind(data: bytes | memoryview) -> str | None:

@@ -1,7 +1,7 @@
 """The clock offset between a motion-capture file and the ROS 2 recording of the joint states.
 
 t_recording = t_file + offset [s], t_file: seconds since the file's first frame. Both streams see the same motion:
-the markers' speed (per frame, the mean over markers of the speed of their centred 50 ms moving median, so noise and
+the markers' speed (per frame, the mean over markers of the speed of their centred 0.05 s moving median, so noise and
 reflections do not count) and the joints' speed (sum of |dq/dt| over the joints) rise and fall together. Both
 profiles are resampled on a `GRID_S` grid, normalised, and cross-correlated over every lag at which the two overlap
 by at least `MIN_OVERLAP` of the shorter one (a session's moves repeat in rhythm: a half overlap can match a wrong

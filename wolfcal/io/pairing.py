@@ -7,7 +7,7 @@ frame at stamp s is final once the largest stamp read is more than `DISORDER_NS`
 joint state within +-`STILL_WINDOW_NS` of s has been read. Frames are paired in batches (`pair_frame`, the rule of
 `wolfcal.io.recording`) on the states of the window, which holds every state that pairing on the whole log would
 look at, so the results are the same; states older than any frame still to pair are dropped. Memory then holds about
-`DISORDER_NS` + 2 `STILL_WINDOW_NS` of joint states (3 s, ~100 KB at 100 Hz of 20 joints), whatever the length.
+`DISORDER_NS` + 2 `STILL_WINDOW_NS` of joint states (3 s), whatever the length.
 
 A file that breaks the bound (a message stamped too far back, or a joint first published after frames were paired)
 raises `Disorder`: the reader then reads it again with `disorder_ns=None`, which pairs every frame on the whole log

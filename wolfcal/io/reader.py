@@ -4,7 +4,7 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 (`image_topic` / `info_topic`); a file may hold any of them (at least one), see `capture_topics`. A capture file
 (written by `CaptureWriter`) holds one JointState per sample, with the stamp of the sample's images: every image is
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
-kept only when the robot was still, and kept frames of different cameras within 20 ms of each other form one sample
+kept only when the robot was still, and kept frames of different cameras within 0.02 s of each other form one sample
 (see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
 camera only). One pass: frames are paired with the joint states as they are read (`wolfcal.io.pairing`: a window
 of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
@@ -42,22 +42,14 @@ from wolfcal.io.cdr import camera_info_key, compressed_image, image_of, joint_st
 from wolfcal.io.filememo import caching, identity_and_memo, read_memo, write_memo
 from wolfcal.io.images import PNG_HEAD, image_damage, image_kind, image_size
 from wolfcal.io.intrinsics_choice import InfoModel, IntrinsicsChooser, camera_info_model
-from wolfcal.io.mcapfile import (
-    channel_decoder,
-    check_mcap,
-    is_finished,
-    iter_message_heads,
-    message_count,
-    recover_hint,
-    torn_error,
-)
+from wolfcal.io.mcapfile import channel_decoder, check_mcap, is_finished, message_count, recover_hint, torn_error
+from wolfcal.io.message_heads import iter_message_heads
 from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
 from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
-from wolfcal.memory import buffers_from_heap, in_own_arena
 
 
 def read_captures(
@@ -85,7 +77,6 @@ def read_capture(
     check_mcap(path)
     if not is_finished(path):
         raise torn_error(path)
-    buffers_from_heap()  # the file's chunks and image messages: not mapped afresh each (`wolfcal.memory`)
     try:
         with path.open("rb") as handle:
             return _read(path, handle, robot_config, intrinsics, progress)
@@ -202,7 +193,7 @@ def _pass_one(
     names_seen: dict[bytes, list[str]] = {}  # a JointState's name list by its bytes (`joint_state`)
     # with the checks remembered, of a png only its header is read from the file (`_png_head`)
     messages = iter_message_heads(reader, handle, topics, image_topics if known else (), _HEAD_BYTES, _png_head)
-    for count, (schema, channel, message, complete, _) in enumerate(messages):
+    for count, (schema, channel, message, complete) in enumerate(messages):
         if progress is not None and count % 200 == 0:
             progress(count, total)
         if channel.topic in image_topics:
@@ -291,13 +282,12 @@ def _read(
     taken_ns = time.time_ns()
     known = _Checks.remembered(path) if caching() else None
     for checks in (known, None) if known is not None else (None,):
-        # on a thread of its own: the pass's message buffers do not spread the heap the samples live in (`in_own_arena`)
         one_pass = partial(_pass_one, path, reader, config, found.cameras, info_cameras, progress, handle=handle,
                            known=checks)  # fmt: skip
         try:
-            read = in_own_arena(partial(one_pass, DISORDER_NS))
+            read = one_pass(DISORDER_NS)
         except Disorder:  # stamps further out of order than the window allows: pair on the whole log
-            read = in_own_arena(partial(one_pass, None))
+            read = one_pass(None)
         if checks is None or read.checks.images == checks.images:
             break
         known = None  # the memo counted other images: not the file it was taken of; checked again
@@ -307,7 +297,7 @@ def _read(
     attachments = {a.name: a.data.decode("utf-8", errors="replace") for a in reader.iter_attachments()}
     skipped = finite_joint_note(path, config.joint_states_topic, pairing.messages, pairing.bad_messages,
                                 pairing.bad_joints)  # fmt: skip
-    del reader  # its index of the file's chunks (~0.7 kB a chunk)
+    del reader  # its index of the file's chunks
     frames: list[_Frame] = []
     for name in found.cameras:
         frames += _keep_frames(path, config, name, read, intrinsics, skipped)

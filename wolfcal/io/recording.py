@@ -43,8 +43,8 @@ class JointSeries:
 
 class JointLog:
     """JointState messages as they are read, kept compactly: per distinct list of joint names, the stamps [ns],
-    positions [rad] and velocities [rad/s] in flat typed arrays (8 bytes a number, ~20 MB for ten minutes of
-    20 joints at 100 Hz), not as Python objects. Velocities are NaN where a message reported none."""
+    positions [rad] and velocities [rad/s] in flat typed arrays (8 bytes a number), not as Python objects.
+    Velocities are NaN where a message reported none."""
 
     def __init__(self) -> None:
         self._groups: dict[tuple[str, ...], tuple[array, array, array]] = {}

@@ -41,7 +41,7 @@ class SampleImage:
 
     def decode(self) -> np.ndarray:
         """Decoded image: (H, W) uint8 for mono, (H, W, 3) uint8 BGR for colour."""
-        import cv2  # here, not at the top: a fit from cached detections never loads OpenCV (45 ms of CPU, 20 MB)
+        import cv2  # here, not at the top: a fit from cached detections does not load OpenCV
 
         data = self.encoded()
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)

@@ -1,9 +1,9 @@
 """Encoded images read back from MCAP files by location, as a stream.
 
 The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
-back when they are needed (detection, a figure): one pass over the part of the file they span, each image's
-bytes handed on and then dropped, so a long recording's images never sit in memory together.
-"""
+back when they are needed (detection, a figure) with mcap's reader: passes over the part of the file they
+span, each image's bytes handed on and then dropped, so a long recording's images never sit in memory
+together. """
 
 from __future__ import annotations
 
@@ -11,14 +11,12 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from itertools import groupby, islice
 from pathlib import Path
-from typing import IO
 
 from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.cdr import compressed_image_span, image_of
-from wolfcal.io.mcapfile import iter_message_heads
+from wolfcal.io.cdr import image_of
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,11 +35,11 @@ WINDOW = 256  # images looked up per pass over the part of the file they span
 def stream_images(locations: Iterable[ImageLocation]) -> Iterator[bytes]:
     """The encoded bytes of the image at each location, in the order given.
 
-    Consecutive locations in one file are read in passes over the time span of up to `WINDOW` of them, in the
-    file's order (what a pass keeps of its images and of the file's chunks grows with the images it looks up, not
-    with the recording); an image that comes before its turn waits in memory until then (none waits when the order
-    given is the file's, e.g. samples in stamp order). WolfcalError naming the file when an image is not found (the
-    file changed since it was read)."""
+    Consecutive locations in one file are read in passes of `McapReader.iter_messages` over the time span of
+    up to `WINDOW` of them, in the file's order (a pass holds the chunks it is reading and the images waiting
+    for their turn, not the recording); an image that comes before its turn waits in memory until then (none
+    waits when the order given is the file's, e.g. samples in stamp order). WolfcalError naming the file when
+    an image is not found (the file changed since it was read)."""
     for path, run in groupby(locations, key=lambda location: location.path):
         yield from _stream_file(path, run)
 
@@ -53,7 +51,7 @@ def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]
         with path.open("rb") as handle:
             reader = make_reader(handle)
             while window := list(islice(run, WINDOW)):
-                yield from _stream_window(path, reader, handle, decoders, window)
+                yield from _stream_window(path, reader, decoders, window)
     except (OSError, McapError) as exc:
         raise WolfcalError(f"{path}: cannot read its images again ({exc}); was the file moved or changed?") from None
 
@@ -61,14 +59,11 @@ def _stream_file(path: Path, wanted: Iterable[ImageLocation]) -> Iterator[bytes]
 def _stream_window(
     path: Path,
     reader: McapReader,
-    handle: IO[bytes],
     decoders: dict[int, Callable],
     wanted: list[ImageLocation],
 ) -> Iterator[bytes]:
-    """The images at `wanted` (one file, open as `handle`), in that order, from one pass over the time span they
-    cover. In an uncompressed chunk an image's bytes are read from where they lie, once (`iter_message_heads`; read
-    with their chunk, then copied out of the chunk and out of the message, a 2048x1536 image cost 0.8 ms against
-    0.6 ms)."""
+    """The images at `wanted` (one file), in that order, from one pass of mcap's reader over the time span
+    they cover."""
     keys = [(w.topic, w.log_time, w.stamp_ns) for w in wanted]
     remaining: dict[tuple[str, int, int], int] = {}
     for key in keys:
@@ -78,22 +73,14 @@ def _stream_window(
     turn = 0
     topics = sorted({topic for topic, _, _ in keys})
     first, last = min(log_time for _, log_time, _ in keys), max(log_time for _, log_time, _ in keys)
-    messages = iter_message_heads(reader, handle, topics, topics, _HEAD_BYTES, _image_head, first, last)
-    for schema, channel, message, complete, offset in messages:
+    for schema, channel, message in reader.iter_messages(topics=topics, starting_at=first, ending_at=last):
         if (channel.topic, message.log_time) not in times:
             continue
-        span = None if complete or offset is None else _image_in_file(message.data, schema, message.log_time, offset)
-        if span is None:  # the whole message read
-            stamp, image = image_of(path, decoders, schema, channel, message)
-        else:
-            stamp, at, length = span
+        stamp, image = image_of(path, decoders, schema, channel, message)
         key = (channel.topic, message.log_time, stamp)
         if not remaining.get(key) or key in waiting:
             continue
-        if span is None:  # the image alone, not the message around it
-            waiting[key] = bytes(image)
-        else:
-            waiting[key] = _read_at(handle, at, length)
+        waiting[key] = bytes(image)  # the image alone, not the message around it
         while turn < len(keys) and keys[turn] in waiting:
             data = waiting[keys[turn]]
             remaining[keys[turn]] -= 1
@@ -107,27 +94,3 @@ def _stream_window(
             f"{path}: the image on {topic} with stamp {stamp} ns is no longer in the file; was the file changed "
             "while wolfcal read it? Run again"
         )
-
-
-_HEAD_BYTES = 256  # of an image message read first: its CDR header and format, up to the image's length
-
-
-def _image_head(schema, head: bytes) -> bool:
-    """Whether `head` holds a CompressedImage message's layout up to its image (then the image is read on its own)."""
-    return compressed_image_span(head, schema, 0) is not None
-
-
-def _image_in_file(head: bytes, schema, log_time: int, offset: int) -> tuple[int, int, int] | None:
-    """(header stamp [ns], where its image begins in the file [bytes], its length [bytes]) of a CompressedImage message
-    whose data begin at `offset` in the file, from their first bytes `head` (`compressed_image_span`)."""
-    span = compressed_image_span(head, schema, log_time)
-    return None if span is None else (span[0], offset + span[1], span[2])
-
-
-def _read_at(handle: IO[bytes], offset: int, length: int) -> bytes:
-    """`length` bytes of the file at `offset`."""
-    handle.seek(offset)
-    data = handle.read(length)
-    if len(data) != length:
-        raise McapError(f"an image ends {length - len(data)} byte(s) early")
-    return data

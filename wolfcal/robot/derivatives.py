@@ -38,7 +38,7 @@ def _motion_twists(joints: list[JointModel], T_root_frames: list[np.ndarray]) ->
         return []
     frames = np.stack(T_root_frames)  # (K, S, 4, 4)
     R, a = frames[:, :, :3, :3], np.stack([j.axis for j in joints])[:, None, None, :]  # (K, S, 3, 3), (K, 1, 1, 3)
-    axis = R[..., 0] * a[..., 0] + R[..., 1] * a[..., 1] + R[..., 2] * a[..., 2]  # (K, S, 3): 4x einsum's speed
+    axis = R[..., 0] * a[..., 0] + R[..., 1] * a[..., 1] + R[..., 2] * a[..., 2]  # (K, S, 3): faster than einsum
     prismatic = np.array([j.type == "prismatic" for j in joints])[:, None, None]
     v0 = np.where(prismatic, axis, cross(frames[:, :, :3, 3], axis))
     return list(np.concatenate([v0, np.where(prismatic, 0.0, axis)], axis=2))

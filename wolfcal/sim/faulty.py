@@ -1,4 +1,4 @@
-"""Capture files with known faults, made from good ones: for the tests and `bench/bad_inputs.py`.
+"""Capture files with known faults, made from good ones: for the tests.
 
 `rewrite_capture` copies an MCAP file message by message (schemas, channels, attachments kept), letting an edit
 change or drop each decoded message; the helpers below are the faults a team meets: NaN or infinite joint

@@ -28,7 +28,7 @@ def synthetic_observations(
 
 def reordered(obs: Observations, seed: int) -> Observations:
     """The same observations with the samples in another order and the corner rows shuffled (seeded): what a fit
-    must not depend on (tests and `bench/bench_fit.py --stability`)."""
+    must not depend on."""
     moved = obs.subset(np.random.default_rng(seed).permutation(obs.n_samples))
     rows = np.random.default_rng(seed + 1).permutation(len(moved.uv))
     return replace(moved, sample_index=moved.sample_index[rows], tag_ids=moved.tag_ids[rows],

@@ -6,29 +6,24 @@ pickles its images), and at most 2 tasks per worker are under way at once, so me
 images the input yields (it may be a lazy iterator over a long recording). A worker decodes an image, finds its
 tags with OpenCV and keeps a crop around each (`wolfcal.vision.tags.find_tags`); the caller's thread refines the
 corners of consecutive images' tags together, up to TAGS_PER_PASS tags and PASS_BYTES of crops a pass (`_refined`:
-the refinement's cost is numpy's per call, so 2048x1536 images, 1-2 tags each, were refined at the cost of many
-calls: the 24-sample camera capture's 37 tags took 62-70 ms in a call per image, 24-28 ms in passes). Results
-come back in input order, each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to ~1e-13 px:
-refined together, the sums run over padded arrays).
+the refinement's cost is numpy's per call, so large images with one or two tags each are refined many at a time).
+Results come back in input order, each what `wolfcal.vision.tags.detect_tags` returns for the decoded image (to
+~1e-13 px: refined together, the sums run over padded arrays).
 
-Workers are threads by default. With the per-edge Python refinement, threads gained only 1.13x on 2 cores (it
-held the interpreter lock); the vectorised refinement (`wolfcal.vision.edges`) spends its time in OpenCV
-and in numpy's large-array loops, which release the lock, and threads now reach the floor (decoding plus
-OpenCV's bare detector on all cores: 1.02x at 2048x1536, 1.11x at 512x384, whole process), while worker
-processes were 1.25x slower than threads (start-up, and every image pickled to a worker; bench/bench_detection.py).
-`processes=True` is kept for callers whose own Python work would compete for the lock: the pool is
-started on first use, kept for the life of the process, and its workers start from a fork server (spawn
-where there is none), never by forking a process whose OpenCV threads are running; as with any use of
-multiprocessing, a script that uses it must guard its top level with `if __name__ == "__main__":`.
+Workers are threads by default: the refinement (`wolfcal.vision.edges`) spends its time in OpenCV and in numpy's
+large-array loops, which release the interpreter lock, and threads neither start processes nor pickle images.
+`processes=True` is kept for callers whose own Python work would compete for the lock: the pool is started on
+first use, kept for the life of the process, and its workers start from a fork server (spawn where there is
+none), never by forking a process whose OpenCV threads are running; as with any use of multiprocessing, a script
+that uses it must guard its top level with `if __name__ == "__main__":`.
 """
 
 from __future__ import annotations
 
 import os
-import threading
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sized
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from itertools import chain, islice
 from typing import TYPE_CHECKING, Any
@@ -36,7 +31,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.memory import buffers_from_heap, release_thread_heap
 
 if TYPE_CHECKING:
     from wolfcal.vision.tags import PendingTags
@@ -44,14 +38,12 @@ if TYPE_CHECKING:
 Families = Mapping[str, "set[int] | None"]  # tag family -> ids to keep (None: all)
 FamilyList = list[tuple[str, "frozenset[int] | None"]]  # the same, as the workers get it
 Detections = dict[int, np.ndarray]  # tag id -> (4, 2) corners [px], aruco order, OpenCV pixel centres
-BATCH = 4  # images per process task at least: a 2048x1536 png is ~3 MB, so ~12 MB of encoded images per task
-# Pixels per task: one image at 1280x960 and above, six at 512x384 (a task's own cost, ~0.1 ms, against ~4 ms of
-# detection per small image; the refinement takes consecutive tasks' tags together whatever their size)
+BATCH = 4  # images per process task at least (each task pickles its encoded images)
+# Pixels per task: one image at 1280x960 and above, six at 512x384 (a task's own cost is small against a small
+# image's detection; the refinement takes consecutive tasks' tags together whatever their size)
 PIXELS_PER_TASK = 1_200_000
-# Bytes of crops waiting for one refinement pass at most (held on top of detection's own buffers): a 2048x1536 tag's
-# crop is 0.4-0.5 MB (up to 6 MB for a tag near the camera), so a pass takes ~9 such tags. The 24-sample camera
-# capture's refinement: 28 ms of CPU at 4 MB, 24 ms at 32 MB (one thread, median of 7); the 6000-frame recording's fit
-# (bench_stream) peaked at 134 MB against 140 MB, its 600-frame fit at 123 against 125-127 MB.
+# Bytes of crops waiting for one refinement pass at most (held on top of detection's own buffers): a pass takes
+# about nine tags of a 2048x1536 image seen from a typical distance
 PASS_BYTES = 4 * 1024 * 1024
 IN_PROCESS = 3  # inputs of at most this many images are detected here, without a pool
 
@@ -80,8 +72,8 @@ def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list
     wanted = {family: None if ids is None else set(ids) for family, ids in families}
     found: list[PendingTags | None] = []
     for data in batch:
-        # straight to 8-bit gray: a colour jpeg decodes only its luma (2048x1536: 15 -> 9 ms), within 1 grey level
-        # of decoding the colours and converting them
+        # straight to 8-bit gray: a colour jpeg decodes only its luma, within 1 grey level of decoding the colours
+        # and converting them
         image = decode_gray(data)
         found.append(None if image is None else find_tags(image, wanted, refine))
     return found
@@ -89,8 +81,8 @@ def _detect_batch(batch: list[bytes], families: FamilyList, refine: str) -> list
 
 def _refined(found: Iterable[PendingTags | None]) -> Generator[Detections | None, None, None]:
     """Each image's detections in input order (None for an undecodable image), the corners of consecutive images'
-    tags refined together in passes of up to TAGS_PER_PASS tags and PASS_BYTES of crops (`refine_found`: a call per
-    2048x1536 image refined 1-2 tags at the cost of many). At most that many images wait for their pass."""
+    tags refined together in passes of up to TAGS_PER_PASS tags and PASS_BYTES of crops (`refine_found`: its cost
+    is mostly per call, not per tag). At most that many images wait for their pass."""
     from wolfcal.vision.edges import TAGS_PER_PASS
     from wolfcal.vision.tags import refine_found
 
@@ -126,8 +118,7 @@ def task_size(data: bytes, processes: bool) -> int:
 
 def _one_opencv_thread() -> int:
     """Run OpenCV's functions on the calling thread alone (the worker threads are one per core already: OpenCV's own
-    threads beside them only spin and wait, 0.05 s of CPU of the 24-sample camera fit's 0.70 s, and 0.026 s of its
-    0.415 s wall); returns the number of threads to restore."""
+    threads beside them only spin and wait); returns the number of threads to restore."""
     import cv2
 
     previous = cv2.getNumThreads()
@@ -181,7 +172,7 @@ def iter_detect_encoded(
     `workers`: threads, or processes if `processes` (default: one per core); 1 detects in this thread. Inputs of at
     most IN_PROCESS images are detected in this thread: `total`, how many images `images` yields if known, tells it
     at once, and the first task goes to a worker as soon as its images are read (else the first IN_PROCESS + 1
-    images are read before any is detected: 2048x1536, 30 ms with both cores idle at the start of a fit).
+    images are read before any is detected, with the cores idle).
     """
     yield from _refined(_found_on_workers(images, families, refine, workers, batch, processes, total))
 
@@ -204,7 +195,6 @@ def _found_on_workers(
     if not head:
         return
     batch = batch or task_size(head[0], processes)
-    buffers_from_heap()  # image buffers: not mapped afresh each (`wolfcal.memory`)
     depth = 2 * workers  # tasks under way
     stream = chain(head, source)
     if workers == 1 or (total if total is not None else len(head)) <= IN_PROCESS:
@@ -221,8 +211,6 @@ def _found_on_workers(
                 yield from pending.popleft().result()
         while pending:
             yield from pending.popleft().result()
-        if not processes:
-            _release_worker_heaps(pool, workers)
     except BrokenProcessPool:
         shutdown_pool()
         raise WolfcalError(
@@ -238,23 +226,6 @@ def _found_on_workers(
             import cv2
 
             cv2.setNumThreads(opencv_threads)
-
-
-def _release_worker_heaps(pool: Executor, workers: int) -> None:
-    """Each detection thread hands back its heap's free top (`release_thread_heap`: the decoded images' room, kept
-    by glibc for the next ones): one task per thread, each held at a barrier until all run, so that no thread takes
-    two."""
-    barrier = threading.Barrier(workers)
-
-    def release() -> None:
-        try:
-            barrier.wait(timeout=60.0)
-        except threading.BrokenBarrierError:  # a thread did not come: the others release their own all the same
-            pass
-        release_thread_heap()
-
-    for task in [pool.submit(release) for _ in range(workers)]:
-        task.result()
 
 
 def detect_encoded(images: Iterable[bytes], families: Families, **options: Any) -> list[Detections]:

@@ -3,35 +3,31 @@
 Where: `$WOLFCAL_CACHE_DIR`, else `$XDG_CACHE_HOME/wolfcal/detections`, else `~/.cache/wolfcal/detections`.
 Not beside the capture: capture folders are often read-only (a USB stick, a shared data set, the repository's
 demo captures) and travel with the data; an entry keyed by content stays valid wherever the file is copied.
-Entries are small (corners only: ~0.3 kB per image); delete the folder at any time.
+Entries are small (corners only); delete the folder at any time.
 
 Key: one entry per (capture file, camera), named by the XXH3-128 hash of the file's whole content (size and mtime
 are not enough: an edited or re-recorded file can keep both), the camera name, and the detector settings
 (families and ids, refinement, wolfcal's detector version, OpenCV's version). An entry stores its full key
 and the image stamps it was made for; it is used only if both match, so a stale or foreign entry (another
 file, other settings, another reader that kept other frames) is detected again and overwritten. Entries are
-written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`: the two fsyncs of each
-of a first run's two writes waited 0.1-0.4 s for a shared disk); one that a crash left empty or torn fails
-`_load`'s checks and is detected again. Hashing costs about 0.01-0.03 s per 100 MB (bench/bench_detection.py),
-so a file's digest is remembered beside the entries (`hash_file`, `remembered_digest`) as a memo tied to the file's
-identity (`wolfcal.io.filememo`: a file changed since is hashed again, a digest taken less than 2 s after the file's
-last change is not trusted).
-A path never hashed before (a first run) is hashed on a thread beside the detection instead of before it; a
-path hashed before (an entry is likely) is hashed first, so a cache hit reads no image. Inside `hashing_ahead` (the
-fit), such hashes begin before the captures are read: reading them leaves the other cores idle.
+written atomically (temporary file, rename) without fsync (a scratch file, `wolfcal.atomic`); one that a crash
+left empty or torn fails `_load`'s checks and is detected again. A file's digest is remembered beside the entries
+(`hash_file`, `remembered_digest`) as a memo tied to the file's identity (`wolfcal.io.filememo`: a file changed
+since is hashed again, a digest taken less than RACY_NS after the file's last change is not trusted), so a cache
+hit reads neither the file's content nor its images.
+
+Why XXH3-128 and not hashlib's SHA-256: the digest names content and guards against no adversary (whoever could
+forge a collision could as well edit the cache folder); at 128 bits two different captures share a digest with a
+chance of about 1e-38; and it reads a multi-GB recording at the speed of the disk, where SHA-256 would add
+seconds to a first run. The same hash names the cache's files.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import threading
 import time
 import zipfile
-from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
-from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +35,7 @@ import numpy as np
 import xxhash
 
 from wolfcal.atomic import atomic_output
-from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, recall, write_memo
+from wolfcal.io.filememo import cache_dir, caching, identity_and_memo, name_digest, recall, write_memo
 from wolfcal.io.filememo import cache_enabled as cache_enabled  # `--no-cache`: this cache and the reader's memos
 from wolfcal.vision.batch import Detections, iter_detect_checked
 from wolfcal.vision.found_tags import FoundTags
@@ -83,22 +79,11 @@ class DetectorSettings:
         }
 
 
-class _Stopped(Exception):
-    """A hash given up (the detection beside it ended first, or failed)."""
-
-
-def content_digest(path: Path, chunk: int = 1 << 20, stop: threading.Event | None = None) -> str:
-    """XXH3-128 hex digest of a file's whole content; _Stopped as soon as `stop` is set.
-
-    XXH3-128, not SHA-256: the digest names content, it guards against no adversary (whoever could forge a
-    collision could as well edit the cache folder), and at 128 bits two different captures share a digest with a
-    chance of about 1e-38; it takes 5 ms per 75 MB here against SHA-256's 42 ms with the CPU's SHA extensions, the
-    fastest hashlib offers (a tenth of the camera fit's first run beyond OpenCV's detector)."""
+def content_digest(path: Path, chunk: int = 1 << 20) -> str:
+    """XXH3-128 hex digest of a file's whole content (see the module docstring for why this hash)."""
     digest = xxhash.xxh3_128()
     with open(path, "rb") as handle:
         while block := handle.read(chunk):
-            if stop is not None and stop.is_set():
-                raise _Stopped
             digest.update(block)
     return digest.hexdigest()
 
@@ -112,45 +97,15 @@ def remembered_digest(path: Path) -> tuple[str | None, bool]:
     return (str(digest) if digest is not None else None), seen
 
 
-def hash_file(path: Path, stop: threading.Event | None = None) -> str:
+def hash_file(path: Path) -> str:
     """`content_digest` of the file, remembered beside the cache entries for `remembered_digest` (`filememo`:
     trusted only if the file changed RACY_NS or more before it was hashed; remembered also when too recent to
     trust, so that `remembered_digest` tells the path was hashed before)."""
     identity, _ = identity_and_memo(path, "digest")
     hashed_ns = time.time_ns()
-    digest = content_digest(path, stop=stop)
+    digest = content_digest(path)
     write_memo(path, "digest", identity, hashed_ns, {DIGEST: digest})
     return digest
-
-
-Hashing = tuple[Future, threading.Event]  # a hash under way (`hash_file`) and the event that stops it
-_ahead: dict[str, Hashing] = {}  # absolute path -> its hash begun by `hashing_ahead`, until `cached_detect` takes it
-
-
-@contextmanager
-def hashing_ahead(paths: Iterable[Path]) -> Iterator[None]:
-    """Inside, each of these capture files that `cached_detect` will hash (no trusted digest remembered: a first
-    run, a changed file) is hashed from the start, on a thread of its own: beside the reading of the captures,
-    which leaves the other cores idle, rather than beside the detection, whose workers it competed with
-    (2048x1536, 24 samples: 0.01 s of CPU for 75 MB, the read included). `cached_detect` takes the hash from there;
-    on leaving, hashes not taken are stopped. Without the cache (`--no-cache`) nothing is hashed."""
-    started: dict[str, Hashing] = {}
-    pool = ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash-ahead")
-    try:
-        for path in paths if caching() else ():
-            name = os.path.abspath(path)
-            try:
-                if name in _ahead or not Path(path).is_file() or remembered_digest(Path(path))[0] is not None:
-                    continue
-            except OSError:
-                continue
-            started[name] = _ahead[name] = _begin_hash(pool, Path(path))
-        yield
-    finally:
-        for name, (_, stop) in started.items():
-            _ahead.pop(name, None)
-            stop.set()
-        pool.shutdown()
 
 
 def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str:
@@ -160,7 +115,7 @@ def _entry_key(digest: str, camera_name: str, settings: DetectorSettings) -> str
 
 def _entry_path(key: str) -> Path:
     """The entry's file in the cache folder, named by the hash of its key."""
-    return cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
+    return cache_dir() / f"{name_digest(key)}.npz"
 
 
 def _load(path: Path, key: str, stamps: np.ndarray) -> FoundTags | None:
@@ -212,15 +167,8 @@ def cached_detect(
 
     if not (caching() and bool(str(path)) and Path(path).is_file()):  # samples made in memory have no file
         return _all(detect(), stamps)
-    ahead = _ahead.pop(os.path.abspath(path), None)  # its hash begun by `hashing_ahead`
     try:
-        digest, seen = remembered_digest(Path(path))
-    except OSError:
-        return _all(detect(), stamps)
-    if not seen:  # a path never hashed (a first run): hashed beside the detection
-        return _detect_while_hashing(Path(path), camera_name, stamps_array, detect, settings, progress, ahead)
-    try:  # changed since, or too recent to trust: hashed first
-        digest = digest or (ahead[0].result() if ahead is not None else hash_file(Path(path)))
+        digest = remembered_digest(Path(path))[0] or hash_file(Path(path))
     except OSError:
         return _all(detect(), stamps)
     key = _entry_key(digest, camera_name, settings)
@@ -244,66 +192,6 @@ def _one_per_stamp(found: FoundTags, stamps: list[int] | np.ndarray) -> FoundTag
     if len(found) != len(stamps):
         raise ValueError(f"{len(found)} images but {len(stamps)} stamps")
     return found
-
-
-def _detect_while_hashing(
-    path: Path,
-    camera_name: str,
-    stamps: np.ndarray,
-    detect: Callable[[], Generator[Detections, None, None]],
-    settings: DetectorSettings,
-    progress: Callable[[int, int | None], None] | None,
-    ahead: Hashing | None = None,
-) -> FoundTags:
-    """Detections of a file's images (`detect()`) with the file hashed meanwhile on a thread of its own (xxhash
-    and the reads release the interpreter lock), so the hash (0.01 s per 70 MB, more when the file is not in
-    the page cache) no longer waits before the detection; then saved. Should the digest find a whole entry (a
-    copied or moved file), detection stops there and the entry answers (or after the last image, if the hash ends
-    later: the same answer as hashing first). A file that cannot be hashed: no cache. `ahead`: the file's hash
-    begun by `hashing_ahead`, taken instead of beginning one."""
-    with ThreadPoolExecutor(1, thread_name_prefix="wolfcal-hash") as hasher:
-        hashing, stop = ahead if ahead is not None else _begin_hash(hasher, path)
-        looked = False
-        found = FoundTags()
-        stream = detect()
-        try:
-            for detections in stream:
-                found.append(detections)
-                if not looked and hashing.done():
-                    looked = True
-                    key = _key_of(hashing, camera_name, settings)
-                    cached = _load(_entry_path(key), key, stamps) if key is not None else None
-                    if cached is not None:
-                        if progress:
-                            progress(len(cached), len(cached))
-                        return cached
-            _one_per_stamp(found, stamps)
-        except BaseException:  # an undecodable image, Ctrl-C: the hash of a long recording is not waited for
-            stop.set()
-            raise
-        finally:
-            stream.close()
-        key = _key_of(hashing, camera_name, settings)
-    if key is None:
-        return found
-    if not looked and (cached := _load(_entry_path(key), key, stamps)) is not None:
-        return cached  # the hash ended after the last image: its entry still answers, as it would have first
-    _save(_entry_path(key), key, stamps, found)
-    return found
-
-
-def _begin_hash(pool: ThreadPoolExecutor, path: Path) -> Hashing:
-    """`hash_file(path)` begun on `pool`, with the event that stops it."""
-    stop = threading.Event()
-    return pool.submit(hash_file, path, stop), stop
-
-
-def _key_of(hashing: Future, camera_name: str, settings: DetectorSettings) -> str | None:
-    """The entry key for the finished hash's digest (None if the file could not be read)."""
-    try:
-        return _entry_key(hashing.result(), camera_name, settings)
-    except OSError:
-        return None
 
 
 def detect_by_source(

@@ -6,15 +6,11 @@ edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola
 corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected. All
 8 edges of a tag are sampled with one `cv2.remap` and fitted with batched normal equations (no per-edge
 Python loop; with every profile on its own and two iterations it gives the corners of the per-edge loop it
-replaced to ~1e-6 px, tests/vision/test_edge_refinement.py compares the two). A call costs ~0.5-1 ms per iteration whatever the
-number of tags (numpy's per-operation cost), so `refine_tags` takes the tags of several images at once. The
-edges of large cells have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled
-after one iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows,
-edge by edge; the grid's unused and padded rows were ~23 % at 512x384), window sums and bins are sums of their own
-(`np.add.reduceat`), the fits closed-form 3x3 solves. CPU per tag, one thread, the bench captures' own tags in
-the fit's tasks, in alternated runs beside the version before (min-median): 0.53-0.58 ms at 512x384 (0.73-0.80 ms
-before, 1.38x; ~0.85 ms before the bins) and 0.88-0.97 ms at 2048x1536 (1.16x; the bins and the settled rule had
-cut it 3x).
+replaced to ~1e-6 px, tests/vision/test_edge_refinement.py compares the two). A call's cost is mostly numpy's
+per operation, whatever the number of tags, so `refine_tags` takes the tags of several images at once. The edges of large cells
+have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled after one iteration is not
+iterated again (SETTLED). Only the profiles used are sampled and measured (P rows, edge by edge), window sums and
+bins are sums of their own (`np.add.reduceat`), the fits closed-form 3x3 solves.
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j) of a grid of M points along an edge at
 distances `d` [px] from the corner (padded to the longest edge), S samples across it at offsets `t` [px]
@@ -34,12 +30,11 @@ from wolfcal.vision.outline import mean_side
 
 MIN_POINTS = 4  # edge points needed for a tangent
 MIN_CONTRAST = 10.0  # grey levels between the 10th and 90th percentile of an edge's profiles
-# Tags refined in one pass at most (detection gathers consecutive images' tags up to this many, `vision.batch`): 8 a
-# pass took 1.15x the CPU of ~9 at 512x384; a pass holds ~0.5 MB per tag of 160 px at 512x384
+# Tags refined in one pass at most (detection gathers consecutive images' tags up to this many, `vision.batch`)
 TAGS_PER_PASS = 16
 # Kept profiles per edge from which they are averaged in bins of k = n // PROFILES (PROFILES to 2 PROFILES - 1 bins):
-# a large cell's edge has 100-200 profiles 0.5 px apart. Binned, the corners move by ~0.01 px (bench_vision: median
-# and 95th percentile error within 0.001 px; 12 bins: +0.005 px at the 95th percentile on 16x16 renders). The fine
+# a large cell's edge has 100-200 profiles 0.5 px apart. Binned, the corners move by ~0.01 px (median and 95th
+# percentile error on rendered views within 0.001 px; 12 bins were worse at the 95th percentile). The fine
 # step along the edge stays: profiles 1-2 px apart alias with the pixel grid (+0.003-0.03 px median error).
 PROFILES = 24
 # A tag whose corners all moved less than this share of its cell in an iteration has settled: no further iteration
@@ -215,7 +210,7 @@ def refine_tags(
     Cost: profiles reach at most 2 px beyond the window across the edge (room for the crossing); an edge with
     2 PROFILES or more profiles has them averaged in bins (`_binned`); a tag whose corners all moved less than
     SETTLED cell in an iteration is not iterated again (at 2048x1536 nearly all after the first, at 512x384 few).
-    On bench_vision's views the corner errors stay within 0.003 px of every profile on its own and two iterations.
+    On rendered views the corner errors stay within 0.003 px of every profile on its own and two iterations.
     """
     corners = np.array(corners, dtype=float).reshape(-1, 4, 2)
     if len(corners) > TAGS_PER_PASS:

@@ -117,8 +117,8 @@ def _cubic_weights(x: np.ndarray, step: float) -> np.ndarray:
 def _unproject_grid(camera: CameraModel, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rays (len(v), len(u), 3), z = 1, through the regular pixel grid u x v.
 
-    Exact unprojection on a grid 8x coarser, cubic interpolation in between: the undistortion is smooth, the
-    error is < 1e-5 px even at the corners of a strongly distorted 2048x1536 image, for 1/64 of the cost.
+    Exact unprojection on a grid 8 times coarser, cubic interpolation in between: the undistortion is smooth, the
+    error is < 1e-5 px even at the corners of a strongly distorted 2048x1536 image, at a small share of the cost.
     """
     step = 8.0
     Wu, Wv = _cubic_weights(u, step), _cubic_weights(v, step)

@@ -11,31 +11,17 @@ corner, sub-pixel points of the two black-square edges next to it (area method o
 the edge, unbiased for pixel-integrated and symmetrically blurred steps), a parabola per edge fitted near the
 corner (lens distortion bends whole edges, so only a local fit is exact), and the tangents intersected.
 
-Why (bench/bench_vision.py: tag36h11 of 0.08 m at 0.3-1.2 m, tilted up to 50 deg, anywhere in the image,
-noise sigma 2; a 2048x1536 camera with strong barrel distortion, k1 = -0.286, and the same lens binned to
-512x384; corner error |detected - projected truth| [px per corner], median / 95th percentile; edges and SUBPIX
-over the default 60 views, the others 100 views):
+Why: on rendered views (a 2048x1536 camera with strong barrel distortion and the same lens binned to 512x384) the
+edge refinement's corners are several times closer to the projected truth than those of OpenCV's refinements
+(SUBPIX, APRILTAG, CONTOUR), and a large frontal tag is found without bias: renderer and detector share the pixel
+convention. The figures: docs/accuracy.md (`python bench/run.py --parts detection`).
 
-    refinement          2048x1536        512x384
-    edges (this)        0.023 / 0.14     0.033 / 0.12
-    aruco SUBPIX        0.20  / 0.32     0.35  / 0.93
-    aruco APRILTAG      0.67  / 1.10     0.62  / 0.84   (and ~1 s per full image)
-    aruco CONTOUR       0.72  / 1.24     0.70  / 0.94
-    none                0.64  / 1.09     0.69  / 1.14
-
-Part of the "edges" error is aliasing in the rendered truth (4x4 supersampling): rendered at 16x16 it is
-0.013 / 0.029 px (full) and 0.021 / 0.051 px (binned; tags there are 15-60 px wide). With a Gaussian blur of
-sigma 1 px it is 0.020 / 0.13 px at full resolution (SUBPIX: 0.25 / 0.36). A large frontal tag rendered at
-16x16 is found within 0.04 px (mean signed error < 0.003 px): renderer and detector share the pixel convention.
-
-Tags are searched for at full resolution. Searching at half resolution (AprilTag's quad_decimate; areas averaged)
-and refining at full resolution halves OpenCV's cost at 2048x1536 (19 -> 9 ms per image) with the same corners
-on the views above (tags of 89 px and more), but loses small tags: of 211 tags of 14-45 px side (tilted up to
-60 deg, some blurred) in 90 images at 2048x1536 it misses 97. They form no candidate outline there (the one-cell
-white margin is under 2 px), so reading the rejected candidates again at full resolution does not bring them back
-(in 40 other images 9 of 103 still lost, of 12-38 px side), nor does a full-resolution pass with the smallest
-threshold window (5 of 211 lost, at 0.65x the cost). Decimating safely needs each tag's smallest expected size,
-i.e. a bound on its distance, which floor tags (0.5-5 m, seen at a grazing angle) and external cameras lack.
+Tags are searched for at full resolution. Searching at half resolution (AprilTag's quad_decimate) and refining at
+full resolution would halve OpenCV's cost at 2048x1536 with the same corners on large tags, but loses small tags
+(under about 45 px side): they form no candidate outline there (the one-cell white margin is under 2 px), and
+neither reading the rejected candidates again at full resolution nor a full-resolution pass with the smallest
+threshold window brings them all back. Decimating safely needs each tag's smallest expected size, i.e. a bound on
+its distance, which floor tags (0.5-5 m, seen at a grazing angle) and external cameras lack.
 """
 
 from __future__ import annotations
@@ -60,8 +46,8 @@ REFINEMENTS = ("edges", "subpix", "apriltag", "contour", "none")
 # Candidates with a shorter outline are not looked at [px]: a tag of 10 px side (1.25 px per tag36h11 cell). Rendered
 # tags of 8-10 px are found 1-4 times in 20 at 512x384, 12 px 12 times in 20; OpenCV's own limit, 3 % of the image's
 # longer side, is 15 px at 512x384, so below 1300 px wide this limit is the one that counts and spares the detector
-# the noise contours of small adaptive-threshold windows (detection at 512x384: 4.9 -> 3.1 ms per image, the same
-# 2046 tags and corners in the 1400 images of bench/bench_table.py's 512x384 captures).
+# the noise contours of small adaptive-threshold windows (faster, with the same tags and corners found in
+# simulated 512x384 captures).
 MIN_TAG_PERIMETER_PX = 40.0
 
 
@@ -213,7 +199,7 @@ def _tags_crop(gray: np.ndarray, corners: np.ndarray, cells: int) -> Crop:
     The refinement's profiles reach at most 6 px beyond a tag's outline, and a corner moves at most half a cell and
     1 px per iteration (2), so a margin of 12 px and two cells holds them all. The crop is clipped to the image: the
     refinement drops profiles beyond the crop's border exactly where they leave the image. Converting only the crop
-    spares the float copy of the whole image (2.4 ms at 2048x1536).
+    spares a float copy of the whole image.
     """
     h, w = gray.shape
     cell = mean_side(corners).max() / cells

@@ -1,4 +1,4 @@
-"""The serving loop: the emulated bus on a new pseudo-terminal, stepped every 2 ms and on every byte received."""
+"""The serving loop: the emulated bus on a new pseudo-terminal, stepped every STEP_S and on every byte received."""
 
 from __future__ import annotations
 
