@@ -7,9 +7,9 @@ corner (lens distortion bends whole edges, so only a local fit is exact), and th
 8 edges of a tag are sampled with one `cv2.remap` and fitted with batched normal equations (no per-edge
 Python loop; with every profile on its own and two iterations it gives the corners of the per-edge loop it
 replaced to ~1e-6 px, tests/vision/test_edge_refinement.py compares the two). A call's cost is mostly numpy's
-per operation, whatever the number of tags, so `refine_tags` takes the tags of several images at once. The edges of large cells
-have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled after one iteration is not
-iterated again (SETTLED). Only the profiles used are sampled and measured (P rows, edge by edge), window sums and
+per operation, whatever the number of tags, so `refine_tags` takes the tags of several images at once. The edges
+of large cells have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled after one
+iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows, edge by edge), window sums and
 bins are sums of their own (`np.add.reduceat`), the fits closed-form 3x3 solves.
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j) of a grid of M points along an edge at
