@@ -9,8 +9,8 @@ Python loop; with every profile on its own and two iterations it gives the corne
 replaced to ~1e-6 px, tests/vision/test_edge_refinement.py compares the two). A call's cost is mostly numpy's
 per operation, whatever the number of tags, so `refine_tags` takes the tags of several images at once. The edges
 of large cells have 100-200 profiles: they are averaged in bins (PROFILES), and a tag that has settled after one
-iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows, edge by edge), window sums and
-bins are sums of their own (`np.add.reduceat`), the fits closed-form 3x3 solves.
+iteration is not iterated again (SETTLED). Only the profiles used are sampled and measured (P rows, edge by
+edge), window sums and bins are sums of their own (`np.add.reduceat`), the fits closed-form 3x3 solves.
 
 Arrays: E edges (corner k, towards corner k+1 then k-1: edge 2k + j) of a grid of M points along an edge at
 distances `d` [px] from the corner (padded to the longest edge), S samples across it at offsets `t` [px]
