@@ -30,15 +30,22 @@ def main() -> None:
     config = load_robot_config(ROBOT)
     with tempfile.TemporaryDirectory() as folder, EmulatorProcess(spec_from_config(config)) as emu:
         options = CaptureOptions(
-            robot=ROBOT, out=Path(folder) / "bench.mcap", camera="sim", port=emu.port, poses=ROBOT / "poses.yaml",
-            velocity=args.velocity, gates=GateSettings(settle_s=args.settle),
+            robot=ROBOT,
+            out=Path(folder) / "bench.mcap",
+            camera="sim",
+            port=emu.port,
+            poses=ROBOT / "poses.yaml",
+            velocity=args.velocity,
+            gates=GateSettings(settle_s=args.settle),
         )
         start = time.perf_counter()
         summary = run_capture(options, Console(quiet=True))
         total = time.perf_counter() - start
     rest = np.array(summary.rest_to_sample_s)
-    print(f"{summary.samples} samples in {total:.1f} s (moves at {args.velocity} rad/s, settle {args.settle} s); "
-          f"rest -> sample on disk: median {np.median(rest):.2f} s, max {rest.max():.2f} s")
+    print(
+        f"{summary.samples} samples in {total:.1f} s (moves at {args.velocity} rad/s, settle {args.settle} s); "
+        f"rest -> sample on disk: median {np.median(rest):.2f} s, max {rest.max():.2f} s"
+    )
 
 
 if __name__ == "__main__":

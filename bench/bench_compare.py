@@ -58,8 +58,10 @@ def session(d: Path, seed: int) -> None:
         result = CliRunner().invoke(app, [*step, *robot])
         if result.exit_code != 0:
             raise SystemExit(f"{' '.join(step)}:\n{result.output}")
-        print(f"  {step[0]} {Path(step[2] if step[0] == 'simulate' else step[-1]).name}: "
-              f"{time.perf_counter() - t:.0f} s", flush=True)
+        print(
+            f"  {step[0]} {Path(step[2] if step[0] == 'simulate' else step[-1]).name}: {time.perf_counter() - t:.0f} s",
+            flush=True,
+        )
 
 
 def compare(d: Path) -> dict:
@@ -96,7 +98,8 @@ def main() -> None:
                     cells.append("n/a" if cell["mean"] is None else f"{cell['mean']:.2f} ± {std}")
                     if label != "before (input URDF)" and cell["mean"] is not None and before[c["key"]]["mean"]:
                         ratios.setdefault(label, {}).setdefault(c["key"], []).append(
-                            cell["mean"] / before[c["key"]]["mean"])
+                            cell["mean"] / before[c["key"]]["mean"]
+                        )
                 print(f"| {label} | " + " | ".join(cells) + " |")
             print(metrics["decision"]["message"], flush=True)
     print("ratio to before per column, over the seeds (mean, max):")

@@ -66,15 +66,19 @@ def speed() -> None:
     for n in (25, 100, 400, 1000):
         scenario = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all")
         wall, cpu, fit = timed(robot, scenario.obs, FitOptions(free="leg", side="both"))
-        print(f"head camera, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d} corners, {len(fit.params)} "
-              f"unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), {fit.solution.evaluations} "
-              "linearisations")
+        print(
+            f"head camera, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d} corners, {len(fit.params)} "
+            f"unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), {fit.solution.evaluations} "
+            "linearisations"
+        )
     for n, moving in ((30, False), (120, False), (120, True)):
         scenario = synthetic_external_scenario(robot, TRIPOD, n=n, seed=n)
         wall, cpu, fit = timed(robot, scenario.obs, FitOptions(free="leg", external_moving=moving))
-        print(f"external camera{' (moving)' if moving else ''}, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d}"
-              f" corners, {len(fit.params)} unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), "
-              f"{fit.solution.evaluations} linearisations")
+        print(
+            f"external camera{' (moving)' if moving else ''}, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d}"
+            f" corners, {len(fit.params)} unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), "
+            f"{fit.solution.evaluations} linearisations"
+        )
 
 
 Case = Callable[[], tuple]  # -> (robot, observations by camera, markers or None, options)
@@ -85,6 +89,7 @@ def from_captures(config: Path, captures: list[Path], **options) -> Case:
         robot = load_robot(config)
         samples, _ = load_samples(robot, captures, None, cameras=())
         return robot, detect_observations(samples, robot)[0], None, FitOptions(**options)
+
     return load
 
 
@@ -98,6 +103,7 @@ def synthetic(n: int, noise_px: float, outliers: float | None) -> Case:
         obs = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all", noise_px=noise_px,
                                  outlier_fraction=outliers).obs  # fmt: skip
         return robot, {obs.camera_name: obs}, None, FitOptions(free="leg", side="both")
+
     return load
 
 
@@ -128,8 +134,9 @@ def cases(floor_dir: Path | None) -> dict[str, Case]:
         out["bench 24"] = from_captures(CONFIG, [BENCH_DATA / "camera_24.mcap"], free="camera")
     for folder in sorted(floor_dir.glob("*_tags*")) if floor_dir else []:
         free = {"free": folder.name.split("_")[0], "side": "both"}
-        out[f"floor {folder.name}"] = from_captures(folder / "robot_standing.yaml",
-                                                    [folder / "feet.mcap", folder / "floor.mcap"], **free)
+        out[f"floor {folder.name}"] = from_captures(
+            folder / "robot_standing.yaml", [folder / "feet.mcap", folder / "floor.mcap"], **free
+        )
     return out
 
 
@@ -146,8 +153,9 @@ def jittered(observations: dict, markers, seed: int) -> tuple[dict, object]:
     out = {k: replace(o, uv=o.uv + 1e-7 * np.random.default_rng(seed).standard_normal(o.uv.shape))
            for k, o in observations.items()}  # fmt: skip
     if markers is not None:
-        markers = replace(markers, xyz=markers.xyz + 1e-10 * np.random.default_rng(seed).standard_normal(
-            markers.xyz.shape))
+        markers = replace(
+            markers, xyz=markers.xyz + 1e-10 * np.random.default_rng(seed).standard_normal(markers.xyz.shape)
+        )
     return out, markers
 
 
@@ -197,9 +205,11 @@ def stability(names: list[str], floor_dir: Path | None) -> None:
         for label, fits in others.items():
             moved, std = np.max([change(base, f) for f in fits], axis=0)
             parts.append(f"{label} {moved:.1e} ({std:.0e})")
-        print(f"{name:34s} {len(base['values']):3d} unknowns, {base['evaluations']:3d} linearisations, "
-              f"{base['cpu']:.2f} s CPU | largest change / std (std's relative change): " + ", ".join(parts),
-              flush=True)
+        print(
+            f"{name:34s} {len(base['values']):3d} unknowns, {base['evaluations']:3d} linearisations, "
+            f"{base['cpu']:.2f} s CPU | largest change / std (std's relative change): " + ", ".join(parts),
+            flush=True,
+        )
 
 
 def main() -> None:

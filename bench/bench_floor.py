@@ -69,7 +69,7 @@ def held_stances(count: int) -> list[dict[str, float]]:
     centre = moved_stance(robot, STANCES[0], (0.0, -0.03, 0.0, 0.0))  # STANCES[0] moved back to the middle
     shifts = np.random.default_rng(0).uniform([-0.02, -0.03, -0.015, -0.15], [0.02, 0.03, 0.0, 0.15], (count, 4))
     stances = [moved_stance(robot, centre, shift) for shift in shifts]
-    assert stances[:len(shipped)] == shipped, "robot.yaml's floor.check_stances follow this recipe"
+    assert stances[: len(shipped)] == shipped, "robot.yaml's floor.check_stances follow this recipe"
     return stances
 
 
@@ -117,12 +117,21 @@ class Held:
     def tag(self) -> str:
         """The part of a --keep folder's name these options set."""
         stances = f"_new-stances{self.new_stances}" if self.new_stances else {1: "", 5: "_held-stances"}[self.stances]
-        return (f"_held{self.samples}x{self.layouts}" + stances
-                + ("" if self.distance == FLOOR_DISTANCE_M else f"_held{self.distance[0]:g}-{self.distance[1]:g}m"))
+        return (
+            f"_held{self.samples}x{self.layouts}"
+            + stances
+            + ("" if self.distance == FLOOR_DISTANCE_M else f"_held{self.distance[0]:g}-{self.distance[1]:g}m")
+        )
 
 
 def simulate(
-    config: Path, folder: Path, seed: int, offsets: str, n_tags: int = 6, n_floor: int = 20, held: Held = Held(),
+    config: Path,
+    folder: Path,
+    seed: int,
+    offsets: str,
+    n_tags: int = 6,
+    n_floor: int = 20,
+    held: Held = Held(),
 ) -> tuple[dict[str, Path], list[Path]]:
     """feet and floor (`n_floor` samples, in the stances) captures of one simulated robot (names -> paths) and the
     held-out floor captures (`held`; `n_tags` floor tags), each made once per folder."""
@@ -174,14 +183,18 @@ def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, 
             agrees = abs(row["error_m"] - after) <= max(0.2 * after, 0.01)
             parts = " ".join(f"{k.split('_')[0]} {row[k] * 100:.2f}" for k in
                              ("formal_std_m", "sample_std_m", "tag_std_m", "rounding_std_m"))  # fmt: skip
-            line += (f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
-                     f"{(row['error_m'] - after) / row['std_m']:+.1f}; {'AGREES' if agrees else 'off'}; {parts}; "
-                     f"{measured['views']} views, {measured['outlier_corners']} corners left out; inset "
-                     f"{inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)")
+            line += (
+                f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
+                f"{(row['error_m'] - after) / row['std_m']:+.1f}; {'AGREES' if agrees else 'off'}; {parts}; "
+                f"{measured['views']} views, {measured['outlier_corners']} corners left out; inset "
+                f"{inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)"
+            )
     rng = np.random.default_rng(seed)
     soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
-    line += (f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "
-             f"{np.rad2deg(max(r.max() for r, _ in soles)):.3f} deg")
+    line += (
+        f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "
+        f"{np.rad2deg(max(r.max() for r, _ in soles)):.3f} deg"
+    )
     floor_block = [b for b in fit.solution.blocks if b.name == "floor"]
     if floor_block:
         line += f", floor rms {floor_block[0].rms_after:.3f} px"
@@ -194,19 +207,41 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--scenarios", nargs="*", default=["leg", "camera"])
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder and reuse them")
-    parser.add_argument("--stances", action="store_true", help="floor samples spread over STANCES too (default: "
-                        "all standing at floor.standing)")
+    parser.add_argument(
+        "--stances",
+        action="store_true",
+        help="floor samples spread over STANCES too (default: all standing at floor.standing)",
+    )
     parser.add_argument("--floor-tags", type=int, default=6, help="floor tags lying on the floor (default 6)")
     parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
-    parser.add_argument("--held-stances", action="store_true", help="the held-out floor samples spread over STANCES "
-                        "too (default: all standing): each stance rounds the standing legs' readings anew")
-    parser.add_argument("--held-new-stances", type=int, default=0, help="the held-out floor samples spread over "
-                        "this many stances none of the fit's (`held_stances`)")
+    parser.add_argument(
+        "--held-stances",
+        action="store_true",
+        help="the held-out floor samples spread over STANCES "
+        "too (default: all standing): each stance rounds the standing legs' readings anew",
+    )
+    parser.add_argument(
+        "--held-new-stances",
+        type=int,
+        default=0,
+        help="the held-out floor samples spread over this many stances none of the fit's (`held_stances`)",
+    )
     parser.add_argument("--held-samples", type=int, default=16, help="held-out floor samples (default 16)")
-    parser.add_argument("--held-layouts", type=int, default=1, help="held-out floor captures, the tags laid out "
-                        "anew in each (the held-out samples split between them; default 1)")
-    parser.add_argument("--held-distance", type=float, nargs=2, default=FLOOR_DISTANCE_M, metavar=("NEAR", "FAR"),
-                        help="the held-out floor tags lie this far away [m] (default 1 4)")
+    parser.add_argument(
+        "--held-layouts",
+        type=int,
+        default=1,
+        help="held-out floor captures, the tags laid out "
+        "anew in each (the held-out samples split between them; default 1)",
+    )
+    parser.add_argument(
+        "--held-distance",
+        type=float,
+        nargs=2,
+        default=FLOOR_DISTANCE_M,
+        metavar=("NEAR", "FAR"),
+        help="the held-out floor tags lie this far away [m] (default 1 4)",
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
@@ -214,12 +249,18 @@ def main() -> None:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 try:
                     # the captures depend on these options: a --keep folder per combination, never a stale one
-                    held = Held(args.held_samples, args.held_layouts,
-                                5 if args.held_stances else 1, args.held_new_stances, tuple(args.held_distance))
+                    held = Held(
+                        args.held_samples,
+                        args.held_layouts,
+                        5 if args.held_stances else 1,
+                        args.held_new_stances,
+                        tuple(args.held_distance),
+                    )
                     flags = "_stances" if args.stances else ""
                     folder = root / f"{scenario}_{seed}_tags{args.floor_tags}_floor{args.floor_samples}{flags}"
-                    print(run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples, held),
-                          flush=True)
+                    print(
+                        run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples, held), flush=True
+                    )
                 except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
                     print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
 

@@ -65,9 +65,11 @@ def run(seed: int, folder: Path) -> dict[str, dict]:
     session = write_session(folder, seed)
     fit = ["--system", "mocap", "--free", "leg"]
     config = str(STRIDER / "robot.yaml")
-    runs = {"markers": [str(folder / "markers.mcap"), "--robot", config],
-            "c3d": [str(folder / "joints.mcap"), "--mocap", str(folder / "markers.c3d"), "--robot", config],
-            "known": [str(folder / "markers.mcap"), "--robot", str(known_mounts_config(session, folder))]}
+    runs = {
+        "markers": [str(folder / "markers.mcap"), "--robot", config],
+        "c3d": [str(folder / "joints.mcap"), "--mocap", str(folder / "markers.c3d"), "--robot", config],
+        "known": [str(folder / "markers.mcap"), "--robot", str(known_mounts_config(session, folder))],
+    }
     out = {}
     for name, args in runs.items():
         result = CliRunner().invoke(app, ["fit", *args, *fit, "--out", str(folder / name)])
@@ -82,24 +84,30 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     args = parser.parse_args()
     rows = []
-    print(f"{'seed':>4} {'source':>7} {'sole mm':>8} {'sole deg':>8} {'roll deg':>8} {'mount deg':>9} "
-          f"{'max |z|':>7} {'flagged':>8} {'other':>5} {'clock ms':>8}")
+    print(
+        f"{'seed':>4} {'source':>7} {'sole mm':>8} {'sole deg':>8} {'roll deg':>8} {'mount deg':>9} "
+        f"{'max |z|':>7} {'flagged':>8} {'other':>5} {'clock ms':>8}"
+    )
     for seed in range(args.seeds):
         with tempfile.TemporaryDirectory() as tmp:
             for name, r in run(seed, Path(tmp)).items():
                 rows.append(r | {"source": name})
                 clock = "-" if r["clock_ms"] is None else f"{r['clock_ms']:.2f}"
-                print(f"{seed:>4} {name:>7} {r['sole_mm']:8.3f} {r['sole_deg']:8.3f} {r['roll_deg']:8.3f} "
-                      f"{r['mount_deg']:9.3f} {r['max_z']:7.2f} {r['flagged']:>4}/{r['reflections']:<3} "
-                      f"{r['other']:>5} {clock:>8}",
-                      flush=True)
+                print(
+                    f"{seed:>4} {name:>7} {r['sole_mm']:8.3f} {r['sole_deg']:8.3f} {r['roll_deg']:8.3f} "
+                    f"{r['mount_deg']:9.3f} {r['max_z']:7.2f} {r['flagged']:>4}/{r['reflections']:<3} "
+                    f"{r['other']:>5} {clock:>8}",
+                    flush=True,
+                )
     for source in ("markers", "c3d", "known"):
         for key in ("sole_mm", "sole_deg", "roll_deg", "max_z"):
             v = np.array([r[key] for r in rows if r["source"] == source])
             print(f"{source} {key}: mean {v.mean():.3f}, max {v.max():.3f}")
         pairs = np.rad2deg([pair for r in rows if r["source"] == source for pair in r["pairs"]])
-        print(f"{source}: ankle-roll error against the mounts' rotation: correlation "
-              f"{np.corrcoef(pairs.T)[0, 1]:.3f}, rms difference {np.sqrt(np.mean(np.diff(pairs) ** 2)):.3f} deg")
+        print(
+            f"{source}: ankle-roll error against the mounts' rotation: correlation "
+            f"{np.corrcoef(pairs.T)[0, 1]:.3f}, rms difference {np.sqrt(np.mean(np.diff(pairs) ** 2)):.3f} deg"
+        )
 
 
 if __name__ == "__main__":

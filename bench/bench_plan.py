@@ -203,8 +203,10 @@ def paired(runs: list[dict], metric: str, scale: float) -> str:
     d = np.array([r["planned12"][metric] - r["random30"][metric] for r in runs]) * scale
     boot = np.median(np.random.default_rng(0).choice(d, size=(2000, len(d))), axis=1)
     lo, hi = np.percentile(boot, [5, 95])
-    return (f"median {np.median(d):+.3f} (90 % interval {lo:+.3f} .. {hi:+.3f}), planned better in {(d < 0).sum()} "
-            f"of {len(d)}")
+    return (
+        f"median {np.median(d):+.3f} (90 % interval {lo:+.3f} .. {hi:+.3f}), planned better in {(d < 0).sum()} "
+        f"of {len(d)}"
+    )
 
 
 def timing() -> None:
@@ -222,8 +224,11 @@ def timing() -> None:
         start, cpu = time.perf_counter(), time.process_time()
         make_plan(robot, PlanOptions(free=free, system=system, poses=20, criterion=criterion), say=mark)
         total, wall = time.process_time() - cpu, time.perf_counter() - start
-        print(f"{system:9s} --free {free} {criterion}: 20 of 2000 in {total:.1f} s CPU (candidates "
-              f"{marks[0] - cpu:.1f} s), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f}", flush=True)
+        print(
+            f"{system:9s} --free {free} {criterion}: 20 of 2000 in {total:.1f} s CPU (candidates "
+            f"{marks[0] - cpu:.1f} s), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f}",
+            flush=True,
+        )
 
 
 def main() -> None:
@@ -272,11 +277,17 @@ def main() -> None:
                 g = [r["random12"][f"{kind}_{u}"] / r["planned12"][f"{kind}_{u}"] for r in runs
                      if r["planned12"][f"{kind}_{u}"] > 0]  # fmt: skip
                 gains.append(f"{np.median(g):.1f}x (lowest {min(g):.1f}x) ({u})" if g else f"none ({u})")
-            print(f"{name:12s} worst std among the observable offsets and camera mount (no tag mounts), {label}, "
-                  f"random12/planned12, median of {n} seeds: {', '.join(gains)}", flush=True)
-        print(f"{name:12s} planning {np.median([r['planning_s'] for r in runs]):.1f} s wall, "
-              f"{np.median([r['planning_cpu_s'] for r in runs]):.1f} s CPU (12 of 2000; load average "
-              f"{os.getloadavg()[0]:.1f})", flush=True)
+            print(
+                f"{name:12s} worst std among the observable offsets and camera mount (no tag mounts), {label}, "
+                f"random12/planned12, median of {n} seeds: {', '.join(gains)}",
+                flush=True,
+            )
+        print(
+            f"{name:12s} planning {np.median([r['planning_s'] for r in runs]):.1f} s wall, "
+            f"{np.median([r['planning_cpu_s'] for r in runs]):.1f} s CPU (12 of 2000; load average "
+            f"{os.getloadavg()[0]:.1f})",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

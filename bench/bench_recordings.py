@@ -53,8 +53,9 @@ def main() -> None:
                 # the head joints' offsets are true errors only where the preset frees them
                 offsets = "head" if free == "head_camera" else "none"
                 robot = load_robot(CONFIG)
-                truth = simulate_recording(robot, path, args.poses, offsets, args.binning,
-                                           RecordingOptions(flicker=args.flicker, seed=seed))
+                truth = simulate_recording(
+                    robot, path, args.poses, offsets, args.binning, RecordingOptions(flicker=args.flicker, seed=seed)
+                )
                 simulated = time.perf_counter() - start
                 start = time.perf_counter()
                 fit, z = z_scores(robot, truth, path, free)

@@ -61,9 +61,14 @@ def after(port: str, folder: Path) -> dict:
     figures = run_venue(options, say=lambda line: None)
     robot = load_robot(ROBOT)
     rotation, translation = camera_pose_errors(robot, load_result(options.out / "fit").corrections, load_truth(TRUTH))
-    result = {"robot_time_s": figures["robot_time_s"], "wall_time_s": figures["wall_time_s"],
-              "samples": figures["samples"], "camera_rotation_deg": float(np.rad2deg(rotation.max())),
-              "camera_translation_mm": float(translation.max() * 1000), "deployed": figures["deploy"]["written"]}
+    result = {
+        "robot_time_s": figures["robot_time_s"],
+        "wall_time_s": figures["wall_time_s"],
+        "samples": figures["samples"],
+        "camera_rotation_deg": float(np.rad2deg(rotation.max())),
+        "camera_translation_mm": float(translation.max() * 1000),
+        "deployed": figures["deploy"]["written"],
+    }
     print(f"after: robot time {result['robot_time_s']:.1f} s, wall time {result['wall_time_s']:.1f} s, samples "
           f"{result['samples']}, camera within {result['camera_rotation_deg']:.4f} deg and "
           f"{result['camera_translation_mm']:.3f} mm of the truth", flush=True)  # fmt: skip

@@ -35,9 +35,7 @@ def fit(capture: Path, robot: Path, cache: Path) -> dict:
             os.environ["WOLFCAL_CACHE_DIR"] = str(cache_dir)
             out = Path(scratch) / "out"
             return _timed(
-                lambda: run_fit(
-                    [capture], robot, out, FitOptions(free="camera"), say=lambda _: None, force=True
-                )
+                lambda: run_fit([capture], robot, out, FitOptions(free="camera"), say=lambda _: None, force=True)
             )
 
         once(Path(scratch) / "warm-up")

@@ -74,9 +74,7 @@ def run_child(tree: Path, argv: list[str], env: dict[str, str] | None = None) ->
     if done["code"]:
         raise SystemExit(f"child failed ({' '.join(argv[:3])} ...):\n{output[-3000:]}")
     last = next((line for line in reversed(output.splitlines()) if line.startswith("{")), None)
-    return ChildRun(
-        json.loads(last) if last else None, done["wall"], done["cpu"], done["peak_kb"] / 1024, output
-    )
+    return ChildRun(json.loads(last) if last else None, done["wall"], done["cpu"], done["peak_kb"] / 1024, output)
 
 
 def median(values: list[float]) -> float:

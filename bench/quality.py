@@ -37,9 +37,7 @@ def _random_view(camera, rng: np.random.Generator, width: float) -> np.ndarray:
         z = -ray
         x = np.cross([0.0, 1.0, 0.0], z)
         x /= np.linalg.norm(x)
-        R = np.column_stack([x, np.cross(z, x), z]) @ exp_so3(
-            np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)])
-        )
+        R = np.column_stack([x, np.cross(z, x), z]) @ exp_so3(np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)]))
         axis = rng.normal(size=2)
         R = R @ exp_so3(np.array([*axis / np.linalg.norm(axis), 0.0]) * np.deg2rad(rng.uniform(0, 50)))
         T = make_transform(R, ray * rng.uniform(0.3, 1.2) / ray[2])
@@ -108,8 +106,7 @@ def intrinsics(seeds: int, say) -> dict:
         camera = example_camera(640, 480)
         poses = random_board_poses(camera, board, 16, np.random.default_rng(seed))
         images = [
-            render_view(camera, board, T, np.random.default_rng([seed, i]), 2.0, 1.5)
-            for i, T in enumerate(poses)
+            render_view(camera, board, T, np.random.default_rng([seed, i]), 2.0, 1.5) for i, T in enumerate(poses)
         ]
         start = time.perf_counter()
         found = [detect_board(image, board, f"view {i}") for i, image in enumerate(images)]
@@ -121,10 +118,7 @@ def intrinsics(seeds: int, say) -> dict:
             result.camera.cy,
             time.perf_counter() - start,
         )
-        z += [
-            abs(getattr(result.camera, k) - getattr(camera, k)) / result.std[k]
-            for k in ("fx", "fy", "cx", "cy")
-        ]
+        z += [abs(getattr(result.camera, k) - getattr(camera, k)) / result.std[k] for k in ("fx", "fy", "cx", "cy")]
         start = time.perf_counter()
         points = []
         for image in images:
@@ -212,7 +206,6 @@ def seeds(count: int, binning: int, say) -> dict:
                 runs.append(run)
                 say(f"seeds {name} {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in run.items()))
             out["scenarios"][name] = {
-                key: {"median": median([r[key] for r in runs]), "max": max(r[key] for r in runs)}
-                for key in runs[0]
+                key: {"median": median([r[key] for r in runs]), "max": max(r[key] for r in runs)} for key in runs[0]
             }
     return out

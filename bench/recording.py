@@ -70,9 +70,7 @@ def recording(folder: Path, frames: int, binning: int) -> Path:
     names, q, images = _poses(folder, binning)
     renders = [_jpeg(image) for image in images]
     rng = np.random.default_rng(0)
-    field = rng.normal(
-        0.0, NOISE_SIGMA, (images[0].shape[0] + NOISE_MARGIN, images[0].shape[1] + NOISE_MARGIN)
-    )
+    field = rng.normal(0.0, NOISE_SIGMA, (images[0].shape[0] + NOISE_MARGIN, images[0].shape[1] + NOISE_MARGIN))
     field = field.astype(np.float32)
     offsets = iter(rng.permutation(NOISE_MARGIN * NOISE_MARGIN).tolist())
     config = load_robot_config(CONFIG)

@@ -33,9 +33,7 @@ def _f(value: float | None, fmt: str) -> str:
 
 
 def _when(part: dict) -> str:
-    return (
-        f"taken {part['taken']}, load average {part['load_average']:.1f} at the end, {part['seconds']:.0f} s"
-    )
+    return f"taken {part['taken']}, load average {part['load_average']:.1f} at the end, {part['seconds']:.0f} s"
 
 
 def targets_section(results: dict) -> list[str]:
@@ -105,9 +103,7 @@ def fit_section(fit: dict) -> list[str]:
         f"{fit['rounds']} rounds; {_when(fit)}. Floor: reading the capture's images with mcap's reader, "
         "decoding them to gray and OpenCV's bare aruco detector on all cores (no wolfcal code). Wall / CPU.",
         "",
-        *_table(
-            ["code", "floor", "first run", "first / floor", "cached run", "cached process", "its peak"], rows
-        ),
+        *_table(["code", "floor", "first run", "first / floor", "cached run", "cached process", "its peak"], rows),
     ]
 
 
@@ -235,9 +231,7 @@ def accuracy(results: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--results", type=Path, default=ROOT / "bench" / "results.json")
     parser.add_argument("--docs", type=Path, default=ROOT / "docs")
     args = parser.parse_args()

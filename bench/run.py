@@ -33,21 +33,15 @@ PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--parts", default=",".join(PARTS), help="comma-separated, of " + ", ".join(PARTS))
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results.json")
     parser.add_argument("--before", type=Path, default=None, help="a folder holding an older wolfcal package")
-    parser.add_argument(
-        "--rounds", type=int, default=3, help="rounds of the fit part (each tree once a round)"
-    )
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of the fit part (each tree once a round)")
     parser.add_argument("--stream-rounds", type=int, default=1)
     parser.add_argument("--frames", default="600,6000", help="recording lengths of the stream part")
     parser.add_argument("--stream-binning", type=int, default=4, help="1: 2048x1536 frames; 4: 512x384")
-    parser.add_argument(
-        "--views", type=int, default=20, help="rendered views per camera of the detection part"
-    )
+    parser.add_argument("--views", type=int, default=20, help="rendered views per camera of the detection part")
     parser.add_argument("--seeds", type=int, default=3, help="seeds of the intrinsics and seeds parts")
     parser.add_argument("--binning", type=int, default=4, help="image binning of the seeds part")
     args = parser.parse_args()

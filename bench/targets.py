@@ -84,10 +84,7 @@ def fit_speed(trees: dict[str, Path], rounds: int, say) -> dict:
         "samples": FIT_SAMPLES,
         "size": [2048, 1536],
         "rounds": rounds,
-        "trees": {
-            label: {key: summary(values) for key, values in figures.items()}
-            for label, figures in runs.items()
-        },
+        "trees": {label: {key: summary(values) for key, values in figures.items()} for label, figures in runs.items()},
     }
 
 
@@ -116,16 +113,12 @@ def stream_memory(trees: dict[str, Path], frames: list[int], binning: int, round
                         "--force",
                     ],
                 )
-                used = next(
-                    (line.strip() for line in run.output.splitlines() if line.startswith("head camera:")), ""
-                )
+                used = next((line.strip() for line in run.output.splitlines() if line.startswith("head camera:")), "")
                 entry = out[label].setdefault(str(n), {"peak_mb": [], "wall": [], "cpu": [], "line": used})
                 entry["peak_mb"].append(run.peak_mb)
                 entry["wall"].append(run.wall)
                 entry["cpu"].append(run.cpu)
-                say(
-                    f"stream {label} round {k + 1}: {n} frames, peak {run.peak_mb:.0f} MB, {run.wall:.1f} s; {used}"
-                )
+                say(f"stream {label} round {k + 1}: {n} frames, peak {run.peak_mb:.0f} MB, {run.wall:.1f} s; {used}")
     for figures in out.values():
         for entry in figures.values():
             for key in ("peak_mb", "wall", "cpu"):

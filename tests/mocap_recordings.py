@@ -21,10 +21,13 @@ MSG: builtin_interfaces/Time
 int32 sec
 uint32 nanosec
 """  # the definitions a message with a std_msgs/Header carries after its own, as ros2 writes them
-MARKERS_DEF = """std_msgs/Header header
+MARKERS_DEF = (
+    """std_msgs/Header header
 uint32 frame_number
 mocap4r2_msgs/Marker[] markers
-""" + HEADER_DEFS + """================================================================================
+"""
+    + HEADER_DEFS
+    + """================================================================================
 MSG: mocap4r2_msgs/Marker
 int8 USE_NAME=0
 int8 USE_INDEX=1
@@ -39,12 +42,16 @@ float64 x
 float64 y
 float64 z
 """
-JOINT_STATE_DEF = """std_msgs/Header header
+)
+JOINT_STATE_DEF = (
+    """std_msgs/Header header
 string[] name
 float64[] position
 float64[] velocity
 float64[] effort
-""" + HEADER_DEFS
+"""
+    + HEADER_DEFS
+)
 
 
 def session(n_poses: int = 4, seed: int = 0):
@@ -81,13 +88,24 @@ def write_markers_recording(path: Path, t: np.ndarray, joints: dict[str, np.ndar
         for i, ti in enumerate(t):
             stamp = T0 + int(round(ti * 1e9))
             header = {"stamp": {"sec": stamp // 10**9, "nanosec": stamp % 10**9}, "frame_id": ""}
-            writer.write_message("/joint_states", js, {"header": header, "name": list(joints), "position": [
-                float(v[i]) for v in joints.values()], "velocity": [], "effort": []}, log_time=stamp)
+            writer.write_message(
+                "/joint_states",
+                js,
+                {
+                    "header": header,
+                    "name": list(joints),
+                    "position": [float(v[i]) for v in joints.values()],
+                    "velocity": [],
+                    "effort": [],
+                },
+                log_time=stamp,
+            )
             if xyz_m is None:
                 continue
             markers = [{"id_type": 1 if by_index else 0, "marker_index": k, "marker_name": "" if by_index else name,
                         "translation": dict(zip("xyz", map(float, xyz_m[i, k])))}
                        for k, name in enumerate(labels) if np.all(np.isfinite(xyz_m[i, k]))]  # fmt: skip
-            writer.write_message("/mocap/markers", mk, {"header": header, "frame_number": i, "markers": markers},
-                                 log_time=stamp)
+            writer.write_message(
+                "/mocap/markers", mk, {"header": header, "frame_number": i, "markers": markers}, log_time=stamp
+            )
         writer.finish()

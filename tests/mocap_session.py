@@ -28,8 +28,14 @@ STRIDER = Path(__file__).resolve().parent / "data" / "strider"
 JOINT_HZ, MARKER_HZ = 100.0, 120.0
 MOVE_S, HOLD_S = 1.0, 1.5
 TICK = 2 * np.pi / 4096  # [rad]
-RANGES = {"hip_yaw": (-0.3, 0.3), "hip_roll": (-0.3, 0.3), "hip_pitch": (-1.0, 0.3), "knee": (0.2, 1.6),
-          "ankle_pitch": (-0.8, 0.6), "ankle_roll": (-0.35, 0.35)}  # true angles of the still poses [rad]
+RANGES = {
+    "hip_yaw": (-0.3, 0.3),
+    "hip_roll": (-0.3, 0.3),
+    "hip_pitch": (-1.0, 0.3),
+    "knee": (0.2, 1.6),
+    "ankle_pitch": (-0.8, 0.6),
+    "ankle_roll": (-0.35, 0.35),
+}  # true angles of the still poses [rad]
 
 
 @dataclass
@@ -137,7 +143,7 @@ def write_session(folder: Path, seed: int, n_poses: int = 25) -> Session:
     pairs = rng.permutation(n_poses * len(names))
     n_occluded, n_reflected = round(0.03 * len(pairs)), max(round(0.01 * len(pairs)), 1)
     occluded = {(int(i // len(names)), names[i % len(names)]) for i in pairs[:n_occluded]}
-    reflections = {(int(i // len(names)), names[i % len(names)]) for i in pairs[n_occluded: n_occluded + n_reflected]}
+    reflections = {(int(i // len(names)), names[i % len(names)]) for i in pairs[n_occluded : n_occluded + n_reflected]}
     for pose, name in reflections:
         direction = rng.normal(size=3)
         p[still == pose, names.index(name)] += direction / np.linalg.norm(direction) * rng.uniform(0.002, 0.02)
@@ -193,8 +199,9 @@ def mount_rotation(session: Session, side: str) -> float:
     frame: the markers cannot tell it from this rotation of their mounts."""
     config = load_robot_config(STRIDER)
     a = np.array([1.0, 0.0, 0.0])
-    moves = [(np.cross(a, m.xyz), session.mounts[m.name]) for m in config.marker_config().entries
-             if m.link == f"{side}_foot"]
+    moves = [
+        (np.cross(a, m.xyz), session.mounts[m.name]) for m in config.marker_config().entries if m.link == f"{side}_foot"
+    ]
     return float(sum(u @ m for u, m in moves) / sum(u @ u for u, _ in moves))
 
 

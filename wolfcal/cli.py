@@ -38,8 +38,9 @@ def show_version(value: bool) -> None:
 
 @app.callback()
 def main_options(
-    version: bool = typer.Option(False, "--version", callback=show_version, is_eager=True,
-                                 help="Print wolfcal's version and exit."),
+    version: bool = typer.Option(
+        False, "--version", callback=show_version, is_eager=True, help="Print wolfcal's version and exit."
+    ),
 ) -> None:
     """Options before the command: --version."""
 
@@ -77,8 +78,10 @@ def force_option() -> bool:
     return typer.Option(False, "--force", help=FORCE_HELP)
 
 
-CURRENT_HELP = ("The robot's present calibration: a bitbots_extrinsic_calibration YAML, a hardware interface file "
-                "with joint_offset values, or a folder of files wolfcal deployed before. Repeatable.")
+CURRENT_HELP = (
+    "The robot's present calibration: a bitbots_extrinsic_calibration YAML, a hardware interface file "
+    "with joint_offset values, or a folder of files wolfcal deployed before. Repeatable."
+)
 
 
 def current_option() -> list[Path]:
@@ -123,34 +126,62 @@ def intrinsics(
 def capture(
     robot: Path | None = robot_option(),
     port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
-    camera: str | None = typer.Option(None, "--camera", help="Head camera: V4L index or /dev/video path, video file, "
-                                      "image folder, or 'sim' (renders the robot served by `wolfcal emulate`)."),
-    external: list[str] = typer.Option([], "--external", help="External camera NAME=SOURCE (NAME from the config's "
-                                       "external_cameras, SOURCE as for --camera), e.g. tripod=/dev/video2. "
-                                       "Repeatable; beside or instead of --camera."),
-    poses: Path | None = typer.Option(None, "--poses", help="Scripted mode: poses YAML (torque on); a bare name "
-                                       "not found here is taken from the robot config's folder (poses.yaml)."),
+    camera: str | None = typer.Option(
+        None,
+        "--camera",
+        help="Head camera: V4L index or /dev/video path, video file, "
+        "image folder, or 'sim' (renders the robot served by `wolfcal emulate`).",
+    ),
+    external: list[str] = typer.Option(
+        [],
+        "--external",
+        help="External camera NAME=SOURCE (NAME from the config's "
+        "external_cameras, SOURCE as for --camera), e.g. tripod=/dev/video2. "
+        "Repeatable; beside or instead of --camera.",
+    ),
+    poses: Path | None = typer.Option(
+        None,
+        "--poses",
+        help="Scripted mode: poses YAML (torque on); a bare name "
+        "not found here is taken from the robot config's folder (poses.yaml).",
+    ),
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
     samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
-    limp: str | None = typer.Option(None, "--limp", help="Manual mode: groups (head, legs, arms, all) or "
-                                    "joints to switch torque off (default: head,legs; with --floor: head)."),
+    limp: str | None = typer.Option(
+        None,
+        "--limp",
+        help="Manual mode: groups (head, legs, arms, all) or "
+        "joints to switch torque off (default: head,legs; with --floor: head).",
+    ),
     yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
     velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed (rad/s)."),
-    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of every camera's images (sim "
-                                       "default: 4 head, 2 external)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: the "
-                                           "config's; external cameras use their config 'intrinsics')."),
+    binning: int | None = typer.Option(
+        None, "--binning", help="Sensor binning of every camera's images (sim default: 4 head, 2 external)."
+    ),
+    intrinsics: Path | None = typer.Option(
+        None,
+        "--intrinsics",
+        help="Head camera's camera_info YAML (default: the config's; external cameras use their config 'intrinsics').",
+    ),
     settle: float = typer.Option(0.3, "--settle", help="Seconds every joint must be still (within a tick)."),
     min_sharpness: float = typer.Option(100.0, "--min-sharpness", help="Minimum variance of the Laplacian."),
-    floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands (legs held at the config's "
-                               "floor.standing, torque on) and the head looks at the floor tags, aimed through a "
-                               "pan/tilt grid, or turned by hand with --manual."),
-    check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit "
-                               "(`evaluate --capture`): the legs go through floor.check_stances, stances the fit's "
-                               "capture did not use, one head view each. Take it three times, the floor tags "
-                               "moved between."),
+    floor: bool = typer.Option(
+        False,
+        "--floor",
+        help="Floor samples: the robot stands (legs held at the config's "
+        "floor.standing, torque on) and the head looks at the floor tags, aimed through a "
+        "pan/tilt grid, or turned by hand with --manual.",
+    ),
+    check: bool = typer.Option(
+        False,
+        "--check",
+        help="With --floor: the held-out floor capture that checks a fit "
+        "(`evaluate --capture`): the legs go through floor.check_stances, stances the fit's "
+        "capture did not use, one head view each. Take it three times, the floor tags "
+        "moved between.",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
@@ -158,10 +189,24 @@ def capture(
     from wolfcal.capture.pipeline import CaptureOptions, run_capture
 
     options = CaptureOptions(
-        robot=default_robot(robot), out=out, camera=camera, port=port, poses=poses, manual=manual, samples=samples,
-        limp=limp, yes=yes, exit_torque=exit_torque, binning=binning, intrinsics=intrinsics, velocity=velocity,
-        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness), external=external, force=force,
-        floor=floor, floor_check=check,
+        robot=default_robot(robot),
+        out=out,
+        camera=camera,
+        port=port,
+        poses=poses,
+        manual=manual,
+        samples=samples,
+        limp=limp,
+        yes=yes,
+        exit_torque=exit_torque,
+        binning=binning,
+        intrinsics=intrinsics,
+        velocity=velocity,
+        gates=GateSettings(settle_s=settle, min_sharpness=min_sharpness),
+        external=external,
+        force=force,
+        floor=floor,
+        floor_check=check,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -172,23 +217,31 @@ def capture(
 def venue(
     robot: Path | None = robot_option(),
     port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
-    camera: str = typer.Option(..., "--camera", help="Head camera: V4L index or /dev/video path, video file, image "
-                               "folder, or 'sim' (renders the robot served by `wolfcal emulate`)."),
-    out: Path | None = typer.Option(None, "--out", help="Session folder to create: captures, fit, report, deploy "
-                                    "files."),
+    camera: str = typer.Option(
+        ...,
+        "--camera",
+        help="Head camera: V4L index or /dev/video path, video file, image "
+        "folder, or 'sim' (renders the robot served by `wolfcal emulate`).",
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", help="Session folder to create: captures, fit, report, deploy files."
+    ),
     resume: Path | None = typer.Option(None, "--resume", help="Continue the interrupted session in this folder."),
-    current: Path | None = typer.Option(None, "--current", help="The robot's present calibration (the team's deploy "
-                                        "files); recorded in the report."),
+    current: Path | None = typer.Option(
+        None, "--current", help="The robot's present calibration (the team's deploy files); recorded in the report."
+    ),
     yes: bool = typer.Option(False, "--yes", help="Switch torque on (and go on to the floor views) without asking."),
-    velocity: float | None = typer.Option(None, "--velocity", help="Safe speed of every move [rad/s] (default "
-                                          "1.5)."),
-    acceleration: float | None = typer.Option(None, "--acceleration", help="Safe acceleration of every move "
-                                              "[rad/s^2] (default 6)."),
-    feet_poses: int | None = typer.Option(None, "--feet-poses", help="Planned feet views, planned once per robot "
-                                          "config (default 8)."),
+    velocity: float | None = typer.Option(None, "--velocity", help="Safe speed of every move [rad/s] (default 1.5)."),
+    acceleration: float | None = typer.Option(
+        None, "--acceleration", help="Safe acceleration of every move [rad/s^2] (default 6)."
+    ),
+    feet_poses: int | None = typer.Option(
+        None, "--feet-poses", help="Planned feet views, planned once per robot config (default 8)."
+    ),
     binning: int | None = typer.Option(None, "--binning", help="Sensor binning of the images (sim default: 4)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
-                                           "the config's)."),
+    intrinsics: Path | None = typer.Option(
+        None, "--intrinsics", help="Head camera's camera_info YAML (default: the config's)."
+    ),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
 ) -> None:
     """Recalibrate the head camera in one session: planned feet views, floor views, fit, check, deploy files."""
@@ -199,8 +252,16 @@ def venue(
     if folder is None or (out is not None and resume is not None):
         raise WolfcalError("give exactly one of --out DIR (a new session) or --resume DIR (continue one)")
     options = VenueOptions(
-        robot=default_robot(robot), out=folder, camera=camera, port=port, current=current, yes=yes,
-        resume=resume is not None, binning=binning, intrinsics=intrinsics, exit_torque=exit_torque,
+        robot=default_robot(robot),
+        out=folder,
+        camera=camera,
+        port=port,
+        current=current,
+        yes=yes,
+        resume=resume is not None,
+        binning=binning,
+        intrinsics=intrinsics,
+        exit_torque=exit_torque,
     )
     options.velocity = options.velocity if velocity is None else velocity
     options.acceleration = options.acceleration if acceleration is None else acceleration
@@ -214,28 +275,53 @@ def venue(
 @app.command()
 @friendly_errors
 def fit(
-    captures: list[Path] = typer.Argument(..., help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
-                                          "recordings of the joint states (and Markers, unless --mocap is given)."),
+    captures: list[Path] = typer.Argument(
+        ...,
+        help="Capture files (.mcap) to fit on; with --system mocap, ROS 2 "
+        "recordings of the joint states (and Markers, unless --mocap is given).",
+    ),
     robot: Path | None = robot_option(),
-    free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg, and the "
-                             f"measurement systems' presets ({' | '.join(system_presets())}), several joined by "
-                             "commas (leg,imu)."),
+    free: str = typer.Option(
+        DEFAULT_PRESET,
+        "--free",
+        help="Free parameters: camera | head_camera | leg, and the "
+        f"measurement systems' presets ({' | '.join(system_presets())}), several joined by "
+        "commas (leg,imu).",
+    ),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
     fix_tags: bool = typer.Option(False, "--fix-tags", help="Hold the tag mounts at their configured poses."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="camera_info YAML overriding the capture's "
-                                           "(head camera only)."),
+    intrinsics: Path | None = typer.Option(
+        None, "--intrinsics", help="camera_info YAML overriding the capture's (head camera only)."
+    ),
     out: Path = typer.Option(..., "--out", help="Output folder for result.yaml and calibrated.urdf."),
-    system: str | None = typer.Option(None, "--system", help="Measurement systems to use: "
-                                      f"{' | '.join(selectable_systems())} (default: every system the captures "
-                                      "contain)."),
-    mocap: list[Path] = typer.Option([], "--mocap", help="Motion-capture file (.c3d, Motive or Vicon .csv) of the "
-                                     "session of each capture, in the same order. Repeatable."),
-    mocap_offset: list[float] = typer.Option([], "--mocap-offset", help="Clock offset of each --mocap file [s]: "
-                                             "t_recording = t_file + offset (default: estimated)."),
-    mocap_moving: bool = typer.Option(False, "--mocap-moving", help="The robot's base moved between samples: one "
-                                      "base pose in the motion-capture frame per sample."),
-    external_moving: bool = typer.Option(False, "--external-moving", help="External camera moved between samples: "
-                                         "one pose per sample instead of one per capture file."),
+    system: str | None = typer.Option(
+        None,
+        "--system",
+        help="Measurement systems to use: "
+        f"{' | '.join(selectable_systems())} (default: every system the captures "
+        "contain).",
+    ),
+    mocap: list[Path] = typer.Option(
+        [],
+        "--mocap",
+        help="Motion-capture file (.c3d, Motive or Vicon .csv) of the "
+        "session of each capture, in the same order. Repeatable.",
+    ),
+    mocap_offset: list[float] = typer.Option(
+        [],
+        "--mocap-offset",
+        help="Clock offset of each --mocap file [s]: t_recording = t_file + offset (default: estimated).",
+    ),
+    mocap_moving: bool = typer.Option(
+        False,
+        "--mocap-moving",
+        help="The robot's base moved between samples: one base pose in the motion-capture frame per sample.",
+    ),
+    external_moving: bool = typer.Option(
+        False,
+        "--external-moving",
+        help="External camera moved between samples: one pose per sample instead of one per capture file.",
+    ),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
     current: list[Path] = current_option(),
     force: bool = force_option(),
@@ -244,19 +330,39 @@ def fit(
     from wolfcal.fit.pipeline import FitOptions, run_fit
     from wolfcal.vision.cache import cache_enabled
 
-    options = FitOptions(free=free, side=side, fix_tags=fix_tags, system=system, external_moving=external_moving,
-                         mocap_moving=mocap_moving)
+    options = FitOptions(
+        free=free,
+        side=side,
+        fix_tags=fix_tags,
+        system=system,
+        external_moving=external_moving,
+        mocap_moving=mocap_moving,
+    )
     with cache_enabled(not no_cache):
-        run_fit(captures, default_robot(robot), out, options, intrinsics, say=typer.echo, force=force,
-                mocap=mocap, mocap_offsets=mocap_offset, current=current)
+        run_fit(
+            captures,
+            default_robot(robot),
+            out,
+            options,
+            intrinsics,
+            say=typer.echo,
+            force=force,
+            mocap=mocap,
+            mocap_offsets=mocap_offset,
+            current=current,
+        )
 
 
 @app.command()
 @friendly_errors
 def evaluate(
     fit_dir: Path = typer.Argument(..., help="Folder written by `wolfcal fit` (holds result.yaml)."),
-    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap), not used by the fit. "
-                                       "Repeatable. Without it: k-fold cross-validation over the fit's samples."),
+    capture: list[Path] = typer.Option(
+        [],
+        "--capture",
+        help="Held-out capture (.mcap), not used by the fit. "
+        "Repeatable. Without it: k-fold cross-validation over the fit's samples.",
+    ),
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, deploy files."),
     folds: int = typer.Option(5, "--folds", help="Folds of the cross-validation (without --capture)."),
     deploy_worse: bool = typer.Option(
@@ -264,14 +370,26 @@ def evaluate(
     ),
     force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
-    ground_limit: float | None = typer.Option(None, "--ground-limit-cm", help="Largest measured ground error that "
-                                              "may be deployed [cm] (default: the robot config's "
-                                              "floor.ground_check.limit, 5 cm)."),
-    mount_limit: float = typer.Option(2.0, "--mount-limit-deg", help="Warn when the camera correction turns the "
-                                      "camera by more than this [deg] and no floor samples measure the ground "
-                                      "error."),
-    current: list[Path] = typer.Option([], "--current", help="The robot's present calibration, the 'before' model "
-                                       "(default: the one the fit started from). " + CURRENT_HELP.split(": ", 1)[1]),
+    ground_limit: float | None = typer.Option(
+        None,
+        "--ground-limit-cm",
+        help="Largest measured ground error that "
+        "may be deployed [cm] (default: the robot config's "
+        "floor.ground_check.limit, 5 cm).",
+    ),
+    mount_limit: float = typer.Option(
+        2.0,
+        "--mount-limit-deg",
+        help="Warn when the camera correction turns the "
+        "camera by more than this [deg] and no floor samples measure the ground "
+        "error.",
+    ),
+    current: list[Path] = typer.Option(
+        [],
+        "--current",
+        help="The robot's present calibration, the 'before' model "
+        "(default: the one the fit started from). " + CURRENT_HELP.split(": ", 1)[1],
+    ),
 ) -> None:
     """Held-out error before/after in pixels, millimetres and metres on the field; report and files to deploy."""
     import math
@@ -282,9 +400,18 @@ def evaluate(
     if (ground_limit is not None and ground_limit <= 0) or mount_limit <= 0:
         raise WolfcalError("--ground-limit-cm and --mount-limit-deg must be positive")
     with cache_enabled(not no_cache):
-        metrics = run_evaluate(fit_dir, capture, out, deploy_worse, folds, say=typer.echo, force=force,
-                               ground_limit_m=None if ground_limit is None else ground_limit / 100.0,
-                               mount_limit_rad=math.radians(mount_limit), current=current)
+        metrics = run_evaluate(
+            fit_dir,
+            capture,
+            out,
+            deploy_worse,
+            folds,
+            say=typer.echo,
+            force=force,
+            ground_limit_m=None if ground_limit is None else ground_limit / 100.0,
+            mount_limit_rad=math.radians(mount_limit),
+            current=current,
+        )
     if not metrics["deploy"]["written"]:
         raise DeployRefused("the verdict above withholds the deploy files; --deploy-worse writes them anyway")
 
@@ -293,8 +420,12 @@ def evaluate(
 @friendly_errors
 def compare(
     fit_dirs: list[Path] = typer.Argument(..., help="Folders written by `wolfcal fit` (each holds result.yaml)."),
-    capture: list[Path] = typer.Option([], "--capture", help="Held-out capture (.mcap) of the head camera, an "
-                                       "external camera or motion capture, used by none of the fits. Repeatable."),
+    capture: list[Path] = typer.Option(
+        [],
+        "--capture",
+        help="Held-out capture (.mcap) of the head camera, an "
+        "external camera or motion capture, used by none of the fits. Repeatable.",
+    ),
     out: Path = typer.Option(..., "--out", help="Report folder: report.html, report.md, metrics.json, figures/."),
     force: bool = force_option(),
     no_cache: bool = typer.Option(False, "--no-cache", help="Detect tags again; neither read nor write the cache."),
@@ -310,8 +441,9 @@ def compare(
 @app.command()
 @friendly_errors
 def demo(
-    out: Path = typer.Option(Path("demo-output"), "--out", help="Folder for the simulated captures, the fits and "
-                             "the reports."),
+    out: Path = typer.Option(
+        Path("demo-output"), "--out", help="Folder for the simulated captures, the fits and the reports."
+    ),
     force: bool = force_option(),
 ) -> None:
     """The venue workflow on simulated demo captures (feet + floor -> fit -> evaluate with the measured ground
@@ -329,29 +461,54 @@ def simulate(
     samples: int = typer.Option(24, "--samples", help="Number of still poses."),
     seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same capture)."),
     offsets: str = typer.Option("none", "--offsets", help="Joints with true encoder offsets: none|head|legs|all."),
-    binning: int | None = typer.Option(None, "--binning", help="Sensor binning of every camera's images "
-                                       "(default, as capture's sim camera: 4 head, 2 external)."),
+    binning: int | None = typer.Option(
+        None,
+        "--binning",
+        help="Sensor binning of every camera's images (default, as capture's sim camera: 4 head, 2 external).",
+    ),
     noise: float = typer.Option(2.0, "--noise", help="Image noise standard deviation [gray levels]."),
     outliers: float = typer.Option(0.0, "--outliers", help="Share of outlier samples (motion blur, stale joints)."),
-    intrinsics: Path | None = typer.Option(None, "--intrinsics", help="Head camera's camera_info YAML (default: "
-                                           "the config's)."),
+    intrinsics: Path | None = typer.Option(
+        None, "--intrinsics", help="Head camera's camera_info YAML (default: the config's)."
+    ),
     truth: Path | None = typer.Option(None, "--truth", help="Reuse the truth of an earlier simulation (.truth.yaml)."),
-    system: str = typer.Option("head", "--system", help="Cameras: head | external (a tripod camera of the config) "
-                               "| all (both in every sample) | mocap (motion capture: FILE.mcap with joint states "
-                               "and Markers, and FILE.c3d) | imu (a standing recording: joint states and "
-                               "sensor_msgs/msg/Imu, stances that turn and tilt the torso)."),
-    external: str | None = typer.Option(None, "--external", help="Which external camera of the config "
-                                        "(default: the first)."),
-    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
-                                         "(m, rad; body frame x forward, y left, z up) in base_link; default random "
-                                         "1-2 m in front, looking at the robot."),
-    poses: Path | None = typer.Option(None, "--poses", help="Poses file (e.g. from `wolfcal plan`; a bare name "
-                                      "not found here is taken from the robot config's folder): simulate these "
-                                      "poses instead of --samples random ones."),
-    floor: bool = typer.Option(False, "--floor", help="Floor samples: the robot stands and turns its head to see the "
-                               "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml)."),
-    check: bool = typer.Option(False, "--check", help="With --floor: the held-out floor capture that checks a fit, "
-                               "its samples spread over floor.check_stances (stances the fit's capture did not use)."),
+    system: str = typer.Option(
+        "head",
+        "--system",
+        help="Cameras: head | external (a tripod camera of the config) "
+        "| all (both in every sample) | mocap (motion capture: FILE.mcap with joint states "
+        "and Markers, and FILE.c3d) | imu (a standing recording: joint states and "
+        "sensor_msgs/msg/Imu, stances that turn and tilt the torso).",
+    ),
+    external: str | None = typer.Option(
+        None, "--external", help="Which external camera of the config (default: the first)."
+    ),
+    placement: str | None = typer.Option(
+        None,
+        "--placement",
+        help="External camera pose x,y,z,roll,pitch,yaw "
+        "(m, rad; body frame x forward, y left, z up) in base_link; default random "
+        "1-2 m in front, looking at the robot.",
+    ),
+    poses: Path | None = typer.Option(
+        None,
+        "--poses",
+        help="Poses file (e.g. from `wolfcal plan`; a bare name "
+        "not found here is taken from the robot config's folder): simulate these "
+        "poses instead of --samples random ones.",
+    ),
+    floor: bool = typer.Option(
+        False,
+        "--floor",
+        help="Floor samples: the robot stands and turns its head to see the "
+        "config's floor tags lying 0.5-5 m away (true places in FILE.truth.yaml).",
+    ),
+    check: bool = typer.Option(
+        False,
+        "--check",
+        help="With --floor: the held-out floor capture that checks a fit, "
+        "its samples spread over floor.check_stances (stances the fit's capture did not use).",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Write a simulated capture with known ground truth (FILE.mcap, FILE.truth.yaml, FILE.truth.urdf)."""
@@ -359,8 +516,18 @@ def simulate(
     from wolfcal.sim.simulate import SimOptions, simulate_capture
 
     options = SimOptions(
-        samples=samples, seed=seed, binning=binning, noise_sigma=noise, outlier_fraction=outliers, offsets=offsets,
-        truth_file=truth, system=system, external=external, placement=placement, poses=poses, floor=floor,
+        samples=samples,
+        seed=seed,
+        binning=binning,
+        noise_sigma=noise,
+        outlier_fraction=outliers,
+        offsets=offsets,
+        truth_file=truth,
+        system=system,
+        external=external,
+        placement=placement,
+        poses=poses,
+        floor=floor,
         floor_check=check,
     )
     camera = load_camera_info(intrinsics) if intrinsics else None
@@ -374,19 +541,31 @@ def plan(
     robot: Path | None = robot_option(),
     free: str = typer.Option(DEFAULT_PRESET, "--free", help="Free parameters: camera | head_camera | leg."),
     side: str = typer.Option("both", "--side", help="Leg preset: right | left | both."),
-    system: str = typer.Option("head", "--system", help="Measurement system: head | external | mocap (the "
-                               "config's markers) | floor (head pan/tilt while standing, the config's floor tags)."),
+    system: str = typer.Option(
+        "head",
+        "--system",
+        help="Measurement system: head | external | mocap (the "
+        "config's markers) | floor (head pan/tilt while standing, the config's floor tags).",
+    ),
     poses: int = typer.Option(12, "--poses", help="Number of poses to plan."),
     candidates: int = typer.Option(2000, "--candidates", help="Random valid candidate poses to choose from."),
-    criterion: str | None = typer.Option(None, "--criterion", help="I (average variance of the delivered poses: "
-                                         "camera or soles) | D (determinant) | A (trace) | E (worst direction); "
-                                         "default: the preset's (README)."),
+    criterion: str | None = typer.Option(
+        None,
+        "--criterion",
+        help="I (average variance of the delivered poses: "
+        "camera or soles) | D (determinant) | A (trace) | E (worst direction); "
+        "default: the preset's (README).",
+    ),
     velocity: float = typer.Option(0.5, "--velocity", help="Capture move speed [rad/s] (for the order and time)."),
     margin: float = typer.Option(0.1, "--margin", help="Kept from each joint limit [rad]."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the candidates."),
     external: str | None = typer.Option(None, "--external", help="External camera of the config (default: first)."),
-    placement: str | None = typer.Option(None, "--placement", help="External camera pose x,y,z,roll,pitch,yaw "
-                                         "(m, rad, as for simulate); default 1.5 m in front, looking at the robot."),
+    placement: str | None = typer.Option(
+        None,
+        "--placement",
+        help="External camera pose x,y,z,roll,pitch,yaw "
+        "(m, rad, as for simulate); default 1.5 m in front, looking at the robot.",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Plan the few calibration poses that tell the most: a poses file and the predicted uncertainty."""
@@ -403,10 +582,15 @@ def plan(
 def emulate(
     robot: Path | None = robot_option(),
     truth: Path | None = typer.Option(None, "--truth", help="True corrections YAML (e.g. FILE.truth.yaml)."),
-    fault: list[str] = typer.Option([], "--fault", help="KIND:ID, optionally =VALUE and @SECONDS after start, "
-                                    "KIND: no-answer, crc, hw-error, missing, model, late, stale. Repeatable."),
-    operator: Path | None = typer.Option(None, "--operator", help="Poses YAML an emulated operator moves the "
-                                         "limp joints through (manual capture)."),
+    fault: list[str] = typer.Option(
+        [],
+        "--fault",
+        help="KIND:ID, optionally =VALUE and @SECONDS after start, "
+        "KIND: no-answer, crc, hw-error, missing, model, late, stale. Repeatable.",
+    ),
+    operator: Path | None = typer.Option(
+        None, "--operator", help="Poses YAML an emulated operator moves the limp joints through (manual capture)."
+    ),
     hold: float = typer.Option(2.0, "--hold", help="Seconds the emulated operator holds each pose."),
 ) -> None:
     """Emulate the robot's Dynamixel bus (Protocol 2.0) on a pseudo-terminal; prints its path first."""
@@ -456,16 +640,23 @@ def board_command(
 @app.command()
 @friendly_errors
 def tags(
-    ids: str | None = typer.Option(None, "--ids", help="Tag ids, e.g. 42-44,50 (default: the robot config's tags "
-                                   "and floor tags)."),
-    size: float | None = typer.Option(None, "--size", help="Edge of the black square [m] (default: each tag's in "
-                                      "the robot config)."),
+    ids: str | None = typer.Option(
+        None, "--ids", help="Tag ids, e.g. 42-44,50 (default: the robot config's tags and floor tags)."
+    ),
+    size: float | None = typer.Option(
+        None, "--size", help="Edge of the black square [m] (default: each tag's in the robot config)."
+    ),
     out: Path = typer.Option(..., "--out", help="Output file; OUT.pdf and OUT.png are written."),
-    family: str | None = typer.Option(None, "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11 "
-                                      "(default: the robot config's, else 36h11)."),
+    family: str | None = typer.Option(
+        None, "--family", help="AprilTag family: 16h5 | 25h9 | 36h10 | 36h11 (default: the robot config's, else 36h11)."
+    ),
     robot: Path | None = robot_option(),
-    paper: str | None = typer.Option(None, "--paper", help="a4 | a3 | letter | fit (one page of the tags' size); "
-                                     "default: a4, or the first of a3, fit that holds the tags."),
+    paper: str | None = typer.Option(
+        None,
+        "--paper",
+        help="a4 | a3 | letter | fit (one page of the tags' size); "
+        "default: a4, or the first of a3, fit that holds the tags.",
+    ),
     dpi: float = typer.Option(300, "--dpi", help="PNG resolution."),
     force: bool = force_option(),
 ) -> None:

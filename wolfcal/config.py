@@ -367,8 +367,9 @@ def _camera(path: Path, data) -> CameraConfig:
     name = _parameter_name(cam, "camera")
     axes = cam.string("axes", "optical")
     if axes not in CAMERA_AXES:
-        cam.fail(f"'axes' must be 'optical' (z forward, x right, y down) or 'body' (x forward, y left, z up), "
-                 f"found {axes!r}")
+        cam.fail(
+            f"'axes' must be 'optical' (z forward, x right, y down) or 'body' (x forward, y left, z up), found {axes!r}"
+        )
     link = cam.string("frame")
     return CameraConfig(
         axes=axes,
@@ -391,8 +392,6 @@ def _parameter_name(r: _Reader, default: str | None = None) -> str:
             f"(it is used in parameter names such as {name}.x)"
         )
     return name
-
-
 
 
 def _sampling_ranges(path: Path, data) -> dict[str, dict[str, tuple[float, float]]]:
@@ -438,6 +437,8 @@ def _external_cameras(path: Path, data) -> tuple[ExternalCameraConfig, ...]:
             )
         )
     return tuple(cameras)
+
+
 REPOSITORY_ROBOT = Path("configs/wolfgang")  # the default robot when run from the repository root
 
 
@@ -467,8 +468,20 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path, data, "")
     r.check_keys(
         ("name", "urdf", "base_link"),
-        ("tags", "camera", "external_cameras", "joint_states_topic", "servos", "priors", "markers", "floor",
-         "field", "sampling_ranges", *PLANNING_KEYS, *config_sections()),
+        (
+            "tags",
+            "camera",
+            "external_cameras",
+            "joint_states_topic",
+            "servos",
+            "priors",
+            "markers",
+            "floor",
+            "field",
+            "sampling_ranges",
+            *PLANNING_KEYS,
+            *config_sections(),
+        ),
     )
     urdf = _resolve(path.parent, r.string("urdf"))
     if not urdf.is_file():
@@ -479,8 +492,10 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     sections = {key: parse(path, r.data[key]) for key, parse in config_sections().items()
                 if r.data.get(key) is not None}  # fmt: skip
     if camera is None and not external and markers is None and not sections:
-        r.fail("needs a head camera ('camera:'), a camera under 'external_cameras:', motion-capture 'markers:' or "
-               f"a measurement system's section ({', '.join(config_sections()) or 'none registered'})")
+        r.fail(
+            "needs a head camera ('camera:'), a camera under 'external_cameras:', motion-capture 'markers:' or "
+            f"a measurement system's section ({', '.join(config_sections()) or 'none registered'})"
+        )
     _check_topics_distinct(path, camera, external)
     if camera is not None and camera.name in {c.name for c in external}:
         r.fail(f"'camera.name' {camera.name!r} is also an external camera's name; each camera needs its own name")
@@ -510,9 +525,7 @@ def load_robot_config(path: str | Path) -> RobotConfig:
     )
 
 
-def _check_topics_distinct(
-    path: Path, camera: CameraConfig | None, external: tuple[ExternalCameraConfig, ...]
-) -> None:
+def _check_topics_distinct(path: Path, camera: CameraConfig | None, external: tuple[ExternalCameraConfig, ...]) -> None:
     """Two cameras on one topic could not be told apart in a capture."""
     owners: dict[str, str] = {}
     topics = [] if camera is None else [(camera.topic, "camera.topic"), (camera.info_topic, "camera.info_topic")]
@@ -562,8 +575,10 @@ def _markers(path: Path, data) -> MarkersConfig:
         m.check_keys(("name", "link", "xyz"), ("side",))
         name = m.string("name")
         if not _MARKER_NAME.fullmatch(name):
-            m.fail(f"'name' {name!r} must start with a letter and hold only letters, digits, '_' and inner spaces, "
-                   "after an optional 'Subject:' prefix (it is used in parameter names such as marker.r_foot_fl.x)")
+            m.fail(
+                f"'name' {name!r} must start with a letter and hold only letters, digits, '_' and inner spaces, "
+                "after an optional 'Subject:' prefix (it is used in parameter names such as marker.r_foot_fl.x)"
+            )
         if name in {k.name for k in markers}:
             m.fail(f"'name' {name!r} is used by another marker; names must be unique")
         side = m.data.get("side")
@@ -626,8 +641,11 @@ class FloorConfig:
     def named_stances(self) -> list[tuple[str, dict[str, float]]]:
         """Every standing pose the config gives, with its key: `floor.standing`, `floor.stances[i]`,
         `floor.check_stances[i]`."""
-        return [("floor.standing", self.standing), *((f"floor.stances[{i}]", s) for i, s in enumerate(self.stances)),
-                *((f"floor.check_stances[{i}]", s) for i, s in enumerate(self.check_stances))]
+        return [
+            ("floor.standing", self.standing),
+            *((f"floor.stances[{i}]", s) for i, s in enumerate(self.stances)),
+            *((f"floor.check_stances[{i}]", s) for i, s in enumerate(self.check_stances)),
+        ]
 
     def capture_stances(self, check: bool = False) -> tuple[dict[str, float], ...]:
         """The stances a floor capture goes through: `floor_stances`, or with `check` `floor.check_stances` (() when
@@ -685,8 +703,10 @@ def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:
         if isinstance(tag_id, bool) or not isinstance(tag_id, int) or tag_id < 0:
             t.fail(f"'id' must be a non-negative integer, found {tag_id!r}")
         if tag_id in on_links:
-            t.fail(f"tag {tag_id} is also configured on a link under 'tags:'; a floor tag lies on the floor, "
-                   "so give it an id no tag on the robot uses")
+            t.fail(
+                f"tag {tag_id} is also configured on a link under 'tags:'; a floor tag lies on the floor, "
+                "so give it an id no tag on the robot uses"
+            )
         if tag_id in {x.id for x in tags}:
             t.fail(f"tag {tag_id} is listed twice")
         family = t.string("family", "tag36h11")
@@ -716,8 +736,9 @@ def _soles(path: Path, data) -> tuple[tuple[str, ...], tuple[SoleConfig, ...]]:
     """`floor.soles`: each a link name, or {link, xyz} for a sole frame at xyz [m] in the link (axes as the link's).
     Returns the sole frames' names and the frames to add."""
     if not isinstance(data, list) or not data:
-        raise WolfcalError(f"{path}: 'floor.soles' must be a non-empty list of links (or {{link, xyz}}) whose "
-                           "frames lie on the floor")
+        raise WolfcalError(
+            f"{path}: 'floor.soles' must be a non-empty list of links (or {{link, xyz}}) whose frames lie on the floor"
+        )
     names: list[str] = []
     added: list[SoleConfig] = []
     for i, item in enumerate(data):

@@ -41,8 +41,16 @@ class Observations:
 
     @classmethod
     def of_views(
-        cls, joint_names: list[str], q_measured: np.ndarray, stamps_ns: np.ndarray, sources: list[str],
-        camera: CameraModel, sample: np.ndarray, tag_ids: np.ndarray, uv: np.ndarray, camera_name: str = HEAD_CAMERA,
+        cls,
+        joint_names: list[str],
+        q_measured: np.ndarray,
+        stamps_ns: np.ndarray,
+        sources: list[str],
+        camera: CameraModel,
+        sample: np.ndarray,
+        tag_ids: np.ndarray,
+        uv: np.ndarray,
+        camera_name: str = HEAD_CAMERA,
     ) -> Observations:
         """Observations of whole views: view v is tag `tag_ids[v]` in sample `sample[v]` (V,), its four corners
         `uv` (V, 4, 2) [px] in aruco order; the sample fields as in the class."""

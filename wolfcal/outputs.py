@@ -26,16 +26,12 @@ def check_folder(folder: Path, option: str = "--out") -> None:
     folder = Path(folder)
     existing = _nearest_existing(folder)
     if not existing.is_dir():
-        raise WolfcalError(
-            f"{option} {folder}: {existing} is a file, not a folder; choose an output path in a folder"
-        )
+        raise WolfcalError(f"{option} {folder}: {existing} is a file, not a folder; choose an output path in a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise WolfcalError(f"{option} {folder}: cannot write in {existing} (permission denied); choose another place")
 
 
-def check_outputs(
-    paths: Iterable[Path], force: bool, inputs: Iterable[Path] = (), option: str = "--out"
-) -> None:
+def check_outputs(paths: Iterable[Path], force: bool, inputs: Iterable[Path] = (), option: str = "--out") -> None:
     """Refuse outputs that are inputs, exist without `force`, are folders, or cannot be written."""
     paths = [Path(p) for p in paths]
     inputs_resolved = {Path(p).resolve() for p in inputs}

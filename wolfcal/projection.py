@@ -32,7 +32,11 @@ def tag_corner_pixels(camera: CameraModel, T_camera_tag: np.ndarray, corners: np
 
 
 def visible_in_view(
-    camera: CameraModel, T_camera_tag: np.ndarray, sizes: np.ndarray, margin_px: float, min_size_px: float,
+    camera: CameraModel,
+    T_camera_tag: np.ndarray,
+    sizes: np.ndarray,
+    margin_px: float,
+    min_size_px: float,
     max_angle_rad: float = np.deg2rad(60.0),
 ) -> np.ndarray:
     """(N, T) bool: tag t (edge `sizes[t]` [m], pose T_camera_tag (N, T, 4, 4)) lies fully inside the image with a
@@ -49,8 +53,15 @@ def visible_in_view(
 
 
 def observations_from_poses(
-    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, T_camera_tag: np.ndarray,
-    visible: np.ndarray, noise_px: float, rng: np.random.Generator, camera_name: str = HEAD_CAMERA,
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections,
+    q_true: np.ndarray,
+    T_camera_tag: np.ndarray,
+    visible: np.ndarray,
+    noise_px: float,
+    rng: np.random.Generator,
+    camera_name: str = HEAD_CAMERA,
     sources: list[str] | None = None,
 ) -> Observations:
     """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids, poses T_camera_tag (N, T, 4, 4))
@@ -62,8 +73,14 @@ def observations_from_poses(
     uv = uv + rng.normal(0.0, noise_px, size=uv.shape)
     n = len(q_true)
     return Observations.of_views(
-        list(robot.joint_names), encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        np.arange(n, dtype=np.int64), sources or ["synthetic"] * n, camera, s_idx, np.array(tag_ids)[t_idx], uv,
+        list(robot.joint_names),
+        encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        np.arange(n, dtype=np.int64),
+        sources or ["synthetic"] * n,
+        camera,
+        s_idx,
+        np.array(tag_ids)[t_idx],
+        uv,
         camera_name,
     )
 
@@ -83,8 +100,9 @@ def tag_pose_from_pixels(camera: CameraModel, uv: np.ndarray, size: float) -> np
     import cv2  # here, not at the top: a fit from cached detections does not load OpenCV
 
     xy = camera.undistort_normalized(camera.pixels_to_normalized(uv))
-    ok, rvec, tvec = cv2.solvePnP(tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None,
-                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    ok, rvec, tvec = cv2.solvePnP(
+        tag_corners(size), xy.reshape(4, 1, 2), np.eye(3), None, flags=cv2.SOLVEPNP_IPPE_SQUARE
+    )
     if not ok:
         return None
     T = np.eye(4)

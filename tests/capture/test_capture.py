@@ -49,17 +49,12 @@ BINNING = 4
 TRUTH = Corrections(
     # head offsets for the fit; arm offsets (outside the camera-to-foot chains) to check ids and ticks
     offsets={"HeadPan": 0.0326, "HeadTilt": 0.0237, "RElbow": -0.021, "LShoulderRoll": 0.017},
-    frames={
-        "camera_optical_frame_uncalibrated_frame": np.array(
-            [0.0004, -0.0004, 0.0019, -0.0619, -0.0161, 0.0108]
-        )
-    },
+    frames={"camera_optical_frame_uncalibrated_frame": np.array([0.0004, -0.0004, 0.0019, -0.0619, -0.0161, 0.0108])},
     tags={
         43: np.array([-0.0007, -0.0013, -0.0006, 0.0004, -0.0233, -0.0022]),
         44: np.array([-0.0012, -0.0007, -0.0005, -0.003, 0.0046, 0.0102]),
     },
 )
-
 
 
 @pytest.fixture(scope="module")
@@ -126,14 +121,9 @@ def assert_same_still_moment(robot, capture) -> None:
         found = detect_tags(sample.images[HEAD_CAMERA].decode(), "tag36h11", {43, 44})
         assert found, sample.stamp_ns
         ids = sorted(found)
-        _, T_camera_tag = robot.camera_and_tag_poses(
-            q[None], ids, Corrections(frames=TRUTH.frames, tags=TRUTH.tags)
-        )
+        _, T_camera_tag = robot.camera_and_tag_poses(q[None], ids, Corrections(frames=TRUTH.frames, tags=TRUTH.tags))
         for k, tag_id in enumerate(ids):
-            p = (
-                tag_corners(robot.config.tag(tag_id).size) @ T_camera_tag[0, k, :3, :3].T
-                + T_camera_tag[0, k, :3, 3]
-            )
+            p = tag_corners(robot.config.tag(tag_id).size) @ T_camera_tag[0, k, :3, :3].T + T_camera_tag[0, k, :3, 3]
             errors += list(np.linalg.norm(camera.project(p) - found[tag_id], axis=1))
         assert np.sqrt(np.mean(np.square(errors))) < 2.0 and max(errors) < 6.0, sample.stamp_ns
 
@@ -174,8 +164,7 @@ def test_scripted_capture_then_fit_recovers_the_offsets(scripted, tmp_path):
 def test_targets_outside_the_urdf_limits_are_refused_before_anything_moves(robot, truth_file, tmp_path):
     poses = tmp_path / "bad.yaml"
     poses.write_text(
-        "poses:\n  - {name: up, joints: {HeadTilt: 2.0, HeadPan: 0.1}}\n"
-        "  - {name: typo, joints: {HeadTlt: 0.0}}\n"
+        "poses:\n  - {name: up, joints: {HeadTilt: 2.0, HeadPan: 0.1}}\n  - {name: typo, joints: {HeadTlt: 0.0}}\n"
     )
     with emulator(robot, truth_file) as emu:
         before, _ = read_true_angles(emu.port)
@@ -270,9 +259,7 @@ def run_with_fault(opts: CaptureOptions, inject, after_samples: int = 2) -> tupl
 def test_bus_faults_are_reported_and_lose_no_sample(robot, truth_file, tmp_path, fault, message):
     out = tmp_path / "f.mcap"
     with emulator(robot, truth_file) as emu:
-        error, _ = run_with_fault(
-            options(out, emu.port, poses=POSES, velocity=5.0), lambda: emu.inject(fault)
-        )
+        error, _ = run_with_fault(options(out, emu.port, poses=POSES, velocity=5.0), lambda: emu.inject(fault))
     assert isinstance(error, BusError)
     assert re.search(message, str(error))
     kept = len(read_capture(out, robot.config).samples)
@@ -289,9 +276,7 @@ def test_camera_failure_is_reported_and_loses_no_sample(robot, truth_file, scrip
     cv2.imwrite(str(image), read_capture(scripted[0], robot.config).samples[0].images[HEAD_CAMERA].decode())
     intrinsics = tmp_path / "camera.yaml"  # the images' own resolution: no binning for a folder source
     full = load_camera_info(robot.config.camera.intrinsics)
-    save_camera_info(
-        full.scaled(1 / BINNING, 1 / BINNING, full.width // BINNING, full.height // BINNING), intrinsics
-    )
+    save_camera_info(full.scaled(1 / BINNING, 1 / BINNING, full.width // BINNING, full.height // BINNING), intrinsics)
     out = tmp_path / "c.mcap"
 
     def unplug() -> None:
@@ -438,8 +423,9 @@ def tag_image(shift_px: float = 0.0, blur_sigma: float = 0.0) -> np.ndarray:
     texture = np.kron(tag_texture("tag36h11", 43), np.ones((12, 12), np.uint8))
     image = np.full((240, 320), 128, np.uint8)
     image[60 : 60 + texture.shape[0], 100 : 100 + texture.shape[1]] = texture
-    image = cv2.warpAffine(image, np.float32([[1, 0, shift_px], [0, 1, 0]]), (320, 240), flags=cv2.INTER_LINEAR,
-                           borderValue=128)
+    image = cv2.warpAffine(
+        image, np.float32([[1, 0, shift_px], [0, 1, 0]]), (320, 240), flags=cv2.INTER_LINEAR, borderValue=128
+    )
     return cv2.GaussianBlur(image, (0, 0), blur_sigma) if blur_sigma else image
 
 
@@ -469,16 +455,46 @@ def test_gates_say_why_a_moment_is_rejected():
 
 def test_command_line_emulate_and_capture_report_bus_problems_without_traceback(tmp_path):
     emulate = subprocess.Popen(
-        [sys.executable, "-m", "wolfcal.cli", "emulate", "--robot", str(ROBOT), "--fault", "model:20=1020",
-         "--fault", "missing:7"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "wolfcal.cli",
+            "emulate",
+            "--robot",
+            str(ROBOT),
+            "--fault",
+            "model:20=1020",
+            "--fault",
+            "missing:7",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         port = emulate.stdout.readline().strip()
         capture = subprocess.run(
-            [sys.executable, "-m", "wolfcal.cli", "capture", "--robot", str(ROBOT), "--port", port, "--camera", "sim",
-             "--poses", str(POSES), "--out", str(tmp_path / "x.mcap")],
-            cwd=ROOT, capture_output=True, text=True, timeout=60,
+            [
+                sys.executable,
+                "-m",
+                "wolfcal.cli",
+                "capture",
+                "--robot",
+                str(ROBOT),
+                "--port",
+                port,
+                "--camera",
+                "sim",
+                "--poses",
+                str(POSES),
+                "--out",
+                str(tmp_path / "x.mcap"),
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
         )
     finally:
         emulate.send_signal(signal.SIGTERM)

@@ -62,7 +62,9 @@ def test_config_reads_external_cameras_and_a_missing_head_camera(tmp_path):
     config = load_robot_config(WOLFGANG)
     (tripod,) = config.external_cameras
     assert (tripod.name, tripod.image_topic, tripod.info_topic) == (
-        "tripod", "/tripod/image/compressed", "/tripod/camera_info"
+        "tripod",
+        "/tripod/image/compressed",
+        "/tripod/camera_info",
     )
     assert tripod.intrinsics == WOLFGANG / "tripod_webcam.yaml" and config.camera_names == ["head", "tripod"]
     headless = load_robot(write_config(tmp_path, camera=None))
@@ -241,6 +243,7 @@ def test_recording_pairs_each_stream_and_groups_frames_within_20_ms(tmp_path):
     path = tmp_path / "rosbag.mcap"
     write_recording(path, config)
     capture = read_capture(path, config)
+
     def still(s: float) -> bool:  # no motion within +-0.25 s
         return s + 0.25 < MOVE[0] or s - 0.25 > MOVE[1]
 

@@ -248,7 +248,6 @@ def test_an_output_set_lands_whole_or_not_at_all(tmp_path):
     assert (tmp_path / "a.txt").read_text() == "new a"
 
 
-
 def test_a_scratch_file_is_no_output_of_the_set(tmp_path, monkeypatch):
     """A cache file (scratch) lands at once, even inside an output set that then fails, and waits for no fsync."""
     synced: list[int] = []
@@ -262,6 +261,7 @@ def test_a_scratch_file_is_no_output_of_the_set(tmp_path, monkeypatch):
         raise RuntimeError("failed before the set was complete")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["entry.bin"]
     assert len(synced) == 1  # the output's own fsync, none for the scratch file
+
 
 def test_intrinsics_board_and_tags_refuse_existing_outputs(tmp_path):
     (tmp_path / "camera.yaml").write_text("earlier calibration")

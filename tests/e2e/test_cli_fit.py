@@ -53,7 +53,8 @@ def test_fit_recovers_simulated_camera_pose(capture, tmp_path):
     expected = robot.model.link_poses(q, ["camera_optical_frame"], Corrections.from_dict(data["corrections"]))
     np.testing.assert_allclose(
         calibrated.link_poses(q, ["camera_optical_frame"])["camera_optical_frame"],
-        expected["camera_optical_frame"], atol=1e-8,
+        expected["camera_optical_frame"],
+        atol=1e-8,
     )
 
 

@@ -45,7 +45,8 @@ def test_a_plain_install_runs_from_any_folder_with_the_packaged_robot_its_poses_
     simulated = wolfcal("simulate", "--out", "sim.mcap", "--poses", "poses.yaml")  # the packaged robot's poses
     assert simulated.returncode == 0, simulated.stderr
     assert yaml.safe_load((work / "sim.truth.yaml").read_text())["samples"] == len(
-        yaml.safe_load((packaged / "poses.yaml").read_text())["poses"])
+        yaml.safe_load((packaged / "poses.yaml").read_text())["poses"]
+    )
     fitted = wolfcal("fit", "sim.mcap", "--out", "fit")
     assert fitted.returncode == 0, fitted.stderr
     assert (work / "fit" / "calibrated.urdf").is_file()

@@ -38,8 +38,6 @@ def quiet(_text: str) -> None:
     pass
 
 
-
-
 def split_capture(src: Path, parts: dict[Path, range], robot, camera) -> None:
     """Write samples of one simulated capture into several files (same robot, same truth, different poses)."""
     samples = read_capture(src, robot.config).samples
@@ -58,9 +56,7 @@ def sim(tmp_path_factory, robot, camera):
     """A simulated robot (camera tilted by ~0.065 rad): fit on 22 poses, 10 other poses held out."""
     root = tmp_path_factory.mktemp("evaluate")
     simulate_capture(CONFIG, root / "all.mcap", SimOptions(samples=32, seed=5, binning=4), say=quiet)
-    split_capture(
-        root / "all.mcap", {root / "fit.mcap": range(22), root / "held.mcap": range(22, 32)}, robot, camera
-    )
+    split_capture(root / "all.mcap", {root / "fit.mcap": range(22), root / "held.mcap": range(22, 32)}, robot, camera)
     run_fit([root / "fit.mcap"], CONFIG, root / "fit", FitOptions(free="camera"), say=quiet)
     return root
 

@@ -170,7 +170,7 @@ def test_a_solve_without_some_views_holds_the_unknowns_no_kept_corner_depends_on
     x = fit.solve(fit.start(), np.ones(len(views.tags), dtype=bool))
     keep = views.samples != views.samples[0]
     orphan = ~fit.sparsity(keep)[: fit.n_pixels(keep)].any(axis=0)
-    assert orphan[fit.first_reading:].any()
+    assert orphan[fit.first_reading :].any()
     far = x.copy()
     far[orphan] = 1e3 * robot.config.priors.encoder_noise  # far up the Huber loss's linear arm
     held, reference = fit.solve(far, keep, 0.1), fit.solve(x, keep, 0.1)

@@ -98,8 +98,10 @@ def test_the_check_the_advice_asks_for_is_the_robot_configs(tmp_path):
     taken = {"before_m": 0.30, "after_m": 0.04, "after_std_m": 0.02, "check": check}
     v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, {**taken, "capture": {"samples": 30, "stances": 10,
                                                                            "layouts": 3}}, None, 0.0)  # fmt: skip
-    assert "take more held-out floor samples: `wolfcal capture --floor --check` 3 times (floor.check_stances: 10 " \
-           "stances" in " ".join(v["notes"])
+    assert (
+        "take more held-out floor samples: `wolfcal capture --floor --check` 3 times (floor.check_stances: 10 "
+        "stances" in " ".join(v["notes"])
+    )
     v = deploy_verdict("leg", 2.0, 0.3, STRUCTURE_OK, {**taken, "capture": {"samples": 20, "stances": 10,
                                                                            "layouts": 2}}, None, 0.0)  # fmt: skip
     assert "samples 20 (the check takes 30), layouts 2 (the check takes 3)" in " ".join(v["notes"])

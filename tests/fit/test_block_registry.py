@@ -74,8 +74,13 @@ def protractor_blocks(robot, captures, options, say):
 
 
 TOY = systems.System(
-    "protractor", f"{__name__}:ProtractorBlock", reader=None, simulator=None, planner=None,
-    fit_blocks=f"{__name__}:protractor_blocks", presets=(("protractor", f"{__name__}:protractor_parameters"),),
+    "protractor",
+    f"{__name__}:ProtractorBlock",
+    reader=None,
+    simulator=None,
+    planner=None,
+    fit_blocks=f"{__name__}:protractor_blocks",
+    presets=(("protractor", f"{__name__}:protractor_parameters"),),
 )
 
 

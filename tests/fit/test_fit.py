@@ -14,8 +14,6 @@ from wolfcal.sim.scenario import synthetic_scenario
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "wolfgang"
 
 
-
-
 def z_scores(fit, truth):
     return (fit.solution.values - fit.params.values_from(truth)) / fit.solution.std
 

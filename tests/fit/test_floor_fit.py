@@ -55,8 +55,17 @@ def test_floor_tag_seen_once_is_refused(robot):
     once = floor.obs.subset(np.arange(floor.obs.n_samples))
     first = int(once.tag_ids[0])
     keep = (once.tag_ids != first) | (once.sample_index == once.sample_index[0])
-    lonely = Observations(once.joint_names, once.q_measured, once.stamps_ns, once.sources, once.camera,
-                          once.sample_index[keep], once.tag_ids[keep], once.corner_index[keep], once.uv[keep])
+    lonely = Observations(
+        once.joint_names,
+        once.q_measured,
+        once.stamps_ns,
+        once.sources,
+        once.camera,
+        once.sample_index[keep],
+        once.tag_ids[keep],
+        once.corner_index[keep],
+        once.uv[keep],
+    )
     with pytest.raises(WolfcalError, match=f"floor tag\\(s\\) {first} seen in only one sample"):
         check_floor_samples(robot, lonely)
 
@@ -77,8 +86,10 @@ def test_leg_fit_with_floor_samples_brings_the_ground_error_down(robot):
     both = fit_observations(robot, {"head": joined(feet.obs, floor.obs)}, FitOptions(free="leg"))
     assert [b.name for b in both.blocks] == ["head camera", "floor", "sole closure"]
     assert any(p.startswith("floor.tag60.") for p in both.params.names)
-    after_feet, after_both = ground_4_5(robot, feet.truth, feet_only.corrections), ground_4_5(
-        robot, feet.truth, both.corrections)
+    after_feet, after_both = (
+        ground_4_5(robot, feet.truth, feet_only.corrections),
+        ground_4_5(robot, feet.truth, both.corrections),
+    )
     assert before > 1.0  # over a metre at 4.5 m before
     assert after_both < 0.05 and after_both < after_feet, (after_feet, after_both)
 

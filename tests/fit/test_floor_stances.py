@@ -59,8 +59,9 @@ def test_stances_that_move_every_leg_joint_average_the_standing_readings_roundin
     for name, stances in (("standing", None), ("lean", [STANDING, *LEAN])):
         (tmp_path / name).mkdir()
         robot = load_robot(write_config(tmp_path / name, stances))
-        _, gap, bad = off_plane(sole_gaps(np.stack(list(robot.model.link_poses(stance_poses(robot),
-                                                                               ["l_sole", "r_sole"]).values()))))
+        _, gap, bad = off_plane(
+            sole_gaps(np.stack(list(robot.model.link_poses(stance_poses(robot), ["l_sole", "r_sole"]).values())))
+        )
         assert not bad.any() and gap.max() < 1e-3  # the nominal soles stay on one plane in every stance
         errors[name] = []
         for seed in range(4):
@@ -87,13 +88,16 @@ def test_stances_are_read_in_order_and_default_to_standing(tmp_path):
     assert stance_poses(robot)[0, robot.model.column("RKnee")] == robot.config.floor.standing["RKnee"]
 
 
-@pytest.mark.parametrize("stances, words", [
-    ([DEEP[0], {"RKnee": -0.6}], "'floor.stances[1]' is not a standing pose: the soles l_sole and r_sole are"),
-    ([{"RKnee": -0.6, "LKnee": 0.6, "RAnkleRoll": 0.3}], "'floor.stances[0]' is not a standing pose"),
-    ([{"NoJoint": 0.1}], "'floor.stances[0]' names joint(s) NoJoint"),
-    ([{"RKnee": "deep"}], "'stances[0].RKnee' must be a number [rad]"),
-    ({"RKnee": 0.1}, "'stances' must be a list of standing poses"),
-])
+@pytest.mark.parametrize(
+    "stances, words",
+    [
+        ([DEEP[0], {"RKnee": -0.6}], "'floor.stances[1]' is not a standing pose: the soles l_sole and r_sole are"),
+        ([{"RKnee": -0.6, "LKnee": 0.6, "RAnkleRoll": 0.3}], "'floor.stances[0]' is not a standing pose"),
+        ([{"NoJoint": 0.1}], "'floor.stances[0]' names joint(s) NoJoint"),
+        ([{"RKnee": "deep"}], "'stances[0].RKnee' must be a number [rad]"),
+        ({"RKnee": 0.1}, "'stances' must be a list of standing poses"),
+    ],
+)
 def test_a_bad_stance_is_named(tmp_path, stances, words):
     path = write_config(tmp_path, stances)
     with pytest.raises(WolfcalError, match="robot.yaml") as info:
@@ -128,7 +132,7 @@ def test_scripted_floor_capture_goes_through_the_stances(tmp_path):
     grid = len(AIM_DISTANCES_M) * len(AIM_BEARINGS_DEG)
     assert len(poses) == 3 * grid
     for k, stance in enumerate(stances):
-        for pose in poses[k * grid:(k + 1) * grid]:  # each stance in turn, legs at its readings
+        for pose in poses[k * grid : (k + 1) * grid]:  # each stance in turn, legs at its readings
             assert pose.name.startswith(f"stance {k}, floor ")
             assert all(pose.joints[j] == v for j, v in stance.items()) and pose.joints["RHipRoll"] == 0.0
 

@@ -81,8 +81,9 @@ def test_mount_with_calibrated_legs_within_015_deg_and_3_std(setup, seed):
 def test_joint_fit_with_a_feet_capture_and_legs_first_for_comparison(setup, seed):
     robot = setup[0]
     feet, truth, samples = scenario(setup, seed)
-    joint = fit_observations(robot, {"head": feet.obs}, FitOptions(free="leg,imu"),
-                             own_blocks=[ImuBlock(robot, samples)])
+    joint = fit_observations(
+        robot, {"head": feet.obs}, FitOptions(free="leg,imu"), own_blocks=[ImuBlock(robot, samples)]
+    )
     error, z = mount_error(joint, truth)
     assert np.all(np.abs(error) < 0.25), f"mount error {error} deg (joint fit)"
     n = len(joint.chain)
@@ -91,11 +92,14 @@ def test_joint_fit_with_a_feet_capture_and_legs_first_for_comparison(setup, seed
     # the same data, legs first (feet capture alone), then the IMU under those legs: the ankle rolls the camera
     # cannot tell from the foot tags' mounts tilt the torso, and the mount takes that tilt
     legs = fit_observations(robot, {"head": feet.obs}, FitOptions(free="leg"))
-    after = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
-                             own_blocks=[ImuBlock(robot, samples, fixed=legs.corrections)])
+    after = fit_observations(
+        robot, {}, FitOptions(free="imu", system="imu"), own_blocks=[ImuBlock(robot, samples, fixed=legs.corrections)]
+    )
     first_error, _ = mount_error(after, truth)
-    print(f"seed {seed}: joint fit {np.round(error, 3)} deg (std {np.round(error / z, 3)}), "
-          f"legs first {np.round(first_error, 3)} deg")
+    print(
+        f"seed {seed}: joint fit {np.round(error, 3)} deg (std {np.round(error / z, 3)}), "
+        f"legs first {np.round(first_error, 3)} deg"
+    )
     if seed in (4, 5):  # the seeds whose ankle-roll offsets the camera leaves furthest off
         assert np.abs(first_error).max() > 0.5 > 2 * np.abs(error).max()
 
@@ -126,8 +130,12 @@ def test_the_std_carries_the_bias_share(setup):
     ten times what the accelerometer's noise alone would give."""
     robot = setup[0]
     _, truth, samples = scenario(setup, 2)
-    fit = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
-                           own_blocks=[ImuBlock(robot, samples, fixed=Corrections(offsets=truth.offsets))])
+    fit = fit_observations(
+        robot,
+        {},
+        FitOptions(free="imu", system="imu"),
+        own_blocks=[ImuBlock(robot, samples, fixed=Corrections(offsets=truth.offsets))],
+    )
     std = fit.solution.std[:2] * DEG
     assert np.all((std > 0.16) & (std < 0.2)), std
 
@@ -158,12 +166,14 @@ def test_a_bumped_still_period_is_left_out_alone(setup):
     robot = setup[0]
     _, truth, samples = scenario(setup, 3)
     fixed = Corrections(offsets=truth.offsets)
-    clean = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
-                             own_blocks=[ImuBlock(robot, samples, fixed=fixed)])
+    clean = fit_observations(
+        robot, {}, FitOptions(free="imu", system="imu"), own_blocks=[ImuBlock(robot, samples, fixed=fixed)]
+    )
     c, s = np.cos(np.deg2rad(1.5)), np.sin(np.deg2rad(1.5))
     samples.accel[7] = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]) @ samples.accel[7]
-    bumped = fit_observations(robot, {}, FitOptions(free="imu", system="imu"),
-                              own_blocks=[ImuBlock(robot, samples, fixed=fixed)])
+    bumped = fit_observations(
+        robot, {}, FitOptions(free="imu", system="imu"), own_blocks=[ImuBlock(robot, samples, fixed=fixed)]
+    )
     assert bumped.solution.blocks[0].outlier_views == [(7, -1)]
     assert np.abs(bumped.solution.values[:2] - clean.solution.values[:2]).max() * DEG < 0.01
 

@@ -50,8 +50,10 @@ def test_analytic_derivatives_match_finite_differences():
     block = MocapBlock(robot, obs)
     chain = ParameterSet([offset_parameter(j, 0.05) for j in ("RKnee", "LHipPitch", "RAnkleRoll")])
     rng = np.random.default_rng(2)
-    x_chain, x_local = rng.normal(0, 0.02, len(chain)), block.nuisance.references + rng.normal(0, 0.01,
-                                                                                             len(block.nuisance))
+    x_chain, x_local = (
+        rng.normal(0, 0.02, len(chain)),
+        block.nuisance.references + rng.normal(0, 0.01, len(block.nuisance)),
+    )
     assert_block_derivatives(block, chain, x_chain, x_local)
 
 
@@ -84,7 +86,7 @@ def test_leg_fit_recovers_offsets_within_their_std_and_flags_every_reflection(se
     assert np.all(np.abs(z) < 3.5), dict(zip(fit.chain.names, np.round(z, 2)))
     assert np.max(np.abs(values[:n] - true_values)) < 0.02  # rad (the ankle rolls rest partly on the mount priors)
     flagged = {(s, k) for s, k in fit.solution.blocks[0].outlier_views}
-    assert reflections <= flagged, (reflections - flagged)
+    assert reflections <= flagged, reflections - flagged
     assert len(flagged - reflections) <= 2
 
 
@@ -103,7 +105,8 @@ def test_result_lists_each_left_out_marker_with_its_sample(tmp_path):
     assert left_out >= {(s, obs.marker_names[k]) for s, k in reflections}
     assert all(e["distance_mm"] > 1.0 for e in block["left_out_markers"])
     assert 0.2 < block["rms_after_mm"] < 0.45 and block["base_poses"]["mocap"]["xyz"] == pytest.approx(
-        T_MOCAP_BASE[:3, 3], abs=0.005)
+        T_MOCAP_BASE[:3, 3], abs=0.005
+    )
     assert any(p["name"] == "marker.r_foot_fl.x" for p in data["parameters"])
     rms = f"{block['rms_before_mm']:.3f} mm before -> {block['rms_after_mm']:.3f} mm"
     assert f"residual RMS (per axis, inliers): {rms}" in "\n".join(summary_lines(result))

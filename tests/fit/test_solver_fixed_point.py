@@ -62,8 +62,11 @@ def sorted_weighted_median(values: np.ndarray, weights: np.ndarray, width: float
 
     def at(level: float) -> float:
         k = min(int(np.searchsorted(cumulative, level)), len(edges) - 1)
-        return float(edges[k]) if k == 0 or slope[k - 1] <= 0.0 else float(
-            edges[k - 1] + (level - cumulative[k - 1]) / slope[k - 1])
+        return (
+            float(edges[k])
+            if k == 0 or slope[k - 1] <= 0.0
+            else float(edges[k - 1] + (level - cumulative[k - 1]) / slope[k - 1])
+        )
 
     return 0.5 * (at(half * (1.0 - 1e-9)) + at(half * (1.0 + 1e-9)))
 
@@ -73,14 +76,19 @@ def test_the_median_found_in_a_window_is_the_median_over_all_values():
     all of them, for standardised numbers with their shares as weights (many values, heavy tails, an offset plain
     median), values far apart (a flat stretch at half), ties, one value and no weight."""
     rng = np.random.default_rng(4)
-    cases = [(np.abs(rng.standard_t(3, 20_000)), rng.uniform(0.0, 1.0, 20_000)),
-             (np.abs(rng.normal(size=3000)), np.where(rng.random(3000) < 0.3, 5.0, 0.1)),
-             (np.array([1.0, 2.0, 3.0, 4.0]), np.ones(4)), (np.array([0.5, 0.5, 0.5, 2.0]), np.array([1.0, 1, 1, 3])),
-             (np.array([0.7]), np.array([0.4])), (np.array([0.2, 0.9]), np.zeros(2))]
+    cases = [
+        (np.abs(rng.standard_t(3, 20_000)), rng.uniform(0.0, 1.0, 20_000)),
+        (np.abs(rng.normal(size=3000)), np.where(rng.random(3000) < 0.3, 5.0, 0.1)),
+        (np.array([1.0, 2.0, 3.0, 4.0]), np.ones(4)),
+        (np.array([0.5, 0.5, 0.5, 2.0]), np.array([1.0, 1, 1, 3])),
+        (np.array([0.7]), np.array([0.4])),
+        (np.array([0.2, 0.9]), np.zeros(2)),
+    ]
     cases += [(np.round(np.abs(rng.normal(size=400)), 1), rng.uniform(0.1, 2.0, 400)) for _ in range(20)]
     for values, weights in cases:
-        assert weighted_median(values, weights) == pytest.approx(sorted_weighted_median(values, weights),
-                                                                 rel=1e-12, abs=1e-12)
+        assert weighted_median(values, weights) == pytest.approx(
+            sorted_weighted_median(values, weights), rel=1e-12, abs=1e-12
+        )
 
 
 @pytest.fixture(scope="module")

@@ -251,9 +251,7 @@ def test_sigkill_mid_capture_then_recover_rescues_every_confirmed_sample(tmp_pat
     assert confirmed == list(range(6))
     partial = tmp_path / "capture.mcap.partial"
     assert partial.is_file() and not path.exists()
-    with pytest.raises(
-        WolfcalError, match=r"capture\.mcap\.partial: was not closed properly.*wolfcal recover"
-    ):
+    with pytest.raises(WolfcalError, match=r"capture\.mcap\.partial: was not closed properly.*wolfcal recover"):
         read_capture(partial, config)
     with pytest.raises(WolfcalError, match="did not finish"):
         read_capture(path, config)
@@ -381,9 +379,7 @@ def write_recording(
             )
             if camera_info is not None:
                 info = camera_info_message(camera_info, (0, 0), stamp, "camera_optical_frame")
-                writer.write_message(
-                    config.camera.info_topic, schemas[CAMERA_INFO], info, log_time=stamp + 5_000_000
-                )
+                writer.write_message(config.camera.info_topic, schemas[CAMERA_INFO], info, log_time=stamp + 5_000_000)
         writer.finish()
     return t, q, v
 
@@ -444,9 +440,7 @@ def test_pairing_split_publishers_and_sparse_states_with_velocities():
     states = JointStates.from_messages(legs + head)
     assert states.names == ["RKnee", "HeadPan"]
     paired = pair_frame(states, 300 * ms)
-    assert (
-        isinstance(paired, Paired) and paired.positions.tolist() == [0.5, 0.0] and paired.velocities is None
-    )
+    assert isinstance(paired, Paired) and paired.positions.tolist() == [0.5, 0.0] and paired.velocities is None
     assert "HeadPan moved" in pair_frame(states, 500 * ms)
 
     sparse = [(k * 500 * ms, ["RKnee"], [0.5], [0.0 if k < 3 else 0.2]) for k in range(6)]  # 2 Hz

@@ -108,8 +108,9 @@ def test_deploy_files_hold_the_new_total_and_keep_the_imu_block(robot, tmp_path)
     (tmp_path / "rory.yaml").write_text(TEAM_FILE)
     (tmp_path / "wolfgang.yaml").write_text(HARDWARE_FILE)
     present = load_current([tmp_path / "rory.yaml", tmp_path / "wolfgang.yaml"], robot)
-    new = present.corrections.overridden_by(Corrections(
-        offsets={"RKnee": 0.02}, frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, -0.08, 0.01, 0.0])}))
+    new = present.corrections.overridden_by(
+        Corrections(offsets={"RKnee": 0.02}, frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, -0.08, 0.01, 0.0])})
+    )
     out = tmp_path / "deploy"
     out.mkdir()
     write_deploy_files(robot, new, out, present)

@@ -126,8 +126,12 @@ TILTED = np.array([0.1, 0.0, 1.0]) / np.linalg.norm([0.1, 0.0, 1.0])
 @pytest.mark.parametrize("gyro", [True, False])
 def test_still_periods_are_found_from_the_data(robot, tmp_path, gyro):
     path = tmp_path / "standing.mcap"
-    write(path, robot, [(3.0, True, UP), (1.0, False, UP), (3.0, True, TILTED), (1.0, False, UP), (2.5, True, UP)],
-          gyro=gyro)
+    write(
+        path,
+        robot,
+        [(3.0, True, UP), (1.0, False, UP), (3.0, True, TILTED), (1.0, False, UP), (2.5, True, UP)],
+        gyro=gyro,
+    )
     samples = read_standing([path], "/joint_states", "/imu/data", robot.joint_names)
     assert samples.n_samples == 3
     directions = samples.accel / np.linalg.norm(samples.accel, axis=1, keepdims=True)
@@ -224,8 +228,11 @@ def test_legs_and_imu_in_one_fit_from_a_feet_capture_and_a_standing_recording(ro
     assert [b["system"] for b in result["blocks"]] == ["head", "imu"]
     truth = yaml.safe_load((tmp_path / "standing.truth.yaml").read_text())["truth"]
     fitted = {p["name"]: p for p in result["parameters"]}
-    expected = {"imu.rx": truth["frames"]["imu_board_joint"][3], "imu.ry": truth["frames"]["imu_board_joint"][4],
-                **{f"{j}.offset": v for j, v in truth["offsets"].items()}}
+    expected = {
+        "imu.rx": truth["frames"]["imu_board_joint"][3],
+        "imu.ry": truth["frames"]["imu_board_joint"][4],
+        **{f"{j}.offset": v for j, v in truth["offsets"].items()},
+    }
     for name, true in expected.items():
         if fitted[name]["data_share"] > 0.5:  # offsets the data inform (an ankle roll against its tag's mount not)
             assert abs(fitted[name]["value"] - true) < 3 * fitted[name]["std"], (name, fitted[name], true)

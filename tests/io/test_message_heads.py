@@ -25,21 +25,15 @@ def _mixed_file(path, compression: str) -> None:
         for k in range(200):
             channel = rng.choice([big, small, other])
             size = rng.choice([0, 5, 100, 2000]) if channel == big else 8
-            writer.add_message(
-                channel, log_time=rng.randrange(50), data=bytes([k % 256]) * size, publish_time=0
-            )
+            writer.add_message(channel, log_time=rng.randrange(50), data=bytes([k % 256]) * size, publish_time=0)
         writer.finish()
 
 
 def _heads_and_expected(path):
     with path.open("rb") as handle:
         reader = make_reader(handle)
-        expected = [
-            (c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(topics=["/big", "/small"])
-        ]
-        heads = list(
-            iter_message_heads(reader, handle, ["/big", "/small"], {"/big"}, 50, lambda _, head: head[0] % 2)
-        )
+        expected = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(topics=["/big", "/small"])]
+        heads = list(iter_message_heads(reader, handle, ["/big", "/small"], {"/big"}, 50, lambda _, head: head[0] % 2))
     return heads, expected
 
 

@@ -21,6 +21,8 @@ from wolfcal.io.mocap_load import load_marker_observations
 from wolfcal.io.mocap_samples import read_recording
 
 WOLFGANG = Path(__file__).resolve().parents[2] / "configs" / "wolfgang"
+
+
 def test_c3d_written_by_ezc3d_reads_in_metres_with_invalid_points_missing(tmp_path):
     t, _, p = session()
     p_mm = p * 1000.0
@@ -63,8 +65,9 @@ def test_still_samples_one_per_hold_and_bad_input(tmp_path):
     write_markers_recording(tmp_path / "r.mcap", t, {j: q for j in ("RKnee", "LKnee")}, labels, p)
     obs = load_marker_observations(config, ["RKnee", "LKnee"], [tmp_path / "r.mcap"], [])
     assert obs.n_samples == 5 and obs.marker_names == ["r_foot_fl", "torso_ul"] and obs.unknown_names == ["ghost"]
-    held = np.array([np.median(p[int((2.5 * k + 1.1) * RATE) : int((2.5 * k + 2.4) * RATE)], axis=0)
-                     for k in range(5)])  # per hold: the median of its frames (0.3 mm noise -> ~0.03 mm)
+    held = np.array(
+        [np.median(p[int((2.5 * k + 1.1) * RATE) : int((2.5 * k + 2.4) * RATE)], axis=0) for k in range(5)]
+    )  # per hold: the median of its frames (0.3 mm noise -> ~0.03 mm)
     assert np.allclose(obs.xyz.reshape(5, 2, 3), held[:, :2], atol=0.0001)
     assert np.allclose(obs.q_measured[:, 0], q[(np.arange(5) * 2.5 * RATE + 200).astype(int)])
     write_c3d(tmp_path / "x.c3d", ["a", "b", "c"], p * 1000.0)

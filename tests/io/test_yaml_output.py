@@ -26,8 +26,13 @@ def test_dump_yaml_pieces_write_the_same_text(monkeypatch):
                 "b": "long " * int(rng.integers(1, 30)), "c": []} for _ in range(int(rng.integers(0, 5)))],
                 "pairs": [[1, 2], {}], "flag": bool(i % 2)}  # fmt: skip
 
-    data = {"title": "x: y", "blocks": [{"name": "b", "samples": [item(i) for i in range(7)]}, 5, "z"],
-            "samples": [item(i) for i in range(9)], "empty": [], "nested": {"deep": {"list": [item(0), 3]}}}
+    data = {
+        "title": "x: y",
+        "blocks": [{"name": "b", "samples": [item(i) for i in range(7)]}, 5, "z"],
+        "samples": [item(i) for i in range(9)],
+        "empty": [],
+        "nested": {"deep": {"list": [item(0), 3]}},
+    }
     for items in (1, 2, 3, 256):
         monkeypatch.setattr(wolfcal.yamlfile, "PIECE_ITEMS", items)
         for width in (40, 80, 120):

@@ -130,6 +130,7 @@ def test_robot_without_collision_geometry_is_refused(tmp_path):
 def test_tag_never_in_view_is_refused(tmp_path):
     def hide_left_tag(data):  # a 'left' tag on the torso's back: the head camera never sees it
         data["tags"][1].update(link="torso", side="left", xyz=[-0.07, 0.0, 0.12], rpy=[1.5708, 0, -1.5708])
+
     robot = load_robot(_config_copy(tmp_path, hide_left_tag))
     with pytest.raises(WolfcalError, match="tag 44 .* in view in none"):
         make_plan(robot, PlanOptions(free="leg", side="both", poses=3, candidates=50), say=lambda _m: None)
@@ -145,8 +146,10 @@ def test_capture_refuses_a_script_whose_legs_cross(robot, tmp_path):
     from wolfcal.capture.poses import check_collisions
 
     path = tmp_path / "poses.yaml"
-    path.write_text("poses:\n- {name: apart, joints: {RHipRoll: -0.3, LHipRoll: 0.3}}\n"
-                    "- {name: crossed, joints: {RHipRoll: 0.6, LHipRoll: -0.6}}\n")
+    path.write_text(
+        "poses:\n- {name: apart, joints: {RHipRoll: -0.3, LHipRoll: 0.3}}\n"
+        "- {name: crossed, joints: {RHipRoll: 0.6, LHipRoll: -0.6}}\n"
+    )
     script = load_poses(path, joint_limits(robot, robot.config.servos.ids))
     crossed = np.array([{"RHipRoll": 0.6, "LHipRoll": -0.6}.get(j, 0.0) for j in robot.joint_names])
     assert min(_min_gaps(robot, crossed).values()) < 0, "the independent check sees the legs overlap"
@@ -351,8 +354,9 @@ def test_candidates_drawn_by_parts_pass_every_check_and_head_views_match_full_fk
     assert pose_ok(robot, camera, views).all()
     ids = [t for t in robot.config.tag_ids if t in tags]
     q = np.random.default_rng(6).uniform(-1.5, 1.5, size=(500, len(robot.joint_names)))
-    np.testing.assert_array_equal(tag_views(robot, camera, q, tags, base_tag_poses(robot, q, ids)),
-                                  tag_views(robot, camera, q, tags))
+    np.testing.assert_array_equal(
+        tag_views(robot, camera, q, tags, base_tag_poses(robot, q, ids)), tag_views(robot, camera, q, tags)
+    )
     # the head is drawn uniformly: the candidates' head angles spread over the range that shows the feet
     pan = cands.q[:, robot.joint_names.index("HeadPan")]
     assert pan.min() < -0.3 and pan.max() > 0.3
@@ -476,11 +480,14 @@ def test_cover_twice_exchanges_a_pose_so_no_column_is_seen_once():
         cover_twice(G, [7], shows[:, :2], ["a", "b"], basis)  # one pose: column a is seen once whatever it is
 
 
-@pytest.mark.parametrize("system,edit,message", [
-    ("mocap", lambda d: d.pop("markers"), "add 'markers:'"),
-    ("floor", lambda d: d["floor"].update(tags=[]), "lists no floor tag"),
-    ("floor", lambda d: d.pop("floor"), "has no 'floor:'"),
-])
+@pytest.mark.parametrize(
+    "system,edit,message",
+    [
+        ("mocap", lambda d: d.pop("markers"), "add 'markers:'"),
+        ("floor", lambda d: d["floor"].update(tags=[]), "lists no floor tag"),
+        ("floor", lambda d: d.pop("floor"), "has no 'floor:'"),
+    ],
+)
 def test_mocap_and_floor_plans_without_markers_or_floor_tags_are_refused(tmp_path, system, edit, message):
     out = tmp_path / "p.yaml"
     path = _config_copy(tmp_path, edit)
@@ -490,8 +497,20 @@ def test_mocap_and_floor_plans_without_markers_or_floor_tags_are_refused(tmp_pat
 
 
 def test_mocap_plan_for_the_head_camera_is_refused(tmp_path):
-    result = CliRunner().invoke(app, ["plan", "--robot", str(WOLFGANG), "--system", "mocap", "--free", "head_camera",
-                                      "--out", str(tmp_path / "p.yaml")])
+    result = CliRunner().invoke(
+        app,
+        [
+            "plan",
+            "--robot",
+            str(WOLFGANG),
+            "--system",
+            "mocap",
+            "--free",
+            "head_camera",
+            "--out",
+            str(tmp_path / "p.yaml"),
+        ],
+    )
     assert result.exit_code != 0 and "motion capture cannot see" in result.output
 
 
@@ -521,8 +540,11 @@ def test_plan_predicts_the_std_the_fit_reports_on_what_the_poses_decide(robot):
 
     rng = np.random.default_rng(7)
     head = {"HeadPan": 0.02, "HeadTilt": -0.015}
-    truth = Corrections(offsets=head, frames={robot.camera_joint: np.array([0.002, -0.001, 0.002, -0.06, 0.02, 0.08])},
-                        tags={t: np.array([0.001, 0.0, -0.001, 0.005, -0.004, 0.006]) for t in seen})
+    truth = Corrections(
+        offsets=head,
+        frames={robot.camera_joint: np.array([0.002, -0.001, 0.002, -0.06, 0.02, 0.08])},
+        tags={t: np.array([0.001, 0.0, -0.001, 0.005, -0.004, 0.006]) for t in seen},
+    )
     q_true = cands.q[idx] + truth.offset_vector(robot.joint_names)
     T = robot.camera_and_tag_poses(q_true, robot.config.tag_ids, Corrections(frames=truth.frames, tags=truth.tags))[1]
     obs = observations_from_poses(robot, camera.model, truth, q_true, T, cands.visible[idx], 0.2, rng, camera.name)

@@ -62,5 +62,6 @@ def test_criterion_is_the_average_delivered_variance_of_the_fits_covariance(robo
     assert plan.delivered is not None
     (rot_planned, pos_planned), (rot_random, pos_random) = plan.delivered
     assert (rot_planned / ROTATION_TOLERANCE) ** 2 + (pos_planned / POSITION_TOLERANCE) ** 2 == pytest.approx(
-        6 * direct, rel=1e-4)  # each the rms length of a 3-vector: together the 6 rows' variances, 6 x the mean
+        6 * direct, rel=1e-4
+    )  # each the rms length of a 3-vector: together the 6 rows' variances, 6 x the mean
     assert rot_planned < rot_random and pos_planned < pos_random

@@ -42,17 +42,20 @@ def test_other_robot_gets_ground_errors_from_its_config(tmp_path):
     assert abs(errors[0]["error_m"] - expected) / expected < 0.15
 
 
-@pytest.mark.parametrize("extra, words", [
-    ("floor: {soles: [base], standing: {}, tags: [{id: 7, size: 0.1}]}\n", "also configured on a link"),
-    ("floor: {soles: [nowhere], standing: {}}\n", "'floor.soles[0]'"),
-    ("floor: {soles: [base], standing: {nojoint: 0.1}}\n", "'floor.standing'"),
-    ("floor: {soles: [], standing: {}}\n", "'floor.soles' must be a non-empty list"),
-    ("floor: {soles: [{link: nowhere, xyz: [0, 0, 0]}], standing: {}}\n", "'floor.soles' link 'nowhere'"),
-    ("floor: {soles: [{link: base, xyz: [0, 0]}], standing: {}}\n", "'floor.soles[0].xyz' must be a list of 3"),
-    ("floor: {soles: [{link: base, rpy: [0, 0, 0]}], standing: {}}\n", "'floor.soles[0]' unknown key(s) rpy"),
-    ("floor: {soles: [base], standing: {}, aim: [nojoint]}\n", "'floor.aim' names nojoint"),
-    ("floor: {soles: [base], standing: {}, tags: [{id: 30, size: -1}]}\n", "must be positive"),
-])
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        ("floor: {soles: [base], standing: {}, tags: [{id: 7, size: 0.1}]}\n", "also configured on a link"),
+        ("floor: {soles: [nowhere], standing: {}}\n", "'floor.soles[0]'"),
+        ("floor: {soles: [base], standing: {nojoint: 0.1}}\n", "'floor.standing'"),
+        ("floor: {soles: [], standing: {}}\n", "'floor.soles' must be a non-empty list"),
+        ("floor: {soles: [{link: nowhere, xyz: [0, 0, 0]}], standing: {}}\n", "'floor.soles' link 'nowhere'"),
+        ("floor: {soles: [{link: base, xyz: [0, 0]}], standing: {}}\n", "'floor.soles[0].xyz' must be a list of 3"),
+        ("floor: {soles: [{link: base, rpy: [0, 0, 0]}], standing: {}}\n", "'floor.soles[0]' unknown key(s) rpy"),
+        ("floor: {soles: [base], standing: {}, aim: [nojoint]}\n", "'floor.aim' names nojoint"),
+        ("floor: {soles: [base], standing: {}, tags: [{id: 30, size: -1}]}\n", "must be positive"),
+    ],
+)
 def test_bad_floor_config_is_named(tmp_path, extra, words):
     path = write_robot(tmp_path, extra)
     with pytest.raises(WolfcalError, match="robot.yaml") as info:

@@ -14,7 +14,6 @@ from wolfcal.robot.robot import load_robot
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "wolfgang" / "robot.yaml"
 
 
-
 def random_q(model, n, rng):
     lo = np.array([model.joints[j].lower for j in model.actuated_joint_names])
     hi = np.array([model.joints[j].upper for j in model.actuated_joint_names])
@@ -117,10 +116,14 @@ tags:
         (BASE.replace("frame: camera_optical_frame", "frame: eye"), ["camera.frame", "eye"]),
         (BASE.replace("size: 0.08", "size: -1"), ["tags[0].size", "positive"]),
         (BASE + "servos: {ids: {Tail: 3}}\n", ["servos.ids", "Tail"]),
-        (BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: tag43"),
-         ["'camera'", "tag43", "tag<id>"]),
-        (BASE + "external_cameras: [{name: camera, image_topic: /t/i, info_topic: /t/c}]\n",
-         ["camera.name", "external camera's name"]),
+        (
+            BASE.replace("frame: camera_optical_frame", "frame: camera_optical_frame, name: tag43"),
+            ["'camera'", "tag43", "tag<id>"],
+        ),
+        (
+            BASE + "external_cameras: [{name: camera, image_topic: /t/i, info_topic: /t/c}]\n",
+            ["camera.name", "external camera's name"],
+        ),
     ],
 )
 def test_config_errors_name_file_and_key(tmp_path, text, words):

@@ -85,24 +85,52 @@ def write_recording(path: Path, robot, poses: np.ndarray) -> int:
         t_ns = 10**9 + int(round(t * 1e9))
         q = q_at(t)
         reading = encoder_readings(q[None], np.zeros(3))[0]
-        ros.write_message("/pt/joints", schemas[JOINT_STATE], {
-            "header": header(t_ns), "name": robot.joint_names, "position": reading.tolist(),
-            "velocity": [], "effort": []}, log_time=t_ns, publish_time=t_ns)
+        ros.write_message(
+            "/pt/joints",
+            schemas[JOINT_STATE],
+            {
+                "header": header(t_ns),
+                "name": robot.joint_names,
+                "position": reading.tolist(),
+                "velocity": [],
+                "effort": [],
+            },
+            log_time=t_ns,
+            publish_time=t_ns,
+        )
         if step % 50 == 0:
             K = CAMERA.K.ravel().tolist()
-            ros.write_message("/pt/cam/info", schemas[CAMERA_INFO], {
-                "header": header(t_ns), "height": 480, "width": 640, "distortion_model": "equidistant",
-                "d": CAMERA.D.tolist(), "k": K, "r": np.eye(3).ravel().tolist(), "p": K[:3] + [0] + K[3:6] + [0] +
-                K[6:] + [0], "binning_x": 0, "binning_y": 0,
-                "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}},
-                log_time=t_ns, publish_time=t_ns)
+            ros.write_message(
+                "/pt/cam/info",
+                schemas[CAMERA_INFO],
+                {
+                    "header": header(t_ns),
+                    "height": 480,
+                    "width": 640,
+                    "distortion_model": "equidistant",
+                    "d": CAMERA.D.tolist(),
+                    "k": K,
+                    "r": np.eye(3).ravel().tolist(),
+                    "p": K[:3] + [0] + K[3:6] + [0] + K[6:] + [0],
+                    "binning_x": 0,
+                    "binning_y": 0,
+                    "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+                },
+                log_time=t_ns,
+                publish_time=t_ns,
+            )
         if step % 12 == 6:  # 4 Hz, between joint-state stamps
             t_image = t + 0.01
             image = scene.render_true(q_at(t_image))
             ok, png = cv2.imencode(".png", image)
             stamp = 10**9 + int(round(t_image * 1e9))
-            ros.write_message("/pt/cam/image/compressed", schemas[COMPRESSED_IMAGE], {
-                "header": header(stamp), "format": "png", "data": png.tobytes()}, log_time=stamp, publish_time=stamp)
+            ros.write_message(
+                "/pt/cam/image/compressed",
+                schemas[COMPRESSED_IMAGE],
+                {"header": header(stamp), "format": "png", "data": png.tobytes()},
+                log_time=stamp,
+                publish_time=stamp,
+            )
             phase, first, last = t_image % 1.5, t_image < 1.5, t_image >= total - 1.5
             still_images += (phase >= 0.75 or first) and (phase <= 1.25 or last)
     ros.finish()
@@ -117,8 +145,17 @@ def test_fit_on_a_plain_recording_of_another_robot(tmp_path):
     recording = tmp_path / "recording.mcap"
     still = write_recording(recording, robot, still_poses(robot, rng, 12))
     result = CliRunner().invoke(
-        app, ["fit", str(recording), "--robot", str(tmp_path / "robot.yaml"), "--free", "camera", "--out",
-              str(tmp_path / "fit")]
+        app,
+        [
+            "fit",
+            str(recording),
+            "--robot",
+            str(tmp_path / "robot.yaml"),
+            "--free",
+            "camera",
+            "--out",
+            str(tmp_path / "fit"),
+        ],
     )
     assert result.exit_code == 0, result.output
     data = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())

@@ -110,8 +110,18 @@ def test_floor_views_aim_with_the_configured_joints_and_stand_on_configured_sole
     """G1: floor samples aimed with `floor.aim` (waist yaw and pitch), the floor the plane of the {link, xyz} soles;
     a camera fit from them finds the simulated camera rotation to a few mrad."""
     config = str(ROBOTS / "unitree_g1" / "robot.yaml")
-    run("simulate", "--robot", config, "--floor", "--out", str(tmp_path / "floor.mcap"), "--samples", "6",
-        "--binning", "1")
+    run(
+        "simulate",
+        "--robot",
+        config,
+        "--floor",
+        "--out",
+        str(tmp_path / "floor.mcap"),
+        "--samples",
+        "6",
+        "--binning",
+        "1",
+    )
     run("fit", str(tmp_path / "floor.mcap"), "--robot", config, "--free", "camera", "--out", str(tmp_path / "fit"))
     truth = load_corrections(tmp_path / "floor.truth.yaml", key="truth").frames["d435_link_optical"]
     result = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())

@@ -199,10 +199,7 @@ def test_a_remembered_digest_holds_only_while_the_file_is_the_same(capture, tmp_
     assert cache.hash_file(path) == cache.content_digest(path) != true_digest
 
 
-
-def test_a_first_run_saves_its_entry_and_a_copied_capture_finds_it(
-    capture, images, tmp_path, monkeypatch
-):
+def test_a_first_run_saves_its_entry_and_a_copied_capture_finds_it(capture, images, tmp_path, monkeypatch):
     """A path never hashed is hashed and its detections saved; a copy of a cached capture (a new path, the same
     content) is answered by the entry, whatever its images would have given (reversed
     here, so a fresh detection would show)."""
@@ -219,6 +216,7 @@ def test_a_first_run_saves_its_entry_and_a_copied_capture_finds_it(
     copy.write_bytes(path.read_bytes())
     assert_same(cached_detect(copy, "head", stamps, iter(images[::-1]), settings), fresh(images))
     assert len(entries(folder)) == 1
+
 
 def test_entry_for_other_settings_or_stamps_is_not_used(capture, images, tmp_path, monkeypatch):
     monkeypatch.setenv("WOLFCAL_CACHE_DIR", str(tmp_path / "cache"))

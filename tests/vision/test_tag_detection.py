@@ -193,7 +193,8 @@ def test_a_plane_reaching_the_camera_plane_is_rendered_without_an_overflowing_pi
     white = np.full((8, 8), 255, np.uint8)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        image = render_targets(CAMERA, [PlanarTarget(T, white, 4.0, 4.0)], background=np.full((1536, 2048), 60.0),
-                               supersample=1)
+        image = render_targets(
+            CAMERA, [PlanarTarget(T, white, 4.0, 4.0)], background=np.full((1536, 2048), 60.0), supersample=1
+        )
     assert image[-10:, CAMERA.width // 2].min() == 255  # the floor below the centre
     assert image[10, CAMERA.width // 2] == 60  # the sky above it stays background

@@ -45,9 +45,7 @@ def load_camera_info(path: str | Path) -> CameraModel:
             numbers(str(path), f"{key}.data", _matrix(data, key, rows, cols, path))
     model = data.get("distortion_model", "plumb_bob")
     name = str(data.get("camera_name", "camera"))
-    return checked_camera(
-        str(path), data["image_width"], data["image_height"], K, D, model, YAML_FIELDS, name
-    )
+    return checked_camera(str(path), data["image_width"], data["image_height"], K, D, model, YAML_FIELDS, name)
 
 
 def camera_info_dict(camera: CameraModel) -> dict:

@@ -33,9 +33,7 @@ class CameraModel:
 
     def __post_init__(self) -> None:
         if self.distortion_model not in MODELS:
-            raise ValueError(
-                f"unknown distortion model {self.distortion_model!r}; use one of {', '.join(MODELS)}"
-            )
+            raise ValueError(f"unknown distortion model {self.distortion_model!r}; use one of {', '.join(MODELS)}")
         D = np.zeros(MODELS[self.distortion_model])
         given = np.asarray(self.D, dtype=float).ravel()
         D[: min(len(given), len(D))] = given[: len(D)]
@@ -157,6 +155,9 @@ class CameraModel:
         """Whether pixels (..., 2) lie inside the image, `margin` pixels from its border (NaN is outside)."""
         u, v = uv[..., 0], uv[..., 1]
         with np.errstate(invalid="ignore"):
-            return (u >= margin - 0.5) & (u <= self.width - 0.5 - margin) & (v >= margin - 0.5) & (
-                v <= self.height - 0.5 - margin
+            return (
+                (u >= margin - 0.5)
+                & (u <= self.width - 0.5 - margin)
+                & (v >= margin - 0.5)
+                & (v <= self.height - 0.5 - margin)
             )

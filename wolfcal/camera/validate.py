@@ -81,9 +81,7 @@ def checked_camera(
     d = numbers(where, fields["D"], D)
     expected = MODELS[model]
     if d.size > expected and np.any(d[expected:] != 0):
-        raise WolfcalError(
-            f"{where}: '{fields['D']}' has {d.size} coefficients, the {model} model has {expected}"
-        )
+        raise WolfcalError(f"{where}: '{fields['D']}' has {d.size} coefficients, the {model} model has {expected}")
     return CameraModel(width, height, k.reshape(3, 3), d[:expected], model, name)
 
 

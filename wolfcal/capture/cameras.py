@@ -45,8 +45,11 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
     cameras = {}
     for name, source in sources.items():
         head = name == HEAD_CAMERA
-        path = (Path(options.intrinsics) if head and options.intrinsics
-                else robot.config.intrinsics_file(name, "capturing", "pass --intrinsics FILE" if head else ""))
+        path = (
+            Path(options.intrinsics)
+            if head and options.intrinsics
+            else robot.config.intrinsics_file(name, "capturing", "pass --intrinsics FILE" if head else "")
+        )
         model = load_camera_info(path)
         binning = options.binning or (sim_binning(name) if source == "sim" else 1)
         cameras[name] = CaptureCamera(model, model.binned(binning, name), binning, source)

@@ -51,9 +51,7 @@ def run_capture(
     check_options(options)
     robot = load_robot(options.robot)
     if robot.config.servos is None:
-        raise WolfcalError(
-            f"{robot.config.path}: no 'servos' section (port, ids): capture needs the servo bus"
-        )
+        raise WolfcalError(f"{robot.config.path}: no 'servos' section (port, ids): capture needs the servo bus")
     limits = joint_limits(robot, robot.config.servos.ids)
     script, limp, stances = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
@@ -165,14 +163,20 @@ def _plan(
 
 
 def _say_end(
-    summary: CaptureSummary, failure: BaseException | None, failed: list[str], exit_torque: str, port: str,
+    summary: CaptureSummary,
+    failure: BaseException | None,
+    failed: list[str],
+    exit_torque: str,
+    port: str,
     console: Console,
 ) -> None:
     """What the file holds and how the torque was left; raises the capture's failure (with that said) if any."""
     saved = f"{summary.samples} sample(s) saved in {summary.path}" if summary.path else "no sample taken, no file"
     if failed:
-        saved += (f"\ntorque could not be left as chosen (--exit-torque {exit_torque}) on {', '.join(failed)}: "
-                  "check these joints before touching the robot")
+        saved += (
+            f"\ntorque could not be left as chosen (--exit-torque {exit_torque}) on {', '.join(failed)}: "
+            "check these joints before touching the robot"
+        )
         failure = failure if isinstance(failure, WolfcalError) else BusError(f"{port}: bus failure at exit")
     if isinstance(failure, WolfcalError):
         raise type(failure)(f"{failure}\n{saved}") from None

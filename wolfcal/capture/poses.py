@@ -96,11 +96,7 @@ def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> Pose
     problems, poses, names = [], [], set()
     for i, entry in enumerate(data["poses"]):
         where = f"poses[{i}]"
-        if (
-            not isinstance(entry, dict)
-            or set(entry) - {"name", "joints"}
-            or not isinstance(entry.get("joints"), dict)
-        ):
+        if not isinstance(entry, dict) or set(entry) - {"name", "joints"} or not isinstance(entry.get("joints"), dict):
             problems.append(f"{where}: must be a mapping with 'name' and 'joints' (joint: rad)")
             continue
         name = str(entry.get("name", f"pose{i + 1}"))
@@ -116,16 +112,12 @@ def load_poses(path: str | Path, limits: dict[str, tuple[float, float]]) -> Pose
                 problems.append(f"{where}: {joint} must be a number of radians, found {value!r}")
             elif not limits[joint][0] <= value <= limits[joint][1]:
                 lo, hi = limits[joint]
-                problems.append(
-                    f"{where}: {joint} = {value:.4f} rad is outside the URDF limits [{lo:.4f}, {hi:.4f}]"
-                )
+                problems.append(f"{where}: {joint} = {value:.4f} rad is outside the URDF limits [{lo:.4f}, {hi:.4f}]")
             else:
                 joints[str(joint)] = float(value)
         poses.append(Pose(name, joints))
     if problems:
-        raise WolfcalError(
-            f"{path}: {len(problems)} problem(s), nothing was moved:\n  " + "\n  ".join(problems)
-        )
+        raise WolfcalError(f"{path}: {len(problems)} problem(s), nothing was moved:\n  " + "\n  ".join(problems))
     return PoseScript(poses, float(velocity))
 
 

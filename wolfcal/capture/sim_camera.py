@@ -27,9 +27,7 @@ class SimCamera:
     """Renders the robot as the bus emulators on `ports` hold it (true angles, true frames and tags; the truth file
     of the first emulator that has one)."""
 
-    def __init__(
-        self, robot: Robot, ports: list[str], camera: CameraModel, seed: int = 0, external: str | None = None
-    ):
+    def __init__(self, robot: Robot, ports: list[str], camera: CameraModel, seed: int = 0, external: str | None = None):
         self.name, self.ports, self.robot = "sim", ports, robot
         self._read = read_true_angles
         truth_path = next((path for path in (read_true_angles(port)[1] for port in ports) if path), None)
@@ -40,8 +38,7 @@ class SimCamera:
         if external is not None:
             placements = load_external_truth(Path(truth_path)) if truth_path else {}
             T_base_camera = placements.get(external, DEFAULT_PLACEMENT)
-        self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera,
-                              floor_places=floor_places)
+        self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera, floor_places=floor_places)
 
     def grab(self) -> np.ndarray:
         angles: dict[str, float] = {}

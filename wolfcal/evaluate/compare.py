@@ -125,8 +125,13 @@ def _topics(path: Path) -> set[str]:
     return {c.topic for c in summary.channels.values() if counts.get(c.id, 1)}
 
 
-def _head_columns(robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable,
-                  corner_inset: tuple[float, float]) -> list[Column]:
+def _head_columns(
+    robot: Robot,
+    models: dict[str, Corrections],
+    loaded: list[Capture],
+    say: Callable,
+    corner_inset: tuple[float, float],
+) -> list[Column]:
     """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen."""
     samples, _ = samples_of(loaded, robot)
     observations, _ = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
@@ -247,12 +252,17 @@ def decide(columns: list[Column], calibrations: list[Calibration]) -> dict:
         verdicts[c.label] = {"mean_ratio_to_before": ratio_of.get(c.label), "worse_columns": worse}
     eligible = [label for label, ratio in ratio_of.items() if not verdicts[label]["worse_columns"] and ratio < 1.0]
     if not eligible:
-        return {"deploy": None, "calibrations": verdicts,
-                "message": "deploy none of them: each makes a column worse than the input URDF or improves none"}
+        return {
+            "deploy": None,
+            "calibrations": verdicts,
+            "message": "deploy none of them: each makes a column worse than the input URDF or improves none",
+        }
     best = min(eligible, key=lambda label: ratio_of[label])
     ratio = ratio_of[best]
-    message = (f"deploy {best}: it makes no column worse than the input URDF and has the lowest mean error relative "
-               f"to it over the {len(columns)} column(s) ({ratio:.2f} of before's on average)")
+    message = (
+        f"deploy {best}: it makes no column worse than the input URDF and has the lowest mean error relative "
+        f"to it over the {len(columns)} column(s) ({ratio:.2f} of before's on average)"
+    )
     rejected = [f"{label} is worse than before on {'; '.join(v['worse_columns'])}" for label, v in verdicts.items()
                 if v["worse_columns"]]  # fmt: skip
     if rejected:
@@ -315,7 +325,10 @@ def _write_report(out_dir: Path, metrics: dict, columns: list[Column], calibrati
 
 
 def run_compare(
-    fit_dirs: list[Path], captures: list[Path], out_dir: Path, say: Callable[[str], None] = print,
+    fit_dirs: list[Path],
+    captures: list[Path],
+    out_dir: Path,
+    say: Callable[[str], None] = print,
     force: bool = False,
 ) -> dict:
     """The whole `wolfcal compare` job; returns the metrics written to out_dir/metrics.json. Outputs are checked
@@ -338,8 +351,10 @@ def run_compare(
                *_external_columns(robot, models, loaded, say),
                *_mocap_column(robot, models, mocap_captures, say)]  # fmt: skip
     if not columns:
-        raise WolfcalError(f"{', '.join(map(str, captures))}: no view of a configured tag or marker that the "
-                           "calibrations can be measured on; check the captures and the robot config's tags/markers")
+        raise WolfcalError(
+            f"{', '.join(map(str, captures))}: no view of a configured tag or marker that the "
+            "calibrations can be measured on; check the captures and the robot config's tags/markers"
+        )
     decision = decide(columns, calibrations)
     metrics: dict[str, Any] = {
         "wolfcal_version": wolfcal.__version__,
@@ -358,8 +373,14 @@ def run_compare(
     }  # fmt: skip
     _write_report(out_dir, metrics, columns, calibrations)
     for label in models:
-        say(f"{label}: " + "; ".join(f"{col.key} {metrics['table'][label][col.key]['mean']} ± "
-                                     f"{metrics['table'][label][col.key]['std']} {col.unit}" for col in columns))
+        say(
+            f"{label}: "
+            + "; ".join(
+                f"{col.key} {metrics['table'][label][col.key]['mean']} ± "
+                f"{metrics['table'][label][col.key]['std']} {col.unit}"
+                for col in columns
+            )
+        )
     say(decision["message"])
     say(f"report: {out_dir / 'report.html'}")
     return metrics

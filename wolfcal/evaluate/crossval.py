@@ -27,7 +27,11 @@ def fold_assignment(n_samples: int, folds: int) -> np.ndarray:
 
 
 def cross_validate(
-    robot: Robot, obs: Observations, options: FitOptions, folds: int, say: Callable[[str], None],
+    robot: Robot,
+    obs: Observations,
+    options: FitOptions,
+    folds: int,
+    say: Callable[[str], None],
     present: CurrentCalibration | None = None,
 ) -> tuple[np.ndarray, list[Corrections]]:
     """Fold of each sample and each fold's model to deploy (fitted without that fold's samples; totals on
@@ -45,9 +49,7 @@ def cross_validate(
     models = []
     for k in range(folds):
         train = np.flatnonzero(fold_of != k)
-        say(
-            f"fold {k + 1}/{folds}: fitting on {len(train)} sample(s), holding out {int(np.sum(fold_of == k))}"
-        )
+        say(f"fold {k + 1}/{folds}: fitting on {len(train)} sample(s), holding out {int(np.sum(fold_of == k))}")
         fit = fit_observations(robot, obs.subset(train), options)
         rows = parameter_results(fit)
         models.append(held_model(rows, fit.solution.uncertainty.covariance, present or CurrentCalibration(),

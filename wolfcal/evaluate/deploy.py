@@ -106,8 +106,11 @@ def team_extrinsic_text(robot: Robot, corrections: Corrections, present: Current
     """bitbots_extrinsic_calibration.yaml: the camera block from the model, the IMU block from `present`."""
     camera = euler_offsets(optical_rotation(robot, corrections))
     imu = present.imu if present is not None else None
-    imu_note = (f"unchanged from {', '.join(present.sources)}" if imu is not None and present is not None else
-                "0: not calibrated here and no present value given (--current); put the robot's own values here")
+    imu_note = (
+        f"unchanged from {', '.join(present.sources)}"
+        if imu is not None and present is not None
+        else "0: not calibrated here and no present value given (--current); put the robot's own values here"
+    )
     return extrinsic_text(camera, imu, "camera correction fitted by wolfcal (total)", imu_note)
 
 
@@ -120,7 +123,8 @@ def deploy_warnings(robot: Robot, corrections: Corrections, present: CurrentCali
             warnings.append(
                 f"The camera correction moves the camera by {np.linalg.norm(t) * 1000:.1f} mm ({t[0] * 1000:+.1f}, "
                 f"{t[1] * 1000:+.1f}, {t[2] * 1000:+.1f} mm), which {EXTRINSIC_FILE} cannot hold (rotation only): "
-                "on the team's stack that part is lost; calibrated_folded.urdf holds it.")
+                "on the team's stack that part is lost; calibrated_folded.urdf holds it."
+            )
     if present is None or present.imu is None:
         warnings.append(f"{EXTRINSIC_FILE}: the IMU block is 0 (no present value given with --current); copy the "
                         "robot's own IMU offsets into it before deploying.")  # fmt: skip
@@ -162,7 +166,11 @@ def deploy_lines(record: dict, out_dir: Path) -> list[str]:
 
 
 def write_or_withhold_deploy_files(
-    robot: Robot, corrections: Corrections, out_dir: Path, refused: str | None, override: bool,
+    robot: Robot,
+    corrections: Corrections,
+    out_dir: Path,
+    refused: str | None,
+    override: bool,
     present: CurrentCalibration | None = None,
 ) -> dict:
     """Write the deploy files of the model `corrections` (totals), or (refused: the verdict's reason, without the

@@ -25,7 +25,11 @@ LARGER = {"camera": ("head_camera", "leg"), "head_camera": ("leg",), "leg": ()} 
 
 
 def explaining_preset(
-    robot: Robot, obs: Observations, views: TagViews, options: FitOptions, present: Corrections,
+    robot: Robot,
+    obs: Observations,
+    views: TagViews,
+    options: FitOptions,
+    present: Corrections,
     inlier_samples: np.ndarray,
 ) -> dict:
     """{'tested': {preset: whitened residual scale, or None when it could not be fitted}, 'explained_by': the first

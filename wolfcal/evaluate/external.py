@@ -69,8 +69,12 @@ def foot_tag_grid_mm(robot: Robot, obs: Observations, model: Corrections) -> lis
 
 
 def external_metrics(
-    robot: Robot, observations: dict[str, Observations], fitted: Corrections, truth: Corrections | None,
-    say: Callable[[str], None], before: Corrections | None = None,
+    robot: Robot,
+    observations: dict[str, Observations],
+    fitted: Corrections,
+    truth: Corrections | None,
+    say: Callable[[str], None],
+    before: Corrections | None = None,
 ) -> dict:
     """Before (`before`, default the nominal URDF) / after figures of every external camera's held-out views (see
     the module docstring)."""

@@ -24,9 +24,7 @@ def png(image: np.ndarray) -> bytes:
     return data.tobytes()
 
 
-def _text(
-    img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45, color=INK, anchor: str = "left"
-):
+def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45, color=INK, anchor: str = "left"):
     (w, h), _ = cv2.getTextSize(text, FONT, scale, 1)
     x, y = org
     if anchor == "center":
@@ -126,9 +124,7 @@ def histograms_png(series: list[tuple[str, np.ndarray, tuple[int, int, int]]], x
     for bin_counts, (_, _, color) in zip(counts, series):
         for i, n in enumerate(bin_counts):
             if n:
-                cv2.rectangle(
-                    overlay, (x_of(edges[i]) + 1, y_of(n)), (x_of(edges[i + 1]) - 1, ax.y1), color, -1
-                )
+                cv2.rectangle(overlay, (x_of(edges[i]) + 1, y_of(n)), (x_of(edges[i + 1]) - 1, ax.y1), color, -1)
     ax.img[:] = cv2.addWeighted(overlay, 0.65, ax.img, 0.35, 0)
     ax.frame()
     ax.legend([(label, color) for label, _, color in series])
@@ -137,9 +133,7 @@ def histograms_png(series: list[tuple[str, np.ndarray, tuple[int, int, int]]], x
     return png(ax.img)
 
 
-def per_sample_png(
-    before: np.ndarray, after: np.ndarray, outliers: np.ndarray, ylabel: str, title: str
-) -> bytes:
+def per_sample_png(before: np.ndarray, after: np.ndarray, outliers: np.ndarray, ylabel: str, title: str) -> bytes:
     """Paired bars per sample (log y axis); outlier samples get a grey background and an 'x' under their bars."""
     n = len(before)
     ax = LogAxes(max(760, 60 + 22 * n), 364, title)
@@ -147,9 +141,7 @@ def per_sample_png(
 
     def y_of(v: float) -> int:
         v = min(max(v, lo), hi)
-        return int(
-            ax.y1 - (np.log10(v) - np.log10(lo)) / (np.log10(hi) - np.log10(lo)) * (ax.y1 - ax.y0 - 30)
-        )
+        return int(ax.y1 - (np.log10(v) - np.log10(lo)) / (np.log10(hi) - np.log10(lo)) * (ax.y1 - ax.y0 - 30))
 
     for d in _decades(lo, hi):
         cv2.line(ax.img, (ax.x0, y_of(d)), (ax.x1, y_of(d)), GRID, 1)
@@ -168,8 +160,7 @@ def per_sample_png(
             _text(ax.img, str(i), (int(x + width / 2), ax.y1 + 14), 0.38, anchor="center")
     ax.frame()
     ax.legend(
-        [("before", BEFORE), ("after", AFTER)]
-        + ([("outlier sample", (215, 215, 215))] if outliers.any() else [])
+        [("before", BEFORE), ("after", AFTER)] + ([("outlier sample", (215, 215, 215))] if outliers.any() else [])
     )
     _text(ax.img, "sample", ((ax.x0 + ax.x1) // 2, ax.y1 + 44), anchor="center")
     _text(ax.img, ylabel, (8, ax.y0 - 12))

@@ -194,12 +194,12 @@ class _FloorFit:
         """(V_keep, 4, 2) where the unknowns x put the corners of the views `keep` less where they were seen [px]
         (BEHIND_CAMERA_PX for a corner behind the camera)."""
         v = self.views
-        place = x[7:self.first_reading].reshape(-1, 3)[self.tag_of_view[keep]]
+        place = x[7 : self.first_reading].reshape(-1, 3)[self.tag_of_view[keep]]
         c, s = np.cos(place[:, 2:3]), np.sin(place[:, 2:3])
         p = self.printed[self.tag_of_view[keep]]
         p_real = np.stack([place[:, :1] + c * p[..., 0] - s * p[..., 1], place[:, 1:2] + s * p[..., 0] + c * p[..., 1],
                            p[..., 2]], axis=-1)  # fmt: skip
-        errors = x[self.first_reading:]
+        errors = x[self.first_reading :]
         moved = np.einsum("vkd,vk->vd", v.twists[keep], errors[v.readings[keep]])  # (V, 6) camera frame
         T_camera_moved = np.tile(np.eye(4), (len(moved), 1, 1))
         T_camera_moved[:, :3, :3], T_camera_moved[:, :3, 3] = exp_so3(moved[:, 3:]), moved[:, :3]
@@ -213,8 +213,8 @@ class _FloorFit:
         out = self.start()
         out[:7] = x[:7]
         index = np.searchsorted(other.placements, self.placements)
-        out[7:self.first_reading] = x[7:other.first_reading].reshape(-1, 3)[index].ravel()
-        out[self.first_reading:] = x[other.first_reading:other.first_reading + self.n_readings]
+        out[7 : self.first_reading] = x[7 : other.first_reading].reshape(-1, 3)[index].ravel()
+        out[self.first_reading :] = x[other.first_reading : other.first_reading + self.n_readings]
         return out
 
     def robust(self, x: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, float]:
@@ -414,7 +414,10 @@ def _landing_offset(aimed: tuple[np.ndarray, np.ndarray], distance: float, beari
 
 
 def measured_ground_errors(
-    robot: Robot, obs: Observations, models: dict[str, Corrections], distances: tuple[float, ...] = DISTANCES_M,
+    robot: Robot,
+    obs: Observations,
+    models: dict[str, Corrections],
+    distances: tuple[float, ...] = DISTANCES_M,
     corner_inset: tuple[float, float] = (0.0, 0.0),
 ) -> dict | None:
     """Per model: per distance the measured ground error [m] (worst bearing; None: the ball lies above the model's
@@ -450,8 +453,11 @@ def capture_size(robot: Robot, obs: Observations) -> dict[str, int]:
     the tag layouts (capture files: the tags may lie elsewhere in each, and each place has its own corner bias)."""
     seen = np.unique(obs.sample_index)
     legs = np.array([robot.model.column(j) for j in robot.actuated_joints_to(list(robot.config.floor_config().soles))])
-    return {"samples": len(seen), "stances": len(np.unique(obs.q_measured[np.ix_(seen, legs)], axis=0)),
-            "layouts": len({obs.sources[i] for i in seen})}
+    return {
+        "samples": len(seen),
+        "stances": len(np.unique(obs.q_measured[np.ix_(seen, legs)], axis=0)),
+        "layouts": len({obs.sources[i] for i in seen}),
+    }
 
 
 def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
@@ -466,8 +472,13 @@ def _spread(offset: Callable[[np.ndarray], np.ndarray], floor: dict) -> dict:
     by_sample, by_tag = (_jackknife_covariance(offset, floor[k]) for k in ("jackknife_samples", "jackknife_tags"))
     rounding = G @ floor["rounding_covariance"] @ G.T
     total = (formal if np.trace(formal) > np.trace(by_sample) else by_sample) + by_tag + rounding
-    parts = {"std_m": total, "formal_std_m": formal, "sample_std_m": by_sample, "tag_std_m": by_tag,
-             "rounding_std_m": rounding}
+    parts = {
+        "std_m": total,
+        "formal_std_m": formal,
+        "sample_std_m": by_sample,
+        "tag_std_m": by_tag,
+        "rounding_std_m": rounding,
+    }
     return {k: float(np.sqrt(np.trace(c))) for k, c in parts.items()}
 
 

@@ -91,7 +91,11 @@ def ground_errors(
 
 
 def predicted_ground_std(
-    robot: Robot, camera: CameraModel, chain: ParameterSet, values: np.ndarray, covariance: np.ndarray,
+    robot: Robot,
+    camera: CameraModel,
+    chain: ParameterSet,
+    values: np.ndarray,
+    covariance: np.ndarray,
     distance: float,
 ) -> float:
     """1-sigma ground error at `distance` [m] that the fit's covariance (P, P) of the chain parameter `values` (P,)

@@ -62,22 +62,29 @@ def verdict_ground(measured: dict | None, distances: tuple[float, ...], distance
     k = distances.index(distance)
     before, after = (measured["models"][m]["rows"][k] for m in ("before", "after"))
     inf = float("inf")
-    return {"before_m": inf if before["error_m"] is None else before["error_m"],
-            "after_m": inf if after["error_m"] is None else after["error_m"], "after_std_m": after["std_m"],
-            "before_std_m": before["std_m"] or 0.0, "capture": measured.get("capture"),
-            "check": measured.get("check")}
+    return {
+        "before_m": inf if before["error_m"] is None else before["error_m"],
+        "after_m": inf if after["error_m"] is None else after["error_m"],
+        "after_std_m": after["std_m"],
+        "before_std_m": before["std_m"] or 0.0,
+        "capture": measured.get("capture"),
+        "check": measured.get("check"),
+    }
 
 
 def ground_rows(
-    robot: Robot, camera: CameraModel, truth: Corrections | None, models: dict[str, Corrections],
-    say: Callable[[str], None], distances: tuple[float, ...],
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections | None,
+    models: dict[str, Corrections],
+    say: Callable[[str], None],
+    distances: tuple[float, ...],
 ) -> tuple[list[dict], str | None]:
     """`ground_errors` rows of the models before and after [m] against the simulator's truth, or none and why (no
     `floor:` config). Without a truth the reference is the model after, whose error is then not measured: None,
     with 'no_truth' set (it would read 0 by definition)."""
     if robot.config.floor is None:
-        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not "
-                    "computed")
+        return [], (f"{robot.config.path} has no 'floor:' (standing soles and pose): the ground error was not computed")
     say("computing the ground error ...")
     rows = ground_errors(robot, camera, truth if truth is not None else models["after"], models, distances)
     if truth is None:

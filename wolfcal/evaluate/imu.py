@@ -31,8 +31,10 @@ from wolfcal.robot.robot import Robot
 if TYPE_CHECKING:
     from wolfcal.fit.result import FitResult
 
-MEANING = ("angle between the measured gravity direction (the accelerometer's mean over a still period, IMU frame) "
-           "and the standing soles' normal in the IMU frame under the model [deg]; RMS and max over the periods")
+MEANING = (
+    "angle between the measured gravity direction (the accelerometer's mean over a still period, IMU frame) "
+    "and the standing soles' normal in the IMU frame under the model [deg]; RMS and max over the periods"
+)
 
 
 def gravity_errors(robot: Robot, samples: StandingSamples, model: Corrections) -> np.ndarray:
@@ -64,14 +66,22 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
     if not all(config.topic in t and not cameras & t for t in topics):
         return None
     if {str(Path(c).resolve()) for c in captures} <= set(result.captures):
-        raise WolfcalError(f"{', '.join(map(str, captures))}: the IMU is checked on standing recordings the fit did "
-                           "not use (no cross-validation over still periods): give one with --capture")
+        raise WolfcalError(
+            f"{', '.join(map(str, captures))}: the IMU is checked on standing recordings the fit did "
+            "not use (no cross-validation over still periods): give one with --capture"
+        )
     samples = read_standing([Path(c) for c in captures], robot.config.joint_states_topic, config.topic,
                             robot.joint_names)  # fmt: skip
     before, after = gravity_errors(robot, samples, Corrections()), gravity_errors(robot, samples, result.corrections)
     worse = float(np.sqrt(np.mean(after**2))) >= float(np.sqrt(np.mean(before**2)))
-    refusal = (f"the held-out gravity error is not smaller after the fit ({_figures(after)['rms_deg']} deg RMS "
-               f"against {_figures(before)['rms_deg']} deg before)") if worse else None
+    refusal = (
+        (
+            f"the held-out gravity error is not smaller after the fit ({_figures(after)['rms_deg']} deg RMS "
+            f"against {_figures(before)['rms_deg']} deg before)"
+        )
+        if worse
+        else None
+    )
     metrics: dict = {
         "wolfcal_version": wolfcal.__version__, "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "fit_dir": str(Path(fit_dir).resolve()), "robot": str(robot.config.path), "free": result.free,
@@ -92,7 +102,9 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
         metrics["deploy"] = write_or_withhold_deploy_files(robot, result.corrections, out_dir, refusal, deploy_worse)
         write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=1))
         write_text_atomic(out_dir / "report.md", "\n".join(lines + [refusal or "Verdict: deploy."]) + "\n")
-    say(f"imu: gravity error on {samples.n_samples} held-out still period(s): {metrics['before']['rms_deg']} deg "
-        f"RMS before -> {metrics['after']['rms_deg']} deg after (max {metrics['after']['max_deg']} deg)")
+    say(
+        f"imu: gravity error on {samples.n_samples} held-out still period(s): {metrics['before']['rms_deg']} deg "
+        f"RMS before -> {metrics['after']['rms_deg']} deg after (max {metrics['after']['max_deg']} deg)"
+    )
     say(refusal or "verdict: deploy")
     return metrics

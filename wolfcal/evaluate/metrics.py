@@ -56,9 +56,7 @@ def measure_tag_views(robot: Robot, obs: Observations) -> TagViews:
         samples.append(int(sample))
         tags.append(int(tag_id))
         poses.append(np.full((4, 4), np.nan) if T is None else T)
-    return TagViews(
-        np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4)
-    )
+    return TagViews(np.array(samples, dtype=int), np.array(tags, dtype=int), np.array(poses).reshape(-1, 4, 4))
 
 
 @dataclass

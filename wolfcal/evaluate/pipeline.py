@@ -133,8 +133,16 @@ def _observe(
 
 
 def _run_external_evaluate(
-    robot: Robot, result: FitResult, fitted: Corrections, fit_dir: Path, loaded: list[Capture], captures: list[Path],
-    out_dir: Path, deploy_worse: bool, say: Callable[[str], None], present: CurrentCalibration,
+    robot: Robot,
+    result: FitResult,
+    fitted: Corrections,
+    fit_dir: Path,
+    loaded: list[Capture],
+    captures: list[Path],
+    out_dir: Path,
+    deploy_worse: bool,
+    say: Callable[[str], None],
+    present: CurrentCalibration,
 ) -> dict:
     """Held-out external-camera captures (read: `loaded`): `external_metrics` before/after, metrics.json,
     report.md, deploy files (totals on `present`) unless the reprojection error of any camera got worse."""
@@ -203,9 +211,7 @@ def _write_report(out_dir: Path, metrics: dict, figures: Figures) -> None:
     blocks = report_blocks(metrics, captions)
     for name, data in pngs.items():
         write_bytes_atomic(out_dir / "figures" / name, data)
-    write_text_atomic(
-        out_dir / "report.html", render_html(blocks, pngs, f"wolfcal evaluation {metrics['robot_name']}")
-    )
+    write_text_atomic(out_dir / "report.html", render_html(blocks, pngs, f"wolfcal evaluation {metrics['robot_name']}"))
     write_text_atomic(out_dir / "report.md", render_markdown(blocks, "figures"))
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n")
 
@@ -214,8 +220,15 @@ PARAMETER_KEYS = ("name", "value", "std", "unit", "data_share", "display")  # of
 
 
 def _after(
-    robot: Robot, obs: Observations, views: TagViews, result: FitResult, fitted: Corrections,
-    present: CurrentCalibration, held_out: list[Path] | None, folds: int, say: Callable[[str], None],
+    robot: Robot,
+    obs: Observations,
+    views: TagViews,
+    result: FitResult,
+    fitted: Corrections,
+    present: CurrentCalibration,
+    held_out: list[Path] | None,
+    folds: int,
+    say: Callable[[str], None],
 ) -> tuple[ModelErrors, list[Corrections], np.ndarray | None, str]:
     """Errors of the calibrated model: on held-out captures (`held_out`) the model to deploy (`fitted`), otherwise
     each sample under the model to deploy of the cross-validation fold that left it out.
@@ -229,8 +242,16 @@ def _after(
 
 
 def _judge(
-    robot: Robot, obs: Observations, views: TagViews, result: FitResult, fitted: Corrections,
-    present: CurrentCalibration, sources: list[Path], held_out: bool, folds: int, say: Callable[[str], None],
+    robot: Robot,
+    obs: Observations,
+    views: TagViews,
+    result: FitResult,
+    fitted: Corrections,
+    present: CurrentCalibration,
+    sources: list[Path],
+    held_out: bool,
+    folds: int,
+    say: Callable[[str], None],
 ) -> HeldOutErrors:
     """Errors before (the present calibration) and after (see `_after`), the outlier samples and the summaries;
     more than MAX_LEFT_OUT of the samples left out is refused (WolfcalError)."""
@@ -258,7 +279,8 @@ def present_calibration(robot: Robot, result: FitResult, current: list[Path]) ->
     if result.current is not None and present.corrections.to_dict() != started.corrections.to_dict():
         raise WolfcalError(
             f"{', '.join(map(str, current))}: the fit started from another present calibration "
-            f"({', '.join(started.sources)}); leave out --current, or fit again with it")
+            f"({', '.join(started.sources)}); leave out --current, or fit again with it"
+        )
     return present
 
 
@@ -377,5 +399,6 @@ def run_evaluate(
 
 def before_label(present: CurrentCalibration) -> str:
     """What 'before' is: the present calibration's files, or the input URDF."""
-    return f"present calibration ({', '.join(Path(s).name for s in present.sources)})" if present.sources else \
-        "input URDF"
+    return (
+        f"present calibration ({', '.join(Path(s).name for s in present.sources)})" if present.sources else "input URDF"
+    )

@@ -95,8 +95,7 @@ def ground_text(reference_is_truth: bool, standing: dict[str, float], soles: lis
     )
     if reference_is_truth:
         return (
-            common
-            + " Reference: the simulator's truth (the held-out capture has a .truth.yaml beside it), so "
+            common + " Reference: the simulator's truth (the held-out capture has a .truth.yaml beside it), so "
             "both columns are true errors."
         )
     return (
@@ -143,12 +142,17 @@ def measured_ground_blocks(measured: dict | None) -> list[Block]:
     size = measured.get("capture")
     of = (f" ({size['samples']} samples in {size['stances']} stances, {size['layouts']} tag layout(s))" if size
           else "")  # fmt: skip
-    text = (f"Measured without truth on {measured['views']} held-out views of the floor tags{of}: the floor tags' "
-            "places, the real floor's tilt and height and the camera's turn are fitted so that every view shows "
-            "each tag at its printed size; the ball is then placed through each model as above (worst of -30, 0, "
-            "+30 deg; 1 sigma). A turn or shift of the whole floor is not seen.")
-    return [("h2", "Measured ground error (held-out floor views)"), ("p", text),
-            ("table", (["ball at", "error before", "error after"], rows, set()))]
+    text = (
+        f"Measured without truth on {measured['views']} held-out views of the floor tags{of}: the floor tags' "
+        "places, the real floor's tilt and height and the camera's turn are fitted so that every view shows "
+        "each tag at its printed size; the ball is then placed through each model as above (worst of -30, 0, "
+        "+30 deg; 1 sigma). A turn or shift of the whole floor is not seen."
+    )
+    return [
+        ("h2", "Measured ground error (held-out floor views)"),
+        ("p", text),
+        ("table", (["ball at", "error before", "error after"], rows, set())),
+    ]
 
 
 def report_blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]:

@@ -55,9 +55,7 @@ def overlay_samples(outliers: np.ndarray, after: ModelErrors) -> list[int]:
     """Which samples to show: inliers spread from best to worst after calibration, plus the worst outlier."""
     inliers = np.flatnonzero(~outliers)
     ranked = inliers[np.argsort(after.sample_rms[inliers])]
-    picks = [
-        int(ranked[i]) for i in np.unique(np.linspace(0, len(ranked) - 1, OVERLAYS - 1).round().astype(int))
-    ]
+    picks = [int(ranked[i]) for i in np.unique(np.linspace(0, len(ranked) - 1, OVERLAYS - 1).round().astype(int))]
     if outliers.any():
         bad = np.flatnonzero(outliers)
         picks.append(int(bad[np.argmax(after.sample_rms[bad])]))

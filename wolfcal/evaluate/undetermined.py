@@ -85,5 +85,7 @@ def _note(rows: list[ParameterResult], i: int, value: float, change: np.ndarray,
              and abs(change[k]) * MOVED_NOTE[rows[k].unit][0] >= MOVED_NOTE[rows[k].unit][2]]  # fmt: skip
     carried = (f"; the parameters it trades against carry its share: {', '.join(moved)} (change from their fitted "
                "values)") if moved else ""  # fmt: skip
-    return (f"{p.name}: only {p.data_share:.0%} of its information comes from the data (fitted {p.display}), so it "
-            f"is deployed at its present value {value * scale:+.3f} {shown}, not at the fitted one{carried}.")
+    return (
+        f"{p.name}: only {p.data_share:.0%} of its information comes from the data (fitted {p.display}), so it "
+        f"is deployed at its present value {value * scale:+.3f} {shown}, not at the fitted one{carried}."
+    )

@@ -54,18 +54,22 @@ FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the
 # (README, "The venue check"; its size on a robot: `robot.floor.check_size`): the standing legs' shared tick
 # rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's corner bias only over the places
 # it lies in (`tag_std_m`)
-NO_CHECK_STANCES = ("list standing poses none of the fit's in the robot config's floor.check_stances "
-                    "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check` "
-                    f"{CHECK_LAYOUTS} times, the floor tags moved between, and give all {CHECK_LAYOUTS} to "
-                    "`evaluate --capture`")
+NO_CHECK_STANCES = (
+    "list standing poses none of the fit's in the robot config's floor.check_stances "
+    "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check` "
+    f"{CHECK_LAYOUTS} times, the floor tags moved between, and give all {CHECK_LAYOUTS} to "
+    "`evaluate --capture`"
+)
 
 
 def check_how(check: dict) -> str:
     """How to take the check of size `check` (`robot.floor.check_size`: samples, stances, layouts)."""
     views = check["samples"] // (check["stances"] * check["layouts"])
-    return (f"`wolfcal capture --floor --check` {check['layouts']} times (floor.check_stances: {check['stances']} "
-            f"stances none of the fit's, {views} head view(s) each), the floor tags moved between, and all "
-            f"{check['layouts']} given to `evaluate --capture`")
+    return (
+        f"`wolfcal capture --floor --check` {check['layouts']} times (floor.check_stances: {check['stances']} "
+        f"stances none of the fit's, {views} head view(s) each), the floor tags moved between, and all "
+        f"{check['layouts']} given to `evaluate --capture`"
+    )
 
 
 def more_precise(capture: dict | None, check: dict | None) -> str:
@@ -108,9 +112,15 @@ def deploy_verdict(
     if structure is not None and structure["unexplained"]:
         refusals.append(_unexplained_refusal(advice, structure))
     if worse:
-        refusals.append(("keep the input URDF and refit with more varied poses or fewer free parameters", (
-            f"The calibration makes held-out error worse: reprojection RMS {after_px:.3f} px calibrated vs "
-            f"{before_px:.3f} px with the input URDF.")))
+        refusals.append(
+            (
+                "keep the input URDF and refit with more varied poses or fewer free parameters",
+                (
+                    f"The calibration makes held-out error worse: reprojection RMS {after_px:.3f} px calibrated vs "
+                    f"{before_px:.3f} px with the input URDF."
+                ),
+            )
+        )
     if measured_ground is not None:
         _judge_measured_ground(advice, measured_ground, limits, refusals, notes)
     else:
@@ -147,10 +157,12 @@ def _advice(free: str, structure: dict | None) -> str:
         return LEGS_ADVICE
     if structure is None or not structure["unexplained"]:  # a ground error that got worse: a camera preset's legs
         return LEGS_ADVICE if free in ("camera", "head_camera") else FLOOR_ADVICE
-    none = f"neither {' nor '.join(NAMES[p] for p in tested)} explain these residuals either (fitted on them); " \
-        if tested else ""
-    return (none + "check the tags' ids, sizes and links, the camera intrinsics, and that the captures are of this "
-            "robot")
+    none = (
+        f"neither {' nor '.join(NAMES[p] for p in tested)} explain these residuals either (fitted on them); "
+        if tested
+        else ""
+    )
+    return none + "check the tags' ids, sizes and links, the camera intrinsics, and that the captures are of this robot"
 
 
 def _unexplained_refusal(what: str, structure: dict) -> tuple[str, str]:
@@ -161,7 +173,8 @@ def _unexplained_refusal(what: str, structure: dict) -> tuple[str, str]:
     return what, (
         f"Held-out tags are off by {structure['view_shift_rms_px']:.2f} px RMS per axis, {structure['scale']:.1f} "
         f"times what detection noise ({structure['corner_noise_px']:.2f} px) and joint quantisation explain: "
-        f"{what}.{sets}")
+        f"{what}.{sets}"
+    )
 
 
 def _judge_measured_ground(
@@ -177,9 +190,15 @@ def _judge_measured_ground(
                                  f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
     elif a > limit_cm:
         unsure = f" The measurement is that uncertain: {precise}." if a - GROUND_SIGMAS * sa <= limit_cm else ""
-        refusals.append((advice, (
-            f"The measured ground error at {at} stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
-            f"{limit_cm:g} cm (floor.ground_check.limit or --ground-limit-cm).{unsure}")))
+        refusals.append(
+            (
+                advice,
+                (
+                    f"The measured ground error at {at} stays above the limit: {a:.1f} +- {sa:.1f} cm (1 sigma) > "
+                    f"{limit_cm:g} cm (floor.ground_check.limit or --ground-limit-cm).{unsure}"
+                ),
+            )
+        )
     elif a + GROUND_SIGMAS * sa > limit_cm:
         notes.append(
             f"The measured ground error at {at} is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "

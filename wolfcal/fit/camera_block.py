@@ -49,9 +49,16 @@ class CameraBlock(Block):
     outlier_rule = FIT_VIEW_PX
     noise_min, noise_max = NOISE_FLOOR_PX, 50.0  # the floor is the fit's setting (`FitOptions.noise_floor_px`)
 
-    def __init__(self, robot: Robot, obs: Observations, tag_ids: list[int], external: bool = False,
-                 placement_of_sample: np.ndarray | None = None, placement_names: list[str] | None = None,
-                 fixed: Corrections | None = None) -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        obs: Observations,
+        tag_ids: list[int],
+        external: bool = False,
+        placement_of_sample: np.ndarray | None = None,
+        placement_names: list[str] | None = None,
+        fixed: Corrections | None = None,
+    ) -> None:
         self.robot, self.obs, self.tag_ids, self.external = robot, obs, list(tag_ids), external
         self.fixed = fixed or Corrections()  # corrections held fixed under the free ones (e.g. a model under test)
         self.camera_name = obs.camera_name
@@ -83,8 +90,9 @@ class CameraBlock(Block):
             tag_fixed = np.array([self.robot.fixed_to_base(self.robot.config.tag(t).link) for t in self.tag_ids])
             fixed = tag_fixed[self.tag_col]
             key = np.where(fixed, self.placement_of_sample[self.sample_of_unit], key)
-        _, labels = np.unique(np.stack([fixed, key, self.tag_col, self.obs.corner_index], axis=1), axis=0,
-                              return_inverse=True)
+        _, labels = np.unique(
+            np.stack([fixed, key, self.tag_col, self.obs.corner_index], axis=1), axis=0, return_inverse=True
+        )
         return labels.ravel()
 
     def start_noise(self, priors: PriorConfig) -> float:
@@ -101,8 +109,15 @@ class CameraBlock(Block):
         for k, name in enumerate(names):
             values = np.concatenate([init[k][:3, 3], log_so3(init[k][:3, :3])])
             params += [
-                Parameter(f"{name}.{c}", "pose", name, i, "m" if i < 3 else "rad",
-                          POSE_PRIOR_M if i < 3 else POSE_PRIOR_RAD, float(values[i]))
+                Parameter(
+                    f"{name}.{c}",
+                    "pose",
+                    name,
+                    i,
+                    "m" if i < 3 else "rad",
+                    POSE_PRIOR_M if i < 3 else POSE_PRIOR_RAD,
+                    float(values[i]),
+                )
                 for i, c in enumerate(COMPONENTS)
             ]
         return ParameterSet(params)
@@ -216,7 +231,10 @@ def placements(obs: Observations, moving: bool) -> tuple[np.ndarray, list[str]]:
 
 
 def initial_camera_poses(
-    robot: Robot, obs: Observations, placement_of_sample: np.ndarray, n_placements: int,
+    robot: Robot,
+    obs: Observations,
+    placement_of_sample: np.ndarray,
+    n_placements: int,
     model: Corrections | None = None,
 ) -> list[np.ndarray]:
     """T_base_camera (4, 4) per placement from PnP of the tags on links the legs do not move (`Robot.off_the_legs`:

@@ -45,12 +45,18 @@ def _check(name: str, analytic: np.ndarray, numeric: np.ndarray, rtol: float, at
     error = float(np.abs(analytic - numeric).max(initial=0.0))
     assert error <= rtol * scale + atol, (
         f"{name}: analytic and central-difference derivatives differ by {error:.3g} (largest entry {scale:.3g}, "
-        f"allowed {rtol * scale + atol:.3g})")
+        f"allowed {rtol * scale + atol:.3g})"
+    )
 
 
 def assert_block_derivatives(
-    block: Block, chain: ParameterSet, chain_values: np.ndarray, local_values: np.ndarray | None = None,
-    rtol: float = 1e-5, atol: float = 1e-9, step: float = STEP,
+    block: Block,
+    chain: ParameterSet,
+    chain_values: np.ndarray,
+    local_values: np.ndarray | None = None,
+    rtol: float = 1e-5,
+    atol: float = 1e-9,
+    step: float = STEP,
 ) -> Linearization:
     """AssertionError naming the Jacobian (chain, local or joint readings) where the block's analytic derivatives
     at (chain_values (Pc,), local_values (L,), default the nuisance references) differ from central differences;
@@ -59,13 +65,24 @@ def assert_block_derivatives(
     values = np.asarray(chain_values, dtype=float)
     lin = block.linearize(values, local, chain)
     assert lin.residual.shape == (block.n_units, block.dim), (
-        f"{block.name}: residual shape {lin.residual.shape}, expected (units, dim) = ({block.n_units}, {block.dim})")
+        f"{block.name}: residual shape {lin.residual.shape}, expected (units, dim) = ({block.n_units}, {block.dim})"
+    )
     assert np.all(np.isfinite(lin.residual)), f"{block.name}: residuals not finite at the point checked"
-    _check(f"{block.name} chain", lin.jac_chain,
-           central_differences(lambda v: block.linearize(v, local, chain).residual, values, step), rtol, atol)
+    _check(
+        f"{block.name} chain",
+        lin.jac_chain,
+        central_differences(lambda v: block.linearize(v, local, chain).residual, values, step),
+        rtol,
+        atol,
+    )
     if len(block.nuisance):
-        _check(f"{block.name} local", dense_local(block, lin),
-               central_differences(lambda x: block.linearize(values, x, chain).residual, local, step), rtol, atol)
+        _check(
+            f"{block.name} local",
+            dense_local(block, lin),
+            central_differences(lambda x: block.linearize(values, x, chain).residual, local, step),
+            rtol,
+            atol,
+        )
     q0 = block.q_measured.copy()
 
     def at_readings(dq: np.ndarray) -> np.ndarray:

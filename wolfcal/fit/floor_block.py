@@ -115,7 +115,8 @@ class FloorBlock(Block):
         inward = self._inward() * np.minimum(1.0, REFERENCE_EDGE_PX / edge)[:, None]
         self.inward = np.einsum("mij,mj->mi", self.normals, inward)
         self.nuisance = self._place_parameters() + ParameterSet(
-            [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)])
+            [Parameter(CORNER_INSET, "floor", "floor", 0, "px", INSET_PRIOR_PX)]
+        )
 
     def joint_reading_groups(self) -> np.ndarray:
         """The standing legs hold one pose in every floor sample: their readings' error is shared by all."""
@@ -259,8 +260,13 @@ class SoleClosure(Block):
         c = standing_chain(self.robot, self.q_measured, chain, chain_values, self.fixed)
         d = _disagreement_derivatives(c.T_root_soles, c.twists_soles)
         n_joints = self.q_measured.shape[1]
-        return Linearization(residual=sole_gaps(c.T_root_soles), jac_chain=d[..., n_joints:], jac_local=None,
-                             local_cols=None, joint_sensitivity=d[..., :n_joints])
+        return Linearization(
+            residual=sole_gaps(c.T_root_soles),
+            jac_chain=d[..., n_joints:],
+            jac_local=None,
+            local_cols=None,
+            joint_sensitivity=d[..., :n_joints],
+        )
 
 
 def check_floor_samples(robot: Robot, obs: Observations) -> None:

@@ -101,14 +101,14 @@ class ImuBlock(Block):
         length = np.linalg.norm(v, axis=1)
         p = v / length[:, None]
         residual = np.einsum("sik,si->sk", self.E, p)
-        E_P = np.einsum("sik,sij->skj", self.E, np.eye(3)[None] - p[:, :, None] * p[:, None, :]) / length[:, None,
-                                                                                                            None]
+        E_P = np.einsum("sik,sij->skj", self.E, np.eye(3)[None] - p[:, :, None] * p[:, None, :]) / length[:, None, None]
 
         def through(twists: list[np.ndarray], imu: np.ndarray) -> np.ndarray:
             """(S, 2, C) d(residual) from the soles' twists (K of (S, C, 6)) and the IMU's (S, C, 6)."""
             ds = sum(cross(t[..., 3:], zk[:, None, :]) for t, zk in zip(twists, z))  # (S, C, 3)
-            dn = (ds - np.sum(ds * n_root[:, None, :], axis=2, keepdims=True) * n_root[:, None, :]) / size[:, None,
-                                                                                                          None]
+            dn = (ds - np.sum(ds * n_root[:, None, :], axis=2, keepdims=True) * n_root[:, None, :]) / size[
+                :, None, None
+            ]
             dn_imu = np.einsum("sji,scj->sci", R, dn - cross(imu[..., 3:], n_root[:, None, :]))
             return np.einsum("skj,sji,sci->skc", E_P, M, dn_imu)
 
@@ -117,8 +117,13 @@ class ImuBlock(Block):
         e_x, e_y, e_z = np.eye(3)
         dv_bias = np.stack([cross(e_y, n_imu), -cross(e_x, n_imu), np.broadcast_to(e_z, n_imu.shape)], axis=2)
         jac_bias = np.einsum("skj,sjb->skb", E_P, dv_bias)  # (S, 2, 3)
-        return Linearization(residual=residual, jac_chain=jac_chain, jac_local=jac_bias,
-                             local_cols=np.tile(np.arange(3), (len(p), 1)), joint_sensitivity=sensitivity)
+        return Linearization(
+            residual=residual,
+            jac_chain=jac_chain,
+            jac_local=jac_bias,
+            local_cols=np.tile(np.arange(3), (len(p), 1)),
+            joint_sensitivity=sensitivity,
+        )
 
     def report(self, fitted: FittedBlock) -> dict:
         """The common entry (`Block.report`) in degrees, with each still period's file, time, gravity error before
@@ -189,19 +194,27 @@ def imu_fit_blocks(robot: Robot, captures: list[Path], options: FitOptions,
     alone = [c for c in with_imu if not cameras & topics[c]]
     if not wanted:
         if alone:
-            raise WolfcalError(f"{', '.join(map(str, alone))}: IMU data without images; the IMU joins the fit with "
-                               f"--free {options.free},imu (or --free imu)")
+            raise WolfcalError(
+                f"{', '.join(map(str, alone))}: IMU data without images; the IMU joins the fit with "
+                f"--free {options.free},imu (or --free imu)"
+            )
         return [], []
     if options.chain_preset in (None, "camera", "head_camera") and "imu" not in options.presets:
-        raise WolfcalError(f"--system imu with --free {options.free}: gravity cannot inform the camera; use --free imu "
-                           "(the mount), --free leg (the legs, the mount known) or --free leg,imu")
+        raise WolfcalError(
+            f"--system imu with --free {options.free}: gravity cannot inform the camera; use --free imu "
+            "(the mount), --free leg (the legs, the mount known) or --free leg,imu"
+        )
     imu_joint(robot)  # a clear error for an IMU link the URDF lacks or moves, before any file is read
     if not with_imu:
-        raise WolfcalError(f"{', '.join(map(str, captures))}: no {IMU} messages on {config.topic} (robot config "
-                           "'imu.topic'); give a standing recording (`wolfcal capture --standing`)")
+        raise WolfcalError(
+            f"{', '.join(map(str, captures))}: no {IMU} messages on {config.topic} (robot config "
+            "'imu.topic'); give a standing recording (`wolfcal capture --standing`)"
+        )
     samples = read_standing(with_imu, robot.config.joint_states_topic, config.topic, robot.joint_names)
-    say(f"imu: {samples.n_samples} still period(s) from {len(with_imu)} recording(s)"
-        + "".join(f"; {note}" for note in samples.notes))
+    say(
+        f"imu: {samples.n_samples} still period(s) from {len(with_imu)} recording(s)"
+        + "".join(f"; {note}" for note in samples.notes)
+    )
     return [ImuBlock(robot, samples)], alone
 
 

@@ -43,8 +43,9 @@ class MocapBlock(Block):
     name = "motion capture"
     noise_min, noise_max, noise_start = 1e-5, 0.1, MOCAP_NOISE_START_M
 
-    def __init__(self, robot: Robot, obs: MarkerObservations, moving: bool = False,
-                 fixed: Corrections | None = None) -> None:
+    def __init__(
+        self, robot: Robot, obs: MarkerObservations, moving: bool = False, fixed: Corrections | None = None
+    ) -> None:
         self.robot, self.obs, self.moving = robot, obs, moving
         self.fixed = fixed or Corrections()
         self.base = robot.config.base_link
@@ -152,8 +153,10 @@ class MocapBlock(Block):
         R_mocap_base = exp_so3(pose[:, 3:])
         R = R_mocap_base @ R_base_root  # (M, 3, 3) root -> mocap rotation
         p_mocap = np.einsum("mij,mj->mi", R_mocap_base, p_base) + pose[:, :3]
-        jac_pose = np.concatenate([np.broadcast_to(np.eye(3), R.shape),
-                                   -R_mocap_base @ skew(p_base) @ right_jacobian_so3(pose[:, 3:])], axis=2)
+        jac_pose = np.concatenate(
+            [np.broadcast_to(np.eye(3), R.shape), -R_mocap_base @ skew(p_base) @ right_jacobian_so3(pose[:, 3:])],
+            axis=2,
+        )
         jac_mount = R @ T_root_link[:, :3, :3]
         local_cols = np.concatenate([6 * placement[:, None] + np.arange(6),
                                      self.n_pose + 3 * k[:, None] + np.arange(3)], axis=1)  # fmt: skip

@@ -60,10 +60,15 @@ def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, resi
         "n_outlier_views": len(b.outlier_views),
         "n_units_used": b.n_units,
         "left_out_markers": [
-            {"sample": int(s), "marker": obs.marker_names[k], "source": Path(obs.sources[s]).name,
-             "stamp_ns": int(obs.stamps_ns[s]),
-             "distance_mm": round(float(np.linalg.norm(residual[u])) * 1000, 3)}
-            for u, (s, k) in enumerate(block.view_labels) if (s, k) in left_out
+            {
+                "sample": int(s),
+                "marker": obs.marker_names[k],
+                "source": Path(obs.sources[s]).name,
+                "stamp_ns": int(obs.stamps_ns[s]),
+                "distance_mm": round(float(np.linalg.norm(residual[u])) * 1000, 3),
+            }
+            for u, (s, k) in enumerate(block.view_labels)
+            if (s, k) in left_out
         ],  # fmt: skip
         "unknown_marker_names": obs.unknown_names,
         "base_poses": poses,

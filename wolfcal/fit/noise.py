@@ -97,7 +97,10 @@ class GroupedWhitening:
     independent, rows in no group get zero weight."""
 
     def __init__(
-        self, group_of_row: np.ndarray, shared: SharedErrors, row_scale: np.ndarray | None = None,
+        self,
+        group_of_row: np.ndarray,
+        shared: SharedErrors,
+        row_scale: np.ndarray | None = None,
         factors: tuple[ColumnMatrix, np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """`factors`: (Q, s^2, group of each column) when already decomposed (`chunks`)."""
@@ -197,7 +200,8 @@ class GroupedWhitening:
                 has = np.flatnonzero(slots[0][at] >= 0)
                 unit = rows[at][has]
                 U[has[:, None], firsts + slots[0][at][has][:, None]] = (
-                    shared.sigma_q * shared.A[unit][:, moving] / self.row_scale[unit][:, None])
+                    shared.sigma_q * shared.A[unit][:, moving] / self.row_scale[unit][:, None]
+                )
             else:
                 for j, (slot, first) in enumerate(zip(slots, firsts)):
                     has = np.flatnonzero(slot[at] >= 0)
@@ -259,8 +263,9 @@ class GroupedWhitening:
         own *= keep if M.ndim == 1 else keep[:, None]
         return np.concatenate([own, t * (scale if M.ndim == 1 else scale[:, None])])
 
-    def split_normal(self, M: np.ndarray, sigma: float, weight: np.ndarray,
-                     v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def split_normal(
+        self, M: np.ndarray, sigma: float, weight: np.ndarray, v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(W_s M)^T diag(weight) W_s M (P, P) and (W_s M)^T v (P,) of dense rows M (R, P) (W_s: `split`; weight
         and v (R + K,): one number per split row), without forming W_s M when every row is in a group (a `chunks`
         part) and few measured rows have a weight other than 1. With N = D^-1 M and T = Q^T N, the measured rows'

@@ -39,12 +39,16 @@ class FitOptions:
         known = (*PRESETS, *system_presets())
         for preset in self.presets:
             if preset not in known:
-                raise WolfcalError(f"--free {preset!r} is not a preset; use one of {', '.join(known)}, or several "
-                                   "joined by commas (e.g. leg,imu)")
+                raise WolfcalError(
+                    f"--free {preset!r} is not a preset; use one of {', '.join(known)}, or several "
+                    "joined by commas (e.g. leg,imu)"
+                )
         chain = [p for p in self.presets if p in PRESETS]
         if len(chain) > 1:
-            raise WolfcalError(f"--free {self.free}: give at most one of {', '.join(PRESETS)} (leg includes the "
-                               "camera's and head_camera's parameters)")
+            raise WolfcalError(
+                f"--free {self.free}: give at most one of {', '.join(PRESETS)} (leg includes the "
+                "camera's and head_camera's parameters)"
+            )
         check_preset(self.chain_preset or PRESETS[0], self.side)
         if self.system is not None and self.system not in selectable_systems():
             raise WolfcalError(f"--system {self.system!r} must be one of {', '.join(selectable_systems())}")

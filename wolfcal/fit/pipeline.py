@@ -107,8 +107,11 @@ def fit_observations(
     if isinstance(observations, Observations):
         observations = {observations.camera_name: observations}
     mocap = mocap_block(robot, markers, options) if options.chain_preset is not None else None
-    if (options.system not in CAMERA_SYSTEMS or options.chain_preset is None
-            or (not observations and (mocap is not None or own_blocks))):
+    if (
+        options.system not in CAMERA_SYSTEMS
+        or options.chain_preset is None
+        or (not observations and (mocap is not None or own_blocks))
+    ):
         observations = {}  # no camera in the fit: --system names another, or no camera parameter is free
     else:
         observations = _systems(robot, observations, options)
@@ -193,17 +196,16 @@ def block_sigmas(robot: Robot, blocks: Sequence[Block]) -> list[float]:
     return [b.start_noise(robot.config.priors) for b in blocks]
 
 
-def _tags_used(
-    robot: Robot, observations: dict[str, Observations], options: FitOptions
-) -> dict[str, Observations]:
+def _tags_used(robot: Robot, observations: dict[str, Observations], options: FitOptions) -> dict[str, Observations]:
     """Per camera, the observations of the tags the preset uses (cameras without one left out); an external camera
     also keeps the tags on links the legs do not move, on which its pose rests."""
     used: dict[str, Observations] = {}
     for name, obs in observations.items():
         tag_ids = tags_for_preset(robot, options.chain_preset or "camera", obs.observed_tag_ids, options.side)
         if name != HEAD_CAMERA:
-            tag_ids = sorted(set(tag_ids) | {t for t in obs.observed_tag_ids
-                                             if robot.off_the_legs(robot.config.tag(t).link)})
+            tag_ids = sorted(
+                set(tag_ids) | {t for t in obs.observed_tag_ids if robot.off_the_legs(robot.config.tag(t).link)}
+            )
         if tag_ids:
             used[name] = obs if set(tag_ids) == set(obs.observed_tag_ids) else obs.only_tags(tag_ids)
     return used
@@ -247,12 +249,16 @@ def mocap_block(robot: Robot, markers: MarkerObservations | None, options: FitOp
         return None
     if markers is None:
         if options.system == "mocap":
-            raise WolfcalError("--system mocap: no marker data; give a ROS 2 recording with the robot config's "
-                               "markers topic, or a motion-capture file with --mocap FILE")
+            raise WolfcalError(
+                "--system mocap: no marker data; give a ROS 2 recording with the robot config's "
+                "markers topic, or a motion-capture file with --mocap FILE"
+            )
         return None
     if options.chain_preset in ("camera", "head_camera") and options.system == "mocap":
-        raise WolfcalError(f"--free {options.free} estimates the head camera, which motion capture cannot see "
-                           "(no marker on the camera's optical frame); use --free leg with --system mocap")
+        raise WolfcalError(
+            f"--free {options.free} estimates the head camera, which motion capture cannot see "
+            "(no marker on the camera's optical frame); use --free leg with --system mocap"
+        )
     if options.chain_preset == "leg" and options.side != "both":
         config = robot.config.marker_config()
         markers = markers.only_markers([n for n in markers.marker_names
@@ -313,7 +319,10 @@ def samples_of(
 
 
 def load_samples(
-    robot: Robot, captures: list[Path], intrinsics: Path | None, cameras: tuple[str, ...] = (HEAD_CAMERA,),
+    robot: Robot,
+    captures: list[Path],
+    intrinsics: Path | None,
+    cameras: tuple[str, ...] = (HEAD_CAMERA,),
     say: Callable[[str], None] | None = None,
 ) -> tuple[list[Sample], list[str]]:
     """`samples_of` the captures read by `load_captures`."""
@@ -411,16 +420,17 @@ def run_fit(
     return result
 
 
-def fit_inputs(
-    robot: Robot, captures: Sequence[Path], mocap: Sequence[Path], intrinsics: Path | None
-) -> list[Path]:
+def fit_inputs(robot: Robot, captures: Sequence[Path], mocap: Sequence[Path], intrinsics: Path | None) -> list[Path]:
     """Every file a fit reads (captures, motion-capture files, robot config and URDF, intrinsics): none of them may
     be an output (`check_output_folder`)."""
     return [*captures, *mocap, robot.config.path, robot.config.urdf] + ([intrinsics] if intrinsics else [])
 
 
 def read_markers(
-    robot: Robot, captures: list[Path], mocap: Sequence[Path], mocap_offsets: Sequence[float],
+    robot: Robot,
+    captures: list[Path],
+    mocap: Sequence[Path],
+    mocap_offsets: Sequence[float],
     say: Callable[[str], None],
 ) -> tuple[MarkerObservations, list[str]]:
     """The still samples' marker positions (motion-capture frame [m]) from the captures' Markers topic or the
@@ -429,8 +439,10 @@ def read_markers(
     from wolfcal.io.mocap_load import load_marker_observations  # here: a camera fit does not load the mocap readers
 
     markers = load_marker_observations(robot.config, robot.joint_names, captures, list(mocap), list(mocap_offsets))
-    say(f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
-        + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items()))
+    say(
+        f"motion capture: {markers.n_samples} still sample(s), {len(markers.xyz)} marker positions"
+        + "".join(f"; {Path(k).name}: clock offset {v:.4f} s" for k, v in markers.clock_offsets_s.items())
+    )
     warnings = [f"marker labels not in the robot config, ignored: {', '.join(markers.unknown_names)}"
                 ] if markers.unknown_names else []  # fmt: skip
     return markers, warnings
@@ -465,9 +477,7 @@ def write_fit(out_dir: Path, fit: Fit, result: FitResult) -> None:
         write_calibrated_config(fit.robot, fit.corrections, out_dir / "calibrated_robot.yaml")
 
 
-def report_fit(
-    result: FitResult, fit: Fit, warnings: list[str], out_dir: Path, say: Callable[[str], None]
-) -> None:
+def report_fit(result: FitResult, fit: Fit, warnings: list[str], out_dir: Path, say: Callable[[str], None]) -> None:
     """Tell the user what was fitted: the summary, notes on what the data cannot tell apart, the warnings, and
     where the outputs are."""
     for line in summary_lines(result):

@@ -205,10 +205,32 @@ class FitResult:
     HEAD_FIGURES: ClassVar[tuple[str, ...]] = ("rms_meaning", "rms_before_px", "rms_after_px", "max_after_px")
     OPTIONAL: ClassVar[tuple[str, ...]] = (*HEAD_FIGURES, "mocap_clock_offset_s", "current")
     KEY_ORDER: ClassVar[tuple[str, ...]] = (  # result.yaml's key order (fields not listed follow in field order)
-        "version", "wolfcal_version", "created", "robot", "urdf", "captures", "intrinsics", "free", "side", "fix_tags",
-        "system", "external_moving", "systems_used", "tags_used", "rms_meaning", "rms_before_px", "rms_after_px",
-        "max_after_px", "noise_model", "robust_loss", "outlier_rule", "noise_floor_px", "n_samples",
-        "n_outlier_samples", "n_outlier_tag_views", "n_outlier_corners",
+        "version",
+        "wolfcal_version",
+        "created",
+        "robot",
+        "urdf",
+        "captures",
+        "intrinsics",
+        "free",
+        "side",
+        "fix_tags",
+        "system",
+        "external_moving",
+        "systems_used",
+        "tags_used",
+        "rms_meaning",
+        "rms_before_px",
+        "rms_after_px",
+        "max_after_px",
+        "noise_model",
+        "robust_loss",
+        "outlier_rule",
+        "noise_floor_px",
+        "n_samples",
+        "n_outlier_samples",
+        "n_outlier_tag_views",
+        "n_outlier_corners",
     )
 
     @property
@@ -293,7 +315,11 @@ def _noise_model(fit: Fit, blocks: list[dict]) -> dict:
 
 
 def fit_result(
-    fit: Fit, options: FitOptions, captures: list[Path], intrinsics: Path | None, warnings: list[str],
+    fit: Fit,
+    options: FitOptions,
+    captures: list[Path],
+    intrinsics: Path | None,
+    warnings: list[str],
     current: CurrentCalibration | None = None,
 ) -> FitResult:
     """The result of a fit, with the settings it ran with and the present calibration it started from."""

@@ -216,8 +216,12 @@ def estimate_class_scales(state: BlockState, lin: Linearization, problem: Proble
             # by a whole row's square as its residual crosses it: the levels would never settle)
             spread = MAD_TO_SIGMA * float(np.median(zc))
             weight = np.clip((CLASS_CUT + CLASS_FADE - zc / spread) / CLASS_FADE, 0.0, 1.0)
-            level[c] = _class_level(weight * lin.residual.ravel()[rows] ** 2 / absorbed[rows], state.sigma**2,
-                                    reading[rows], float(np.sum(weight)))
+            level[c] = _class_level(
+                weight * lin.residual.ravel()[rows] ** 2 / absorbed[rows],
+                state.sigma**2,
+                reading[rows],
+                float(np.sum(weight)),
+            )
     scale = level[classes]
     scale = np.maximum(scale / np.median(scale), CLASS_SCALE_FLOOR)
     change = float(np.max(np.abs(scale / state.unit_scale - 1.0)))
@@ -327,8 +331,11 @@ def _update_noise(
         largest = max(largest, abs(state.sigma / previous - 1.0), change)
         notes.append(
             f"{state.block.name}: {int(state.excluded.sum())} outlier view(s)"
-            + (f" and {int(state.excluded_units.sum())} single {state.block.unit_name}(s)"
-               if state.excluded_units.any() else "")
+            + (
+                f" and {int(state.excluded_units.sum())} single {state.block.unit_name}(s)"
+                if state.excluded_units.any()
+                else ""
+            )
             + f", noise {state.sigma:.3g} "
             f"{state.block.unit} (scale {scale:.2f})"
         )
@@ -356,13 +363,15 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
-        result = levenberg_marquardt(problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL,
-                                     std_tol=ROUND_STD_TOL)
+        result = levenberg_marquardt(
+            problem.residuals, problem.normal_equations, z, cost_tol=ROUND_COST_TOL, std_tol=ROUND_STD_TOL
+        )
         z, evaluations = result.x, evaluations + result.nfev
         changed, change, notes = _update_round(problem, z, rows_total)
         say(f"round {round_index + 1}: " + "; ".join(notes) + f"; joint noise {problem.sigma_q * 1000:.3f} mrad")
         if not changed and change < ROUND_NOISE_TOL:
             break
+
     # The final solves: converge under the noise model, then re-estimate it at the converged point, until it is
     # the one the solution was solved under (a fixed point: the estimate no longer depends on where a round stopped).
     def newton(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -370,24 +379,30 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
 
     std = marginal_std(problem.normal_equations(z)[0])  # what the final solves' std_tol counts in
     for final_index in range(MAX_FINAL_SOLVES):
-        result = levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL,
-                                     std_tol=FINAL_STD_TOL, std=std, damping=FINAL_DAMPING)
+        result = levenberg_marquardt(
+            problem.residuals, newton, z, ftol=FINAL_FTOL, std_tol=FINAL_STD_TOL, std=std, damping=FINAL_DAMPING
+        )
         z, evaluations = result.x, evaluations + result.nfev
         if final_index == MAX_FINAL_SOLVES - 1:
-            say(f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
-                f"{'an outlier set' if changed else f'noise {change:.1%}'}); the solution is the last solve's")
+            say(
+                f"the noise model did not settle in {MAX_FINAL_SOLVES} final solves (last change: "
+                f"{'an outlier set' if changed else f'noise {change:.1%}'}); the solution is the last solve's"
+            )
             break
         changed, change, notes = _update_round(problem, z, rows_total)
         if not changed and change < FIXED_POINT_TOL:
             break
-        say(f"final solve {final_index + 1}: the noise model at its solution differs ("
-            f"{'outlier set changed' if changed else f'noise {change:.2%}'}): " + "; ".join(notes) + "; solving again")
+        say(
+            f"final solve {final_index + 1}: the noise model at its solution differs ("
+            f"{'outlier set changed' if changed else f'noise {change:.2%}'}): " + "; ".join(notes) + "; solving again"
+        )
     after = problem.raw_residuals(z)
     information, _, _ = problem.information(z)
     return Solution(
         values=problem.values(z),
-        uncertainty=information_uncertainty(information, problem.params.prior_sigmas,
-                                            lambda: problem.information(z, triangular=True)[2]),
+        uncertainty=information_uncertainty(
+            information, problem.params.prior_sigmas, lambda: problem.information(z, triangular=True)[2]
+        ),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,
         evaluations=evaluations,

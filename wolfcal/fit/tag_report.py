@@ -40,11 +40,15 @@ def tag_view_report(block: TagViewBlock, fitted: FittedBlock) -> dict:
             "outlier_tags": outlier_tags.get(i, []),
             **({"outlier_corners": corners.get(i, [])} if corners is not None else {}),
         })  # fmt: skip
-    corner_keys = {} if rule is None or corners is None else {
-        # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
-        "n_outlier_corners": sum(len(c) for c in corners.values()),
-        "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
-    }
+    corner_keys = (
+        {}
+        if rule is None or corners is None
+        else {
+            # single corners of the views kept, far off while the view's others fit: left out, see corner_rule
+            "n_outlier_corners": sum(len(c) for c in corners.values()),
+            "corner_rule": {"factor": rule.factor, "floor_px": rule.floor, "meaning": CORNER_RULE_MEANING},
+        }
+    )
     return {
         "name": b.name,
         "system": b.system,

@@ -56,7 +56,8 @@ def triangular_factor(M: np.ndarray) -> np.ndarray:
 
 
 def information_uncertainty(
-    information: np.ndarray, prior_sigmas: np.ndarray,
+    information: np.ndarray,
+    prior_sigmas: np.ndarray,
     triangular: np.ndarray | Callable[[], np.ndarray | None] | None = None,
 ) -> Uncertainty:
     """Uncertainty of the unknowns from the information J^T J (P, P) of the whitened data Jacobian J in

@@ -214,9 +214,7 @@ class DynamixelBus:
         """Raise BusError when any servo reports a hardware error."""
         errors = self.hardware_errors()
         if errors:
-            listed = "; ".join(
-                f"{j} (id {self.servos.ids[j]}): {hardware_error_text(b)}" for j, b in errors.items()
-            )
+            listed = "; ".join(f"{j} (id {self.servos.ids[j]}): {hardware_error_text(b)}" for j, b in errors.items())
             raise BusError(
                 f"{self.port_name}: hardware error: {listed}; the servo switched its torque off: remove the "
                 "cause (load, temperature, supply voltage), then reboot the servo or power-cycle the robot"
@@ -326,6 +324,4 @@ class DynamixelBus:
         sid = self.servos.ids[joint]
         (result, _), tried = _with_retries(partial(self.ph.reboot, self.port, sid), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
-            raise BusError(
-                f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result, tried)}"
-            )
+            raise BusError(f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result, tried)}")

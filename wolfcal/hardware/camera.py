@@ -52,8 +52,7 @@ class OpenCVCamera:
         self.capture = cv2.VideoCapture(target, cv2.CAP_V4L2) if live else cv2.VideoCapture(target)
         if not self.capture.isOpened():
             raise CameraError(
-                f"camera {source}: cannot open it; check the device index/path and that no other "
-                "program uses it"
+                f"camera {source}: cannot open it; check the device index/path and that no other program uses it"
             )
         if live:
             self.capture.set(cv2.CAP_PROP_FRAME_WIDTH, size[0])
@@ -108,6 +107,4 @@ def open_camera(source: str, camera: CameraModel) -> CameraSource:
         return FolderCamera(path, size)
     if path.is_file():
         return OpenCVCamera(source, size, live=False)
-    raise CameraError(
-        f"--camera {source!r}: not a device index, /dev/video path, video file, image folder or 'sim'"
-    )
+    raise CameraError(f"--camera {source!r}: not a device index, /dev/video path, video file, image folder or 'sim'")

@@ -146,9 +146,7 @@ def run_intrinsics(
     return calibration
 
 
-def _check_request(
-    inputs: list[str], out: Path, options: IntrinsicsOptions, camera: str | None
-) -> tuple[Inputs, Path]:
+def _check_request(inputs: list[str], out: Path, options: IntrinsicsOptions, camera: str | None) -> tuple[Inputs, Path]:
     """The options checked and the inputs found, and the outputs checked before any work; the report folder."""
     if options.method not in METHODS:
         raise WolfcalError(f"unknown --detector {options.method!r}; use one of {', '.join(METHODS)}")
@@ -171,7 +169,10 @@ def _check_request(
 
 
 def _views_from_streams(
-    streams: Sequence[tuple[str | int, str | None]], views: list[Detection], board: Board, options: IntrinsicsOptions,
+    streams: Sequence[tuple[str | int, str | None]],
+    views: list[Detection],
+    board: Board,
+    options: IntrinsicsOptions,
     say: Callable[[str], None],
 ) -> list[Detection]:
     """Still, distinct views from videos or the live camera added to `views` until the coverage is complete."""

@@ -164,6 +164,8 @@ def detections_yaml(detections: list[Detection], failures: list[Failure]) -> str
     for f in failures:
         lines += [f"- name: {json.dumps(f.name)}", f"  reason: {json.dumps(f.reason)}"]
     return "\n".join(lines) + "\n"
+
+
 REPORT_FILES = (
     "detections.yaml", "residual_histogram.png", "per_view_errors.png", "corner_map.png", "distortion_field.png",
     "per_view.csv", "intrinsics.yaml", "summary.md",

@@ -97,8 +97,10 @@ def _camera_correction(path: Path, data: dict, robot: Robot) -> np.ndarray:
     """wolfcal's camera_correction.yaml -> the camera's frame correction vector (6,)."""
     frame = robot.config.head_camera().frame
     if data.get("child_frame") != frame:
-        raise WolfcalError(f"{path}: 'child_frame' is {data.get('child_frame')!r}, but this robot's camera frame is "
-                           f"{frame!r} ({robot.config.path}); is this the calibration of another robot?")
+        raise WolfcalError(
+            f"{path}: 'child_frame' is {data.get('child_frame')!r}, but this robot's camera frame is "
+            f"{frame!r} ({robot.config.path}); is this the calibration of another robot?"
+        )
     try:
         t = np.array([float(data["translation"][k]) for k in "xyz"])
         rpy = np.array([float(v) for v in data["rpy"]])

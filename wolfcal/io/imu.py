@@ -127,8 +127,10 @@ def read_imu_recording(path: Path, joint_states_topic: str, imu_topic: str) -> t
     """The joint states and IMU messages of a recording; WolfcalErrors name the file and topic."""
     found = topics_of(path)
     if imu_topic not in found:
-        raise WolfcalError(f"{path}: no {IMU} messages on {imu_topic} (robot config 'imu.topic'); topics in the "
-                           f"file: {', '.join(sorted(found)) or 'none'}")
+        raise WolfcalError(
+            f"{path}: no {IMU} messages on {imu_topic} (robot config 'imu.topic'); topics in the "
+            f"file: {', '.join(sorted(found)) or 'none'}"
+        )
     if found[imu_topic] != IMU:
         raise WolfcalError(f"{path}: {imu_topic} carries {found[imu_topic]}, not {IMU} (robot config 'imu.topic')")
     joints, times, accel, gyro, has_gyro = [], [], [], [], True
@@ -167,12 +169,16 @@ def _check_units(path: Path, topic: str, accel: np.ndarray) -> None:
         raise WolfcalError(f"{path}: {topic}: every linear_acceleration is NaN or infinite")
     size = float(np.median(np.linalg.norm(finite, axis=1)))
     if G_UNITS_RANGE[0] <= size <= G_UNITS_RANGE[1]:
-        raise WolfcalError(f"{path}: {topic}: the accelerometer reads |a| = {size:.3f} (median): that is in g, but "
-                           f"{IMU} gives linear_acceleration in m/s^2; have the IMU driver publish m/s^2 "
-                           "(multiply by 9.80665)")
+        raise WolfcalError(
+            f"{path}: {topic}: the accelerometer reads |a| = {size:.3f} (median): that is in g, but "
+            f"{IMU} gives linear_acceleration in m/s^2; have the IMU driver publish m/s^2 "
+            "(multiply by 9.80665)"
+        )
     if not GRAVITY_RANGE_M_S2[0] <= size <= GRAVITY_RANGE_M_S2[1]:
-        raise WolfcalError(f"{path}: {topic}: the accelerometer reads |a| = {size:.3f} m/s^2 (median), not gravity "
-                           f"(9.81 m/s^2) while the robot stands; check the IMU driver's units and the topic")
+        raise WolfcalError(
+            f"{path}: {topic}: the accelerometer reads |a| = {size:.3f} m/s^2 (median), not gravity "
+            f"(9.81 m/s^2) while the robot stands; check the IMU driver's units and the topic"
+        )
 
 
 def still_messages(stream: ImuStream, states: JointStates | None = None) -> np.ndarray:
@@ -194,8 +200,12 @@ def still_messages(stream: ImuStream, states: JointStates | None = None) -> np.n
         fast = np.concatenate([[0], np.cumsum(rate > GYRO_STILL_RAD_S)])
         still &= (fast[hi] - fast[lo]) == 0
     if states is not None:
-        moved = np.sort(np.concatenate([np.zeros(0, dtype=np.int64)] + [
-            s.times[1:][np.abs(np.diff(s.positions)) > ENCODER_TICK + 1e-9] for s in states.series.values()]))
+        moved = np.sort(
+            np.concatenate(
+                [np.zeros(0, dtype=np.int64)]
+                + [s.times[1:][np.abs(np.diff(s.positions)) > ENCODER_TICK + 1e-9] for s in states.series.values()]
+            )
+        )
         still &= np.searchsorted(moved, t + half, side="right") == np.searchsorted(moved, t - half, side="left")
     return still if n else np.zeros(0, dtype=bool)
 
@@ -216,15 +226,19 @@ def standing_samples(path: Path, states: JointStates, stream: ImuStream, joint_n
         first, end = int(np.searchsorted(t, t0)), int(np.searchsorted(t, t1, side="right"))
         q = _held_readings(states, joint_names, int(t0), int(t1))
         if q is None:
-            notes.append(f"{path.name}: the IMU was still {(t1 - t0) / 1e9:.1f} s from {t0 / 1e9:.2f} s but a joint "
-                         "moved; left out")
+            notes.append(
+                f"{path.name}: the IMU was still {(t1 - t0) / 1e9:.1f} s from {t0 / 1e9:.2f} s but a joint "
+                "moved; left out"
+            )
             continue
         window = stream.accel[first:end]
         rows.append((q, window.mean(axis=0), float(window.std(axis=0).max()), end - first, int((t0 + t1) // 2)))
     if not rows:
-        raise WolfcalError(f"{path}: the robot never stood still: no period of at least {MIN_STILL_S + 2 * EDGE_S:.1f} "
-                           f"s in which the IMU (accelerometer scatter <= {ACCEL_SCATTER_M_S2} m/s^2, gyro <= "
-                           f"{GYRO_STILL_RAD_S} rad/s) and every joint held still; hold each stance about 3 s")
+        raise WolfcalError(
+            f"{path}: the robot never stood still: no period of at least {MIN_STILL_S + 2 * EDGE_S:.1f} "
+            f"s in which the IMU (accelerometer scatter <= {ACCEL_SCATTER_M_S2} m/s^2, gyro <= "
+            f"{GYRO_STILL_RAD_S} rad/s) and every joint held still; hold each stance about 3 s"
+        )
     return StandingSamples(
         joint_names=list(joint_names), q_measured=np.array([r[0] for r in rows]),
         accel=np.array([r[1] for r in rows]), scatter=np.array([r[2] for r in rows]),

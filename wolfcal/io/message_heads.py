@@ -95,9 +95,7 @@ def _chunk_heads(
         opcode, length = struct.unpack("<BQ", _exactly(handle, 9))
         position += 9 + length
         if opcode == _OPCODE_MESSAGE:
-            channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(
-                _exactly(handle, _MESSAGE_FIXED.size)
-            )
+            channel_id, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack(_exactly(handle, _MESSAGE_FIXED.size))
             size = length - _MESSAGE_FIXED.size
             if channel_id in wanted:
                 channel = summary.channels[channel_id]

@@ -47,8 +47,9 @@ def unit_scale(path: Path, units: str, where: str) -> float:
     key = units.replace("\0", "").strip().lower()
     if key not in UNIT_SCALE:
         found = f"{units.replace(chr(0), '').strip()!r}" if key else "none"
-        raise WolfcalError(f"{path}: {where} gives no length unit this reader knows (found {found}); the file must "
-                           "state mm, cm or m")
+        raise WolfcalError(
+            f"{path}: {where} gives no length unit this reader knows (found {found}); the file must state mm, cm or m"
+        )
     return UNIT_SCALE[key]
 
 
@@ -67,8 +68,9 @@ def read_mocap_file(path: Path) -> MarkerTrajectories:
         raise WolfcalError(f"{path}: motion-capture file not found; check the path")
     suffix = path.suffix.lower()
     if suffix not in (".c3d", ".csv"):
-        raise WolfcalError(f"{path}: unknown motion-capture file type; give a .c3d file or a Motive / Vicon Nexus "
-                           ".csv export")
+        raise WolfcalError(
+            f"{path}: unknown motion-capture file type; give a .c3d file or a Motive / Vicon Nexus .csv export"
+        )
     try:
         traj = read_c3d(path) if suffix == ".c3d" else read_csv_export(path)
     except WolfcalError:
@@ -77,8 +79,10 @@ def read_mocap_file(path: Path) -> MarkerTrajectories:
         raise WolfcalError(f"{path}: the file is too large for this computer's memory") from None
     except Exception as exc:  # anything else a damaged file provokes in a reader or a library
         kind = "C3D" if suffix == ".c3d" else "CSV export"
-        raise WolfcalError(f"{path}: not a readable {kind} ({type(exc).__name__}: {exc}); check that the file is "
-                           "complete and export it again") from None
+        raise WolfcalError(
+            f"{path}: not a readable {kind} ({type(exc).__name__}: {exc}); check that the file is "
+            "complete and export it again"
+        ) from None
     if not traj.labels:
         raise NoMarkers(f"{path}: the file holds no marker trajectories")
     if len(traj.times_ns) == 0:

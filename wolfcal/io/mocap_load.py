@@ -16,16 +16,23 @@ from wolfcal.markers import MarkerObservations
 
 
 def load_marker_observations(
-    config: RobotConfig, joint_names: list[str], recordings: list[Path], mocap_files: list[Path],
+    config: RobotConfig,
+    joint_names: list[str],
+    recordings: list[Path],
+    mocap_files: list[Path],
     offsets_s: list[float] | None = None,
 ) -> MarkerObservations:
     """Every still sample of the sources, concatenated; `offsets_s` (one per file) replaces the estimated offsets."""
     if config.markers is None:
-        raise WolfcalError(f"{config.path}: no 'markers:' in the robot config; motion capture needs the markers "
-                           "(name, link, xyz) listed there")
+        raise WolfcalError(
+            f"{config.path}: no 'markers:' in the robot config; motion capture needs the markers "
+            "(name, link, xyz) listed there"
+        )
     if mocap_files and len(mocap_files) != len(recordings):
-        raise WolfcalError(f"give one --mocap file per recording of joint states, in the same order ({len(mocap_files)}"
-                           f" --mocap file(s) for {len(recordings)} recording(s))")
+        raise WolfcalError(
+            f"give one --mocap file per recording of joint states, in the same order ({len(mocap_files)}"
+            f" --mocap file(s) for {len(recordings)} recording(s))"
+        )
     if offsets_s and len(offsets_s) != len(mocap_files):
         raise WolfcalError("give one --mocap-offset per --mocap file, in the same order")
     parts = []

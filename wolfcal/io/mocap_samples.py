@@ -54,21 +54,34 @@ def read_recording(
                 if channel.topic == config.joint_states_topic:
                     joints.append((stamp, list(msg.name), list(msg.position), list(msg.velocity)))
                 else:
-                    frames.append((stamp, [(m.marker_name if m.id_type != USE_INDEX else str(m.marker_index),
-                                            (m.translation.x, m.translation.y, m.translation.z)) for m in msg.markers]))
+                    frames.append(
+                        (
+                            stamp,
+                            [
+                                (
+                                    m.marker_name if m.id_type != USE_INDEX else str(m.marker_index),
+                                    (m.translation.x, m.translation.y, m.translation.z),
+                                )
+                                for m in msg.markers
+                            ],
+                        )
+                    )
     except WolfcalError:
         raise
     except Exception as exc:  # the mcap libraries raise many types for damaged files
         raise WolfcalError(f"{path}: cannot read the recording ({type(exc).__name__}: {exc})") from None
     if not joints:
-        raise WolfcalError(f"{path}: no joint states on {config.joint_states_topic} (robot config "
-                           "'joint_states_topic')")
+        raise WolfcalError(
+            f"{path}: no joint states on {config.joint_states_topic} (robot config 'joint_states_topic')"
+        )
     states = JointStates.from_messages(joints)
     if not with_markers:
         return states, None
     if not frames:
-        raise WolfcalError(f"{path}: no mocap4r2_msgs/msg/Markers on {config.marker_config().topic} (robot config "
-                           "'markers.topic'); give the motion-capture file with --mocap FILE")
+        raise WolfcalError(
+            f"{path}: no mocap4r2_msgs/msg/Markers on {config.marker_config().topic} (robot config "
+            "'markers.topic'); give the motion-capture file with --mocap FILE"
+        )
     labels = list(dict.fromkeys(name for _, markers in frames for name, _ in markers))
     column = {n: i for i, n in enumerate(labels)}
     frames.sort(key=lambda f: f[0])
@@ -77,8 +90,9 @@ def read_recording(
         for name, p in markers:
             xyz[i, column[name]] = p
     times = np.array([f[0] for f in frames], dtype=np.int64)
-    return states, MarkerTrajectories(path, times, labels, xyz, file_clock=False,
-                                      format="ROS 2 recording (mocap4r2_msgs/msg/Markers)")
+    return states, MarkerTrajectories(
+        path, times, labels, xyz, file_clock=False, format="ROS 2 recording (mocap4r2_msgs/msg/Markers)"
+    )
 
 
 def match_labels(traj: MarkerTrajectories, config: RobotConfig) -> tuple[list[str], list[int], list[str]]:
@@ -173,9 +187,11 @@ def marker_samples(traj: MarkerTrajectories, states: JointStates, config: RobotC
         q.append(reading[[states.names.index(j) for j in joint_names]])
         stamps.append((int(traj.times_ns[a]) + int(traj.times_ns[b - 1])) // 2 + shift)
     if not q:
-        raise WolfcalError(f"{traj.path}: no period in which the markers and the joints were both still; hold each "
-                           f"pose at least {MIN_STILL_S + 2 * STILL_WINDOW_S:.1f} s" + (
-                               "; or the clock offset is wrong (--mocap-offset)" if traj.file_clock else ""))
+        raise WolfcalError(
+            f"{traj.path}: no period in which the markers and the joints were both still; hold each "
+            f"pose at least {MIN_STILL_S + 2 * STILL_WINDOW_S:.1f} s"
+            + ("; or the clock offset is wrong (--mocap-offset)" if traj.file_clock else "")
+        )
     return MarkerObservations(
         joint_names=list(joint_names), q_measured=np.array(q), stamps_ns=np.array(stamps, dtype=np.int64),
         sources=[str(traj.path)] * len(q), marker_names=names, sample_index=np.array(sample_rows, dtype=int),

@@ -94,9 +94,7 @@ _HEADER_DEPS = (("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME)
 MSGDEFS: dict[str, str] = {
     JOINT_STATE: _with_dependencies(_JOINT_STATE, *_HEADER_DEPS),
     COMPRESSED_IMAGE: _with_dependencies(_COMPRESSED_IMAGE, *_HEADER_DEPS),
-    CAMERA_INFO: _with_dependencies(
-        _CAMERA_INFO, *_HEADER_DEPS, ("sensor_msgs/RegionOfInterest", _REGION_OF_INTEREST)
-    ),
+    CAMERA_INFO: _with_dependencies(_CAMERA_INFO, *_HEADER_DEPS, ("sensor_msgs/RegionOfInterest", _REGION_OF_INTEREST)),
     MARKERS: _with_dependencies(
         _MARKERS, *_HEADER_DEPS, ("mocap4r2_msgs/Marker", _MARKER), ("geometry_msgs/Point", _POINT)
     ),

@@ -143,8 +143,11 @@ def pair_frame(states: JointStates, stamp_ns: int) -> Paired | str:
         j = min(candidates, key=lambda c: abs(int(s.times[c]) - stamp_ns)) if candidates else -1
         dt = abs(int(s.times[j]) - stamp_ns) if candidates else None
         if dt is None or dt > PAIR_TOLERANCE_NS:
-            nearest = f"nearest {dt / 1e6:.0f} ms away" if dt is not None and dt <= STILL_WINDOW_NS else (
-                f"none within {STILL_WINDOW_NS / 1e6:.0f} ms")  # what a window of +-STILL_WINDOW_NS tells
+            nearest = (
+                f"nearest {dt / 1e6:.0f} ms away"
+                if dt is not None and dt <= STILL_WINDOW_NS
+                else (f"none within {STILL_WINDOW_NS / 1e6:.0f} ms")
+            )  # what a window of +-STILL_WINDOW_NS tells
             return f"no joint state of {name} within {PAIR_TOLERANCE_NS / 1e6:.0f} ms ({nearest})"
         positions.append(s.positions[j])
         velocities.append(s.velocities[j])
@@ -165,9 +168,7 @@ def pair_frame(states: JointStates, stamp_ns: int) -> Paired | str:
         if np.max(np.abs(v)) > STILL_VELOCITY:
             return f"{name} was turning at {np.max(np.abs(v)):.3f} rad/s (still: <= {STILL_VELOCITY} rad/s)"
     if worst is not None:
-        return (
-            f"not still: {worst[1]} moved {worst[0]:.1f} encoder ticks within +-{STILL_WINDOW_NS / 1e9:.2f} s"
-        )
+        return f"not still: {worst[1]} moved {worst[0]:.1f} encoder ticks within +-{STILL_WINDOW_NS / 1e9:.2f} s"
     v = np.asarray(velocities)
     return Paired(np.asarray(positions), v if np.all(np.isfinite(v)) else None)
 

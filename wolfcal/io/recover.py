@@ -86,9 +86,7 @@ def _copy_records(handle: IO[bytes], out: IO[bytes]) -> int:
                 if decode is not None:
                     stamps[schema.name].add(header_stamp_ns(decode(record.data).header, record.log_time))
         elif isinstance(record, Attachment):
-            writer.add_attachment(
-                record.create_time, record.log_time, record.name, record.media_type, record.data
-            )
+            writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type, record.data)
         elif isinstance(record, Metadata):
             writer.add_metadata(record.name, record.metadata)
     writer.finish()

@@ -3,7 +3,7 @@
 The reader keeps only where each used image lies (`ImageLocation`), not its bytes; `stream_images` reads them
 back when they are needed (detection, a figure) with mcap's reader: passes over the part of the file they
 span, each image's bytes handed on and then dropped, so a long recording's images never sit in memory
-together. """
+together."""
 
 from __future__ import annotations
 

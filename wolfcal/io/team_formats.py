@@ -86,8 +86,10 @@ def read_extrinsic_file(path: Path) -> ExtrinsicFile:
     for key, value in data.items():
         name = "/" + str(key).lstrip("/")
         if name not in nodes:
-            raise WolfcalError(f"{path}: '{key}' is not a node of bitbots_extrinsic_calibration (expected "
-                               f"{CAMERA_NODE} and {IMU_NODE}); is this the robot's extrinsic calibration file?")
+            raise WolfcalError(
+                f"{path}: '{key}' is not a node of bitbots_extrinsic_calibration (expected "
+                f"{CAMERA_NODE} and {IMU_NODE}); is this the robot's extrinsic calibration file?"
+            )
         nodes[name] = _node_offsets(path, str(key), value)  # type: ignore[assignment]
     if nodes[CAMERA_NODE] is None and nodes[IMU_NODE] is None:
         raise WolfcalError(f"{path}: holds neither {CAMERA_NODE} nor {IMU_NODE}")

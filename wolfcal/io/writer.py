@@ -160,9 +160,7 @@ class CaptureWriter:
             raise WolfcalError(f"{self.path}: the capture is closed; open a new CaptureWriter")
         positions = np.asarray(positions, dtype=float).ravel()
         velocities = None if velocities is None else np.asarray(velocities, dtype=float).ravel()
-        if len(positions) != len(joint_names) or (
-            velocities is not None and len(velocities) != len(joint_names)
-        ):
+        if len(positions) != len(joint_names) or (velocities is not None and len(velocities) != len(joint_names)):
             raise WolfcalError(f"{self.path}: {len(joint_names)} joint names but positions/velocities differ")
         unknown = sorted(set(images) - set(self.cameras))
         if unknown or not images:
@@ -242,4 +240,3 @@ class CaptureWriter:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
-

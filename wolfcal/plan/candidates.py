@@ -204,8 +204,13 @@ def draw_until(n: int, batch: Callable[[], tuple[np.ndarray, np.ndarray, int]]) 
 
 
 def draw_candidates(
-    robot: Robot, camera: PlanCamera, tag_ids: list[int], n: int, rng: np.random.Generator,
-    collisions: CollisionModel, margin: float = 0.1,
+    robot: Robot,
+    camera: PlanCamera,
+    tag_ids: list[int],
+    n: int,
+    rng: np.random.Generator,
+    collisions: CollisionModel,
+    margin: float = 0.1,
 ) -> Candidates:
     """Up to n candidate poses (see the module docstring), the joints drawn within their limits shrunk by `margin`
     [rad]; a clear error when none shows the tags."""

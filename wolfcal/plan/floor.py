@@ -55,8 +55,9 @@ GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0  # spreads the bearings of successive tags
 def expected_places(robot: Robot) -> dict[int, np.ndarray]:
     """(x, y, yaw) [m, rad] in the floor frame of each floor tag as a plan assumes them (see the module docstring);
     a clear error without floor tags."""
-    floor = robot.config.floor_config("--system floor plans the head's views of tags lying on the floor: add "
-                                      "floor: {soles, standing, tags}")
+    floor = robot.config.floor_config(
+        "--system floor plans the head's views of tags lying on the floor: add floor: {soles, standing, tags}"
+    )
     if not floor.tags:
         raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; --system floor plans the head's "
                            "views of the tags lying on the floor: add them ({id, family, size})")  # fmt: skip
@@ -110,8 +111,15 @@ def floor_views(robot: Robot, camera: PlanCamera, q: np.ndarray, places: dict[in
     return visible & ~hidden.reshape(len(q), len(sizes), 4).any(axis=2)
 
 
-def draw_floor_candidates(robot: Robot, camera: PlanCamera, places: dict[int, np.ndarray], n: int,
-                          rng: np.random.Generator, collisions: CollisionModel, margin: float = 0.1) -> Candidates:
+def draw_floor_candidates(
+    robot: Robot,
+    camera: PlanCamera,
+    places: dict[int, np.ndarray],
+    n: int,
+    rng: np.random.Generator,
+    collisions: CollisionModel,
+    margin: float = 0.1,
+) -> Candidates:
     """Up to n standing poses with the head aimed at random (pan/tilt within their limits shrunk by `margin` [rad]),
     each showing a floor tag (module docstring)."""
     joints = aim_joints(robot)

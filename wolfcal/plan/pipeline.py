@@ -243,9 +243,15 @@ def table_lines(plan: Plan) -> list[str]:
              f"  {'parameter':44s} {'prior':>9s} {'planned':>9s} {'random':>9s}"]  # fmt: skip
     for i, p in enumerate(plan.params.parameters[: plan.n_chain]):
         scale, unit = (1000.0, "mm") if p.unit == "m" else (np.rad2deg(1.0), "deg")
-        note = "" if plan.observable[i] else (
-            "  (no pose separates it: keeps its prior)" if plan.at_prior[i]
-            else "  (no pose improves it: the view repeated in every pose bounds it)")
+        note = (
+            ""
+            if plan.observable[i]
+            else (
+                "  (no pose separates it: keeps its prior)"
+                if plan.at_prior[i]
+                else "  (no pose improves it: the view repeated in every pose bounds it)"
+            )
+        )
         lines.append(f"  {p.name:44s} {p.prior_sigma * scale:7.3f}{unit:>2s} {plan.planned.std[i] * scale:7.3f}"
                      f"{unit:>2s} {plan.random.std[i] * scale:7.3f}{unit:>2s}{note}")  # fmt: skip
     lines += [f"  assumed: {note}" for note in plan.notes]
@@ -258,15 +264,19 @@ def table_lines(plan: Plan) -> list[str]:
                      "evaluation configurations of `--criterion I`, with what no pose separates at its prior): "
                      f"planned {np.rad2deg(rot_p):.4f} deg {pos_p * 1000:.3f} mm, random {np.rad2deg(rot_r):.4f} deg "
                      f"{pos_r * 1000:.3f} mm")  # fmt: skip
-    lines.append("  condition number (column-scaled Jacobian, observable parameters): "
-                 f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}")
+    lines.append(
+        "  condition number (column-scaled Jacobian, observable parameters): "
+        f"planned {plan.condition[0]:.3g}, random {plan.condition[1]:.3g}"
+    )
     names = plan.params.names
     for group in plan.groups:
         if all(plan.at_prior[names.index(g)] for g in group):
             lines.append(f"  no pose separates {' ~ '.join(group)} (equivalent motions; they keep their prior)")
         else:
-            lines.append(f"  no pose improves {' ~ '.join(group)} (bounded by their prior and the view repeated in "
-                         "every pose, whose detection error repeats too)")
+            lines.append(
+                f"  no pose improves {' ~ '.join(group)} (bounded by their prior and the view repeated in "
+                "every pose, whose detection error repeats too)"
+            )
     observable_names = [nm for nm, ok in zip(names, plan.observable) if ok]
     chain_names = set(names[: plan.n_chain])
     for a, b, r in plan.planned.correlated_pairs(plan.planned_names):

@@ -116,7 +116,12 @@ def select(
 
 
 def cover_twice(
-    G: np.ndarray, chosen: list[int], shows: np.ndarray, labels: list[str], basis: np.ndarray, criterion: str = "D",
+    G: np.ndarray,
+    chosen: list[int],
+    shows: np.ndarray,
+    labels: list[str],
+    basis: np.ndarray,
+    criterion: str = "D",
     M0: np.ndarray | None = None,
 ) -> list[int]:
     """`chosen` with no column of shows (N, T) bool (a floor tag in view; `labels` name them) shown by exactly one

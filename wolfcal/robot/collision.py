@@ -225,11 +225,13 @@ class CollisionModel:
         if worst is None:
             return ""
         a, b, share = worst
-        return (f"the collision model (capsules from {self.source}) puts {a} and {b} closer than "
-                f"{clearance_m * 1000:.0f} mm in {share:.0%} of the poses drawn; if these parts cannot touch on the "
-                f"robot, give 'collision_radii:' in {self.robot.config.path} (capsules between joint origins that "
-                f"replace the URDF's <collision>), or 'collision_ignore: [[{a}, {b}]]' there to never check this "
-                "pair (as an SRDF's disable_collisions)")
+        return (
+            f"the collision model (capsules from {self.source}) puts {a} and {b} closer than "
+            f"{clearance_m * 1000:.0f} mm in {share:.0%} of the poses drawn; if these parts cannot touch on the "
+            f"robot, give 'collision_radii:' in {self.robot.config.path} (capsules between joint origins that "
+            f"replace the URDF's <collision>), or 'collision_ignore: [[{a}, {b}]]' there to never check this "
+            "pair (as an SRDF's disable_collisions)"
+        )
 
     def colliding_pair(self, q: np.ndarray) -> tuple[str, str] | None:
         """The links of the closest overlapping pair at one configuration q (J,), or None."""

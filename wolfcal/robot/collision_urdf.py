@@ -65,9 +65,9 @@ def box_capsules(T_link_box: np.ndarray, size: np.ndarray) -> list[tuple[np.ndar
 def mesh_path(urdf: Path, filename: str) -> Path | None:
     """The file a mesh's `filename` names, or None when it is not found."""
     if filename.startswith("file://"):
-        tries = [Path(filename[len("file://"):])]
+        tries = [Path(filename[len("file://") :])]
     elif filename.startswith("package://"):
-        package, _, rest = filename[len("package://"):].partition("/")
+        package, _, rest = filename[len("package://") :].partition("/")
         folders = [urdf.resolve().parent, *urdf.resolve().parents]
         tries = [f / package / rest for f in folders] + [f / rest for f in folders]
     else:

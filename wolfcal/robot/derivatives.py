@@ -65,7 +65,12 @@ class ChainDerivatives:
     """
 
     def __init__(
-        self, robot: Robot, q: np.ndarray, corrections: Corrections, params: ParameterSet, links: list[str],
+        self,
+        robot: Robot,
+        q: np.ndarray,
+        corrections: Corrections,
+        params: ParameterSet,
+        links: list[str],
         tag_ids: list[int],
     ) -> None:
         self.robot, self.params = robot, params

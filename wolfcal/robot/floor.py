@@ -64,8 +64,11 @@ def floor_frame_twists(sole_poses: np.ndarray, sole_twists: np.ndarray) -> np.nd
     dz = (dz_raw - np.sum(dz_raw * z, axis=-1, keepdims=True) * z) / np.linalg.norm(z_raw, axis=-1)[:, None, None]
     xz = np.sum(x_raw[:, None] * z, axis=-1, keepdims=True)  # (N, 1, 1)
     x_perp = x_raw[:, None] - xz * z
-    dx_perp = dx_raw - (np.sum(dx_raw * z, axis=-1, keepdims=True) + np.sum(x_raw[:, None] * dz, axis=-1,
-                                                                             keepdims=True)) * z - xz * dz
+    dx_perp = (
+        dx_raw
+        - (np.sum(dx_raw * z, axis=-1, keepdims=True) + np.sum(x_raw[:, None] * dz, axis=-1, keepdims=True)) * z
+        - xz * dz
+    )
     dx = (dx_perp - np.sum(dx_perp * x, axis=-1, keepdims=True) * x) / np.linalg.norm(x_perp, axis=-1, keepdims=True)
     dy = cross(dz, x) + cross(z, dx)
     w = 0.5 * (cross(x, dx) + cross(y, dy) + cross(z, dz))
@@ -96,8 +99,7 @@ def check_size(robot: Robot) -> dict[str, int] | None:
     stances = len(robot.config.floor_config(FLOOR_NEEDED).check_stances)
     if not stances:
         return None
-    return {"samples": stances * CHECK_VIEWS_PER_STANCE * CHECK_LAYOUTS, "stances": stances,
-            "layouts": CHECK_LAYOUTS}
+    return {"samples": stances * CHECK_VIEWS_PER_STANCE * CHECK_LAYOUTS, "stances": stances, "layouts": CHECK_LAYOUTS}
 
 
 def camera_in_floor(

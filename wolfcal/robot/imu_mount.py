@@ -46,8 +46,9 @@ def parse_imu_config(path: Path, data: object) -> ImuConfig:
         raise WolfcalError(f"{path}: 'imu' must be a mapping {{frame, topic, bias, stances}}")
     unknown = sorted(set(data) - {"frame", "topic", "bias", "stances"})
     if unknown:
-        raise WolfcalError(f"{path}: unknown key(s) under 'imu': {', '.join(unknown)} (known: frame, topic, bias, "
-                           "stances)")
+        raise WolfcalError(
+            f"{path}: unknown key(s) under 'imu': {', '.join(unknown)} (known: frame, topic, bias, stances)"
+        )
     frame, topic = data.get("frame"), data.get("topic", DEFAULT_TOPIC)
     if not isinstance(frame, str) or not frame:
         raise WolfcalError(f"{path}: 'imu.frame' must name the URDF link of the IMU")
@@ -55,11 +56,14 @@ def parse_imu_config(path: Path, data: object) -> ImuConfig:
         raise WolfcalError(f"{path}: 'imu.topic' must be a ROS topic name such as /imu/data")
     bias = data.get("bias", DEFAULT_BIAS_M_S2)
     if not isinstance(bias, (int, float)) or isinstance(bias, bool) or not 0 < bias < 1:
-        raise WolfcalError(f"{path}: 'imu.bias' must be the accelerometer's bias level per axis in m/s^2, above 0 "
-                           "and below 1 (typically 0.03)")
+        raise WolfcalError(
+            f"{path}: 'imu.bias' must be the accelerometer's bias level per axis in m/s^2, above 0 "
+            "and below 1 (typically 0.03)"
+        )
     stances = data.get("stances", [])
     if not isinstance(stances, list) or not all(
-            isinstance(s, dict) and all(isinstance(v, (int, float)) for v in s.values()) for s in stances):
+        isinstance(s, dict) and all(isinstance(v, (int, float)) for v in s.values()) for s in stances
+    ):
         raise WolfcalError(f"{path}: 'imu.stances' must be a list of joint -> reading [rad] maps")
     return ImuConfig(frame, topic, float(bias), tuple({str(k): float(v) for k, v in s.items()} for s in stances))
 
@@ -75,13 +79,16 @@ def imu_joint(robot: Robot) -> str:
     not in the URDF or is attached by a joint that moves."""
     frame, config = imu_config(robot).frame, robot.config
     if frame not in robot.model.links:
-        raise WolfcalError(f"{config.path}: 'imu.frame' {frame!r} is not a link of {config.urdf}; name the link "
-                           "of the IMU")
+        raise WolfcalError(
+            f"{config.path}: 'imu.frame' {frame!r} is not a link of {config.urdf}; name the link of the IMU"
+        )
     joint = robot.model.joint_to_child.get(frame)
     if joint is None or joint.type != "fixed":
         how = "is the URDF's root" if joint is None else f"is attached by the {joint.type} joint {joint.name!r}"
-        raise WolfcalError(f"{config.path}: 'imu.frame' {frame!r} {how}; the IMU's link must be attached by a "
-                           "fixed joint, whose origin is the nominal mount")
+        raise WolfcalError(
+            f"{config.path}: 'imu.frame' {frame!r} {how}; the IMU's link must be attached by a "
+            "fixed joint, whose origin is the nominal mount"
+        )
     return joint.name
 
 

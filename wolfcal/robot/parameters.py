@@ -132,7 +132,11 @@ def tags_for_preset(robot: Robot, preset: str, observed_tag_ids: list[int], side
 
 
 def build_parameter_set(
-    robot: Robot, preset: str, tags_by_camera: dict[str, list[int]], side: str = "both", fix_tags: bool = False,
+    robot: Robot,
+    preset: str,
+    tags_by_camera: dict[str, list[int]],
+    side: str = "both",
+    fix_tags: bool = False,
     marker_links: tuple[str, ...] = (),
 ) -> ParameterSet:
     """Free chain parameters of a preset for the tags each camera ('head' or an external camera's name) uses.

@@ -103,10 +103,14 @@ class Robot:
         poses = self.model.link_poses(q, links, corrections, base=self.config.base_link)
         T_base_camera = poses[frame]
         T_camera_base = invert_transform(T_base_camera)
-        T_camera_tag = np.stack(
-            [T_camera_base @ poses[self.config.tag(t).link] @ self.T_link_tag(t, corrections) for t in tag_ids],
-            axis=1,
-        ) if tag_ids else np.zeros((len(T_base_camera), 0, 4, 4))
+        T_camera_tag = (
+            np.stack(
+                [T_camera_base @ poses[self.config.tag(t).link] @ self.T_link_tag(t, corrections) for t in tag_ids],
+                axis=1,
+            )
+            if tag_ids
+            else np.zeros((len(T_base_camera), 0, 4, 4))
+        )
         return T_base_camera, T_camera_tag
 
 
@@ -127,9 +131,7 @@ def load_robot(config_path: str | Path) -> Robot:
     model = _with_config_frames(config, model)
     for i, tag in enumerate(config.tags):
         if tag.link not in model.links:
-            raise WolfcalError(
-                f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}"
-            )
+            raise WolfcalError(f"{where}: 'tags[{i}].link' {tag.link!r} (tag {tag.id}) is not a link of {config.urdf}")
     for i, marker in enumerate(config.markers.entries if config.markers is not None else ()):
         if marker.link not in model.links:
             raise WolfcalError(
@@ -163,8 +165,10 @@ def _check_movable(config: RobotConfig, model: KinematicModel, key: str, joints:
     followed = {j: model.joints[j].mimic for j in unknown if j in model.joints}
     mimics = [f"{j} follows {mimic[0]}" for j, mimic in followed.items() if mimic is not None]
     if mimics:
-        raise WolfcalError(f"{config.path}: '{key}' names mimic joint(s) ({'; '.join(mimics)}, <mimic> in "
-                           f"{config.urdf}): name the joint each follows instead")
+        raise WolfcalError(
+            f"{config.path}: '{key}' names mimic joint(s) ({'; '.join(mimics)}, <mimic> in "
+            f"{config.urdf}): name the joint each follows instead"
+        )
     if unknown:
         raise WolfcalError(
             f"{config.path}: '{key}' names joint(s) {', '.join(unknown)} that are not movable joints of {config.urdf}"
@@ -178,8 +182,10 @@ def _check_aim(config: RobotConfig, model: KinematicModel) -> None:
     chain = [j.name for j in model.joints_between(config.base_link, config.head_camera("floor.aim needs it").frame)]
     wrong = [j for j in config.floor.aim if j not in chain or not model.joints[j].actuated]
     if wrong:
-        raise WolfcalError(f"{config.path}: 'floor.aim' names {', '.join(wrong)}, not movable joint(s) between "
-                           f"{config.base_link} and the camera; name the pan and tilt joints of the camera")
+        raise WolfcalError(
+            f"{config.path}: 'floor.aim' names {', '.join(wrong)}, not movable joint(s) between "
+            f"{config.base_link} and the camera; name the pan and tilt joints of the camera"
+        )
 
 
 def _check_floor(config: RobotConfig, model: KinematicModel) -> None:

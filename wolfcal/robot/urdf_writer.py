@@ -53,8 +53,10 @@ def calibrated_origins(model: KinematicModel, corrections: Corrections, fold_off
         if not joint.in_urdf:  # T_u @ (T_s @ D @ T_s^-1) @ T_s = T_u @ T_s @ D: the added frame lands as modelled
             target = model.urdf_parent_joint(joint.parent)
             if target.type != "fixed":
-                raise WolfcalError(f"{model.source}: the correction of '{name}' cannot be written: '{joint.parent}' "
-                                   f"hangs from the movable joint '{target.name}' (attach it by a fixed joint)")
+                raise WolfcalError(
+                    f"{model.source}: the correction of '{name}' cannot be written: '{joint.parent}' "
+                    f"hangs from the movable joint '{target.name}' (attach it by a fixed joint)"
+                )
             D = joint.T_parent_origin @ D @ invert_transform(joint.T_parent_origin)
             name = target.name
         factors.setdefault(name, []).append(D)

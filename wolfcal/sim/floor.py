@@ -53,8 +53,14 @@ class FloorViews:
 
 
 def floor_views(
-    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
-    distance: tuple[float, float] = (1.0, 4.0), min_edge_px: float = 12.0, margin_px: float = 10.0,
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections,
+    n: int,
+    rng: np.random.Generator,
+    distance: tuple[float, float] = (1.0, 4.0),
+    min_edge_px: float = 12.0,
+    margin_px: float = 10.0,
     check: bool = False,
 ) -> FloorViews:
     """Places of the floor tags and n standing poses (the stances one after the other; `check`: the check's,
@@ -93,9 +99,16 @@ def floor_views(
 
 
 def simulate_floor(
-    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
-    distance: tuple[float, float] = (1.0, 4.0), noise_px: float = 0.15, min_edge_px: float = 12.0,
-    margin_px: float = 10.0, source: str = "floor.mcap",
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections,
+    n: int,
+    rng: np.random.Generator,
+    distance: tuple[float, float] = (1.0, 4.0),
+    noise_px: float = 0.15,
+    min_edge_px: float = 12.0,
+    margin_px: float = 10.0,
+    source: str = "floor.mcap",
 ) -> FloorScene:
     """n floor samples (see the module docstring) with Gaussian corner noise [px]."""
     ids = robot.config.floor_config().tag_ids
@@ -104,8 +117,13 @@ def simulate_floor(
     s_idx, t_idx = np.nonzero(vis)
     detected = uv[s_idx, t_idx] + rng.normal(0.0, noise_px, (len(s_idx), 4, 2))
     obs = Observations.of_views(
-        list(robot.joint_names), encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
-        np.arange(len(q_true), dtype=np.int64) + 10**6, [source] * len(q_true), camera, s_idx, np.array(ids)[t_idx],
+        list(robot.joint_names),
+        encoder_readings(q_true, truth.offset_vector(robot.joint_names)),
+        np.arange(len(q_true), dtype=np.int64) + 10**6,
+        [source] * len(q_true),
+        camera,
+        s_idx,
+        np.array(ids)[t_idx],
         detected,
     )
     return FloorScene(obs, views.places, q_true)

@@ -65,8 +65,20 @@ def tilted_stances(robot: Robot) -> np.ndarray:
     floor = robot.config.floor_config("the standing stances start from the config's floor stances")
     bent = (floor.stances or floor.check_stances or (floor.standing,))[0]
     t, u = TILT_RAD, TURN_RAD
-    rotations = [(0, 0, 0), (t, 0, 0), (-t, 0, 0), (0, t, 0), (0, -t, 0), (0, 0, u), (0, 0, -u), (t, t, 0),
-                 (-t, -t, 0), (t, -t, u), (-t, t, -u), (0.7 * t, 0.7 * t, 0.7 * u)]
+    rotations = [
+        (0, 0, 0),
+        (t, 0, 0),
+        (-t, 0, 0),
+        (0, t, 0),
+        (0, -t, 0),
+        (0, 0, u),
+        (0, 0, -u),
+        (t, t, 0),
+        (-t, -t, 0),
+        (t, -t, u),
+        (-t, t, -u),
+        (0.7 * t, 0.7 * t, 0.7 * u),
+    ]
     stances = [moved_stance(robot, bent, (0.0, 0.0, 0.0, *r)) for r in rotations]
     return stance_readings(stances, robot.model)
 
@@ -80,17 +92,21 @@ def imu_stances(robot: Robot) -> np.ndarray:
     for i, stance in enumerate(config.stances):
         unknown = [j for j in stance if j not in robot.joint_names]
         if unknown:
-            raise WolfcalError(f"{robot.config.path}: 'imu.stances[{i}]' names {', '.join(unknown)}, not movable "
-                               f"joints of {robot.config.urdf}")
+            raise WolfcalError(
+                f"{robot.config.path}: 'imu.stances[{i}]' names {', '.join(unknown)}, not movable "
+                f"joints of {robot.config.urdf}"
+            )
     q = stance_readings(config.stances, robot.model)
     soles = list(robot.config.floor_config("standing stances need 'floor.soles'").soles)[:2]
     poses = robot.model.link_poses(q, soles, base=robot.config.base_link)
     tilt, gap, bad = off_plane(sole_gaps(np.stack([poses[s] for s in soles])))
     if bad.any():
         i = int(np.argmax(bad))
-        raise WolfcalError(f"{robot.config.path}: 'imu.stances[{i}]' is not a standing pose: the soles are "
-                           f"{np.rad2deg(tilt[i]):.1f} deg and {gap[i] * 100:.1f} cm from one plane under the nominal "
-                           f"model ({STANDING_RULE})")
+        raise WolfcalError(
+            f"{robot.config.path}: 'imu.stances[{i}]' is not a standing pose: the soles are "
+            f"{np.rad2deg(tilt[i]):.1f} deg and {gap[i] * 100:.1f} cm from one plane under the nominal "
+            f"model ({STANDING_RULE})"
+        )
     return q
 
 
@@ -116,7 +132,11 @@ def true_gravity(robot: Robot, truth: Corrections, q_true: np.ndarray) -> tuple[
 
 
 def standing_samples_direct(
-    robot: Robot, truth: Corrections, q_true: np.ndarray, bias: np.ndarray, rng: np.random.Generator,
+    robot: Robot,
+    truth: Corrections,
+    q_true: np.ndarray,
+    bias: np.ndarray,
+    rng: np.random.Generator,
     options: ImuSimOptions = ImuSimOptions(),
 ) -> StandingSamples:
     """In-memory still periods (no file) of the stances q_true (S, J): what `wolfcal.io.imu` would read from a
@@ -205,14 +225,21 @@ def simulate_imu(robot: Robot, out: Path, options: SimOptions, camera: CameraMod
     with output_set():
         write_standing_recording(out, robot, truth, q_true, bias, rng, imu)
         truth_yaml, truth_urdf = truth_paths(out)
-        data = {"truth": truth.to_dict(), "imu_bias_m_s2": [float(v) for v in bias], "imu": asdict(imu),
-                "samples": options.samples, "seed": options.seed, "system": "imu",
-                "meaning": "offsets: q_true = q_measured + offset [rad]; frames: origin_new = origin * "
-                "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]; imu_bias_m_s2: the accelerometer's constant bias, IMU frame"}
+        data = {
+            "truth": truth.to_dict(),
+            "imu_bias_m_s2": [float(v) for v in bias],
+            "imu": asdict(imu),
+            "samples": options.samples,
+            "seed": options.seed,
+            "system": "imu",
+            "meaning": "offsets: q_true = q_measured + offset [rad]; frames: origin_new = origin * "
+            "Trans(x,y,z) * Exp(rx,ry,rz) [m, rad]; imu_bias_m_s2: the accelerometer's constant bias, IMU frame",
+        }
         write_text_atomic(truth_yaml, dump_yaml(data, sort_keys=False))
         write_calibrated_urdf(robot.config.urdf, robot.model, truth, truth_urdf)
-    say(f"wrote {out} ({options.samples} stances held {imu.hold_s:.1f} s), {truth_paths(out)[0]}, "
-        f"{truth_paths(out)[1]}")
+    say(
+        f"wrote {out} ({options.samples} stances held {imu.hold_s:.1f} s), {truth_paths(out)[0]}, {truth_paths(out)[1]}"
+    )
     return truth
 
 

@@ -71,19 +71,22 @@ def simulate_mocap(robot: Robot, out: Path, samples: int, seed: int, truth: Corr
     markers = robot.config.markers.entries
     mounts = rng.normal(size=(len(markers), 3))
     mounts *= noise.mount_sigma / np.linalg.norm(mounts, axis=1, keepdims=True)  # each mount off by mount_sigma
-    T_mocap_base = transform_from_xyz_rpy(rng.uniform(-1, 1, 3) + [0, 0, 0.8], [*rng.normal(0, 0.05, 2),
-                                                                                 rng.uniform(-np.pi, np.pi)])
+    T_mocap_base = transform_from_xyz_rpy(
+        rng.uniform(-1, 1, 3) + [0, 0, 0.8], [*rng.normal(0, 0.05, 2), rng.uniform(-np.pi, np.pi)]
+    )
     lo, hi = mocap_bounds(robot)
     poses = rng.uniform(lo, hi, (samples, len(lo)))
     t, q_true, pose_of_frame = timeline(poses)
-    p = true_marker_positions(robot, q_true, truth, mounts, T_mocap_base) + rng.normal(0, noise.sigma,
-                                                                                     (len(t), len(markers), 3))
+    p = true_marker_positions(robot, q_true, truth, mounts, T_mocap_base) + rng.normal(
+        0, noise.sigma, (len(t), len(markers), 3)
+    )
     u = rng.uniform(size=(samples + 1, len(markers)))  # per still pose (last row: while moving)
     occluded = u < noise.occluded
     reflected = (u >= noise.occluded) & (u < noise.occluded + noise.reflections)
     direction = rng.normal(size=(samples + 1, len(markers), 3))
     direction *= rng.uniform(*noise.reflection_range, (samples + 1, len(markers), 1)) / np.linalg.norm(
-        direction, axis=2, keepdims=True)
+        direction, axis=2, keepdims=True
+    )
     occluded[-1], reflected[-1] = False, False
     row = np.where(pose_of_frame >= 0, pose_of_frame, samples)
     p += np.where(reflected[row][..., None], direction[row], 0.0)

@@ -17,8 +17,13 @@ from wolfcal.robot.robot import Robot
 
 
 def synthetic_observations(
-    robot: Robot, camera: CameraModel, truth: Corrections, q_true: np.ndarray, visible: np.ndarray,
-    noise_px: float, rng: np.random.Generator,
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections,
+    q_true: np.ndarray,
+    visible: np.ndarray,
+    noise_px: float,
+    rng: np.random.Generator,
 ) -> Observations:
     """Corners of the visible tags (visible: (N, T) over robot.config.tag_ids) seen by the head camera."""
     frames = Corrections(frames=truth.frames, tags=truth.tags)

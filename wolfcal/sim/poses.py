@@ -18,8 +18,14 @@ from wolfcal.robot.robot import Robot
 
 
 def tag_visibility(
-    robot: Robot, camera: CameraModel, q_true: np.ndarray, truth: Corrections, tag_ids: list[int],
-    margin_px: float, min_size_px: float, max_angle_rad: float = np.deg2rad(60.0),
+    robot: Robot,
+    camera: CameraModel,
+    q_true: np.ndarray,
+    truth: Corrections,
+    tag_ids: list[int],
+    margin_px: float,
+    min_size_px: float,
+    max_angle_rad: float = np.deg2rad(60.0),
 ) -> np.ndarray:
     """(N, T) bool: tag t is well visible to the head camera in pose n (q_true are true angles: no offsets)."""
     true_frames = Corrections(frames=truth.frames, tags=truth.tags)
@@ -29,8 +35,14 @@ def tag_visibility(
 
 
 def random_visible_poses(
-    robot: Robot, camera: CameraModel, truth: Corrections, n: int, rng: np.random.Generator,
-    tag_ids: list[int] | None = None, margin_px: float | None = None, min_size_px: float | None = None,
+    robot: Robot,
+    camera: CameraModel,
+    truth: Corrections,
+    n: int,
+    rng: np.random.Generator,
+    tag_ids: list[int] | None = None,
+    margin_px: float | None = None,
+    min_size_px: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """n true joint configurations (n, J) and their visibility (n, T) of `tag_ids` (default: all tags)."""
     tag_ids = tag_ids or robot.config.tag_ids
@@ -46,9 +58,7 @@ def random_visible_poses(
     return q, visibility(q)
 
 
-def draw_accepted(
-    lo: np.ndarray, hi: np.ndarray, n: int, rng: np.random.Generator, accept, what: str
-) -> np.ndarray:
+def draw_accepted(lo: np.ndarray, hi: np.ndarray, n: int, rng: np.random.Generator, accept, what: str) -> np.ndarray:
     """n configurations (n, J) drawn uniformly in [lo, hi] for which `accept` ((N, J) -> (N,) bool) holds."""
     kept: list[np.ndarray] = []
     for _ in range(200):

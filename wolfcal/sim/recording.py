@@ -96,7 +96,11 @@ def write_recording(
 
 
 def simulate_recording(
-    robot: Robot, path: Path, poses: int, offsets: str = "none", binning: int = 4,
+    robot: Robot,
+    path: Path,
+    poses: int,
+    offsets: str = "none",
+    binning: int = 4,
     options: RecordingOptions = RecordingOptions(),
 ) -> Corrections:
     """Write a recording of `poses` random still poses of the head camera (its config intrinsics, images binned by

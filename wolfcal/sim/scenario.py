@@ -30,8 +30,14 @@ class Scenario:
 
 
 def synthetic_scenario(
-    robot: Robot, camera: CameraModel, n: int, seed: int, offsets: str = "none", noise_px: float = 0.15,
-    outlier_fraction: float = 0.0, tag_ids: list[int] | None = None,
+    robot: Robot,
+    camera: CameraModel,
+    n: int,
+    seed: int,
+    offsets: str = "none",
+    noise_px: float = 0.15,
+    outlier_fraction: float = 0.0,
+    tag_ids: list[int] | None = None,
 ) -> Scenario:
     """n samples of the foot tags; outlier samples get joint readings off by ~0.04 rad (a stale reading)."""
     rng = np.random.default_rng(seed)
@@ -57,8 +63,14 @@ class ExternalScenario:
 
 
 def synthetic_external_scenario(
-    robot: Robot, camera: CameraModel, n: int, seed: int, offsets: str = "legs", noise_px: float = 0.15,
-    placements: int = 1, camera_name: str = "tripod",
+    robot: Robot,
+    camera: CameraModel,
+    n: int,
+    seed: int,
+    offsets: str = "legs",
+    noise_px: float = 0.15,
+    placements: int = 1,
+    camera_name: str = "tripod",
 ) -> ExternalScenario:
     """n samples (split evenly over `placements` tripod placements, one capture file each) in which an external
     camera sees a tag fixed to the base and at least one other tag; legs move, the base stays fixed."""

@@ -37,8 +37,14 @@ class SimScene:
     """The simulated robot's view; `render` takes measured joint angles like the real capture does."""
 
     def __init__(
-        self, robot: Robot, truth: Corrections, camera: CameraModel, seed: int = 0, noise_sigma: float = 2.0,
-        T_base_camera: np.ndarray | None = None, floor_places: dict[int, np.ndarray] | None = None,
+        self,
+        robot: Robot,
+        truth: Corrections,
+        camera: CameraModel,
+        seed: int = 0,
+        noise_sigma: float = 2.0,
+        T_base_camera: np.ndarray | None = None,
+        floor_places: dict[int, np.ndarray] | None = None,
     ):
         self.robot, self.truth, self.camera = robot, truth, camera
         self.T_base_camera = T_base_camera  # (4, 4) external camera; None: the head camera

@@ -238,8 +238,11 @@ def _simulate(
             stamp = START_NS + i * 2_000_000_000
             writer.add_sample(stamp, robot.joint_names, reading, np.zeros_like(reading), images)
             floor_ids = robot.config.floor_config().tag_ids if floor is not None else []
-            seen = _seen(robot, scenes, q_true[i]) if floor is None else [
-                "floor tags " + ", ".join(str(t) for t, v in zip(floor_ids, floor.visible[i]) if v)]
+            seen = (
+                _seen(robot, scenes, q_true[i])
+                if floor is None
+                else ["floor tags " + ", ".join(str(t) for t, v in zip(floor_ids, floor.visible[i]) if v)]
+            )
             say(f"sample {i + 1}/{options.samples}: " + "; ".join(seen)
                 + (f" ({kinds[i]})" if i in kinds else ""))  # fmt: skip
     _write_truth(robot, out, options, truth, cameras, kinds, floor.places if floor is not None else None)

@@ -26,9 +26,7 @@ class TruthSpec:
 def random_truth(robot: Robot, spec: TruthSpec, rng: np.random.Generator) -> Corrections:
     """Random true corrections drawn by `spec` (normal, zero mean, its sigmas [m, rad]): encoder offsets of its
     joints [rad], the head camera's mount (with the tilt `spec.camera_tilt` [rad] added) and every tag's mount."""
-    camera = np.concatenate(
-        [rng.normal(0.0, spec.camera_translation, 3), rng.normal(0.0, spec.camera_rotation, 3)]
-    )
+    camera = np.concatenate([rng.normal(0.0, spec.camera_translation, 3), rng.normal(0.0, spec.camera_rotation, 3)])
     camera[3] += spec.camera_tilt
     return Corrections(
         offsets={j: float(rng.normal(0.0, spec.offset_rms)) for j in spec.offset_joints},

@@ -85,10 +85,16 @@ def session_views(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
 def concatenated(a: Observations, b: Observations) -> Observations:
     """The samples of `a`, then those of `b` (one camera, the same joints)."""
     return Observations(
-        list(a.joint_names), np.vstack([a.q_measured, b.q_measured]), np.concatenate([a.stamps_ns, b.stamps_ns]),
-        [*a.sources, *b.sources], a.camera, np.concatenate([a.sample_index, b.sample_index + a.n_samples]),
-        np.concatenate([a.tag_ids, b.tag_ids]), np.concatenate([a.corner_index, b.corner_index]),
-        np.vstack([a.uv, b.uv]), a.camera_name,
+        list(a.joint_names),
+        np.vstack([a.q_measured, b.q_measured]),
+        np.concatenate([a.stamps_ns, b.stamps_ns]),
+        [*a.sources, *b.sources],
+        a.camera,
+        np.concatenate([a.sample_index, b.sample_index + a.n_samples]),
+        np.concatenate([a.tag_ids, b.tag_ids]),
+        np.concatenate([a.corner_index, b.corner_index]),
+        np.vstack([a.uv, b.uv]),
+        a.camera_name,
     )
 
 

@@ -65,8 +65,10 @@ def feet_plan(robot: Robot, n_poses: int, velocity: float, say: Callable[[str], 
     except WolfcalError as exc:
         fallback = robot.config.path.parent / FALLBACK_POSES
         if not fallback.is_file():
-            raise WolfcalError(f"{robot.config.path}: the feet views cannot be planned ({exc}), and there is no "
-                               f"{fallback} to fall back to: fix the config or write that poses file") from None
+            raise WolfcalError(
+                f"{robot.config.path}: the feet views cannot be planned ({exc}), and there is no "
+                f"{fallback} to fall back to: fix the config or write that poses file"
+            ) from None
         say(f"note: the feet views cannot be planned ({exc}); using {fallback} instead")
         return FeetPlan(load_poses(fallback, limits), f"fallback {fallback}", key)
     cached.parent.mkdir(parents=True, exist_ok=True)

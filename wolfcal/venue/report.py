@@ -50,10 +50,8 @@ def report_lines(figures: dict) -> list[str]:
     if floor is not None:
         k = [r["distance_m"] for r in floor["models"]["after"]["rows"]].index(4.5)
         before, after = (floor["models"][m]["rows"][k] for m in ("before", "after"))
-        cm = lambda r: "above the horizon" if r["error_m"] is None else (  # noqa: E731
-            f"{r['error_m'] * 100:.1f} +- {r['std_m'] * 100:.1f} cm")
         lines.append(f"held-out floor views ({floor['capture']['samples']} in {floor['capture']['stances']} stances): "
-                     f"ground error at 4.5 m {cm(before)} -> {cm(after)} (1 sigma)")  # fmt: skip
+                     f"ground error at 4.5 m {_cm(before)} -> {_cm(after)} (1 sigma)")  # fmt: skip
     else:
         lines.append("held-out floor views: none measured (no floor tags, or too few held-out views of them)")
     truth = figures.get("truth")
@@ -66,6 +64,14 @@ def report_lines(figures: dict) -> list[str]:
     else:
         lines.append(deploy["reason"])
     if deploy.get("current"):
-        lines.append(f"--current {deploy['current']}: recorded; the deploy files hold the calibration on the "
-                     "input URDF")
+        lines.append(
+            f"--current {deploy['current']}: recorded; the deploy files hold the calibration on the input URDF"
+        )
     return lines
+
+
+def _cm(row: dict) -> str:
+    """A measured ground error row as 'X +- Y cm' (1 sigma), or why there is none."""
+    if row["error_m"] is None:
+        return "above the horizon"
+    return f"{row['error_m'] * 100:.1f} +- {row['std_m'] * 100:.1f} cm"

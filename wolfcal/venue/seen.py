@@ -30,8 +30,10 @@ def what_the_camera_sees(frames: list[np.ndarray], tag_ids: set[int]) -> str:
             "session stopped")  # fmt: skip
     if others:
         listed = "; ".join(f"{family} {', '.join(map(str, ids))}" for family, ids in others.items())
-        return (f"{head}: it sees other tags ({listed}); check the tag ids and families in the robot config, or "
-                "put the robot's own tags on")
+        return (
+            f"{head}: it sees other tags ({listed}); check the tag ids and families in the robot config, or "
+            "put the robot's own tags on"
+        )
     if mean < DARK:
         look = f"a dark image (mean grey {mean:.0f} of 255): lens cap on, or exposure far too short?"
     elif mean > BRIGHT:
@@ -39,6 +41,8 @@ def what_the_camera_sees(frames: list[np.ndarray], tag_ids: set[int]) -> str:
     elif std < FLAT_STD:
         look = f"a flat image (grey {mean:.0f} +- {std:.1f}): nothing in view, or the lens covered?"
     else:
-        look = (f"an image without AprilTags (mean grey {mean:.0f}, contrast {std:.0f}, sharpness {sharp:.0f}): "
-                "the wrong camera (--camera), tags not on the feet, or the camera pointing elsewhere?")
+        look = (
+            f"an image without AprilTags (mean grey {mean:.0f}, contrast {std:.0f}, sharpness {sharp:.0f}): "
+            "the wrong camera (--camera), tags not on the feet, or the camera pointing elsewhere?"
+        )
     return f"{head}: it sees {look}"

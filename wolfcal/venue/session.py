@@ -130,8 +130,10 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
     if options.resume:
         state, notes = load_session(options.out, digest)
         if state.plan_key != feet.key:
-            raise WolfcalError(f"--resume {options.out}: the session was started with other feet views (another "
-                               "--velocity or --feet-poses, or another wolfcal); resume it with the same options")
+            raise WolfcalError(
+                f"--resume {options.out}: the session was started with other feet views (another "
+                "--velocity or --feet-poses, or another wolfcal); resume it with the same options"
+            )
         for line in notes:
             say(line)
     else:
@@ -146,11 +148,20 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
         finally:
             bus.close()
     try:
-        figures = check_session(robot, parts(options.out, "feet"), parts(options.out, "floor"),
-                                parts(options.out, "check"), options.out, options.current, say)
+        figures = check_session(
+            robot,
+            parts(options.out, "feet"),
+            parts(options.out, "floor"),
+            parts(options.out, "check"),
+            options.out,
+            options.current,
+            say,
+        )
     except WolfcalError as exc:
-        raise type(exc)(f"{exc}\nthe samples are kept in {options.out}; `wolfcal venue --resume {options.out}` "
-                        "fits and checks them again") from None
+        raise type(exc)(
+            f"{exc}\nthe samples are kept in {options.out}; `wolfcal venue --resume {options.out}` "
+            "fits and checks them again"
+        ) from None
     figures.update({"robot": str(robot.config.path), "plan": feet.source, "robot_time_s": state.robot_time_s,
                     "wall_time_s": time.monotonic() - wall_start, "runs": state.runs,
                     "samples": {p: len(state.done[p]) for p in state.done}})  # fmt: skip

@@ -29,9 +29,7 @@ def aruco_dictionary(name: str) -> cv2.aruco.Dictionary:
         key = f"APRILTAG_{key}"
     value = getattr(cv2.aruco, f"DICT_{key}", None)
     if value is None:
-        known = sorted(
-            n.removeprefix("DICT_") for n in dir(cv2.aruco) if n.startswith("DICT_") and n.isupper()
-        )
+        known = sorted(n.removeprefix("DICT_") for n in dir(cv2.aruco) if n.startswith("DICT_") and n.isupper())
         raise WolfcalError(f"unknown marker dictionary {name!r}; use one of {', '.join(known)}")
     return cv2.aruco.getPredefinedDictionary(value)
 
@@ -59,9 +57,7 @@ class Board:
         if self.square <= 0:
             raise WolfcalError(f"square size must be positive, got {self.square} m")
         if self.is_charuco and self.marker_length >= self.square:
-            raise WolfcalError(
-                f"marker size {self.marker_length} m must be smaller than the square {self.square} m"
-            )
+            raise WolfcalError(f"marker size {self.marker_length} m must be smaller than the square {self.square} m")
 
     @property
     def is_charuco(self) -> bool:
@@ -83,19 +79,13 @@ class Board:
         return self.cols * self.rows
 
     def describe(self) -> str:
-        kind = (
-            f"ChArUco {self.dictionary}{' legacy' if self.legacy else ''}"
-            if self.is_charuco
-            else "checkerboard"
-        )
+        kind = f"ChArUco {self.dictionary}{' legacy' if self.legacy else ''}" if self.is_charuco else "checkerboard"
         return f"{kind} {self.cols}x{self.rows} inner corners, {self.square * 1000:g} mm squares"
 
     def charuco(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV ChArUco board (only for ChArUco boards)."""
         assert self.dictionary is not None
-        board = cv2.aruco.CharucoBoard(
-            self.squares, self.square, self.marker_length, aruco_dictionary(self.dictionary)
-        )
+        board = cv2.aruco.CharucoBoard(self.squares, self.square, self.marker_length, aruco_dictionary(self.dictionary))
         board.setLegacyPattern(self.legacy)
         return board
 

@@ -41,12 +41,8 @@ class Sheet:
 
     width: float
     height: float
-    images: list[tuple[np.ndarray, float, float, float, float]] = field(
-        default_factory=list
-    )  # gray, x, y, w, h
-    lines: list[tuple[float, float, float, float, float]] = field(
-        default_factory=list
-    )  # x0, y0, x1, y1, width
+    images: list[tuple[np.ndarray, float, float, float, float]] = field(default_factory=list)  # gray, x, y, w, h
+    lines: list[tuple[float, float, float, float, float]] = field(default_factory=list)  # x0, y0, x1, y1, width
     texts: list[tuple[float, float, float, str]] = field(default_factory=list)  # x, y, height, text
 
 

@@ -44,9 +44,7 @@ def spec_from_config(
         sid: ServoSpec(joint, config.servos.models.get(joint, DEFAULT_MODEL), float(offsets.get(joint, 0.0)))
         for joint, sid in config.servos.ids.items()
     }
-    return EmulatorSpec(
-        servos, list(faults), [dict(p) for p in operator_poses], hold_s, operator_speed, truth_path
-    )
+    return EmulatorSpec(servos, list(faults), [dict(p) for p in operator_poses], hold_s, operator_speed, truth_path)
 
 
 def load_truth(path: Path) -> Corrections:

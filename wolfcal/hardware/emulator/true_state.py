@@ -30,9 +30,7 @@ class TrueStatePublisher:
         self.bin_path.parent.mkdir(parents=True, exist_ok=True)
         self.joints = joints
         self.json_path.write_text(json.dumps({"joints": joints, "truth": truth_path, "pid": os.getpid()}))
-        self.array = np.lib.format.open_memmap(
-            self.bin_path, mode="w+", dtype=np.float64, shape=(len(joints) + 1,)
-        )
+        self.array = np.lib.format.open_memmap(self.bin_path, mode="w+", dtype=np.float64, shape=(len(joints) + 1,))
 
     def publish(self, angles: dict[str, float]) -> None:
         self.array[0] += 1
