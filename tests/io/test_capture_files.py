@@ -218,7 +218,7 @@ WRITER_SCRIPT = textwrap.dedent(
     import sys
     from pathlib import Path
     sys.path.insert(0, {tests!r})
-    from test_io import JOINTS, T0, sample_data
+    from test_capture_files import JOINTS, T0, sample_data
     from wolfcal.camera.camera_info import load_camera_info
     from wolfcal.config import load_robot_config
     from wolfcal.io.writer import CaptureWriter
@@ -239,7 +239,7 @@ WRITER_SCRIPT = textwrap.dedent(
 
 def test_sigkill_mid_capture_then_recover_rescues_every_confirmed_sample(tmp_path, config):
     path = tmp_path / "capture.mcap"
-    script = WRITER_SCRIPT.format(tests=str(Path(__file__).resolve().parents[1]), config=str(CONFIG), path=str(path))
+    script = WRITER_SCRIPT.format(tests=str(Path(__file__).resolve().parent), config=str(CONFIG), path=str(path))
     process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         confirmed = [int(process.stdout.readline()) for _ in range(6)]
