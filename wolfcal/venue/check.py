@@ -178,5 +178,6 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
                              predicted, camera_turn(robot, fitted, before), limits)  # fmt: skip
     deploy = write_deploy(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"], present)
     return {"fit": str(out_dir / FIT_FOLDER), "samples_fitted": head.n_samples, "cross_validation": crossval,
-            "held_out_floor": measured, "verdict": verdict, "deploy": deploy,
+            "held_out_floor": measured,
+            "ground_distance_m": limits.ground_distance_m, "verdict": verdict, "deploy": deploy,
             "camera_correction": camera_correction(robot, fitted), "warnings": warnings}  # fmt: skip

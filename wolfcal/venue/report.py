@@ -48,10 +48,11 @@ def report_lines(figures: dict) -> list[str]:
     ]
     floor = figures["held_out_floor"]
     if floor is not None:
-        k = [r["distance_m"] for r in floor["models"]["after"]["rows"]].index(4.5)
+        distance = figures["ground_distance_m"]
+        k = [r["distance_m"] for r in floor["models"]["after"]["rows"]].index(distance)
         before, after = (floor["models"][m]["rows"][k] for m in ("before", "after"))
         lines.append(f"held-out floor views ({floor['capture']['samples']} in {floor['capture']['stances']} stances): "
-                     f"ground error at 4.5 m {_cm(before)} -> {_cm(after)} (1 sigma)")  # fmt: skip
+                     f"ground error at {distance:g} m {_cm(before)} -> {_cm(after)} (1 sigma)")  # fmt: skip
     else:
         lines.append("held-out floor views: none measured (no floor tags, or too few held-out views of them)")
     truth = figures.get("truth")
