@@ -18,8 +18,9 @@ import numpy as np
 from wolfcal.atomic import write_text_atomic
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mocap_files import MarkerTrajectories, NoMarkers, read_mocap_file
+from wolfcal.io.mocap_files import read_mocap_file
 from wolfcal.io.mocap_labels import match_names
+from wolfcal.io.mocap_trajectories import MarkerTrajectories, NoMarkers
 from wolfcal.outputs import check_outputs
 
 

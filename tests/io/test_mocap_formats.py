@@ -17,8 +17,9 @@ from typer.testing import CliRunner
 
 from wolfcal.cli import app
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mocap_files import NoMarkers, read_mocap_file
+from wolfcal.io.mocap_files import read_mocap_file
 from wolfcal.io.mocap_labels import match_names
+from wolfcal.io.mocap_trajectories import NoMarkers
 
 RNG = np.random.default_rng(7)
 

@@ -24,7 +24,7 @@ from types import ModuleType
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mocap_files import MarkerTrajectories, NoMarkers, times_from_frames, unit_scale
+from wolfcal.io.mocap_trajectories import MarkerTrajectories, NoMarkers, times_from_frames, unit_scale
 
 PROCESSORS = {84: "Intel", 85: "DEC", 86: "SGI/MIPS"}
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mocap_files import MarkerTrajectories
 from wolfcal.io.mocap_samples import nanmedian
+from wolfcal.io.mocap_trajectories import MarkerTrajectories
 from wolfcal.io.recording import JointStates
 
 GRID_S = 0.002  # resampling step of the speed profiles [s]

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.errors import WolfcalError
-from wolfcal.io.mocap_files import MarkerTrajectories, NoMarkers, times_from_frames, unit_scale
+from wolfcal.io.mocap_trajectories import MarkerTrajectories, NoMarkers, times_from_frames, unit_scale
 
 MOTIVE_ROWS = ("Type", "Name", "ID", "Parent")  # header rows above the kind row, in Motive's order
 VICON_SECTIONS = ("Devices", "Joints", "Model Outputs", "Segments", "Trajectories")

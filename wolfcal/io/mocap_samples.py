@@ -27,8 +27,8 @@ from mcap_ros2.decoder import DecoderFactory
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
-from wolfcal.io.mocap_files import USE_INDEX, MarkerTrajectories
 from wolfcal.io.mocap_labels import match_names
+from wolfcal.io.mocap_trajectories import USE_INDEX, MarkerTrajectories
 from wolfcal.io.msgdefs import header_stamp_ns
 from wolfcal.io.recording import ENCODER_TICK, JointStates
 from wolfcal.markers import MarkerObservations
