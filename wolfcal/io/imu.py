@@ -224,7 +224,7 @@ def standing_samples(path: Path, states: JointStates, stream: ImuStream, joint_n
         if t1 - t0 < MIN_STILL_S * 1e9:
             continue
         first, end = int(np.searchsorted(t, t0)), int(np.searchsorted(t, t1, side="right"))
-        q = _held_readings(states, joint_names, int(t0), int(t1))
+        q = states.held_readings(int(t0), int(t1), joint_names)
         if q is None:
             notes.append(
                 f"{path.name}: the IMU was still {(t1 - t0) / 1e9:.1f} s from {t0 / 1e9:.2f} s but a joint "
@@ -245,19 +245,6 @@ def standing_samples(path: Path, states: JointStates, stream: ImuStream, joint_n
         n_messages=np.array([r[3] for r in rows]), stamps_ns=np.array([r[4] for r in rows], dtype=np.int64),
         sources=[str(path)] * len(rows), notes=notes,
     )  # fmt: skip
-
-
-def _held_readings(states: JointStates, joint_names: list[str], t0: int, t1: int) -> np.ndarray | None:
-    """(J,) per-joint median reading over [t0, t1] [ns], None when a joint moved more than one encoder tick or has
-    no state in it."""
-    q = []
-    for name in joint_names:
-        s = states.series[name]
-        a, b = np.searchsorted(s.times, t0), np.searchsorted(s.times, t1, side="right")
-        if b <= a or np.ptp(s.positions[a:b]) > ENCODER_TICK + 1e-9:
-            return None
-        q.append(float(np.median(s.positions[a:b])))
-    return np.array(q)
 
 
 def read_standing(paths: list[Path], joint_states_topic: str, imu_topic: str,

@@ -30,7 +30,7 @@ from wolfcal.io.mcapfile import check_mcap
 from wolfcal.io.mocap_labels import match_names
 from wolfcal.io.mocap_trajectories import USE_INDEX, MarkerTrajectories
 from wolfcal.io.msgdefs import header_stamp_ns
-from wolfcal.io.recording import ENCODER_TICK, JointStates
+from wolfcal.io.recording import JointStates
 from wolfcal.markers import MarkerObservations
 
 STILL_WINDOW_S = 0.25  # half-width of the stillness window [s]
@@ -144,19 +144,6 @@ def still_periods(times_ns: np.ndarray, still: np.ndarray) -> list[tuple[int, in
     return out
 
 
-def _still_joints(states: JointStates, t0: int, t1: int) -> np.ndarray | None:
-    """(J,) per-joint median reading over [t0, t1] [ns] of the recording's clock, None when a joint moved more than
-    one tick or has no state in it."""
-    q = []
-    for name in states.names:
-        s = states.series[name]
-        a, b = np.searchsorted(s.times, t0), np.searchsorted(s.times, t1, side="right")
-        if b <= a or np.ptp(s.positions[a:b]) > ENCODER_TICK + 1e-9:
-            return None
-        q.append(float(np.median(s.positions[a:b])))
-    return np.array(q)
-
-
 def marker_samples(traj: MarkerTrajectories, states: JointStates, config: RobotConfig, joint_names: list[str],
                    offset_s: float) -> MarkerObservations:  # fmt: skip
     """One sample per still period of the markers in which the joints were still too; `offset_s` maps the
@@ -174,7 +161,7 @@ def marker_samples(traj: MarkerTrajectories, states: JointStates, config: RobotC
     points: list[np.ndarray] = []
     shift = int(round(offset_s * 1e9))
     for a, b in still_periods(traj.times_ns, still):
-        reading = _still_joints(states, int(traj.times_ns[a]) + shift, int(traj.times_ns[b - 1]) + shift)
+        reading = states.held_readings(int(traj.times_ns[a]) + shift, int(traj.times_ns[b - 1]) + shift)
         if reading is None:
             continue
         block = xyz[a:b]

@@ -123,6 +123,18 @@ class JointStates:
             series[name] = JointSeries(t[order], np.concatenate(positions)[order], np.concatenate(velocities)[order])
         return cls([n for n, s in series.items() if len(s.times)], {n: s for n, s in series.items() if len(s.times)})
 
+    def held_readings(self, t0: int, t1: int, names: Sequence[str] | None = None) -> np.ndarray | None:
+        """(J,) per-joint median reading over [t0, t1] [ns] of the joints `names` (default: all, in `self.names`'
+        order) [rad]; None when a joint moved more than one encoder tick or has no state in that span."""
+        q = []
+        for name in self.names if names is None else names:
+            s = self.series[name]
+            a, b = np.searchsorted(s.times, t0), np.searchsorted(s.times, t1, side="right")
+            if b <= a or np.ptp(s.positions[a:b]) > ENCODER_TICK + 1e-9:
+                return None
+            q.append(float(np.median(s.positions[a:b])))
+        return np.array(q)
+
 
 @dataclass(frozen=True, slots=True)
 class Paired:
