@@ -1,7 +1,7 @@
-"""Pixels to points on the field's ground plane, and the expected image width of a field line.
+"""Pixels to points on the ground plane, and the expected image width of a field line.
 
-Frames: `T_field_camera` maps points of the camera's optical frame (z forward, x right, y down) into the field
-frame (origin at the centre mark, z up) [m]; the ground is the plane z = 0.
+Frames: `T_ground_camera` maps points of the camera's optical frame (z forward, x right, y down) into a frame whose
+plane z = 0 is the ground, z up [m]: the field frame (origin at the centre mark) or a standing robot's floor frame.
 """
 
 from __future__ import annotations
@@ -11,23 +11,31 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 
 
-def ground_points(camera: CameraModel, T_field_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Field points (N, 2) [m] where the rays of pixels (N, 2) meet the ground; NaN for rays that do not go down."""
-    rays = camera.unproject(np.asarray(uv, float).reshape(-1, 2)) @ T_field_camera[:3, :3].T
-    origin = T_field_camera[:3, 3]
+def ground_points(camera: CameraModel, T_ground_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Ground points (N, 2) [m] where the rays of pixels uv (N, 2) meet the ground, seen from one camera pose
+    T_ground_camera (4, 4) or one per pixel (N, 4, 4); NaN for rays that do not go down."""
+    T = np.asarray(T_ground_camera, float)
+    rays = camera.unproject(np.asarray(uv, float).reshape(-1, 2))
+    rays = rays @ T[:3, :3].T if T.ndim == 2 else np.einsum("nij,nj->ni", T[:, :3, :3], rays)
+    origin = T[..., :3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(rays[:, 2] < -1e-9, -origin[2] / rays[:, 2], np.nan)
-    return origin[None, :2] + s[:, None] * rays[:, :2]
+        s = np.where(rays[:, 2] < -1e-9, -origin[..., 2] / rays[:, 2], np.nan)
+    return origin[..., :2] + s[:, None] * rays[:, :2]
 
 
-def ground_step(camera: CameraModel, T_field_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def ground_gradient(camera: CameraModel, T_ground_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, 2, 2) d(ground point [m]) / d(pixel) at pixels uv (N, 2), columns u and v: the one-pixel steps
+    (`ground_points` for the poses); NaN where a ray misses the ground."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    here = ground_points(camera, T_ground_camera, uv)
+    steps = [ground_points(camera, T_ground_camera, uv + step) - here for step in ([1.0, 0.0], [0.0, 1.0])]
+    return np.stack(steps, axis=2)
+
+
+def ground_step(camera: CameraModel, T_ground_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """(N, 2) ground distance [m] covered by one pixel step along u (column 0) and along v (column 1) at pixels
     (N, 2); NaN where the ray misses the ground."""
-    uv = np.asarray(uv, float).reshape(-1, 2)
-    here = ground_points(camera, T_field_camera, uv)
-    step_u = np.linalg.norm(ground_points(camera, T_field_camera, uv + [1.0, 0.0]) - here, axis=1)
-    step_v = np.linalg.norm(ground_points(camera, T_field_camera, uv + [0.0, 1.0]) - here, axis=1)
-    return np.column_stack([step_u, step_v])
+    return np.linalg.norm(ground_gradient(camera, T_ground_camera, uv), axis=1)
 
 
 def expected_line_width(

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.field.ground import ground_points
 from wolfcal.field.model import FieldLines
 from wolfcal.field.scene import BORDER_STRIP
 from wolfcal.robot.corrections import Corrections
@@ -97,7 +98,7 @@ def search_place(field: DistanceMap, robot: Robot, q: np.ndarray, view_of_point:
     grounds = {}
     for pitch in PITCHES:
         model = Corrections(frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, pitch, 0.0, 0.0])})
-        ground = ground_points_at(camera, camera_in_floor(robot, q, model)[0][view_of_point], uv)
+        ground = ground_points(camera, camera_in_floor(robot, q, model)[0][view_of_point], uv)
         grounds[float(pitch)] = ground
         finite = np.all(np.isfinite(ground[coarse]), axis=1)
         pose, score = _best(field, ground[coarse][finite], _grid(configured, SEARCH_M, SEARCH_YAW, 13))
@@ -109,13 +110,3 @@ def search_place(field: DistanceMap, robot: Robot, q: np.ndarray, view_of_point:
     pose, score = _best(field, ground, _grid(pose, 0.1, np.deg2rad(3.0), 11))
     configured_score = float(field.truncated_mean(_placed(ground, configured[None]))[0])
     return PlaceSearch(pose, pitch, score, configured_score)
-
-
-def ground_points_at(camera: CameraModel, T_floor_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """(N, 2) floor points [m] of pixels uv (N, 2) seen from cameras T_floor_camera (N, 4, 4); NaN above the
-    horizon."""
-    rays = np.einsum("nij,nj->ni", T_floor_camera[:, :3, :3], camera.unproject(uv))
-    origin = T_floor_camera[:, :3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(rays[:, 2] < 0, -origin[:, 2] / rays[:, 2], np.nan)
-    return origin[:, :2] + s[:, None] * rays[:, :2]

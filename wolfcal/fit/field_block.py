@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.camera.model import CameraModel
+from wolfcal.field.ground import ground_gradient, ground_points
 from wolfcal.field.model import FieldLines, field_lines, nearest_line, nearest_line_normal
 from wolfcal.field.observations import FieldObservations
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
@@ -70,7 +70,7 @@ class FieldBlock(Block):
         self.rays = obs.camera.unproject(obs.uv)  # (M, 3) in the optical frame
         T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, weighted_at or self.fixed)
         T_floor_camera = T_floor_camera[obs.sample_index]
-        self.ground_gradient = _ground_gradient(obs.camera, T_floor_camera, obs.uv)
+        self.ground_gradient = ground_gradient(obs.camera, T_floor_camera, obs.uv)
         self.line_of_unit = _lines_seen(obs, lines, T_floor_camera)
         names = field_pose_names(len(obs.starts))
         self.nuisance = ParameterSet([
@@ -169,30 +169,11 @@ class FieldBlock(Block):
 def _lines_seen(obs: FieldObservations, lines: FieldLines, T_floor_camera: np.ndarray) -> np.ndarray:
     """(M,) the nearest line (`nearest_line`) of each point seen from cameras T_floor_camera (M, 4, 4) of a robot
     standing at its placement's start."""
-    rays = np.einsum("mij,mj->mi", T_floor_camera[:, :3, :3], obs.camera.unproject(obs.uv))
-    origin = T_floor_camera[:, :3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = origin[:, :2] - (origin[:, 2] / rays[:, 2])[:, None] * rays[:, :2]
+    g = ground_points(obs.camera, T_floor_camera, obs.uv)
     x, y, yaw = obs.starts[obs.placement[obs.sample_index]].T
-    field = np.stack(
-        [x + np.cos(yaw) * g[:, 0] - np.sin(yaw) * g[:, 1], y + np.sin(yaw) * g[:, 0] + np.cos(yaw) * g[:, 1]], axis=1
-    )
+    c, s = np.cos(yaw), np.sin(yaw)
+    field = np.stack([x + c * g[:, 0] - s * g[:, 1], y + s * g[:, 0] + c * g[:, 1]], axis=1)
     return nearest_line(lines, np.nan_to_num(field))
-
-
-def _ground_gradient(camera: CameraModel, T_floor_camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """(M, 2, 2) d(ground point in the floor frame [m]) / d(pixel) at each line point (M, 2) seen from cameras
-    T_floor_camera (M, 4, 4): one-pixel steps along u and v; NaN where a ray misses the floor."""
-
-    def ground(points: np.ndarray) -> np.ndarray:
-        rays = np.einsum("mij,mj->mi", T_floor_camera[:, :3, :3], camera.unproject(points))
-        origin = T_floor_camera[:, :3, 3]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(rays[:, 2] < 0, -origin[:, 2] / rays[:, 2], np.nan)
-        return origin[:, :2] + s[:, None] * rays[:, :2]
-
-    here = ground(uv)
-    return np.stack([ground(uv + [1.0, 0.0]) - here, ground(uv + [0.0, 1.0]) - here], axis=2)
 
 
 def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
