@@ -155,16 +155,13 @@ def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarr
     the circle's outward radial. The offset is smooth across the line (a residual without a kink at zero); beyond a
     segment's end it is the offset from the segment's extension."""
     p = np.asarray(points, float).reshape(-1, 2)
-    a, b = lines.segments[:, 0], lines.segments[:, 1]
-    ab = b - a
-    t = np.clip(np.einsum("nsk,sk->ns", p[:, None, :] - a[None], ab) / np.einsum("sk,sk->s", ab, ab), 0.0, 1.0)
-    distances = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=-1)  # (N, S)
-    best = distances.argmin(axis=1)
-    rows = np.arange(len(p))
-    normal = _segment_normals(ab)[best]
-    offset = np.einsum("nk,nk->n", normal, p - a[best])
+    a, ab = lines.segments[:, 0], lines.segments[:, 1] - lines.segments[:, 0]
+    index = nearest_line(lines, p)
+    use_circle = index == len(ab)
+    segment = np.where(use_circle, 0, index)
+    normal = _segment_normals(ab)[segment]
+    offset = np.einsum("nk,nk->n", normal, p - a[segment])
     radius = np.linalg.norm(p, axis=1)
-    use_circle = np.abs(radius - lines.circle_radius) < distances[rows, best]
     radial = p / np.maximum(radius, 1e-12)[:, None]
     normal = np.where(use_circle[:, None], radial, normal)
     return np.where(use_circle, radius - lines.circle_radius, offset), normal
