@@ -33,7 +33,8 @@ import numpy as np
 from wolfcal.errors import WolfcalError
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization
 from wolfcal.geometry import exp_so3, matrix_to_rpy, skew
-from wolfcal.io.imu import IMU, StandingSamples, read_standing, topics_of
+from wolfcal.io.imu import StandingSamples, read_standing, topics_of
+from wolfcal.io.msgdefs import IMU
 from wolfcal.outliers import OutlierRule
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.derivatives import ChainDerivatives, cross

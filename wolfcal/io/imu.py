@@ -22,37 +22,8 @@ from mcap_ros2.decoder import DecoderFactory
 
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap, is_finished, recover_hint, torn_error
-from wolfcal.io.msgdefs import header_stamp_ns
+from wolfcal.io.msgdefs import IMU, header_stamp_ns
 from wolfcal.io.recording import ENCODER_TICK, JointStates
-
-IMU = "sensor_msgs/msg/Imu"
-IMU_MSGDEF = """std_msgs/Header header
-geometry_msgs/Quaternion orientation
-float64[9] orientation_covariance
-geometry_msgs/Vector3 angular_velocity
-float64[9] angular_velocity_covariance
-geometry_msgs/Vector3 linear_acceleration
-float64[9] linear_acceleration_covariance
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x 0
-float64 y 0
-float64 z 0
-float64 w 1
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-"""  # the ROS 2 interface definition (common_interfaces), with its dependencies as rosbag2 stores them
 
 STILL_WINDOW_S = 0.25  # half-width of the stillness window [s]
 ACCEL_SCATTER_M_S2 = 0.15  # largest per-axis std of the accelerometer in a still window [m/s^2]

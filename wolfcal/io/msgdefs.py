@@ -12,6 +12,7 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 MARKERS = "mocap4r2_msgs/msg/Markers"  # MOCAP4ROS2's marker set (motion capture)
+IMU = "sensor_msgs/msg/Imu"
 
 URDF_ATTACHMENT = "robot.urdf"
 CONFIG_ATTACHMENT = "robot.yaml"
@@ -80,6 +81,21 @@ float64 y
 float64 z
 """
 
+_IMU = """std_msgs/Header header
+geometry_msgs/Quaternion orientation
+float64[9] orientation_covariance
+geometry_msgs/Vector3 angular_velocity
+float64[9] angular_velocity_covariance
+geometry_msgs/Vector3 linear_acceleration
+float64[9] linear_acceleration_covariance
+"""
+
+_QUATERNION = """float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+"""
+
 
 def _with_dependencies(definition: str, *dependencies: tuple[str, str]) -> str:
     parts = [definition]
@@ -97,6 +113,9 @@ MSGDEFS: dict[str, str] = {
     CAMERA_INFO: _with_dependencies(_CAMERA_INFO, *_HEADER_DEPS, ("sensor_msgs/RegionOfInterest", _REGION_OF_INTEREST)),
     MARKERS: _with_dependencies(
         _MARKERS, *_HEADER_DEPS, ("mocap4r2_msgs/Marker", _MARKER), ("geometry_msgs/Point", _POINT)
+    ),
+    IMU: _with_dependencies(
+        _IMU, *_HEADER_DEPS, ("geometry_msgs/Quaternion", _QUATERNION), ("geometry_msgs/Vector3", _POINT)
     ),
 }
 

@@ -24,8 +24,8 @@ from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.encoders import encoder_readings
 from wolfcal.errors import WolfcalError
 from wolfcal.geometry import log_so3
-from wolfcal.io.imu import IMU, IMU_MSGDEF, StandingSamples
-from wolfcal.io.msgdefs import JOINT_STATE, MSGDEFS, stamp_dict
+from wolfcal.io.imu import StandingSamples
+from wolfcal.io.msgdefs import IMU, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.truth import truth_paths
 from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections
@@ -185,7 +185,7 @@ def write_standing_recording(path: Path, robot: Robot, truth: Corrections, q_sta
     with path.open("wb") as handle:
         writer = Ros2Writer(handle)
         joint_schema = writer.register_msgdef(JOINT_STATE, MSGDEFS[JOINT_STATE])
-        imu_schema = writer.register_msgdef(IMU, IMU_MSGDEF)
+        imu_schema = writer.register_msgdef(IMU, MSGDEFS[IMU])
         for t, kind, i in events:
             stamp = START_NS + int(round(t * 1e9))
             if kind == 0:
