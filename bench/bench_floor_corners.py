@@ -21,8 +21,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: BLAS threads
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from conftest import OTHER_CAMERA, robot_with_floor_tags  # noqa: E402
-from test_floor_fit import joined  # noqa: E402
+from conftest import OTHER_CAMERA, joined, robot_with_floor_tags  # noqa: E402
 
 from wolfcal.evaluate.ground import ground_errors  # noqa: E402
 from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402

@@ -12,6 +12,7 @@ import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot, load_robot
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -85,3 +86,13 @@ def stop_after_sample(
         if process.poll() is None:
             process.kill()
     return process.returncode, stderr
+
+
+def joined(a: Observations, b: Observations) -> Observations:
+    """Feet samples then floor samples, as one head-camera capture."""
+    return Observations(
+        a.joint_names, np.concatenate([a.q_measured, b.q_measured]), np.concatenate([a.stamps_ns, b.stamps_ns]),
+        a.sources + b.sources, a.camera, np.concatenate([a.sample_index, b.sample_index + a.n_samples]),
+        np.concatenate([a.tag_ids, b.tag_ids]), np.concatenate([a.corner_index, b.corner_index]),
+        np.concatenate([a.uv, b.uv]),
+    )  # fmt: skip

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import OTHER_CAMERA, robot_with_floor_tags
+from conftest import OTHER_CAMERA, joined, robot_with_floor_tags
 
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.ground import ground_errors
@@ -27,16 +27,6 @@ CAMERA = OTHER_CAMERA
 def robot(tmp_path_factory):
     """Wolfgang's URDF with other tag ids and sizes (feet 7, 8; torso 3) and floor tags 60-65 of 0.12-0.2 m."""
     return robot_with_floor_tags(tmp_path_factory.mktemp("floor"))
-
-
-def joined(a: Observations, b: Observations) -> Observations:
-    """Feet samples then floor samples, as one head-camera capture."""
-    return Observations(
-        a.joint_names, np.concatenate([a.q_measured, b.q_measured]), np.concatenate([a.stamps_ns, b.stamps_ns]),
-        a.sources + b.sources, a.camera, np.concatenate([a.sample_index, b.sample_index + a.n_samples]),
-        np.concatenate([a.tag_ids, b.tag_ids]), np.concatenate([a.corner_index, b.corner_index]),
-        np.concatenate([a.uv, b.uv]),
-    )  # fmt: skip
 
 
 def scene(robot, seed, offsets="all"):

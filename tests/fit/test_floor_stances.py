@@ -9,9 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
-from conftest import OTHER_CAMERA, WOLFGANG, wolfgang_with_other_tags
+from conftest import OTHER_CAMERA, WOLFGANG, joined, wolfgang_with_other_tags
 from rich.console import Console
-from test_floor_fit import joined
 from typer.testing import CliRunner
 
 from wolfcal.capture.floor import CHECK_VIEWS_PER_STANCE, check_views, floor_script
