@@ -93,8 +93,8 @@ def test_standing_capture_fits_back_to_the_emulators_mount(tmp_path):
     fit = fit_observations(robot, {}, FitOptions(free="imu", system="imu"), own_blocks=[ImuBlock(robot, samples)])
     idx = [fit.params.names.index("imu.rx"), fit.params.names.index("imu.ry")]
     error = (fit.solution.values[idx] - np.array(MOUNT)) * DEG
-    print(f"recovered mount {np.round(fit.solution.values[idx] * DEG, 3)} deg, true {np.round(np.array(MOUNT) * DEG, 3)}"
-          f" deg, std {np.round(fit.solution.std[idx] * DEG, 3)} deg")  # fmt: skip
+    found, std = np.round(fit.solution.values[idx] * DEG, 3), np.round(fit.solution.std[idx] * DEG, 3)
+    print(f"recovered mount {found} deg, true {np.round(np.array(MOUNT) * DEG, 3)} deg, std {std} deg")
     assert np.all(np.abs(error) < 0.15), f"mount error {error} deg"
     assert np.all(np.abs(error) < 3.0 * fit.solution.std[idx] * DEG)
     with out.open("rb") as handle:  # the Imu messages as an independent reader sees them
