@@ -14,7 +14,7 @@ import dynamixel_sdk as sdk
 import numpy as np
 
 from wolfcal.hardware import protocol as P
-from wolfcal.hardware.bus import BusError, DynamixelBus, _with_retries
+from wolfcal.hardware.bus import BusError, DynamixelBus, with_retries
 from wolfcal.io.imu import G_UNITS_RANGE, GRAVITY_RANGE_M_S2
 from wolfcal.robot.imu_bus import ImuBusConfig
 
@@ -33,12 +33,12 @@ class BusImu:
         """Ping it (model number checked when the config gives one) and read it a few times: BusError when it does
         not answer, refuses the registers, or its accelerometer does not read gravity in m/s^2 (robot standing or
         lying still)."""
-        (model, result, _), tried = _with_retries(
+        (model, result, _), tried = with_retries(
             partial(self.bus.ph.ping, self.bus.port, self.config.id), itemgetter(1)
         )
         if result != sdk.COMM_SUCCESS:
             raise BusError(
-                f"{self.name}: no answer ({self.bus._comm_text(result, tried)}); check 'imu.bus.id' and "
+                f"{self.name}: no answer ({self.bus.comm_text(result, tried)}); check 'imu.bus.id' and "
                 "'imu.bus.port' in the robot config, the IMU's power and cable"
             )
         if self.config.model is not None and model != self.config.model:
@@ -64,11 +64,11 @@ class BusImu:
         """(specific force (3,) [m/s^2], rate of turn (3,) [rad/s]) in the IMU frame."""
         start, length = self.config.span
         read = partial(self.bus.ph.readTxRx, self.bus.port, self.config.id, start, length)
-        (data, result, error), tried = _with_retries(read, itemgetter(1))
+        (data, result, error), tried = with_retries(read, itemgetter(1))
         if result != sdk.COMM_SUCCESS:
             raise BusError(
                 f"{self.name}: reading addresses {start}-{start + length - 1} failed: "
-                f"{self.bus._comm_text(result, tried)}; check the IMU's cable and power"
+                f"{self.bus.comm_text(result, tried)}; check the IMU's cable and power"
             )
         if error & 0x7F in (P.ERR_ACCESS, ERR_DATA_RANGE, ERR_DATA_LENGTH):
             raise BusError(
