@@ -198,3 +198,25 @@ def test_the_emulator_serves_every_bus_and_the_imu_on_its_own(tmp_path):
             assert other.ph.ping(other.port, OPENCR["id"])[1] != 0, "the IMU answers on its own bus only"
         with pytest.raises(WolfcalError, match="/dev/ttyUSB1 is missing"):
             ServoBuses(servos, f"/dev/ttyUSB0={emu.ports['/dev/ttyUSB0']}")
+
+
+def test_command_line_emulate_serves_every_bus_of_the_config(tmp_path):
+    config = load_robot_config(WOLFGANG)
+    legs = [i for j, i in config.servos.ids.items() if j.startswith(("R", "L")) and "Shoulder" not in j]
+    ports = {"/dev/ttyUSB0": [i for i in config.servos.ids.values() if i not in legs], "/dev/ttyUSB1": legs}
+    path = write_config(tmp_path, {**OPENCR, "port": "/dev/ttyUSB1"}, ports)
+    emulate = subprocess.Popen([sys.executable, "-m", "wolfcal.cli", "emulate", "--robot", str(path)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               cwd=Path(__file__).resolve().parents[2])  # fmt: skip
+    try:
+        assert emulate.stdout is not None
+        port = emulate.stdout.readline().strip()  # the first line: what capture --port takes
+        served = dict(item.split("=") for item in port.split(","))
+        assert list(served) == list(ports), port
+        with ServoBuses(load_robot_config(path).servos, port) as bus:
+            assert bus.ping_all() == config.servos.models
+        emulate.send_signal(signal.SIGTERM)
+        emulate.wait(WAIT_S)
+    finally:
+        emulate.kill()
+    assert emulate.returncode == 0 and "the IMU (id 200)" in emulate.stdout.read()
