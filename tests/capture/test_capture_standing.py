@@ -220,3 +220,20 @@ def test_command_line_emulate_serves_every_bus_of_the_config(tmp_path):
     finally:
         emulate.kill()
     assert emulate.returncode == 0 and "the IMU (id 200)" in emulate.stdout.read()
+
+
+def test_stances_outside_the_urdf_limits_are_refused_before_anything_opens(tmp_path):
+    """`imu.stances` turning both hip yaws by 0.15 rad (a standing stance) where the URDF allows 0.1."""
+    urdf = (WOLFGANG / "wolfgang.urdf").read_text()
+    head, _, tail = urdf.partition('<joint name="LHipYaw"')
+    tail = tail.replace('<limit lower="-1.5708" upper="1.5708"', '<limit lower="-0.1" upper="0.1"', 1)
+    (tmp_path / "narrow.urdf").write_text(head + '<joint name="LHipYaw"' + tail)
+    data = yaml.safe_load(write_config(tmp_path).read_text())
+    data["urdf"] = "narrow.urdf"
+    data["imu"]["stances"] = [{"RKnee": -0.5, "LKnee": 0.5}, {"LHipYaw": 0.15, "RHipYaw": 0.15}]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data))
+    options = CaptureOptions(robot=tmp_path, out=tmp_path / "s.mcap", port="/dev/no-such-bus", standing=True, yes=True)
+    with pytest.raises(
+        WolfcalError, match=r"(?s)stance 1 of imu\.stances .*LHipYaw = .*limits \[-0\.1000, 0\.1000\].*nothing was"
+    ):
+        run_capture(options, quiet())
