@@ -109,7 +109,8 @@ def test_standing_capture_fits_back_to_the_emulators_mount(tmp_path):
 
 def test_bad_imu_devices_are_named(tmp_path):
     """One emulated OpenCR (id 200, int16 registers), read with configs that name another id, a layout its control
-    table does not hold, and a scale that leaves out g (the OP3 driver's factor 9.80665)."""
+    table does not hold, and a scale that leaves out g (the OP3 driver's factor 9.80665); then the right layout, but
+    the operator does not confirm the torque."""
     served = write_config(tmp_path, OPENCR)
     cases = [
         ({**OPENCR, "id": 201}, r"IMU \(id 201\).*no answer.*'imu\.bus\.id'"),
@@ -129,6 +130,13 @@ def test_bad_imu_devices_are_named(tmp_path):
             with pytest.raises(BusError, match=f"(?s){words}"):
                 run_capture(options, quiet())
             assert not out.exists() and not list(folder.glob("*.partial")), "nothing moved, nothing written"
+        asked: list[str] = []  # the right layout, but the operator says no
+        options = CaptureOptions(robot=served, out=tmp_path / "no.mcap", port=emu.port, standing=True)
+        with pytest.raises(WolfcalError, match="not confirmed"):
+            run_capture(options, quiet(), ask=lambda question: asked.append(question) or False)
+        assert "Torque goes ON on 12 leg joint(s)" in asked[0] and not (tmp_path / "no.mcap").exists()
+        with ServoBuses(load_robot_config(served).servos, emu.port) as bus:
+            assert not any(bus.torque_enabled().values())
 
 
 @pytest.mark.parametrize("bus, words", [
