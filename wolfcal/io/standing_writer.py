@@ -6,7 +6,8 @@ Imu messages: `linear_acceleration` [m/s^2] and `angular_velocity` [rad/s] in th
 `imu.frame`); no orientation (orientation_covariance[0] = -1, REP 145); covariances unknown (zeros).
 
 Durability as `CaptureWriter`: messages go into `<path>.partial`; `flush()` (after each stance) closes the chunk,
-flushes and fsyncs, so a killed capture keeps every flushed message; `close()` writes the summary and renames the
+flushes and fsyncs, so a killed capture keeps every flushed message (`wolfcal recover` copies them into a finished
+file); `close()` writes the summary and renames the
 file to `<path>` (a file without any message is removed instead).
 """
 
@@ -33,8 +34,8 @@ class StandingWriter:
     def __init__(self, path: Path, config: RobotConfig, imu_topic: str, imu_frame: str):
         self.path, self.partial = Path(path), partial_path(Path(path))
         if self.partial.exists():
-            raise WolfcalError(f"{self.partial} exists: an earlier capture did not finish; delete it, then capture "
-                               "again")  # fmt: skip
+            raise WolfcalError(f"{self.partial} exists: an earlier capture did not finish; rescue what it holds with "
+                               f"`wolfcal recover {self.partial}` or delete it, then capture again")  # fmt: skip
         self.joint_topic, self.imu_topic, self.imu_frame = config.joint_states_topic, imu_topic, imu_frame
         self.count = 0
         self._closed = False
