@@ -125,7 +125,12 @@ def intrinsics(
 @friendly_errors
 def capture(
     robot: Path | None = robot_option(),
-    port: str | None = typer.Option(None, "--port", help="Servo bus device (default: the config's servos.port)."),
+    port: str | None = typer.Option(
+        None,
+        "--port",
+        help="Servo bus device (default: the config's servos.port); for several buses (servos.ports) "
+        "DEVICE=PATH,... for each, as `wolfcal emulate` prints.",
+    ),
     camera: str | None = typer.Option(
         None,
         "--camera",
@@ -146,7 +151,7 @@ def capture(
         "not found here is taken from the robot config's folder (poses.yaml).",
     ),
     manual: bool = typer.Option(False, "--manual", help="Manual mode: torque off, you pose the robot."),
-    samples: int | None = typer.Option(None, "--samples", help="Stop after N samples."),
+    samples: int | None = typer.Option(None, "--samples", help="Stop after N samples (--standing: N stances)."),
     out: Path = typer.Option(..., "--out", help="Capture file to write (.mcap)."),
     limp: str | None = typer.Option(
         None,
@@ -154,7 +159,7 @@ def capture(
         help="Manual mode: groups (head, legs, arms, all) or "
         "joints to switch torque off (default: head,legs; with --floor: head).",
     ),
-    yes: bool = typer.Option(False, "--yes", help="Manual mode: switch torque off without asking."),
+    yes: bool = typer.Option(False, "--yes", help="Switch torque off (manual mode) or on (--standing) without asking."),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
     velocity: float | None = typer.Option(None, "--velocity", help="Scripted mode: move speed (rad/s)."),
     binning: int | None = typer.Option(
@@ -182,9 +187,17 @@ def capture(
         "capture did not use, one head view each. Take it three times, the floor tags "
         "moved between.",
     ),
+    standing: bool = typer.Option(
+        False,
+        "--standing",
+        help="Standing samples for the IMU's mount: the legs (torque on) go through the config's "
+        "standing stances (imu.stances, or stances made from the floor stance that turn and tilt the torso), "
+        "each held still; joint states and the IMU (imu.bus) are recorded. No camera.",
+    ),
     force: bool = force_option(),
 ) -> None:
-    """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
+    """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file, or standing
+    samples (joint states and the IMU) with --standing."""
     from wolfcal.capture.gating import GateSettings
     from wolfcal.capture.pipeline import CaptureOptions, run_capture
 
@@ -207,6 +220,7 @@ def capture(
         force=force,
         floor=floor,
         floor_check=check,
+        standing=standing,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)

@@ -1,4 +1,9 @@
-"""`wolfcal emulate`: serve a robot's bus on a pty until Ctrl-C (or SIGTERM); prints the port to give --port."""
+"""`wolfcal emulate`: serve a robot's buses on ptys until Ctrl-C (or SIGTERM); prints what to give --port first.
+
+Every bus of the config (`servos.ports`, or `servos.port`) gets a pty; with `imu.bus`, the IMU answers on its bus
+(`wolfcal.hardware.emulator.imu`), mounted as the truth file says (the IMU joint's frame correction and
+`imu_bias_m_s2`, as `wolfcal simulate --system imu` writes them) with the simulator's accelerometer and gyro noise.
+"""
 
 from __future__ import annotations
 
@@ -9,9 +14,13 @@ from pathlib import Path
 from wolfcal.capture.poses import joint_limits, load_poses
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.emulator.faults import parse_fault
+from wolfcal.hardware.emulator.imu import ImuSpec
+from wolfcal.hardware.emulator.process import port_option
 from wolfcal.hardware.emulator.serve import serve
 from wolfcal.hardware.emulator.spec import load_truth, spec_from_config
-from wolfcal.robot.robot import load_robot
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.imu_mount import IMU_KEY, imu_joint
+from wolfcal.robot.robot import Robot, load_robot
 
 
 def emulate(
@@ -45,11 +54,14 @@ def emulate(
         poses,
         hold_s,
         str(truth.resolve()) if truth is not None else None,
+        imu=emulated_imu(robot, corrections, truth),
     )
 
-    def ready(port: str) -> None:
-        say(port)
-        say(f"emulating {len(spec.servos)} servos of {robot.config.path} on {port} (Ctrl-C to stop)")
+    def ready(ports: dict[str | None, str]) -> None:
+        say(port_option(ports))
+        imu = f" and the IMU (id {spec.imu.layout.id})" if spec.imu is not None else ""
+        where = ", ".join(f"{device} on {path}" if device else path for device, path in ports.items())
+        say(f"emulating {len(spec.servos)} servos{imu} of {robot.config.path}: {where} (Ctrl-C to stop)")
 
     def stop(signum: int, frame) -> None:
         raise KeyboardInterrupt
@@ -59,3 +71,19 @@ def emulate(
         serve(spec, ready)
     except KeyboardInterrupt:
         say("emulator stopped")
+
+
+def emulated_imu(robot: Robot, truth: Corrections | None, truth_path: Path | None, seed: int = 0) -> ImuSpec | None:
+    """The IMU on the bus when the config has `imu.bus`: its true mount from `truth` (the IMU joint's frame
+    correction), its bias from the truth file's `imu_bias_m_s2` (0 without), the simulator's noise."""
+    from wolfcal.sim.imu import ImuSimOptions, load_corrections_bias
+
+    section = robot.config.sections.get(IMU_KEY)
+    if section is None or section.bus is None:
+        return None
+    imu_joint(robot)  # a clear error for an IMU frame the URDF lacks
+    robot.config.floor_config("the emulated IMU measures gravity along the floor's normal: it needs 'floor.soles'")
+    bias = load_corrections_bias(truth_path) if truth_path is not None else [0.0, 0.0, 0.0]
+    noise = ImuSimOptions()
+    return ImuSpec(str(robot.config.path), section.bus, truth or Corrections(), (bias[0], bias[1], bias[2]),
+                   noise.accel_noise, noise.gyro_noise, seed=seed)  # fmt: skip

@@ -36,6 +36,7 @@ class CaptureOptions:
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
     floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
+    standing: bool = False  # standing samples: joint states and the IMU in stances (`wolfcal.capture.standing`)
 
     def __post_init__(self) -> None:
         if self.poses is not None:
@@ -55,7 +56,14 @@ def parse_external(text: str) -> tuple[str, str]:
 
 def check_options(options: CaptureOptions) -> None:
     """Refuse contradictory or out-of-range options and an output file that exists (WolfcalError)."""
-    if options.floor:
+    if options.standing:
+        given = [name for name, on in (("--floor", options.floor), ("--manual", options.manual),
+                 ("--poses", options.poses is not None), ("--camera", options.camera is not None),
+                 ("--external", bool(options.external)), ("--check", options.floor_check)) if on]  # fmt: skip
+        if given:
+            raise WolfcalError(f"--standing records joint states and the IMU in the config's standing stances, no "
+                               f"camera: drop {', '.join(given)}")  # fmt: skip
+    elif options.floor:
         if options.poses is not None:
             raise WolfcalError("--floor moves the head through its own grid of floor views: drop --poses (or give "
                                "--manual to turn the head by hand)")  # fmt: skip
@@ -64,8 +72,8 @@ def check_options(options: CaptureOptions) -> None:
     elif options.floor_check:
         raise WolfcalError("--check is the held-out floor capture: give it with --floor")
     elif options.manual == (options.poses is not None):
-        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual or --floor")
-    if options.camera is None and not options.external:
+        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual, --floor or --standing")
+    if options.camera is None and not options.external and not options.standing:
         raise WolfcalError("give at least one camera: --camera SOURCE (head camera) and/or --external NAME=SOURCE")
     names = [parse_external(text)[0] for text in options.external]
     if len(set(names)) != len(names):

@@ -3,9 +3,10 @@ MCAP file.
 
 Checks everything it can before anything moves, opens the bus, the cameras (`cameras`) and the writer, runs the
 scripted mode (`scripted`), the manual one (`manual`) or a floor capture (`floor`: either with
-standing legs) in a live view, then leaves the torque as --exit-torque says
-(`exit_torque`). The file is written through `CaptureWriter` (each sample durable on return); Ctrl-C, a bus or
-camera failure finish the file with every sample taken so far before the error is reported.
+standing legs) in a live view, then leaves the torque as --exit-torque says (`exit_torque`). A standing capture
+(joint states and the IMU, no camera) is `standing`'s. The file is written through `CaptureWriter` (each sample
+durable on return); Ctrl-C, a bus or camera failure finish the file with every sample taken so far before the error
+is reported.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Callable
 from rich.console import Console
 
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
-from wolfcal.capture.exit_torque import leave_torque
+from wolfcal.capture.exit_torque import leave_torque, say_end
 from wolfcal.capture.floor import (
     check_floor_limp,
     check_views,
@@ -32,6 +33,7 @@ from wolfcal.capture.poses import DEFAULT_VELOCITY, PoseScript, check_collisions
 from wolfcal.capture.scripted import run_scripted
 from wolfcal.capture.session import CaptureSession, CaptureSummary
 from wolfcal.capture.signals import interruption, signals_held, stop_on_signals
+from wolfcal.capture.standing import run_standing
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError
@@ -48,6 +50,8 @@ def run_capture(
 ) -> CaptureSummary:
     """Run a capture; the summary says how many samples the file holds. Errors are WolfcalError subclasses."""
     console = console or Console(stderr=True)
+    if options.standing:
+        return run_standing(options, console, ask)
     check_options(options)
     robot = load_robot(options.robot)
     if robot.config.servos is None:
@@ -92,7 +96,7 @@ def run_capture(
                 bus.recover_port()
                 failed = leave_torque(bus, initial, touched, options.exit_torque)
         failure = failure or interruption(noted)
-    _say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
+    say_end(session.summary, failure, failed, options.exit_torque, bus.port_name, console)
     return session.summary
 
 
@@ -160,26 +164,3 @@ def _plan(
     elif options.floor:
         script = floor_script(robot, options.velocity or DEFAULT_VELOCITY, options.floor_check)
     return script, limp, stances
-
-
-def _say_end(
-    summary: CaptureSummary,
-    failure: BaseException | None,
-    failed: list[str],
-    exit_torque: str,
-    port: str,
-    console: Console,
-) -> None:
-    """What the file holds and how the torque was left; raises the capture's failure (with that said) if any."""
-    saved = f"{summary.samples} sample(s) saved in {summary.path}" if summary.path else "no sample taken, no file"
-    if failed:
-        saved += (
-            f"\ntorque could not be left as chosen (--exit-torque {exit_torque}) on {', '.join(failed)}: "
-            "check these joints before touching the robot"
-        )
-        failure = failure if isinstance(failure, WolfcalError) else BusError(f"{port}: bus failure at exit")
-    if isinstance(failure, WolfcalError):
-        raise type(failure)(f"{failure}\n{saved}") from None
-    console.print(saved)
-    if failure is not None:  # Ctrl-C, SIGTERM, SIGHUP, or an unexpected error (its traceback is wanted)
-        raise failure

@@ -72,7 +72,7 @@ class Tried:
         return f"{self.attempts} attempt(s) in {self.seconds:.2f} s{pauses}"
 
 
-def _with_retries(
+def with_retries(
     transaction: Callable[[], Outcome], comm_result: Callable[[Outcome], int], budget_s: float | None = None
 ) -> tuple[Outcome, Tried]:
     """The outcome of the first attempt of an SDK transaction that communicated, else of the last one the time
@@ -173,7 +173,7 @@ class DynamixelBus:
         joint = self.joints[self.ids.index(sid)] if sid in self.ids else "?"
         return f"{joint} (id {sid})"
 
-    def _comm_text(self, result: int, tried: Tried | None = None) -> str:
+    def comm_text(self, result: int, tried: Tried | None = None) -> str:
         """The SDK's words for a communication result, with 'timeout' and how it was tried."""
         text = self.ph.getTxRxResult(result).replace("[TxRxResult] ", "")
         kind = "timeout: no answer in time" if result == sdk.COMM_RX_TIMEOUT else "no valid answer"
@@ -184,9 +184,9 @@ class DynamixelBus:
         """Ping every configured servo; one BusError lists every missing id and unexpected model number."""
         problems, models = [], {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
-            (model, result, _), tried = _with_retries(partial(self.ph.ping, self.port, sid), itemgetter(1))
+            (model, result, _), tried = with_retries(partial(self.ph.ping, self.port, sid), itemgetter(1))
             if result != sdk.COMM_SUCCESS:
-                problems.append(f"{joint} (id {sid}): no answer ({self._comm_text(result, tried)})")
+                problems.append(f"{joint} (id {sid}): no answer ({self.comm_text(result, tried)})")
                 continue
             models[joint] = model
             expected = self.servos.models.get(joint)
@@ -239,14 +239,14 @@ class DynamixelBus:
                 failed_at[culprit] += 1
             return result
 
-        result, tried = _with_retries(attempt, lambda result: result)
+        result, tried = with_retries(attempt, lambda result: result)
         if result == sdk.COMM_SUCCESS:
             return
         # the servo most attempts failed at: on a busy host one attempt can fail earlier, at a servo whose answer
         # was merely slow, while the silent servo fails every other attempt
         who = self._name(failed_at.most_common(1)[0][0]) if failed_at else "a servo"
         raise BusError(
-            f"{self.port_name}: sync read of {what} failed at {who}: {self._comm_text(result, tried)}; "
+            f"{self.port_name}: sync read of {what} failed at {who}: {self.comm_text(result, tried)}; "
             "check that servo's cable and power"
         )
 
@@ -264,11 +264,11 @@ class DynamixelBus:
         addr, size = item
         write = {1: self.ph.write1ByteTxRx, 2: self.ph.write2ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
         unsigned = value & ((1 << (8 * size)) - 1)
-        (result, error), tried = _with_retries(partial(write, self.port, sid, addr, unsigned), itemgetter(0))
+        (result, error), tried = with_retries(partial(write, self.port, sid, addr, unsigned), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
             raise BusError(
                 f"{self.port_name}: writing address {addr} of {self._name(sid)} failed: "
-                f"{self._comm_text(result, tried)}; check that servo's cable and power"
+                f"{self.comm_text(result, tried)}; check that servo's cable and power"
             )
         if error & 0x7F:
             raise BusError(
@@ -287,11 +287,11 @@ class DynamixelBus:
         result = {}
         for joint, sid in zip(self.joints, self.ids, strict=True):
             read = partial(self.ph.read1ByteTxRx, self.port, sid, P.TORQUE_ENABLE[0])
-            (value, comm, _), tried = _with_retries(read, itemgetter(1))
+            (value, comm, _), tried = with_retries(read, itemgetter(1))
             if comm != sdk.COMM_SUCCESS:
                 raise BusError(
                     f"{self.port_name}: reading the torque state of {self._name(sid)} failed: "
-                    f"{self._comm_text(comm, tried)}"
+                    f"{self.comm_text(comm, tried)}"
                 )
             result[joint] = bool(value)
         return result
@@ -317,11 +317,11 @@ class DynamixelBus:
             group.addParam(self.servos.ids[joint], list((tick & 0xFFFFFFFF).to_bytes(4, "little")))
         result = group.txPacket()
         if result != sdk.COMM_SUCCESS:
-            raise BusError(f"{self.port_name}: sending goal positions failed: {self._comm_text(result)}")
+            raise BusError(f"{self.port_name}: sending goal positions failed: {self.comm_text(result)}")
 
     def reboot(self, joint: str) -> None:
         """Reboot a servo: clears its hardware error; its torque comes back off."""
         sid = self.servos.ids[joint]
-        (result, _), tried = _with_retries(partial(self.ph.reboot, self.port, sid), itemgetter(0))
+        (result, _), tried = with_retries(partial(self.ph.reboot, self.port, sid), itemgetter(0))
         if result != sdk.COMM_SUCCESS:
-            raise BusError(f"{self.port_name}: rebooting {self._name(sid)} failed: {self._comm_text(result, tried)}")
+            raise BusError(f"{self.port_name}: rebooting {self._name(sid)} failed: {self.comm_text(result, tried)}")

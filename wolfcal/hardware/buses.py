@@ -3,7 +3,8 @@
 `ServoBuses` offers what `DynamixelBus` offers for one port, over one `DynamixelBus` per device: `joints` fixes the
 array order (the config's `servos.ids` order, whatever bus a joint is on); reads are one sync read per bus, taken one
 after the other; writes go to the bus of each joint. A failure raises the `BusError` of the bus it happened on, which
-names that device.
+names that device. `port` (the command line's --port) replaces the config's device: one path for a robot on one bus,
+or DEVICE=PATH,... naming each device of `servos.ports` (e.g. the ptys `wolfcal emulate` serves them on).
 """
 
 from __future__ import annotations
@@ -26,11 +27,7 @@ class ServoBuses:
 
     def __init__(self, servos: ServoConfig, port: str | None = None, baudrate: int | None = None):
         buses = servos.buses
-        if port is not None and len(buses) > 1:
-            raise WolfcalError(
-                f"--port {port}: the robot config lists {len(buses)} servo buses under 'servos.ports' "
-                f"({', '.join(buses)}); give their devices there instead of --port"
-            )
+        paths = port_paths(port, list(buses))
         joint_of = {sid: joint for joint, sid in servos.ids.items()}
         self.servos = servos
         self.joints = list(servos.ids)
@@ -40,11 +37,18 @@ class ServoBuses:
             joints = [joint_of[sid] for sid in ids]
             config = replace(servos, port=device, ids={j: servos.ids[j] for j in joints}, ports={},
                              models={j: m for j, m in servos.models.items() if j in joints})  # fmt: skip
-            bus = DynamixelBus(config, port if port is not None else device, baudrate)
+            bus = DynamixelBus(config, paths.get(device, device), baudrate)
             self.buses.append(bus)
             self.bus_of.update({joint: bus for joint in joints})
         self.port_names = [bus.port_name for bus in self.buses]
         self.port_name = ", ".join(self.port_names)
+
+    def bus_on(self, device: str | None) -> DynamixelBus:
+        """The bus of a config device (`servos.port` or one of `servos.ports`); None: the first bus."""
+        for bus in self.buses:
+            if device is None or bus.servos.port == device:
+                return bus
+        raise WolfcalError(f"{device}: not a servo bus of the robot config ({', '.join(self.servos.buses)})")
 
     # --- connection -----------------------------------------------------------------------------------------
     def open(self) -> ServoBuses:
@@ -136,3 +140,26 @@ class ServoBuses:
 
     def reboot(self, joint: str) -> None:
         self.bus_of[joint].reboot(joint)
+
+
+def port_paths(port: str | None, devices: list[str]) -> dict[str, str]:
+    """Config device -> path to open, from --port: {} without it; one path for a robot on one bus; DEVICE=PATH,...
+    naming every device for several (WolfcalError otherwise)."""
+    if port is None:
+        return {}
+    if "=" not in port:
+        if len(devices) > 1:
+            raise WolfcalError(
+                f"--port {port}: the robot config lists {len(devices)} servo buses under 'servos.ports' "
+                f"({', '.join(devices)}); give DEVICE=PATH for each, comma-separated, or drop --port"
+            )
+        return {devices[0]: port}
+    paths = dict(item.strip().partition("=")[::2] for item in port.split(",") if item.strip())
+    unknown, missing = sorted(set(paths) - set(devices)), [d for d in devices if d not in paths]
+    if unknown or missing or not all(paths.values()):
+        raise WolfcalError(
+            f"--port {port}: give DEVICE=PATH for each servo bus of the robot config ({', '.join(devices)})"
+            + (f"; {', '.join(unknown)} is not one" if unknown else "")
+            + (f"; {', '.join(missing)} is missing" if missing else "")
+        )
+    return paths

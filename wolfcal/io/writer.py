@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import BinaryIO
 
 import numpy as np
 from mcap.writer import CompressionType
@@ -66,6 +67,33 @@ def camera_info_message(camera: CameraModel, binning: tuple[int, int], stamp_ns:
         "binning_y": int(binning[1]),
         "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
     }
+
+
+def start_file(
+    file: BinaryIO, config: RobotConfig, topics: list[tuple[str, str]], metadata: dict[str, dict[str, str]]
+) -> tuple[McapWriter, dict[str, int], dict[str, Callable]]:
+    """Start a capture file in `file`: header (profile ros2), a schema per message type and a channel per
+    (topic, type), the metadata records, the URDF and robot config attached; flushed and fsynced. Returns the
+    writer, the channel id by topic and the CDR encoder by message type."""
+    mcap = McapWriter(file, chunk_size=_NEVER, compression=CompressionType.NONE)
+    mcap.start(profile="ros2", library=LIBRARY)
+    schema_ids, channels, encoders = {}, {}, {}
+    for topic, datatype in topics:
+        if datatype not in schema_ids:
+            schema_ids[datatype] = mcap.register_schema(datatype, "ros2msg", MSGDEFS[datatype].encode())
+            encoders[datatype] = serialize_dynamic(datatype, MSGDEFS[datatype])[datatype]
+        channels[topic] = mcap.register_channel(topic, "cdr", schema_ids[datatype])
+    for name, record in metadata.items():
+        mcap.add_metadata(name, record)
+    now = time.time_ns()
+    for name, media_type, source in (
+        (URDF_ATTACHMENT, "application/xml", config.urdf),
+        (CONFIG_ATTACHMENT, "application/yaml", config.path),
+    ):
+        mcap.add_attachment(now, now, name, media_type, Path(source).read_bytes())
+    mcap.flush()
+    os.fsync(file.fileno())
+    return mcap, channels, encoders
 
 
 class CaptureWriter:
@@ -124,27 +152,11 @@ class CaptureWriter:
 
     def _start(self, config: RobotConfig) -> tuple[McapWriter, dict[str, int], dict[str, Callable]]:
         """Header, schemas, channels (by topic), camera metadata and attachments; durable on return."""
-        mcap = McapWriter(self._file, chunk_size=_NEVER, compression=CompressionType.NONE)
-        mcap.start(profile="ros2", library=LIBRARY)
         topics = [(config.joint_states_topic, JOINT_STATE)]
         for image_topic, info_topic in self.topics.values():
             topics += [(image_topic, COMPRESSED_IMAGE), (info_topic, CAMERA_INFO)]
-        schema_ids, channels, encoders = {}, {}, {}
-        for topic, datatype in topics:
-            if datatype not in schema_ids:
-                schema_ids[datatype] = mcap.register_schema(datatype, "ros2msg", MSGDEFS[datatype].encode())
-                encoders[datatype] = serialize_dynamic(datatype, MSGDEFS[datatype])[datatype]
-            channels[topic] = mcap.register_channel(topic, "cdr", schema_ids[datatype])
-        mcap.add_metadata(CAMERAS_METADATA, {name: image for name, (image, _) in self.topics.items()})
-        now = time.time_ns()
-        for name, media_type, source in (
-            (URDF_ATTACHMENT, "application/xml", config.urdf),
-            (CONFIG_ATTACHMENT, "application/yaml", config.path),
-        ):
-            mcap.add_attachment(now, now, name, media_type, Path(source).read_bytes())
-        mcap.flush()
-        os.fsync(self._file.fileno())
-        return mcap, channels, encoders
+        metadata = {CAMERAS_METADATA: {name: image for name, (image, _) in self.topics.items()}}
+        return start_file(self._file, config, topics, metadata)
 
     def add_sample(
         self,

@@ -7,6 +7,8 @@ Config (all lengths SI):
       topic: /imu/data        # sensor_msgs/msg/Imu (linear_acceleration [m/s^2])
       bias: 0.03              # accelerometer bias level per axis [m/s^2] (1 sigma), default 0.03
       stances: [{...}, ...]   # standing stances of `capture --standing` (joint -> reading [rad]; others 0)
+      bus: {id, accel, gyro}  # the IMU as a device on the servo bus, read by `capture --standing`
+                              #   (`wolfcal.robot.imu_bus`)
 
 The mount correction is a frame correction of that fixed joint (origin_new = origin * Exp(rx, ry, rz), in the
 joint's child frame: the IMU's own axes), named `imu.rx`, `imu.ry` [rad]. `imu.rz` (a turn about the IMU's z axis)
@@ -19,7 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from wolfcal.errors import WolfcalError
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import floor_frames
+from wolfcal.robot.imu_bus import ImuBusConfig, parse_imu_bus
 from wolfcal.robot.parameters import Parameter
 from wolfcal.robot.robot import Robot
 
@@ -38,16 +45,17 @@ class ImuConfig:
     topic: str = DEFAULT_TOPIC  # sensor_msgs/msg/Imu
     bias: float = DEFAULT_BIAS_M_S2  # accelerometer bias level per axis [m/s^2]
     stances: tuple[dict[str, float], ...] = ()  # standing stances for `capture --standing` [rad]
+    bus: ImuBusConfig | None = None  # the IMU on the servo bus (`capture --standing`); None: not on the bus
 
 
 def parse_imu_config(path: Path, data: object) -> ImuConfig:
     """The `imu:` section of the robot config at `path`; a WolfcalError naming the key otherwise."""
     if not isinstance(data, dict):
-        raise WolfcalError(f"{path}: 'imu' must be a mapping {{frame, topic, bias, stances}}")
-    unknown = sorted(set(data) - {"frame", "topic", "bias", "stances"})
+        raise WolfcalError(f"{path}: 'imu' must be a mapping {{frame, topic, bias, stances, bus}}")
+    unknown = sorted(set(data) - {"frame", "topic", "bias", "stances", "bus"})
     if unknown:
         raise WolfcalError(
-            f"{path}: unknown key(s) under 'imu': {', '.join(unknown)} (known: frame, topic, bias, stances)"
+            f"{path}: unknown key(s) under 'imu': {', '.join(unknown)} (known: frame, topic, bias, stances, bus)"
         )
     frame, topic = data.get("frame"), data.get("topic", DEFAULT_TOPIC)
     if not isinstance(frame, str) or not frame:
@@ -65,7 +73,8 @@ def parse_imu_config(path: Path, data: object) -> ImuConfig:
         isinstance(s, dict) and all(isinstance(v, (int, float)) for v in s.values()) for s in stances
     ):
         raise WolfcalError(f"{path}: 'imu.stances' must be a list of joint -> reading [rad] maps")
-    return ImuConfig(frame, topic, float(bias), tuple({str(k): float(v) for k, v in s.items()} for s in stances))
+    bus = parse_imu_bus(path, data["bus"]) if data.get("bus") is not None else None
+    return ImuConfig(frame, topic, float(bias), tuple({str(k): float(v) for k, v in s.items()} for s in stances), bus)
 
 
 def imu_config(robot: Robot, why: str = "the IMU needs it") -> ImuConfig:
@@ -97,3 +106,14 @@ def imu_parameters(robot: Robot) -> list[Parameter]:
     joint = imu_joint(robot)
     return [Parameter(f"imu.{name}", "frame", joint, component, "rad", MOUNT_PRIOR_RAD)
             for name, component in zip(("rx", "ry"), MOUNT_COMPONENTS)]  # fmt: skip
+
+
+def true_gravity(robot: Robot, truth: Corrections, q_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The floor's normal in the IMU frame (N, 3) and R_floor_imu (N, 3, 3) at true angles q_true (N, J), under the
+    true geometry (`truth` without its offsets: q_true are the angles themselves)."""
+    geometry = Corrections(frames=truth.frames, tags=truth.tags)
+    link, soles = imu_config(robot).frame, list(robot.config.floor_config().soles)
+    poses = robot.model.link_poses(q_true, [link, *soles], geometry, base=robot.config.base_link)
+    T_base_floor = floor_frames(np.stack([poses[s] for s in soles]))
+    R_floor_imu = np.swapaxes(T_base_floor[:, :3, :3], 1, 2) @ poses[link][:, :3, :3]
+    return np.swapaxes(R_floor_imu, 1, 2)[:, :, 2], R_floor_imu

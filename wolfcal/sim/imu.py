@@ -29,8 +29,8 @@ from wolfcal.io.msgdefs import IMU, JOINT_STATE, MSGDEFS, stamp_dict
 from wolfcal.io.truth import truth_paths
 from wolfcal.outputs import check_outputs
 from wolfcal.robot.corrections import Corrections
-from wolfcal.robot.floor import floor_frames, moved_stance
-from wolfcal.robot.imu_mount import imu_config, imu_joint
+from wolfcal.robot.floor import moved_stance
+from wolfcal.robot.imu_mount import imu_config, imu_joint, true_gravity
 from wolfcal.robot.robot import Robot
 from wolfcal.robot.stances import STANDING_RULE, off_plane, sole_gaps, stance_readings
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
@@ -118,17 +118,6 @@ def imu_truth(robot: Robot, offset_joints: tuple[str, ...], rng: np.random.Gener
     mount = np.zeros(6)
     mount[3:5] = rng.normal(0.0, MOUNT_SIGMA_RAD, 2)
     return Corrections(dict(truth.offsets), {**truth.frames, imu_joint(robot): mount}, dict(truth.tags))
-
-
-def true_gravity(robot: Robot, truth: Corrections, q_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The floor's normal in the IMU frame (N, 3) and R_floor_imu (N, 3, 3) at true angles q_true (N, J), under the
-    true geometry (`truth` without its offsets: q_true are the angles themselves)."""
-    geometry = Corrections(frames=truth.frames, tags=truth.tags)
-    link, soles = imu_config(robot).frame, list(robot.config.floor_config().soles)
-    poses = robot.model.link_poses(q_true, [link, *soles], geometry, base=robot.config.base_link)
-    T_base_floor = floor_frames(np.stack([poses[s] for s in soles]))
-    R_floor_imu = np.swapaxes(T_base_floor[:, :3, :3], 1, 2) @ poses[link][:, :3, :3]
-    return np.swapaxes(R_floor_imu, 1, 2)[:, :, 2], R_floor_imu
 
 
 def standing_samples_direct(

@@ -7,13 +7,14 @@ and publishes the true joint angles for the simulated camera.
 
 Modules, one job each:
 - `servo`: one servo: its control table and how its true angle moves;
+- `imu`: the IMU as a device on the bus (`imu.bus`): gravity in its frame from the true angles, mount and bias;
 - `faults`: the --fault syntax, what each fault does to a servo, when it starts;
 - `emulated_operator`: the operator of manual capture, posing the limp joints;
 - `spec`: what to emulate, from a robot config and a truth file;
 - `instructions`: the servos' answers to instruction packets;
-- `bus`: the emulated bus over time (servos, operator, faults; bytes in, bytes out);
+- `bus`: one emulated bus over time (servos, operator, faults, the IMU when on it; bytes in, bytes out);
 - `true_state`: the true joint angles shared with the simulated camera;
-- `serve`: the pty serving loop;
+- `serve`: the pty serving loop (a pty per bus of `servos.ports`, one process);
 - `process`: the emulator in a process of its own.
 The `wolfcal emulate` command is `wolfcal.capture.emulate` (it reads robot configs and poses files).
 The names imported below are the package's public interface.

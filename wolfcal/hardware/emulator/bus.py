@@ -1,5 +1,5 @@
-"""The emulated bus over time: its servos, the emulated operator and scheduled faults; instruction bytes in,
-reply bytes out."""
+"""The emulated bus over time: its servos, the emulated operator and scheduled faults, and the IMU when it is on
+this bus; instruction bytes in, reply bytes out."""
 
 from __future__ import annotations
 
@@ -8,17 +8,19 @@ import time
 from wolfcal.hardware import protocol as P
 from wolfcal.hardware.emulator.emulated_operator import EmulatedOperator
 from wolfcal.hardware.emulator.faults import Fault, FaultSchedule, inject
-from wolfcal.hardware.emulator.instructions import answer
+from wolfcal.hardware.emulator.imu import EmulatedImu
+from wolfcal.hardware.emulator.instructions import Device, answer
 from wolfcal.hardware.emulator.servo import EmulatedServo
 from wolfcal.hardware.emulator.spec import EmulatorSpec
 
 
 class EmulatedBus:
     """Feed it the bytes from the master side of the pty, get the reply bytes; `step` advances its servos to now
-    (monotonic clock [s])."""
+    (monotonic clock [s]). `imu`: the emulated IMU when it is on this bus (its registers refreshed before each read
+    addressed to it)."""
 
-    def __init__(self, spec: EmulatorSpec):
-        self.spec = spec
+    def __init__(self, spec: EmulatorSpec, imu: EmulatedImu | None = None):
+        self.spec, self.imu = spec, imu
         self.servos = {sid: EmulatedServo(sid, s) for sid, s in spec.servos.items()}
         self.parser = P.PacketParser()
         self.last = time.monotonic()
@@ -49,7 +51,13 @@ class EmulatedBus:
     def handle(self, data: bytes) -> bytes:
         """The replies to the complete instruction packets received so far (a corrupted one gets none)."""
         out = bytearray()
+        devices: dict[int, Device] = {**self.servos}
+        if self.imu is not None:
+            devices[self.imu.sid] = self.imu
         for packet in self.parser.feed(data):
-            if packet.crc_ok:
-                out += answer(self.servos, packet)
+            if not packet.crc_ok:
+                continue
+            if self.imu is not None and packet.servo_id == self.imu.sid and packet.instruction == P.READ:
+                self.imu.refresh(time.monotonic())
+            out += answer(devices, packet)
         return bytes(out)

@@ -4,11 +4,34 @@ answers nor acts; a `crc` fault corrupts its replies."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Protocol
+
 from wolfcal.hardware import protocol as P
-from wolfcal.hardware.emulator.servo import FIRMWARE, EmulatedServo
+from wolfcal.hardware.emulator.servo import FIRMWARE
 
 
-def answer(servos: dict[int, EmulatedServo], packet: P.Packet) -> bytes:
+class Device(Protocol):
+    """What the answers need of a device on the bus (an `EmulatedServo`, the `EmulatedImu`)."""
+
+    sid: int
+    table: bytearray
+    corrupt: bool
+    late_replies: int
+    stale_replies: int
+    held: bytes
+
+    @property
+    def answers(self) -> bool: ...
+
+    def read(self, item: tuple[int, int], signed: bool = False) -> int: ...
+
+    def write(self, item: tuple[int, int], value: int) -> None: ...
+
+    def error_byte(self) -> int: ...
+
+
+def answer(servos: Mapping[int, Device], packet: P.Packet) -> bytes:
     """The reply bytes (possibly none) to one instruction packet with a good CRC."""
     inst, params = packet.instruction, packet.params
     if inst == P.SYNC_READ and packet.servo_id == P.BROADCAST_ID and len(params) >= 4:
@@ -48,7 +71,7 @@ def _address_and_length(params: bytes) -> tuple[int, int]:
     return int.from_bytes(params[0:2], "little"), int.from_bytes(params[2:4], "little")
 
 
-def _status(servo: EmulatedServo, error: int, params: bytes = b"") -> bytes:
+def _status(servo: Device, error: int, params: bytes = b"") -> bytes:
     if not servo.answers:
         return b""
     if servo.late_replies:  # this reply would come after the master gave up waiting
@@ -65,15 +88,15 @@ def _status(servo: EmulatedServo, error: int, params: bytes = b"") -> bytes:
     return held + bytes(packet)
 
 
-def _read(servo: EmulatedServo, addr: int, length: int) -> bytes:
-    if addr + length > P.CONTROL_TABLE_SIZE:
+def _read(servo: Device, addr: int, length: int) -> bytes:
+    if addr + length > len(servo.table):
         return _status(servo, P.ERR_ACCESS)
     return _status(servo, 0, bytes(servo.table[addr : addr + length]))
 
 
-def _write(servo: EmulatedServo, addr: int, data: bytes) -> int:
+def _write(servo: Device, addr: int, data: bytes) -> int:
     """Write `data` into the control table at `addr`; the status error number (0: done)."""
-    if addr + len(data) > P.CONTROL_TABLE_SIZE:
+    if addr + len(data) > len(servo.table):
         return P.ERR_ACCESS
     if addr == P.TORQUE_ENABLE[0] and data[:1] == b"\x01" and servo.read(P.HARDWARE_ERROR_STATUS):
         return P.ERR_RESULT_FAIL  # a servo in hardware error refuses torque until rebooted

@@ -13,6 +13,13 @@ from wolfcal.hardware.emulator.spec import EmulatorSpec
 START_TIMEOUT_S = 30.0
 
 
+def port_option(ports: dict[str | None, str]) -> str:
+    """`--port` of `wolfcal capture` for emulated buses: the pty of one bus, or DEVICE=PTY,... for several."""
+    if list(ports) == [None]:
+        return ports[None]
+    return ",".join(f"{device}={path}" for device, path in ports.items())
+
+
 def _child(spec: EmulatorSpec, conn: Connection) -> None:
     try:
         serve(spec, conn.send, conn)
@@ -21,10 +28,12 @@ def _child(spec: EmulatorSpec, conn: Connection) -> None:
 
 
 class EmulatorProcess:
-    """The emulator in its own process: `with EmulatorProcess(spec) as emu: ... emu.port ...`."""
+    """The emulator in its own process: `with EmulatorProcess(spec) as emu: ... emu.port ...`; `ports`: the pty of
+    each bus by config device (`servos.ports`; {None: port} for one bus), `port` the first."""
 
     def __init__(self, spec: EmulatorSpec):
         self.port = ""
+        self.ports: dict[str | None, str] = {}
         ctx = multiprocessing.get_context("spawn")
         self.conn, child_conn = ctx.Pipe()
         self.process = ctx.Process(target=_child, args=(spec, child_conn), daemon=True)
@@ -33,7 +42,13 @@ class EmulatorProcess:
         if not self.conn.poll(START_TIMEOUT_S):
             self.stop()
             raise WolfcalError(f"the bus emulator did not start within {START_TIMEOUT_S:.0f} s")
-        self.port = self.conn.recv()
+        self.ports = self.conn.recv()
+        self.port = next(iter(self.ports.values()))
+
+    @property
+    def port_option(self) -> str:
+        """What `wolfcal capture --port` takes for these buses: the pty, or DEVICE=PTY,... for several."""
+        return port_option(self.ports)
 
     def inject(self, fault: Fault) -> None:
         """Inject a fault now; returns once the emulator has (every reply after this shows the fault)."""
