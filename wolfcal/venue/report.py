@@ -9,6 +9,7 @@ import numpy as np
 
 from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.fit.result import load_result
+from wolfcal.hardware.buses import port_paths
 from wolfcal.hardware.emulator import load_truth, read_true_angles
 from wolfcal.robot.robot import Robot
 from wolfcal.venue.check import FIT_FOLDER
@@ -20,7 +21,9 @@ def truth_errors(robot: Robot, options: VenueOptions) -> dict | None:
     (`evaluate.accuracy.camera_pose_errors`), when the camera is the simulated one and the emulator has a truth."""
     if options.camera != "sim" or robot.config.servos is None:
         return None
-    _, truth_path = read_true_angles(options.port or robot.config.servos.port)
+    servos = robot.config.servos
+    paths = port_paths(options.port, list(servos.buses)) or {device: device for device in servos.buses}
+    truth_path = next((path for path in (read_true_angles(port)[1] for port in paths.values()) if path), None)
     if not truth_path:
         return None
     fitted = load_result(options.out / FIT_FOLDER).corrections
