@@ -1,6 +1,7 @@
 """Shared fixtures: the default Wolfgang robot and its head camera (2048x1536, strong barrel distortion)."""
 
 import os
+import signal
 import subprocess
 from pathlib import Path
 
@@ -69,12 +70,20 @@ def camera():
     return load_camera_info(WOLFGANG / "basler_acA2040.yaml")
 
 
+def default_sigint() -> None:
+    """Popen `preexec_fn`: the child takes Ctrl-C as from a terminal even when the tests run where SIGINT is ignored
+    (a background job inherits SIG_IGN, and Python keeps it ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def stop_after_sample(
     command: list[str], cwd: Path, signum: int, sample: int = 2, wait_s: float = 60.0
 ) -> tuple[int, str]:
     """Run a `wolfcal capture` command, send it `signum` once it has printed 'sample N' (that sample is on disk:
     an event, no sleeping), and return its exit code and everything it wrote to stderr."""
-    process = subprocess.Popen(command, cwd=cwd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    process = subprocess.Popen(
+        command, cwd=cwd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, preexec_fn=default_sigint
+    )
     try:
         for line in process.stderr:
             if line.startswith(f"sample {sample}"):

@@ -568,7 +568,7 @@ def plan(
         "--criterion",
         help="I (average variance of the delivered poses: "
         "camera or soles) | D (determinant) | A (trace) | E (worst direction); "
-        "default: the preset's (README).",
+        "default: I for head_camera from the head camera and for leg from an external camera, else D.",
     ),
     velocity: float = typer.Option(0.5, "--velocity", help="Capture move speed [rad/s] (for the order and time)."),
     margin: float = typer.Option(0.1, "--margin", help="Kept from each joint limit [rad]."),

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from conftest import default_sigint
 
 from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.errors import WolfcalError
@@ -130,7 +131,9 @@ def test_one_command_from_start_to_deploy_files_pins_the_camera(robot, tmp_path)
 def run_until(command: list[str], marker: str, count: int, signum: int) -> tuple[int, str]:
     """Run a command, send it `signum` once its stderr has shown `count` lines starting with `marker` (an event,
     no sleeping); its exit code and everything it wrote to stderr."""
-    process = subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    process = subprocess.Popen(
+        command, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, preexec_fn=default_sigint
+    )
     seen, lines = 0, []
     try:
         for line in process.stderr:

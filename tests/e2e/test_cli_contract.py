@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import typer
 import yaml
+from conftest import default_sigint
 from typer.testing import CliRunner
 
 import wolfcal
@@ -42,8 +43,9 @@ def cli(*args: object) -> tuple[int, str]:
 
 
 def process(*args: object, cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "wolfcal.cli", *map(str, args)], cwd=cwd, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    command = [sys.executable, "-m", "wolfcal.cli", *map(str, args)]
+    return subprocess.Popen(command, cwd=cwd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)  # fmt: skip
 
 
 def test_version_is_the_package_version():

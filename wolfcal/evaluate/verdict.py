@@ -51,9 +51,9 @@ NAMES = {"head_camera": "the head joints (--free head_camera)", "leg": "the legs
 
 FLOOR_ADVICE = "capture more floor samples, nearer and farther tags, and fit the legs with them (--free leg)"
 # The held-out floor capture that measures the ground error at the check distance to about 1 cm is the check
-# (README, "The venue check"; its size on a robot: `robot.floor.check_size`): the standing legs' shared tick
-# rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's corner bias only over the places
-# it lies in (`tag_std_m`)
+# (docs/workflows/floor-check.md, "The held-out check"; its size on a robot: `robot.floor.check_size`): the standing
+# legs' shared tick rounding averages only over stances (floor_ground's `rounding_std_m`), and a tag's corner bias only
+# over the places it lies in (`tag_std_m`)
 NO_CHECK_STANCES = (
     "list standing poses none of the fit's in the robot config's floor.check_stances "
     "(`wolfcal.robot.floor.moved_stance` makes them), then take `wolfcal capture --floor --check` "

@@ -42,6 +42,7 @@ from wolfcal.robot.robot import Robot
 
 BATCH = 4000  # configurations of the joints that move the tags drawn at a time
 VIEWS_PER_BODY = 128  # head camera: configurations of the head drawn for each of them
+VIEWS_AT_A_TIME = 16_384  # configurations judged at once (bounds the memory of a batch's link poses)
 MAX_DRAWN = 1_000_000  # configurations drawn at most
 HOPELESS_DRAWN = 100_000  # give up after this many configurations without a single candidate
 CLEARANCE_M = 0.005  # smallest distance kept between two bodies of a candidate pose [m]
@@ -226,15 +227,9 @@ def draw_candidates(
     factored = bool(aim) and not {robot.joint_names[k] for k in aim} & set(tag_joints)  # tags don't move with the head
     rejected = {"tags not in view": 0, "self-collision": 0, "tags hidden by the body": 0}
 
-    def batch() -> tuple[np.ndarray, np.ndarray, int]:
-        q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
-        free = collisions.collision_free(q, CLEARANCE_M, ~moved)  # the pairs the viewer's joints do not move
-        rejected["self-collision"] += int((~free).sum()) * per_body
-        q_body = q[free]
-        q = np.repeat(q_body, per_body, axis=0)
-        q[:, aim] = rng.uniform(lo[aim], hi[aim], size=(len(q), len(aim)))  # the viewer's joints, drawn anew
-        visible = tag_views(robot, camera, q, tag_ids, np.repeat(base_tag_poses(robot, q_body, ids), per_body, 0)
-                            if factored else None)  # fmt: skip
+    def keep(q: np.ndarray, T_base_tag: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The configurations q (m, J) that show the tags, with what each shows."""
+        visible = tag_views(robot, camera, q, tag_ids, T_base_tag)
         ok = pose_ok(robot, camera, visible)
         rejected["tags not in view"] += int((~ok).sum())
         q, visible = q[ok], visible[ok]
@@ -245,7 +240,24 @@ def draw_candidates(
             visible &= line_of_sight(robot, camera, q, collisions)
         ok = pose_ok(robot, camera, visible)
         rejected["tags hidden by the body"] += int((~ok).sum())
-        return q[ok], visible[ok], BATCH * per_body
+        return q[ok], visible[ok]
+
+    def batch() -> tuple[np.ndarray, np.ndarray, int]:
+        q = rng.uniform(lo, hi, size=(BATCH, len(lo)))
+        free = collisions.collision_free(q, CLEARANCE_M, ~moved)  # the pairs the viewer's joints do not move
+        rejected["self-collision"] += int((~free).sum()) * per_body
+        q_body = q[free]
+        q = np.repeat(q_body, per_body, axis=0)
+        q[:, aim] = rng.uniform(lo[aim], hi[aim], size=(len(q), len(aim)))  # the viewer's joints, drawn anew
+        bodies = max(1, VIEWS_AT_A_TIME // per_body)  # the views of this many bodies are judged at a time
+        kept = []
+        for start in range(0, len(q_body), bodies):
+            part = q[start * per_body : (start + bodies) * per_body]
+            body_part = q_body[start : start + bodies]
+            kept.append(keep(part, np.repeat(base_tag_poses(robot, body_part, ids), per_body, 0) if factored else None))
+        if not kept:
+            return q[:0], np.zeros((0, len(robot.config.tag_ids)), dtype=bool), BATCH * per_body
+        return np.concatenate([k[0] for k in kept]), np.concatenate([k[1] for k in kept]), BATCH * per_body
 
     q, visible, drawn = draw_until(n, batch)
     if not len(q):

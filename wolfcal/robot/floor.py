@@ -16,9 +16,10 @@ from wolfcal.robot.stances import stance_readings
 
 # why `floor:` is needed, for the error that names the robot config when it is missing
 FLOOR_NEEDED = "the ground error needs its soles and standing pose: add floor: {soles: [...], standing: {...}}"
-# The held-out floor capture that checks a fit (`capture --floor --check`, README "The venue check"): head views per
-# check stance (the standing legs' tick rounding averages over stances, not over views in one stance) and how many
-# times it is taken, the floor tags moved between (a tag's corner bias averages over the places it lies in)
+# The held-out floor capture that checks a fit (`capture --floor --check`; docs/workflows/floor-check.md, "The held-out
+# check"): head views per check stance (the standing legs' tick rounding averages over stances, not over views in one
+# stance) and how many times it is taken, the floor tags moved between (a tag's corner bias averages over the places it
+# lies in)
 CHECK_VIEWS_PER_STANCE = 1
 CHECK_LAYOUTS = 3
 
@@ -88,7 +89,7 @@ def stance_poses(robot: Robot, check: bool = False) -> np.ndarray:
     if not stances:
         raise WolfcalError(f"{robot.config.path}: --check takes the held-out floor capture in 'floor.check_stances', "
                            "which the config does not give: list standing poses there, none of the fit's "
-                           "(README, \"The venue check\"; `wolfcal.robot.floor.moved_stance` makes them)")  # fmt: skip
+                           "(see the floor-check workflow in the docs, \"The held-out check\")")  # fmt: skip
     return stance_readings(stances, robot.model)
 
 
