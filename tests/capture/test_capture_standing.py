@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import WOLFGANG
+from conftest import WOLFGANG, default_sigint
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rich.console import Console
@@ -169,7 +169,7 @@ def test_an_interrupted_standing_capture_keeps_its_stances_and_restores_the_torq
         command = [sys.executable, "-m", "wolfcal.cli", "capture", "--standing", "--robot", str(WOLFGANG),
                    "--port", emu.port, "--yes", "--velocity", "3", "--out", str(out)]  # fmt: skip
         process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
-                                   cwd=Path(__file__).resolve().parents[2])  # fmt: skip
+                                   cwd=Path(__file__).resolve().parents[2], preexec_fn=default_sigint)  # fmt: skip
         try:
             assert process.stderr is not None
             for line in process.stderr:  # an event: stance 2 is held and on disk
