@@ -12,6 +12,7 @@ import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.field.model import KIDSIZE
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot, load_robot
 
@@ -67,6 +68,19 @@ def robot():
 def camera():
     """2048x1536, plumb_bob with k1 = -0.286 (the Wolfgang's Basler camera)."""
     return load_camera_info(WOLFGANG / "basler_acA2040.yaml")
+
+
+def wolfgang_on_a_field(folder: Path, **field) -> Path:
+    """Wolfgang's robot.yaml (absolute paths, no external cameras) with a KidSize field and the robot placed at
+    (-3, 0, 0) (or the `field` section given), written to folder/robot.yaml."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
+    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
+    data.pop("external_cameras", None)
+    dimensions = {name: getattr(KIDSIZE, name) for name in KIDSIZE.__dataclass_fields__}
+    data["field"] = field or {"dimensions": dimensions, "robot_at": {"x": -3.0, "y": 0.0, "yaw": 0.0}}
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return folder / "robot.yaml"
 
 
 def stop_after_sample(

@@ -182,6 +182,12 @@ def capture(
         "capture did not use, one head view each. Take it three times, the floor tags "
         "moved between.",
     ),
+    field: bool = typer.Option(
+        False,
+        "--field",
+        help="Field views: the robot stands at the config's field.robot_at (legs held at floor.standing, torque on) "
+        "and the head sweeps the field.sweep pan/tilt grid over the field's lines, or is turned by hand with --manual.",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file."""
@@ -207,6 +213,7 @@ def capture(
         force=force,
         floor=floor,
         floor_check=check,
+        field=field,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)

@@ -36,6 +36,7 @@ class CaptureOptions:
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
     floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
+    field: bool = False  # field views: standing at field.robot_at, the head sweeps the field (`wolfcal.capture.field`)
 
     def __post_init__(self) -> None:
         if self.poses is not None:
@@ -55,7 +56,16 @@ def parse_external(text: str) -> tuple[str, str]:
 
 def check_options(options: CaptureOptions) -> None:
     """Refuse contradictory or out-of-range options and an output file that exists (WolfcalError)."""
-    if options.floor:
+    if options.field:
+        if options.floor or options.floor_check:
+            raise WolfcalError("give one of --field (views of the field's lines) and --floor (views of floor tags)")
+        if options.poses is not None:
+            raise WolfcalError("--field moves the head through its own sweep (field.sweep in the robot config): drop "
+                               "--poses (or give --manual to turn the head by hand)")  # fmt: skip
+        if options.camera is None or options.external:
+            raise WolfcalError("--field records the head camera's views of the field: give --camera SOURCE and no "
+                               "--external")  # fmt: skip
+    elif options.floor:
         if options.poses is not None:
             raise WolfcalError("--floor moves the head through its own grid of floor views: drop --poses (or give "
                                "--manual to turn the head by hand)")  # fmt: skip
@@ -64,7 +74,7 @@ def check_options(options: CaptureOptions) -> None:
     elif options.floor_check:
         raise WolfcalError("--check is the held-out floor capture: give it with --floor")
     elif options.manual == (options.poses is not None):
-        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual or --floor")
+        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual, --floor or --field")
     if options.camera is None and not options.external:
         raise WolfcalError("give at least one camera: --camera SOURCE (head camera) and/or --external NAME=SOURCE")
     names = [parse_external(text)[0] for text in options.external]
