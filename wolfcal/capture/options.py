@@ -36,7 +36,7 @@ class CaptureOptions:
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
     floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
-    field: bool = False  # field views: standing at field.robot_at, the head sweeps the field (`wolfcal.capture.field`)
+    field_views: bool = False  # --field: standing at field.robot_at, the head sweeps the field (`capture.field`)
 
     def __post_init__(self) -> None:
         if self.poses is not None:
@@ -56,7 +56,7 @@ def parse_external(text: str) -> tuple[str, str]:
 
 def check_options(options: CaptureOptions) -> None:
     """Refuse contradictory or out-of-range options and an output file that exists (WolfcalError)."""
-    if options.field:
+    if options.field_views:
         if options.floor or options.floor_check:
             raise WolfcalError("give one of --field (views of the field's lines) and --floor (views of floor tags)")
         if options.poses is not None:

@@ -57,7 +57,9 @@ def run_capture(
     script, limp, stances = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
     touched = script.joints if script else [*(stances[0] if stances else {}), *limp]
-    mode = ("floor " if options.floor else "field " if options.field else "") + ("scripted" if script else "manual")
+    mode = ("floor " if options.floor else "field " if options.field_views else "") + (
+        "scripted" if script else "manual"
+    )
     status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
     with stop_on_signals(), ServoBuses(robot.config.servos, options.port) as bus:
@@ -67,7 +69,9 @@ def run_capture(
             script = _checked_script(options, robot, script, bus, status, console)
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
-            confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor or options.field)
+            confirm_limp(
+                [j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor or options.field_views
+            )
         writer = _open_outputs(options, robot, cameras, bus.port_names)
         view = LiveView(status, coverage, console)
         sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
@@ -105,7 +109,7 @@ def _checked_script(
     Floor views the robot cannot take are left out (with a note); a colliding pose of a poses file is refused.
     """
     start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
-    if options.field:
+    if options.field_views:
         script, note = without_collisions(robot, script, start, "--field")
         status.target = options.samples or len(script.poses)
     elif options.floor:
@@ -123,7 +127,7 @@ def _open_outputs(
     options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], ports: list[str]
 ) -> CaptureWriter:
     """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
-    open_sources(cameras, robot, ports, field=options.field)
+    open_sources(cameras, robot, ports, field=options.field_views)
     try:
         streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
         return CaptureWriter(options.out, robot.config, streams, options.image_format)
@@ -151,13 +155,13 @@ def _plan(
     """(poses to drive through, joints to switch off for the operator, the stances' readings [rad] the legs hold
     in turn while the operator turns the head (manual floor capture)), each checked before anything moves."""
     script = load_poses(options.poses, limits) if options.poses else None
-    standing = options.floor or options.field
+    standing = options.floor or options.field_views
     limp = parse_limp(options.limp or ("head" if standing else "head,legs"), robot) if options.manual else []
     stances: list[dict[str, float]] = []
     if standing and options.manual:
-        check_floor_limp(robot, limp, "--field" if options.field else "--floor")
+        check_floor_limp(robot, limp, "--field" if options.field_views else "--floor")
         legs = floor_joints(robot)[0]
-        targets = [field_standing(robot)] if options.field else stance_targets(robot, options.floor_check)
+        targets = [field_standing(robot)] if options.field_views else stance_targets(robot, options.floor_check)
         stances = [{j: q for j, q in t.items() if j in legs} for t in targets]
         if len(stances) > 1 and options.samples is None:
             key = "floor.check_stances" if options.floor_check else "floor.stances"
@@ -165,7 +169,7 @@ def _plan(
                                "capture takes an equal share of --samples in each: give --samples")  # fmt: skip
     elif options.floor:
         script = floor_script(robot, options.velocity or DEFAULT_VELOCITY, options.floor_check)
-    elif options.field:
+    elif options.field_views:
         script = field_script(robot, options.velocity or DEFAULT_VELOCITY)
     return script, limp, stances
 

@@ -56,7 +56,7 @@ class CaptureSession:
         self.options, self.view, self.coverage, self.status = options, view, coverage, status
         self.gates = options.gates
         self.window = StillnessWindow(bus.joints, self.gates)
-        self.field = options.field  # field views: the gates look for the field's lines, not for tags
+        self.field = options.field_views  # field views: the gates look for the field's lines, not for tags
         tags = list(robot.config.tags) + (list(robot.config.floor_config().tags) if options.floor else [])
         self.tag_ids = {t.id for t in tags}  # floor capture: the floor tags too
         self.families = sorted({t.family for t in tags})

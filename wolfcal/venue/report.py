@@ -53,6 +53,9 @@ def report_lines(figures: dict) -> list[str]:
         before, after = (floor["models"][m]["rows"][k] for m in ("before", "after"))
         lines.append(f"held-out floor views ({floor['capture']['samples']} in {floor['capture']['stances']} stances): "
                      f"ground error at {distance:g} m {_cm(before)} -> {_cm(after)} (1 sigma)")  # fmt: skip
+    elif figures.get("field_views"):
+        lines.append(f"field views: {figures['field_views']} fitted with the feet views; ground error from field "
+                     "views: n/a (it needs held-out field views, the robot placed elsewhere: not taken)")  # fmt: skip
     else:
         lines.append("held-out floor views: none measured (no floor tags, or too few held-out views of them)")
     truth = figures.get("truth")
