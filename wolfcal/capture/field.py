@@ -24,7 +24,7 @@ from wolfcal.robot.robot import Robot
 
 FIELD_NEEDED_CAPTURE = "capture --field needs the field's dimensions and where the robot stands on it"
 STANDING_NEEDED_CAPTURE = "capture --field needs the standing soles and readings: add floor: {soles, standing}"
-DEFAULT_PANS = 5
+DEFAULT_PANS = 7
 DEFAULT_PAN_SPAN_RAD = 1.2  # about 70 deg to either side: the touch lines and the penalty area from beside it
 DEFAULT_TILT_AIM_M = (1.5, 3.5)  # floor points ahead of the robot the default tilts aim at [m]
 
