@@ -20,7 +20,14 @@ import yaml
 from conftest import WOLFGANG, stop_after_sample, wolfgang_on_a_field
 from rich.console import Console
 
-from wolfcal.capture.field import DEFAULT_PAN_SPAN_RAD, DEFAULT_PANS, DEFAULT_TILT_AIM_M, field_script
+from wolfcal.capture.field import (
+    DEFAULT_PAN_SPAN_RAD,
+    DEFAULT_PANS,
+    DEFAULT_TILT_AIM_M,
+    field_script,
+    one_sided_note,
+)
+from wolfcal.capture.floor import without_collisions
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import DynamixelBus, rad_to_ticks
@@ -87,6 +94,8 @@ def test_the_default_sweep_stands_and_aims_at_the_floor_ahead(tmp_path):
         assert pose.joints["RKnee"] == -0.2618 and pose.joints["LKnee"] == 0.2618 and pose.joints["RHipPitch"] == 0
         for joint, value in pose.joints.items():
             assert robot.model.joints[joint].lower <= value <= robot.model.joints[joint].upper
+    kept, _ = without_collisions(robot, script, {}, "--field")
+    assert one_sided_note(robot, kept) is None  # the Wolfgang's capsules leave out pans to the right, not all of them
     first_row = [p.joints["HeadPan"] for p in script.poses[:DEFAULT_PANS]]
     assert first_row == sorted(first_row) and [p.joints["HeadPan"] for p in script.poses[DEFAULT_PANS:]] == sorted(
         first_row, reverse=True
@@ -111,7 +120,9 @@ def test_field_capture_stands_at_the_sweep_and_sees_the_lines(tmp_path):
         assert rad_to_ticks(values["RKnee"]) == rad_to_ticks(-0.2618) and rad_to_ticks(values["LHipPitch"]) == 2048
         assert sample.images["head"].decode().ndim == 3  # colour: the lines are told from the turf by colour
     assert not any(torque.values())  # --exit-torque restore: as found (off)
-    assert "field-line points" in console.file.getvalue()
+    text = console.file.getvalue()
+    assert "field-line points" in text
+    assert "note: --field: every view turns HeadPan to one side (+0 to +29 deg)" in text  # pans 0 and 0.5 rad
 
 
 def test_views_that_show_no_field_line_are_not_taken(tmp_path):

@@ -27,6 +27,9 @@ STANDING_NEEDED_CAPTURE = "capture --field needs the standing soles and readings
 DEFAULT_PANS = 7
 DEFAULT_PAN_SPAN_RAD = 1.2  # about 70 deg to either side: the touch lines and the penalty area from beside it
 DEFAULT_TILT_AIM_M = (1.5, 3.5)  # floor points ahead of the robot the default tilts aim at [m]
+# a sweep whose views all lie on one side of straight ahead (beyond this pan [rad]) lets the camera's yaw and the
+# robot's place on the field trade against each other: said before anything moves
+ONE_SIDE_PAN_RAD = 0.2
 
 
 def sweep_joints(robot: Robot) -> dict[str, str]:
@@ -98,3 +101,19 @@ def field_script(robot: Robot, velocity: float) -> PoseScript:
                 name = f"pan {np.rad2deg(pan):+.0f} deg, {name}"
             poses.append(Pose(f"field {name}", {**standing, **head}))
     return PoseScript(poses, velocity)
+
+
+def one_sided_note(robot: Robot, script: PoseScript) -> str | None:
+    """A note when the views of a field script (after any left out) do not look to both sides: no pan reading
+    below -ONE_SIDE_PAN_RAD or none above it; None when they do (or the camera has no pan joint)."""
+    pan = sweep_joints(robot).get("pan")
+    if pan is None or not script.poses:
+        return None
+    pans = [pose.joints[pan] for pose in script.poses]
+    if min(pans) < -ONE_SIDE_PAN_RAD and max(pans) > ONE_SIDE_PAN_RAD:
+        return None
+    return (
+        f"--field: every view turns {pan} to one side ({np.rad2deg(min(pans)):+.0f} to {np.rad2deg(max(pans)):+.0f}"
+        " deg): the camera's yaw and the robot's place on the field then trade against each other and the fit can "
+        "settle far off; give 'field.sweep.pan' readings on both sides of straight ahead"
+    )

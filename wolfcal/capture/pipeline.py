@@ -16,7 +16,7 @@ from rich.console import Console
 
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
-from wolfcal.capture.field import field_script, field_standing
+from wolfcal.capture.field import field_script, field_standing, one_sided_note
 from wolfcal.capture.floor import (
     check_floor_limp,
     check_views,
@@ -111,6 +111,7 @@ def _checked_script(
     start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
     if options.field_views:
         script, note = without_collisions(robot, script, start, "--field")
+        note = "\nnote: ".join(n for n in (note, one_sided_note(robot, script)) if n) or None
         status.target = options.samples or len(script.poses)
     elif options.floor:
         script, note = without_collisions(robot, script, start)

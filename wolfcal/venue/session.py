@@ -24,7 +24,7 @@ import numpy as np
 from wolfcal.atomic import write_text_atomic
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
-from wolfcal.capture.field import field_script
+from wolfcal.capture.field import field_script, one_sided_note
 from wolfcal.capture.floor import check_views, floor_joints, floor_script, without_collisions
 from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.poses import PoseScript, check_collisions
@@ -87,8 +87,9 @@ def _field_phase(robot: Robot, options: VenueOptions, start: dict[str, float], s
     if robot.config.floor is not None and robot.config.floor.tags:
         say("note: --field: field views instead of the floor views (the floor tags are not looked at)")
     script, note = without_collisions(robot, field_script(robot, options.velocity), start, "--field")
-    if note:
-        say(f"note: {note}")
+    for line in (note, one_sided_note(robot, script)):
+        if line:
+            say(f"note: {line}")
     script, _ = shortest_order(robot, script, standing_pose(robot), start)
     x, y, yaw = robot.config.field_config().robot_at
     stand = (f"on the field at field.robot_at (x {x:+.2f} m, y {y:+.2f} m, facing {np.rad2deg(yaw):+.0f} deg from "
