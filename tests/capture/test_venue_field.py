@@ -3,8 +3,9 @@ simulated camera, which renders the robot's feet on its stand, then the field fr
 file's `field_pose`.
 
 Known truth: the demo's camera mount (turned by about 5.6 deg) and the robot's true place on the field, 0.2 m and
-6 deg away from `field.robot_at`. Checks: one command from start to the deploy files, the camera within 0.05 deg and
-2 mm of the truth, the place within 5 cm, the ground error from field views "n/a" (no held-out field views);
+6 deg away from `field.robot_at`. Checks: one command from start to the deploy files, the camera within 0.1 deg (the
+field fit's tolerance) and 2 mm of the truth, the place within 5 cm, the ground error from field views "n/a" (no
+held-out field views);
 a config without a field refused before the bus opens.
 """
 
@@ -61,7 +62,7 @@ def test_one_field_session_from_start_to_deploy_files(tmp_path):
     assert metrics["field_views"] == metrics["samples"]["field"] == 8 and metrics["samples"]["floor"] == 0
     assert metrics["held_out_floor"] is None
     rotation, translation = camera_pose_errors(robot, load_result(out / "fit").corrections, truth)
-    assert np.rad2deg(rotation.max()) < 0.05 and translation.max() < 0.002, (rotation.max(), translation.max())
+    assert np.rad2deg(rotation.max()) < 0.1 and translation.max() < 0.002, (rotation.max(), translation.max())
     params = {p["name"]: p["value"] for p in yaml.safe_load((out / "fit" / "result.yaml").read_text())["parameters"]}
     assert np.hypot(params["field_pose.x"] - PLACE["x"], params["field_pose.y"] - PLACE["y"]) < 0.05
     assert abs(np.rad2deg(params["field_pose.yaw"] - PLACE["yaw"])) < 0.5

@@ -237,7 +237,7 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras
                 driver.move_only(goals, {j: q for j, q in poses[0].joints.items() if j in legs})
                 state.robot_time_s += time.monotonic() - since
                 state.save(options.out)
-                _confirm(f"Stand the robot {phase.stand} (its legs hold the standing pose); go on?", options, ask,
+                _confirm(f"Stand the robot {phase.stand}; its legs hold the standing pose. Go on?", options, ask,
                          say)  # fmt: skip
                 since = time.monotonic()
             if phase.name == "field" or not driver.cameras:  # the simulated camera shows the field or the robot
