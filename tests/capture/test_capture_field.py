@@ -136,6 +136,30 @@ def test_views_that_show_no_field_line_are_not_taken(tmp_path):
     assert not (tmp_path / "sky.mcap").exists()
 
 
+@pytest.mark.slow
+def test_manual_field_capture_keeps_the_legs_standing(tmp_path):
+    """--manual: the legs hold floor.standing (torque on), the emulated operator turns the limp head."""
+    config = config_with(tmp_path)
+    robot = load_robot(config)
+    head_poses = [{"HeadPan": 0.3, "HeadTilt": -0.4}, {"HeadPan": -0.3, "HeadTilt": -0.3}]
+    truth = tmp_path / "truth.yaml"
+    truth.write_text(yaml.safe_dump({"truth": TRUTH.to_dict(), "field_pose": PLACE}))
+    spec = spec_from_config(robot.config, TRUTH, operator_poses=head_poses, hold_s=0.9, truth_path=str(truth),
+                            operator_speed=5.0)  # fmt: skip
+    out = tmp_path / "manual.mcap"
+    with EmulatorProcess(spec) as emu:
+        summary = run_capture(options(config, out, emu.port, manual=True, samples=2, yes=True, exit_torque="on"),
+                              quiet())  # fmt: skip
+        with DynamixelBus(robot.config.servos, emu.port) as bus:
+            torque = bus.torque_enabled()
+    assert summary.samples == 2
+    for sample in read_capture(out, robot.config).samples:
+        values = dict(zip(sample.joint_names, sample.positions, strict=True))
+        assert rad_to_ticks(values["RKnee"]) == rad_to_ticks(-0.2618) and rad_to_ticks(values["LHipPitch"]) == 2048
+        assert head_ticks(values) in {head_ticks(p) for p in head_poses}
+    assert torque["RKnee"] and torque["HeadPan"] and not torque["RElbow"]  # --exit-torque on: the touched joints
+
+
 def test_a_stopped_field_capture_keeps_its_samples_and_leaves_the_torque_as_chosen(tmp_path):
     config = config_with(tmp_path, {"pan": [-0.3, 0.0, 0.3, 0.6], "tilt": [-0.4]})
     robot = load_robot(config)
