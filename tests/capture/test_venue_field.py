@@ -64,8 +64,11 @@ def test_one_field_session_from_start_to_deploy_files(tmp_path):
     rotation, translation = camera_pose_errors(robot, load_result(out / "fit").corrections, truth)
     assert np.rad2deg(rotation.max()) < 0.1 and translation.max() < 0.002, (rotation.max(), translation.max())
     params = {p["name"]: p["value"] for p in yaml.safe_load((out / "fit" / "result.yaml").read_text())["parameters"]}
-    assert np.hypot(params["field_pose.x"] - PLACE["x"], params["field_pose.y"] - PLACE["y"]) < 0.05
-    assert abs(np.rad2deg(params["field_pose.yaw"] - PLACE["yaw"])) < 0.5
+    place_error = np.hypot(params["field_pose.x"] - PLACE["x"], params["field_pose.y"] - PLACE["y"])
+    yaw_error = abs(np.rad2deg(params["field_pose.yaw"] - PLACE["yaw"]))
+    assert place_error < 0.05 and yaw_error < 0.5, (place_error, yaw_error)
+    assert metrics["truth"]["place_mm"] == pytest.approx(1000 * place_error)  # the report against the truth
+    assert metrics["truth"]["place_yaw_deg"] == pytest.approx(yaw_error)
     assert all((out / name).is_file() for name in DEPLOY_FILES) and metrics["deploy"]["written"]
 
 
