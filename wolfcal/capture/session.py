@@ -133,6 +133,7 @@ class CaptureSession:
             return reason
         self.status.still = "yes"
         reason, self.status.sharpness, points = why_not_field_view(frames[HEAD_CAMERA], self.gates)
+        self.status.line_points = points
         if reason:
             return reason
         self.bus.check_hardware()
