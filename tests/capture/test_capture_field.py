@@ -181,7 +181,7 @@ def test_field_capture_refuses_bad_input_before_anything_moves(tmp_path):
     out = tmp_path / "x.mcap"
     (tmp_path / "bare").mkdir()
     no_field = config_with(tmp_path / "bare", field=False)
-    with pytest.raises(WolfcalError, match=r"has no 'field:'; capture --field needs the field's dimensions"):
+    with pytest.raises(WolfcalError, match=r"has no 'field:'; field views need the field's dimensions"):
         run_capture(options(no_field, out, "/dev/null"), quiet())
     outside = config_with(tmp_path, {"pan": [0.0, 3.0], "tilt": [-0.4]})
     with pytest.raises(WolfcalError, match=r"'field.sweep.pan' has 3.0000 rad outside the URDF limits of HeadPan"):

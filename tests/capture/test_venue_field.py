@@ -79,6 +79,6 @@ def test_a_field_session_without_a_field_is_refused_before_the_bus_opens(tmp_pat
     config.write_text(yaml.safe_dump(data))
     options = VenueOptions(robot=config, out=tmp_path / "session", camera="sim", port="/dev/null", yes=True,
                            field_views=True)  # fmt: skip
-    with pytest.raises(WolfcalError, match=r"has no 'field:'; capture --field needs the field's dimensions"):
+    with pytest.raises(WolfcalError, match=r"has no 'field:'; field views need the field's dimensions"):
         run_venue(options, say=lambda line: None)
     assert not (tmp_path / "session").exists()

@@ -22,8 +22,10 @@ from wolfcal.robot.aim import aim_head, aim_joints, ball_position
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 
-FIELD_NEEDED_CAPTURE = "capture --field needs the field's dimensions and where the robot stands on it"
-STANDING_NEEDED_CAPTURE = "capture --field needs the standing soles and readings: add floor: {soles, standing}"
+FIELD_NEEDED_CAPTURE = (
+    "field views need the field's dimensions and where the robot stands: add field: {dimensions, robot_at}"
+)
+STANDING_NEEDED_CAPTURE = "field views need the standing soles and readings: add floor: {soles, standing}"
 DEFAULT_PANS = 7
 DEFAULT_PAN_SPAN_RAD = 1.2  # about 70 deg to either side: the touch lines and the penalty area from beside it
 DEFAULT_TILT_AIM_M = (1.5, 3.5)  # floor points ahead of the robot the default tilts aim at [m]
