@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import signal
+import subprocess
 import sys
 from pathlib import Path
 
@@ -200,3 +201,8 @@ def test_field_capture_refuses_bad_input_before_anything_moves(tmp_path):
     with pytest.raises(WolfcalError, match="--field keeps the legs standing with torque on; --limp names RHipYaw"):
         run_capture(options(config, out, "/dev/null", manual=True, limp="head,legs"), quiet())
     assert not out.exists()
+    run = subprocess.run([sys.executable, "-m", "wolfcal.cli", "capture", "--field", "--robot", str(no_field),
+                          "--camera", "sim", "--port", "/dev/null", "--out", str(out)], cwd=ROOT, capture_output=True,
+                         text=True, timeout=WAIT_S)  # fmt: skip
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert "has no 'field:'" in run.stderr and not out.exists()
