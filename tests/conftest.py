@@ -13,6 +13,7 @@ import yaml
 
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.camera.model import CameraModel
+from wolfcal.field.model import KIDSIZE
 from wolfcal.observations import Observations
 from wolfcal.robot.robot import Robot, load_robot
 
@@ -74,6 +75,19 @@ def default_sigint() -> None:
     """Popen `preexec_fn`: the child takes Ctrl-C as from a terminal even when the tests run where SIGINT is ignored
     (a background job inherits SIG_IGN, and Python keeps it ignored)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def wolfgang_on_a_field(folder: Path, **field) -> Path:
+    """Wolfgang's robot.yaml (absolute paths, no external cameras) with a KidSize field and the robot placed at
+    (-3, 0, 0) (or the `field` section given), written to folder/robot.yaml."""
+    data = yaml.safe_load((WOLFGANG / "robot.yaml").read_text())
+    data["urdf"] = str((WOLFGANG / data["urdf"]).resolve())
+    data["camera"]["intrinsics"] = str((WOLFGANG / data["camera"]["intrinsics"]).resolve())
+    data.pop("external_cameras", None)
+    dimensions = {name: getattr(KIDSIZE, name) for name in KIDSIZE.__dataclass_fields__}
+    data["field"] = field or {"dimensions": dimensions, "robot_at": {"x": -3.0, "y": 0.0, "yaw": 0.0}}
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    return folder / "robot.yaml"
 
 
 def stop_after_sample(

@@ -194,6 +194,12 @@ def capture(
         "standing stances (imu.stances, or stances made from the floor stance that turn and tilt the torso), "
         "each held still; joint states and the IMU (imu.bus) are recorded. No camera.",
     ),
+    field: bool = typer.Option(
+        False,
+        "--field",
+        help="Field views: the robot stands at the config's field.robot_at (legs held at floor.standing, torque on) "
+        "and the head sweeps the field.sweep pan/tilt grid over the field's lines, or is turned by hand with --manual.",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Capture still poses (joint angles + an image and camera info per camera) into an MCAP file, or standing
@@ -221,6 +227,7 @@ def capture(
         floor=floor,
         floor_check=check,
         standing=standing,
+        field_views=field,
     )
     ask = (lambda question: typer.confirm(question, default=False)) if sys.stdin.isatty() else None
     run_capture(options, ask=ask)
@@ -257,8 +264,15 @@ def venue(
         None, "--intrinsics", help="Head camera's camera_info YAML (default: the config's)."
     ),
     exit_torque: str = typer.Option("restore", "--exit-torque", help="Torque at the end: restore | on | off."),
+    field: bool = typer.Option(
+        False,
+        "--field",
+        help="Field views instead of floor views: the robot stands at the config's field.robot_at and the head "
+        "sweeps field.sweep; the fit takes the feet views and the field's lines together.",
+    ),
 ) -> None:
-    """Recalibrate the head camera in one session: planned feet views, floor views, fit, check, deploy files."""
+    """Recalibrate the head camera in one session: planned feet views, floor or field views, fit, check, deploy
+    files."""
     from wolfcal.venue.options import VenueOptions
     from wolfcal.venue.session import run_venue
 
@@ -276,6 +290,7 @@ def venue(
         binning=binning,
         intrinsics=intrinsics,
         exit_torque=exit_torque,
+        field_views=field,
     )
     options.velocity = options.velocity if velocity is None else velocity
     options.acceleration = options.acceleration if acceleration is None else acceleration

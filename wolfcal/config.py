@@ -666,19 +666,32 @@ class FieldConfig:
 
     dimensions: FieldDimensions
     robot_at: tuple[float, float, float]  # x, y [m], yaw [rad] of the standing robot's floor frame on the field
+    # `field.sweep`: the head's pan and tilt readings [rad] a field capture goes through (a grid, pan x tilt);
+    # a key left out: the default of `wolfcal.capture.field`
+    sweep: dict[str, tuple[float, ...]] = field(default_factory=dict)
 
 
 def _field(path: Path, data) -> FieldConfig:
     """`field:` with the field's `dimensions` [m] and the robot's place `robot_at: {x, y, yaw}` [m, m, rad]."""
     r = _Reader(path, data, "field")
-    r.check_keys(("dimensions", "robot_at"))
+    r.check_keys(("dimensions", "robot_at"), ("sweep",))
     dimensions = r.data["dimensions"]
     if not isinstance(dimensions, dict):
         r.fail("'dimensions' must be a mapping of the field's sizes [m] (see the robot config reference)")
     at = _Reader(path, r.data["robot_at"], "field.robot_at")
     at.check_keys(("x", "y", "yaw"))
+    sweep = _Reader(path, r.data.get("sweep") or {}, "field.sweep")
+    sweep.check_keys((), ("pan", "tilt"))
+    angles = {}
+    for key, values in sweep.data.items():
+        ok = isinstance(values, list) and values and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                         and np.isfinite(v) for v in values)  # fmt: skip
+        if not ok:
+            raise WolfcalError(f"{path}: 'field.sweep.{key}' must be a non-empty list of angles [rad], found "
+                               f"{values!r}")  # fmt: skip
+        angles[key] = tuple(float(v) for v in values)
     return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"),
-                       (at.number("x"), at.number("y"), at.number("yaw")))  # fmt: skip
+                       (at.number("x"), at.number("y"), at.number("yaw")), angles)  # fmt: skip
 
 
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:

@@ -56,14 +56,14 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
     return cameras
 
 
-def open_sources(cameras: dict[str, CaptureCamera], robot: Robot, ports: list[str]) -> None:
-    """Open every camera's source (a `sim` one reads the emulators on the servo buses `ports`); on failure the ones
-    already open are closed again."""
+def open_sources(cameras: dict[str, CaptureCamera], robot: Robot, ports: list[str], field: bool = False) -> None:
+    """Open every camera's source (a `sim` one reads the emulators on the servo buses `ports`; with `field` the
+    head camera sees the field the robot stands on); on failure the ones already open are closed again."""
     try:
         for name, camera in cameras.items():
             if camera.source_text == "sim":
                 external = None if name == HEAD_CAMERA else name
-                camera.source = SimCamera(robot, ports, camera.image_model, external=external)
+                camera.source = SimCamera(robot, ports, camera.image_model, external=external, field=field)
             else:
                 camera.source = open_camera(camera.source_text, camera.image_model)
     except BaseException:

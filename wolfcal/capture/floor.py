@@ -37,7 +37,9 @@ def floor_joints(robot: Robot) -> tuple[list[str], list[str]]:
 def stance_targets(robot: Robot, check: bool = False) -> list[dict[str, float]]:
     """`standing_targets` of each stance (`floor.stances`, default `floor.standing`; with `check`
     `floor.check_stances` where given)."""
-    robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
+    floor = robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
+    if not floor.tags:
+        raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; {FLOOR_NEEDED_CAPTURE}")
     return [standing_targets(robot, q, k, check) for k, q in enumerate(stance_poses(robot, check))]
 
 
@@ -49,11 +51,9 @@ def stance_name(robot: Robot, k: int, check: bool = False) -> str:
 
 
 def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, check: bool = False) -> dict[str, float]:
-    """Readings [rad] of a standing pose q (J,) (default `floor.standing`; stance k of the capture (`check`) for
-    messages) for the leg and head servo joints, checked against the URDF limits."""
-    floor = robot.config.floor_config(FLOOR_NEEDED_CAPTURE)
-    if not floor.tags:
-        raise WolfcalError(f"{robot.config.path}: 'floor.tags' lists no floor tag; {FLOOR_NEEDED_CAPTURE}")
+    """Readings [rad] of a standing pose q (J,) (default `floor.standing`; else stance k of the capture (`check`),
+    for messages) for the leg and head servo joints, checked against the URDF limits."""
+    name = "floor.standing" if q is None else stance_name(robot, k, check)
     q = standing_pose(robot) if q is None else q
     legs, head = floor_joints(robot)
     targets = {j: float(q[robot.model.column(j)]) for j in legs + head}
@@ -61,7 +61,7 @@ def standing_targets(robot: Robot, q: np.ndarray | None = None, k: int = 0, chec
                for j, v in targets.items()
                if not robot.model.joints[j].lower <= v <= robot.model.joints[j].upper]  # fmt: skip
     if outside:
-        raise WolfcalError(f"{robot.config.path}: '{stance_name(robot, k, check)}' puts joints outside their URDF "
+        raise WolfcalError(f"{robot.config.path}: '{name}' puts joints outside their URDF "
                            "limits: "
                            + "; ".join(outside))  # fmt: skip
     return targets
@@ -107,32 +107,34 @@ def check_views(robot: Robot, script: PoseScript) -> PoseScript:
     return PoseScript(picked, script.velocity)
 
 
-def without_collisions(robot: Robot, script: PoseScript, start: dict[str, float]) -> tuple[PoseScript, str | None]:
-    """The floor script less the views in which the robot would touch itself (`capture.poses.colliding_poses`,
-    `start`: joint -> rad where the robot stands), and a note on what was left out or not checked; WolfcalError
-    when no view is left."""
+def without_collisions(robot: Robot, script: PoseScript, start: dict[str, float],
+                       mode: str = "--floor") -> tuple[PoseScript, str | None]:  # fmt: skip
+    """The script of standing views (`mode`: --floor or --field, for messages) less the views in which the robot
+    would touch itself (`capture.poses.colliding_poses`, `start`: joint -> rad where the robot stands), and a note
+    on what was left out or not checked; WolfcalError when no view is left."""
     colliding = colliding_poses(robot, script, start)
     if colliding is None:
-        return script, check_collisions(robot, script, "--floor", start)  # the note: nothing checked
+        return script, check_collisions(robot, script, mode, start)  # the note: nothing checked
     if not colliding:
         return script, None
     kept = [pose for pose in script.poses if pose.name not in colliding]
     if not kept:
         left_out = "; ".join(f"{name} ({' and '.join(pair)} would touch)" for name, pair in colliding.items())
-        raise WolfcalError(f"--floor: every floor view would make the robot touch itself, nothing was moved: "
+        raise WolfcalError(f"{mode}: every {mode[2:]} view would make the robot touch itself, nothing was moved: "
                            f"{left_out}")  # fmt: skip
     pairs = sorted({" and ".join(pair) for pair in colliding.values()})  # a few link pairs, not every view
-    return PoseScript(kept, script.velocity), (f"--floor: {len(colliding)} of {len(script.poses)} view(s) left out "
+    return PoseScript(kept, script.velocity), (f"{mode}: {len(colliding)} of {len(script.poses)} view(s) left out "
                                                f"(there {', '.join(pairs)} would touch)")  # fmt: skip
 
 
-def check_floor_limp(robot: Robot, limp: list[str]) -> None:
-    """Refuse a manual floor capture that would switch off a joint of the standing legs."""
+def check_floor_limp(robot: Robot, limp: list[str], mode: str = "--floor") -> None:
+    """Refuse a manual capture of standing views (`mode`: --floor or --field) that would switch off a joint of the
+    standing legs."""
     legs, _ = floor_joints(robot)
     standing = [j for j in limp if j in legs]
     if standing:
-        raise WolfcalError(f"--floor keeps the legs standing with torque on; --limp names {', '.join(standing)}: "
-                           "give head joints only (the default with --floor is 'head')")  # fmt: skip
+        raise WolfcalError(f"{mode} keeps the legs standing with torque on; --limp names {', '.join(standing)}: "
+                           f"give head joints only (the default with {mode} is 'head')")  # fmt: skip
 
 
 def stand(session: CaptureSession, targets: dict[str, float], velocity: float) -> None:

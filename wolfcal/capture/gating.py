@@ -2,7 +2,9 @@
 
 Three gates: every joint still to within `tolerance_ticks` over the last `settle_s` seconds of bus readings;
 the image sharp (variance of the Laplacian over the detected tags, or the whole image when none is seen); the
-tag corners stable between two consecutive frames (max corner motion in pixels).
+tag corners stable between two consecutive frames (max corner motion in pixels). A field view (the field's lines,
+no tags) must instead show at least `min_line_points` line points (`wolfcal.field.detect`) and be sharp over the
+whole image.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from wolfcal.field.detect import detect_line_points
 from wolfcal.hardware.bus import JointState
 
 
@@ -23,6 +26,7 @@ class GateSettings:
     min_sharpness: float = 100.0  # variance of the Laplacian over the tags [grey levels^2]
     max_corner_motion_px: float = 0.5  # corner motion between two consecutive frames [px]
     moved_rad: float = 0.05  # manual mode: a joint must move this far from the last sample [rad]
+    min_line_points: int = 40  # field views: line points a view must show
 
 
 class StillnessWindow:
@@ -100,3 +104,18 @@ def why_not_sharp(
         what = "tags changed" if motion == float("inf") else f"tag corners moved {motion:.2f} px"
         return f"{what} between consecutive frames (limit {settings.max_corner_motion_px} px)", value
     return None, value
+
+
+def why_not_field_view(image: np.ndarray, settings: GateSettings) -> tuple[str | None, float, int]:
+    """(reason or None, sharpness of the whole image, line points found) of a field view's frame: a colour image
+    that shows at least `min_line_points` points of the field's lines and is sharp."""
+    if image.ndim != 3:
+        return "grey image: field lines are told from the turf by colour; record the head camera in colour", 0.0, 0
+    points = len(detect_line_points(image).uv)
+    value = sharpness(image, {})
+    if points < settings.min_line_points:
+        return (f"no field lines in view ({points} line points, at least {settings.min_line_points})", value,
+                points)  # fmt: skip
+    if value < settings.min_sharpness:
+        return f"image blurred: sharpness {value:.0f} < {settings.min_sharpness:.0f}", value, points
+    return None, value, points

@@ -37,6 +37,7 @@ class CaptureOptions:
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
     floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
     standing: bool = False  # standing samples: joint states and the IMU in stances (`wolfcal.capture.standing`)
+    field_views: bool = False  # --field: standing at field.robot_at, the head sweeps the field (`capture.field`)
 
     def __post_init__(self) -> None:
         if self.poses is not None:
@@ -59,10 +60,20 @@ def check_options(options: CaptureOptions) -> None:
     if options.standing:
         given = [name for name, on in (("--floor", options.floor), ("--manual", options.manual),
                  ("--poses", options.poses is not None), ("--camera", options.camera is not None),
-                 ("--external", bool(options.external)), ("--check", options.floor_check)) if on]  # fmt: skip
+                 ("--external", bool(options.external)), ("--check", options.floor_check),
+                 ("--field", options.field_views)) if on]  # fmt: skip
         if given:
             raise WolfcalError(f"--standing records joint states and the IMU in the config's standing stances, no "
                                f"camera: drop {', '.join(given)}")  # fmt: skip
+    elif options.field_views:
+        if options.floor or options.floor_check:
+            raise WolfcalError("give one of --field (views of the field's lines) and --floor (views of floor tags)")
+        if options.poses is not None:
+            raise WolfcalError("--field moves the head through its own sweep (field.sweep in the robot config): drop "
+                               "--poses (or give --manual to turn the head by hand)")  # fmt: skip
+        if options.camera is None or options.external:
+            raise WolfcalError("--field records the head camera's views of the field: give --camera SOURCE and no "
+                               "--external")  # fmt: skip
     elif options.floor:
         if options.poses is not None:
             raise WolfcalError("--floor moves the head through its own grid of floor views: drop --poses (or give "
@@ -72,7 +83,9 @@ def check_options(options: CaptureOptions) -> None:
     elif options.floor_check:
         raise WolfcalError("--check is the held-out floor capture: give it with --floor")
     elif options.manual == (options.poses is not None):
-        raise WolfcalError("give exactly one of --poses POSES.yaml (scripted), --manual, --floor or --standing")
+        raise WolfcalError(
+            "give exactly one of --poses POSES.yaml (scripted), --manual, --floor, --field or --standing"
+        )
     if options.camera is None and not options.external and not options.standing:
         raise WolfcalError("give at least one camera: --camera SOURCE (head camera) and/or --external NAME=SOURCE")
     names = [parse_external(text)[0] for text in options.external]

@@ -2,11 +2,11 @@
 MCAP file.
 
 Checks everything it can before anything moves, opens the bus, the cameras (`cameras`) and the writer, runs the
-scripted mode (`scripted`), the manual one (`manual`) or a floor capture (`floor`: either with
-standing legs) in a live view, then leaves the torque as --exit-torque says (`exit_torque`). A standing capture
-(joint states and the IMU, no camera) is `standing`'s. The file is written through `CaptureWriter` (each sample
-durable on return); Ctrl-C, a bus or camera failure finish the file with every sample taken so far before the error
-is reported.
+scripted mode (`scripted`), the manual one (`manual`), a floor capture (`floor`) or a field capture
+(`field`; both either way, with standing legs) in a live view, then leaves the torque as --exit-torque says
+(`exit_torque`). A standing capture (joint states and the IMU, no camera) is `standing`'s. The file is written
+through `CaptureWriter` (each sample durable on return); Ctrl-C, a bus or camera failure finish the file with every
+sample taken so far before the error is reported.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from rich.console import Console
 
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque, say_end
+from wolfcal.capture.field import field_script, field_standing, one_sided_note
 from wolfcal.capture.floor import (
     check_floor_limp,
     check_views,
@@ -60,7 +61,9 @@ def run_capture(
     script, limp, stances = _plan(options, robot, limits)  # refused before anything moves
     cameras = plan_cameras(options, robot)
     touched = script.joints if script else [*(stances[0] if stances else {}), *limp]
-    mode = ("floor " if options.floor else "") + ("scripted" if script else "manual")
+    mode = ("floor " if options.floor else "field " if options.field_views else "") + (
+        "scripted" if script else "manual"
+    )
     status = Status(mode, options.samples or (len(script.poses) if script else None))
     coverage = Coverage({j: limits[j] for j in touched})
     with stop_on_signals(), ServoBuses(robot.config.servos, options.port) as bus:
@@ -70,7 +73,9 @@ def run_capture(
             script = _checked_script(options, robot, script, bus, status, console)
         initial = bus.torque_enabled()
         if limp and any(initial[j] for j in limp):
-            confirm_limp([j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor)
+            confirm_limp(
+                [j for j in limp if initial[j]], options.yes, ask, legs_hold=options.floor or options.field_views
+            )
         writer = _open_outputs(options, robot, cameras, bus.port_names)
         view = LiveView(status, coverage, console)
         sources = {name: c.source for name, c in cameras.items() if c.source is not None}  # all opened above
@@ -108,7 +113,11 @@ def _checked_script(
     Floor views the robot cannot take are left out (with a note); a colliding pose of a poses file is refused.
     """
     start = dict(zip(bus.joints, (float(v) for v in bus.read_state().positions)))
-    if options.floor:
+    if options.field_views:
+        script, note = without_collisions(robot, script, start, "--field")
+        note = "\nnote: ".join(n for n in (note, one_sided_note(robot, script)) if n) or None
+        status.target = options.samples or len(script.poses)
+    elif options.floor:
         script, note = without_collisions(robot, script, start)
         script = check_views(robot, script) if options.floor_check else script
         status.target = options.samples or len(script.poses)
@@ -123,7 +132,7 @@ def _open_outputs(
     options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], ports: list[str]
 ) -> CaptureWriter:
     """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
-    open_sources(cameras, robot, ports)
+    open_sources(cameras, robot, ports, field=options.field_views)
     try:
         streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
         return CaptureWriter(options.out, robot.config, streams, options.image_format)
@@ -151,16 +160,20 @@ def _plan(
     """(poses to drive through, joints to switch off for the operator, the stances' readings [rad] the legs hold
     in turn while the operator turns the head (manual floor capture)), each checked before anything moves."""
     script = load_poses(options.poses, limits) if options.poses else None
-    limp = parse_limp(options.limp or ("head" if options.floor else "head,legs"), robot) if options.manual else []
+    standing = options.floor or options.field_views
+    limp = parse_limp(options.limp or ("head" if standing else "head,legs"), robot) if options.manual else []
     stances: list[dict[str, float]] = []
-    if options.floor and options.manual:
-        check_floor_limp(robot, limp)
+    if standing and options.manual:
+        check_floor_limp(robot, limp, "--field" if options.field_views else "--floor")
         legs = floor_joints(robot)[0]
-        stances = [{j: q for j, q in t.items() if j in legs} for t in stance_targets(robot, options.floor_check)]
+        targets = [field_standing(robot)] if options.field_views else stance_targets(robot, options.floor_check)
+        stances = [{j: q for j, q in t.items() if j in legs} for t in targets]
         if len(stances) > 1 and options.samples is None:
             key = "floor.check_stances" if options.floor_check else "floor.stances"
             raise WolfcalError(f"{robot.config.path}: '{key}' lists {len(stances)} stances; a manual floor "
                                "capture takes an equal share of --samples in each: give --samples")  # fmt: skip
     elif options.floor:
         script = floor_script(robot, options.velocity or DEFAULT_VELOCITY, options.floor_check)
+    elif options.field_views:
+        script = field_script(robot, options.velocity or DEFAULT_VELOCITY)
     return script, limp, stances

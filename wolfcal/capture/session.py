@@ -3,8 +3,8 @@ from a still moment; the scripted and manual modes decide when to try.
 
 A sample is one still moment: bus reading, a frame of every camera, another frame of every camera, bus reading, all
 within a tick of each other; each camera's image is its second frame, and the sample is written only when every
-camera's frames pass the gates (tags in view, sharp, corners still). Joint angles in rad, the robot's joint
-convention; times on the monotonic clock [s].
+camera's frames pass the gates (tags in view, sharp, corners still; field views: the field's lines in view, sharp).
+Joint angles in rad, the robot's joint convention; times on the monotonic clock [s].
 """
 
 from __future__ import annotations
@@ -15,13 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.capture.gating import StillnessWindow, why_not_sharp
+from wolfcal.capture.gating import StillnessWindow, why_not_field_view, why_not_sharp
 from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.view import Coverage, LiveView, Status
 from wolfcal.hardware.bus import JointState
 from wolfcal.hardware.buses import ServoBuses
 from wolfcal.hardware.camera import CameraSource
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import detect_tags
 
@@ -55,6 +56,7 @@ class CaptureSession:
         self.options, self.view, self.coverage, self.status = options, view, coverage, status
         self.gates = options.gates
         self.window = StillnessWindow(bus.joints, self.gates)
+        self.field = options.field_views  # field views: the gates look for the field's lines, not for tags
         tags = list(robot.config.tags) + (list(robot.config.floor_config().tags) if options.floor else [])
         self.tag_ids = {t.id for t in tags}  # floor capture: the floor tags too
         self.families = sorted({t.family for t in tags})
@@ -98,14 +100,12 @@ class CaptureSession:
         frames_b = {name: camera.grab() for name, camera in self.cameras.items()}
         stamp_ns = time.time_ns()
         after = self.read()
+        if self.field:
+            return self._try_field_sample(before, after, frames_b, stamp_ns)
         corners_a = {name: self.detect(frame) for name, frame in frames_a.items()}
         corners_b = {name: self.detect(frame) for name, frame in frames_b.items()}
         self.status.tags = sorted({t for corners in corners_b.values() for t in corners})
-        moved = np.abs(after.ticks - before.ticks)
-        reason = self.window.why_not_still(time.monotonic())
-        if reason is None and moved.max() > self.gates.tolerance_ticks:
-            k = int(np.argmax(moved))
-            reason = f"joints moved during the frames: {self.bus.joints[k]} by {int(moved[k])} ticks"
+        reason = self._moved(before, after)
         if reason:
             self.status.still = "no"
             return reason
@@ -123,8 +123,36 @@ class CaptureSession:
         self._record(after, {name: sorted(corners) for name, corners in corners_b.items()})
         return None
 
-    def _record(self, state: JointState, tags: dict[str, list[int]]) -> None:
-        """Count a sample written to the file, in the summary and the live view."""
+    def _try_field_sample(self, before: JointState, after: JointState, frames: dict[str, np.ndarray],
+                          stamp_ns: int) -> str | None:  # fmt: skip
+        """The field views' end of `try_sample` (the head camera alone): still between the two bus readings, the
+        field's lines in the frame (`why_not_field_view`), then written; None on success, else why not."""
+        reason = self._moved(before, after)
+        if reason:
+            self.status.still = "no"
+            return reason
+        self.status.still = "yes"
+        reason, self.status.sharpness, points = why_not_field_view(frames[HEAD_CAMERA], self.gates)
+        self.status.line_points = points
+        if reason:
+            return reason
+        self.bus.check_hardware()
+        self.writer.add_sample(stamp_ns, self.bus.joints, after.positions, after.velocities, frames)
+        self._record(after, {}, f"{points} field-line points")
+        return None
+
+    def _moved(self, before: JointState, after: JointState) -> str | None:
+        """Why the robot was not still between two bus readings around the frames (stillness gate again), or None."""
+        reason = self.window.why_not_still(time.monotonic())
+        moved = np.abs(after.ticks - before.ticks)
+        if reason is None and moved.max() > self.gates.tolerance_ticks:
+            k = int(np.argmax(moved))
+            reason = f"joints moved during the frames: {self.bus.joints[k]} by {int(moved[k])} ticks"
+        return reason
+
+    def _record(self, state: JointState, tags: dict[str, list[int]], seen_text: str = "") -> None:
+        """Count a sample written to the file, in the summary and the live view; `seen_text` says what the images
+        show when it is not tags."""
         self.summary.samples += 1
         if self.rest_since is not None:
             self.summary.rest_to_sample_s.append(time.monotonic() - self.rest_since)
@@ -132,10 +160,8 @@ class CaptureSession:
         self.coverage.add(self.bus.joints, state.positions)
         target = f"/{self.options.samples}" if self.options.samples else ""
         pose = f" ({self.status.pose})" if self.status.pose else ""
-        seen = "; ".join(
+        seen = seen_text or "tags " + "; ".join(
             ", ".join(map(str, ids)) + (f" ({name})" if len(tags) > 1 else "") for name, ids in tags.items()
         )
-        self.view.event(
-            f"sample {self.summary.samples}{target}{pose}: tags {seen}, sharpness {self.status.sharpness:.0f}"
-        )
+        self.view.event(f"sample {self.summary.samples}{target}{pose}: {seen}, sharpness {self.status.sharpness:.0f}")
         self.view.refresh()

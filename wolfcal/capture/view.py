@@ -45,6 +45,7 @@ class Status:
     target: int | None
     taken: int = 0
     tags: list[int] = field(default_factory=list)
+    line_points: int | None = None  # field views: the field-line points of the last frame checked (None: tags)
     sharpness: float | None = None
     still: str = "-"
     waiting: str = ""
@@ -87,7 +88,9 @@ class LiveView:
         head.add_row(
             Text(f"{s.mode} capture", style="bold"),
             f"samples {s.taken}{target}",
-            f"tags in view: {', '.join(map(str, s.tags)) or 'none'}",
+            f"tags in view: {', '.join(map(str, s.tags)) or 'none'}"
+            if s.line_points is None
+            else f"field-line points: {s.line_points}",
             f"sharpness: {s.sharpness:.0f}" if s.sharpness is not None else "sharpness: -",
             f"stillness: {s.still}",
         )

@@ -9,6 +9,9 @@ capture file.
 
 `floor_tags: {<id>: {x, y, yaw}}`: the true place of each floor tag lying face up in the true floor frame (the plane of
 the standing soles, `wolfcal.robot.floor`) [m, rad], as `wolfcal simulate --floor` writes it.
+
+`field_pose: {x, y, yaw}`: where the robot's floor frame truly stands on the field (field frame: origin at the centre
+mark, x toward the opponent goal) [m, m, rad], as `wolfcal simulate --system field` writes it.
 """
 
 from __future__ import annotations
@@ -73,3 +76,16 @@ def load_floor_places(path: str | Path) -> dict[int, np.ndarray]:
             raise WolfcalError(f"{path}: 'floor_tags' must map floor tag ids to {{x, y, yaw}} (m, rad)")
         places[tag_id] = np.array(place, dtype=float)
     return places
+
+
+def load_field_pose(path: str | Path) -> np.ndarray | None:
+    """The robot's true place (x, y, yaw) [m, m, rad] on the field from a simulation's FILE.truth.yaml (`field_pose`,
+    as `wolfcal simulate --system field` writes it); None when it has none."""
+    path = Path(path)
+    pose = _truth_section(path, "field_pose")
+    if pose is None:
+        return None
+    values = [pose.get(k) if isinstance(pose, dict) else None for k in ("x", "y", "yaw")]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
+        raise WolfcalError(f"{path}: 'field_pose' must be {{x, y, yaw}} (m, m, rad), found {pose!r}")
+    return np.array(values, dtype=float)

@@ -1,12 +1,16 @@
 """The end of a venue session: fit the camera, check it on views the fit did not use, verdict, deploy files.
 
-- Fit: `--free camera` on the feet views and the floor views of the fit (`fit.pipeline.fit_observations`), written
-  as `wolfcal fit` writes it (`fit/`: result.yaml, calibrated.urdf, calibrated_robot.yaml).
+- Fit: `--free camera` on the feet views and the floor views of the fit (`fit.pipeline.fit_observations`), or the
+  feet views and the field views (the field block of `wolfcal fit --system field`, `fit.field_block.field_blocks`,
+  with the robot's place on the field as its unknowns), written as `wolfcal fit` writes it (`fit/`: result.yaml,
+  calibrated.urdf, calibrated_robot.yaml).
 - Cross-validation over the session's own views (`evaluate.crossval`): each sample's tags on the feet judged by the
   model fitted without its fold; the spread of the folds' camera poses around the full fit says how far one view
   more or less moves the answer.
 - Held-out floor views (the check phase's stances, none of the fit's): the measured ground error before and after
-  at the robot config's `floor.ground_check` distance (`evaluate.floor_ground`).
+  at the robot config's `floor.ground_check` distance (`evaluate.floor_ground`). Field views are all fitted: the
+  ground error they measure needs held-out field views (another placement of the robot), which the session does not
+  take; it reads "n/a", never a number the data did not measure.
 - The deploy verdict of `wolfcal evaluate` (`evaluate.verdict.deploy_verdict`) on these, and the deploy files of the
   model to deploy (`evaluate.undetermined.deployable_model`) through `write_deploy`, the one place that writes them.
 "Before" is the robot's present calibration (`--current`, `io.current.load_current`), else the input URDF; the fit
@@ -15,7 +19,8 @@ starts from it and the deploy files hold the new totals.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +41,8 @@ from wolfcal.evaluate.metrics import measure_tag_views, merge_folds, model_error
 from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
+from wolfcal.fit.blocks import Block
+from wolfcal.fit.field_block import field_blocks
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import check_solution_left_out, detect_captures, fit_observations, write_fit
 from wolfcal.fit.result import fit_result
@@ -111,9 +118,11 @@ def without_single_floor_views(robot: Robot, head: Observations, say: Callable[[
 
 
 def cross_validation(robot: Robot, head: Observations, link_tags: list[int], current: Corrections,
-                     options: FitOptions, fitted: Corrections, say: Callable[[str], None]) -> dict:  # fmt: skip
+                     options: FitOptions, fitted: Corrections, say: Callable[[str], None],
+                     own_blocks: Sequence[Block] = ()) -> dict:  # fmt: skip
     """Held-out pixel errors of the feet tags before (`current`) and after (each sample by the fold model that did
-    not see it), the structure test and the folds' camera spread around the full fit [deg, mm]."""
+    not see it), the structure test and the folds' camera spread around the full fit [deg, mm]; `own_blocks` (the
+    field views) are in every fold's fit, as in the full one."""
     folds = min(FOLDS, head.n_samples // 2)
     if folds < 2:
         raise WolfcalError(f"only {head.n_samples} view(s) with tags: too few to check the fit by cross-validation")
@@ -122,7 +131,7 @@ def cross_validation(robot: Robot, head: Observations, link_tags: list[int], cur
     for k in range(folds):
         say(f"fold {k + 1}/{folds}: fitting without {int(np.sum(fold_of == k))} of the {head.n_samples} views")
         train = without_single_floor_views(robot, head.subset(np.flatnonzero(fold_of != k)), lambda line: None)
-        models.append(fit_observations(robot, {HEAD_CAMERA: train}, options).corrections)
+        models.append(fit_observations(robot, {HEAD_CAMERA: train}, options, own_blocks=own_blocks).corrections)
     seen = np.unique(head.sample_index[np.isin(head.tag_ids, link_tags)])
     feet = head.subset(seen, link_tags)
     fold_feet = fold_of[seen]
@@ -141,19 +150,25 @@ def cross_validation(robot: Robot, head: Observations, link_tags: list[int], cur
 
 
 def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path], check_parts: list[Path],
-                  out_dir: Path, current: Path | None, say: Callable[[str], None]) -> dict:  # fmt: skip
+                  field_parts: list[Path], out_dir: Path, current: Path | None,
+                  say: Callable[[str], None]) -> dict:  # fmt: skip
     """Fit, cross-validation, held-out floor check, verdict and deploy files of a session in `out_dir`; returns
     the figures for metrics.json (the caller adds the session's times and writes it)."""
     present = load_current([current], robot) if current is not None else CurrentCalibration()
     options = FitOptions(free="camera", current=present.corrections if current is not None else None)
     limits = verdict_limits(robot, None, MOUNT_LIMIT_RAD)
     distances = ground_distances(limits)
-    fit_parts = feet_parts + floor_parts
+    fit_parts = feet_parts + floor_parts + field_parts
     head, warnings = session_views(robot, feet_parts, floor_parts, options, say)
     head = without_single_floor_views(robot, head, say)
     observations = {HEAD_CAMERA: head}
-    say(f"fitting the camera on {head.n_samples} views ...")
-    fit = fit_observations(robot, observations, options)
+    field: list[Block] = []
+    if field_parts:
+        say("finding the field's lines in the field views ...")
+        field, _ = field_blocks(robot, field_parts, replace(options, system="field"), say)
+    say(f"fitting the camera on {head.n_samples} views" + (f" and {len(field[0].q_measured)} field views"
+                                                           if field else "") + " ...")  # fmt: skip
+    fit = fit_observations(robot, observations, options, own_blocks=field)
     check_solution_left_out(fit, fit_parts)
     result = fit_result(fit, options, fit_parts, None, warnings, present if current is not None else None)
     write_fit(out_dir / FIT_FOLDER, fit, result)
@@ -161,7 +176,7 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
     warnings += held_notes
     before = present.corrections
     say("checking it on views the fit did not use: cross-validation over the session's views ...")
-    crossval = cross_validation(robot, head, fit.tag_ids, before, options, fitted, say)
+    crossval = cross_validation(robot, head, fit.tag_ids, before, options, fitted, say, field)
     measured = None
     if check_parts:
         say("measuring the ground error on the held-out floor views ...")
@@ -178,6 +193,6 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
                              predicted, camera_turn(robot, fitted, before), limits)  # fmt: skip
     deploy = write_deploy(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"], present)
     return {"fit": str(out_dir / FIT_FOLDER), "samples_fitted": head.n_samples, "cross_validation": crossval,
-            "held_out_floor": measured,
+            "held_out_floor": measured, "field_views": len(field[0].q_measured) if field else 0,
             "ground_distance_m": limits.ground_distance_m, "verdict": verdict, "deploy": deploy,
             "camera_correction": camera_correction(robot, fitted), "warnings": warnings}  # fmt: skip

@@ -4,7 +4,8 @@ Each pose: the goals are sent and the servos move along their profile (the sessi
 acceleration [rad/s^2]); while they move, the previous pose's sample is written (image encoding and fsync). Once
 every joint is within ARRIVAL_TICKS of its goal, the stillness gate (`capture.gating.StillnessWindow`) decides when
 the robot is still; two frames are grabbed at once between two bus readings that must agree, and checked while the
-robot still holds the pose (tags in view, sharp, corners still: `capture.gating.why_not_sharp`), so that a failed
+robot still holds the pose (tags in view, sharp, corners still: `capture.gating.why_not_sharp`; field views: the
+field's lines in view, sharp: `capture.gating.why_not_field_view`), so that a failed
 check costs another still moment (up to GRAB_TRIES) instead of a move back. A pose that still fails is taken again
 once at the end. Poses reach this module already checked (URDF limits, self-collision): it sends nothing else.
 Angles are joint readings [rad]; times are on the monotonic clock [s].
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wolfcal.capture.gating import GateSettings, StillnessWindow, why_not_sharp
+from wolfcal.capture.gating import GateSettings, StillnessWindow, why_not_field_view, why_not_sharp
 from wolfcal.capture.poses import Pose
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import JointState, rad_to_ticks
@@ -78,6 +79,7 @@ class PoseDriver:
         self.bus, self.cameras = bus, cameras
         self.writer: CaptureWriter | None = None  # the phase's capture part, set before `drive`
         self.tag_ids, self.families, self.gates = tag_ids, families, gates
+        self.field = False  # field views: the gates look for the field's lines instead of tags
         self.velocity, self.acceleration, self.say = velocity, acceleration, say
         self.index = {j: k for k, j in enumerate(bus.joints)}
         self.window = StillnessWindow(bus.joints, gates)
@@ -164,6 +166,11 @@ class PoseDriver:
         """(why the frames of one still moment fail the gates or None, the tags seen in the second frames)."""
         seen: set[int] = set()
         for name, frame in frames_b.items():
+            if self.field:
+                reason = why_not_field_view(frame, self.gates)[0]
+                if reason:
+                    return (f"{name}: {reason}" if len(frames_b) > 1 else reason), []
+                continue
             corners_b = self._detect(frame)
             reason, _ = why_not_sharp(frame, self._detect(frames_a[name]), corners_b, self.gates)
             if reason:

@@ -31,6 +31,7 @@ class VenueOptions:
     binning: int | None = None  # default as `wolfcal capture`: 4 for the sim camera, else 1
     intrinsics: Path | None = None
     exit_torque: str = "restore"
+    field_views: bool = False  # field views (the robot standing at field.robot_at) instead of floor views
     gates: GateSettings = field(default_factory=GateSettings)
 
 

@@ -11,6 +11,7 @@ from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.fit.result import load_result
 from wolfcal.hardware.buses import port_paths
 from wolfcal.hardware.emulator import load_truth, read_true_angles
+from wolfcal.io.truth import load_field_pose
 from wolfcal.robot.robot import Robot
 from wolfcal.venue.check import FIT_FOLDER
 from wolfcal.venue.options import VenueOptions
@@ -18,7 +19,8 @@ from wolfcal.venue.options import VenueOptions
 
 def truth_errors(robot: Robot, options: VenueOptions) -> dict | None:
     """Largest camera pose error of the fit against the emulator's truth over the head joints' range [deg, mm]
-    (`evaluate.accuracy.camera_pose_errors`), when the camera is the simulated one and the emulator has a truth."""
+    (`evaluate.accuracy.camera_pose_errors`), when the camera is the simulated one and the emulator has a truth;
+    with field views, also the error of the robot's place on the field [mm, deg] (the truth's `field_pose`)."""
     if options.camera != "sim" or robot.config.servos is None:
         return None
     servos = robot.config.servos
@@ -26,9 +28,16 @@ def truth_errors(robot: Robot, options: VenueOptions) -> dict | None:
     truth_path = next((path for path in (read_true_angles(port)[1] for port in paths.values()) if path), None)
     if not truth_path:
         return None
-    fitted = load_result(options.out / FIT_FOLDER).corrections
-    rotation, translation = camera_pose_errors(robot, fitted, load_truth(Path(truth_path)))
-    return {"rotation_deg": float(np.rad2deg(rotation.max())), "translation_mm": float(translation.max() * 1000)}
+    result = load_result(options.out / FIT_FOLDER)
+    rotation, translation = camera_pose_errors(robot, result.corrections, load_truth(Path(truth_path)))
+    errors = {"rotation_deg": float(np.rad2deg(rotation.max())), "translation_mm": float(translation.max() * 1000)}
+    place = load_field_pose(Path(truth_path))
+    fitted = [result.estimate(f"field_pose.{c}") for c in ("x", "y", "yaw")]
+    if place is not None and all(v is not None for v in fitted):
+        x, y, yaw = (v[0] for v in fitted if v is not None)
+        errors["place_mm"] = float(1000 * np.hypot(x - place[0], y - place[1]))
+        errors["place_yaw_deg"] = float(np.rad2deg(abs(np.remainder(yaw - place[2] + np.pi, 2 * np.pi) - np.pi)))
+    return errors
 
 
 def _px(value: float | None) -> str:
@@ -56,12 +65,17 @@ def report_lines(figures: dict) -> list[str]:
         before, after = (floor["models"][m]["rows"][k] for m in ("before", "after"))
         lines.append(f"held-out floor views ({floor['capture']['samples']} in {floor['capture']['stances']} stances): "
                      f"ground error at {distance:g} m {_cm(before)} -> {_cm(after)} (1 sigma)")  # fmt: skip
+    elif figures.get("field_views"):
+        lines.append(f"field views: {figures['field_views']} fitted with the feet views; ground error from field "
+                     "views: n/a (it needs held-out field views, the robot placed elsewhere: not taken)")  # fmt: skip
     else:
         lines.append("held-out floor views: none measured (no floor tags, or too few held-out views of them)")
     truth = figures.get("truth")
     if truth is not None:
+        place = (f"; the robot's place on the field within {truth['place_mm']:.1f} mm and "
+                 f"{truth['place_yaw_deg']:.3f} deg" if "place_mm" in truth else "")  # fmt: skip
         lines.append(f"against the simulator's truth: camera within {truth['rotation_deg']:.4f} deg and "
-                     f"{truth['translation_mm']:.3f} mm (largest over the head joints' range)")  # fmt: skip
+                     f"{truth['translation_mm']:.3f} mm (largest over the head joints' range){place}")  # fmt: skip
     lines += ["", verdict["message"], *[f"- {r}" for r in verdict["refusals"]], *[f"- {n}" for n in verdict["notes"]]]
     if deploy["written"]:
         lines.append(f"deploy files: {', '.join(deploy['files'])} in {Path(figures['fit']).parent}")

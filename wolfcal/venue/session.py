@@ -2,12 +2,14 @@
 
 Phases: `feet` (the planned feet views, the robot on its stand), then, when the robot config has floor tags,
 `floor` (the floor views of `capture --floor`, the robot standing on the floor among the tags) and `check` (the
-held-out floor views of `capture --floor --check`). Every pose is checked against the URDF limits and the
-collision model before the bus opens and from where the robot stands (`capture.poses`, `capture.floor`); nothing
-else is sent. The session says up front what the robot must be doing and asks before torque is switched on (and
-before the robot must stand on the floor); `--yes` answers both. Robot time counts from torque on to the last
-sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM, a bus or camera failure: every sample
-taken so far is kept, the torque is left as chosen, and `--resume DIR` continues where the session stopped.
+held-out floor views of `capture --floor --check`); with `--field`, instead of the floor phases, `field` (the field
+views of `capture --field`, the robot standing on the field at `field.robot_at`). Every pose is checked against the
+URDF limits and the collision model before the bus opens and from where the robot stands (`capture.poses`,
+`capture.floor`); nothing else is sent. The session says up front what the robot must be doing and asks before
+torque is switched on (and before the robot must stand on the floor or the field); `--yes` answers both. Robot
+time counts from torque on to the last sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM,
+a bus or camera failure: every sample taken so far is kept, the torque is left as chosen, and `--resume DIR`
+continues where the session stopped.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from wolfcal.atomic import write_text_atomic
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque
+from wolfcal.capture.field import field_script, one_sided_note
 from wolfcal.capture.floor import check_views, floor_joints, floor_script, without_collisions
 from wolfcal.capture.options import CaptureOptions
 from wolfcal.capture.poses import PoseScript, check_collisions
@@ -41,7 +44,7 @@ from wolfcal.venue.report import report_lines, truth_errors
 from wolfcal.venue.state import SessionState, load_session, new_session, next_part, parts, robot_digest
 
 Ask = Callable[[str], bool]
-LABELS = {"feet": "feet view", "floor": "floor view", "check": "held-out floor view"}
+LABELS = {"feet": "feet view", "floor": "floor view", "check": "held-out floor view", "field": "field view"}
 
 
 @dataclass
@@ -49,6 +52,7 @@ class Phase:
     name: str
     script: PoseScript
     robot_must: str  # what the robot must be doing, in words
+    stand: str = ""  # where the robot must stand for it (standing phases), in words
 
 
 def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: Callable[[str], None],
@@ -58,12 +62,14 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
     if note:
         say(f"note: {note}")
     phases = [Phase("feet", feet, "hangs on its stand, legs free to move (torque on: the legs and the head move)")]
+    if options.field_views:
+        return [*phases, _field_phase(robot, options, start, say)]
     floor = robot.config.floor
     if floor is None or not floor.tags:
         say(f"note: {robot.config.path} lists no floor tags ('floor.tags'): no floor views, so the ground error is "
             "not measured; the check is the cross-validation over the feet views alone")  # fmt: skip
         return phases
-    standing = "stands on the floor among the floor tags (0.5-5 m in front of it), legs held by torque"
+    stand = "on the floor among the floor tags (0.5-5 m in front of it)"
     at = standing_pose(robot)
     for name, check in (("floor", False), ("check", True)):
         script, note = without_collisions(robot, floor_script(robot, options.velocity, check), start)
@@ -71,8 +77,24 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
         if note:
             say(f"note: {note}")
         script, at = shortest_order(robot, script, at, start)
-        phases.append(Phase(name, script, standing))
+        phases.append(Phase(name, script, f"stands {stand}, legs held by torque", stand))
     return phases
+
+
+def _field_phase(robot: Robot, options: VenueOptions, start: dict[str, float], say: Callable[[str], None]) -> Phase:
+    """The field views (`capture.field`), those the robot cannot take without touching itself left out, in the
+    order of the shortest moves from the standing pose."""
+    if robot.config.floor is not None and robot.config.floor.tags:
+        say("note: --field: field views instead of the floor views (the floor tags are not looked at)")
+    script, note = without_collisions(robot, field_script(robot, options.velocity), start, "--field")
+    for line in (note, one_sided_note(robot, script)):
+        if line:
+            say(f"note: {line}")
+    script, _ = shortest_order(robot, script, standing_pose(robot), start)
+    x, y, yaw = robot.config.field_config().robot_at
+    stand = (f"on the field at field.robot_at (x {x:+.2f} m, y {y:+.2f} m, facing {np.rad2deg(yaw):+.0f} deg from "
+             "the direction of the opponent goal)")  # fmt: skip
+    return Phase("field", script, f"stands {stand}, legs held by torque", stand)
 
 
 def shortest_order(robot: Robot, script: PoseScript, q_from: np.ndarray, start: dict[str, float]
@@ -125,6 +147,8 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
     capture_like = CaptureOptions(robot=options.robot, out=options.out / "x.mcap", camera=options.camera,
                                   binning=options.binning, intrinsics=options.intrinsics)  # fmt: skip
     cameras = plan_cameras(capture_like, robot)
+    if options.field_views:
+        field_script(robot, options.velocity)  # a config without a field or a sweep outside the limits: refused now
     feet = feet_plan(robot, options.feet_poses, options.velocity, say)
     digest = robot_digest(robot.config.path, robot.config.urdf)
     if options.resume:
@@ -136,8 +160,12 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
             )
         for line in notes:
             say(line)
+        if options.field_views != state.field:
+            started = "without" if options.field_views else "with"
+            raise WolfcalError(f"--resume {options.out}: the session was started {started} --field; resume it with "
+                               "the same options")  # fmt: skip
     else:
-        state = SessionState(str(robot.config.path), digest, feet.key)
+        state = SessionState(str(robot.config.path), digest, feet.key, field=options.field_views)
         new_session(options.out, state)
     state.runs += 1
     feet_script = PoseScript(feet.script.poses, options.velocity)
@@ -153,6 +181,7 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
             parts(options.out, "feet"),
             parts(options.out, "floor"),
             parts(options.out, "check"),
+            parts(options.out, "field"),
             options.out,
             options.current,
             say,
@@ -191,14 +220,12 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras
         say(f"  {k}. {len(poses)} {LABELS[phase.name]}s: the robot {phase.robot_must}")
     initial = bus.torque_enabled()
     _confirm(f"Switch torque on for {len(touched)} joints and start moving?", options, ask, say)
-    open_sources(cameras, robot, bus.port_names)
     failure: BaseException | None = None
     writer: CaptureWriter | None = None
     try:
-        sources = {n: c.source for n, c in cameras.items() if c.source is not None}
         floor_families = {t.family for t in robot.config.floor.tags} if robot.config.floor is not None else set()
         families = sorted({t.family for t in robot.config.tags} | floor_families)
-        driver = PoseDriver(bus, sources, _tag_ids(robot), families, options.gates, options.velocity,
+        driver = PoseDriver(bus, {}, _tag_ids(robot), families, options.gates, options.velocity,
                             options.acceleration, say)  # fmt: skip
         since = time.monotonic()
         goals = driver.torque_on(touched)
@@ -210,9 +237,14 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras
                 driver.move_only(goals, {j: q for j, q in poses[0].joints.items() if j in legs})
                 state.robot_time_s += time.monotonic() - since
                 state.save(options.out)
-                _confirm("Stand the robot on the floor among the floor tags (its legs hold the standing pose); "
-                         "go on?", options, ask, say)  # fmt: skip
+                _confirm(f"Stand the robot {phase.stand}; its legs hold the standing pose. Go on?", options, ask,
+                         say)  # fmt: skip
                 since = time.monotonic()
+            if phase.name == "field" or not driver.cameras:  # the simulated camera shows the field or the robot
+                close_sources(cameras)
+                open_sources(cameras, robot, bus.port_names, field=phase.name == "field")
+                driver.cameras = {n: c.source for n, c in cameras.items() if c.source is not None}
+            driver.field = phase.name == "field"
             streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
             writer = CaptureWriter(next_part(options.out, phase.name), robot.config, streams)
             driver.writer = writer
@@ -227,7 +259,8 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras
                     state.done[name].append(outcome.name)
                 state.save(options.out)  # before it is said: a sample reported is a sample kept
                 if outcome.reason is None:
-                    say(f"  sample: {label} {outcome.name}, tags {', '.join(map(str, outcome.tags))}")
+                    seen = f", tags {', '.join(map(str, outcome.tags))}" if outcome.tags else ""
+                    say(f"  sample: {label} {outcome.name}{seen}")
                 else:
                     say(f"  {label} {outcome.name} not taken: {outcome.reason}")
 

@@ -19,7 +19,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.recover import recover_capture
 
 STATE_FILE = "session.json"
-PHASES = ("feet", "floor", "check")  # feet views, floor views for the fit, held-out floor views
+PHASES = ("feet", "floor", "check", "field")  # feet views, floor views for the fit, held-out floor views, field views
 
 
 @dataclass
@@ -30,6 +30,7 @@ class SessionState:
     done: dict[str, list[str]] = field(default_factory=lambda: {p: [] for p in PHASES})  # pose names taken
     robot_time_s: float = 0.0  # time the robot spent moving and holding poses, over every run [s]
     runs: int = 0  # how many times the session was started (1 + resumes)
+    field: bool = False  # field views instead of floor views (`--field`)
 
     def save(self, folder: Path) -> None:
         write_text_atomic(folder / STATE_FILE, json.dumps(asdict(self), indent=2) + "\n")
@@ -64,7 +65,8 @@ def load_session(folder: Path, robot_sha256: str) -> tuple[SessionState, list[st
                            f"--out {folder}")  # fmt: skip
     try:
         state = SessionState(**json.loads(path.read_text()))
-    except (ValueError, TypeError) as exc:
+        state.done = {p: list(state.done.get(p, [])) for p in PHASES}  # a session of a wolfcal with fewer phases
+    except (ValueError, TypeError, AttributeError) as exc:
         raise WolfcalError(f"{path}: not a venue session's state ({exc}); start a new session elsewhere") from None
     if state.robot_sha256 != robot_sha256:
         raise WolfcalError(f"--resume {folder}: the session was started with another robot config or URDF "
