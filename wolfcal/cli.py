@@ -638,11 +638,11 @@ def recover(
     force: bool = force_option(),
 ) -> None:
     """Rescue every complete sample of a capture whose recording stopped before it finished."""
-    from wolfcal.io.recover import recover_capture, recovered_path
+    from wolfcal.io.recover import recover_capture, recovered_path, rescued_text
 
     target = out or recovered_path(file)
     count = recover_capture(file, target, force)
-    typer.echo(f"rescued {count} sample(s) from {file} into {target}")
+    typer.echo(f"rescued {rescued_text(target, count)} from {file} into {target}")
 
 
 @app.command("board")

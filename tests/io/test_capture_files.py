@@ -30,6 +30,7 @@ from wolfcal.io.msgdefs import CAMERA_INFO, COMPRESSED_IMAGE, JOINT_STATE, MSGDE
 from wolfcal.io.reader import read_capture, read_captures
 from wolfcal.io.recording import ENCODER_TICK, JointStates, Paired, pair_frame
 from wolfcal.io.recover import recover_capture
+from wolfcal.io.standing_writer import StandingWriter
 from wolfcal.io.writer import CaptureWriter, camera_info_message
 from wolfcal.observations import HEAD_CAMERA
 
@@ -281,6 +282,22 @@ def torn_copy(tmp_path: Path, config: RobotConfig, camera: CameraModel, complete
         data = writer.partial.read_bytes()
     torn.write_bytes(data[: size + (len(data) - size) // 2])
     return torn
+
+
+def test_a_torn_standing_capture_is_rescued_as_joint_states_and_imu_messages(tmp_path, config):
+    """A standing capture has no images: the rescue counts its messages instead of saying 0 samples."""
+    path = tmp_path / "standing.mcap"
+    writer = StandingWriter(path, config, "/imu/data", "imu_frame")
+    for i in range(10):
+        writer.joint_state(T0 + i * 10_000_000, JOINTS, np.zeros(4), np.zeros(4))
+        writer.imu(T0 + i * 10_000_000, np.array([0.0, 0.0, 9.81]), np.zeros(3))
+    writer.flush()
+    torn = tmp_path / "torn.mcap"
+    shutil.copy(writer.partial, torn)  # as a killed capture leaves it: no summary, no footer
+    writer.close()
+    result = CliRunner().invoke(app, ["recover", str(torn)])
+    assert result.exit_code == 0, result.output
+    assert "rescued 10 joint state(s) and 10 IMU message(s)" in result.output
 
 
 def test_recover_cli_and_default_output_name(tmp_path, config, camera):

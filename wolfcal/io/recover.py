@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import IO
 
+from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer as McapWriter
@@ -19,7 +20,7 @@ from mcap_ros2.decoder import DecoderFactory
 from wolfcal.atomic import atomic_output
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import check_mcap
-from wolfcal.io.msgdefs import COMPRESSED_IMAGE, JOINT_STATE, LIBRARY, header_stamp_ns
+from wolfcal.io.msgdefs import COMPRESSED_IMAGE, IMU, JOINT_STATE, LIBRARY, header_stamp_ns
 from wolfcal.outputs import check_outputs
 
 
@@ -91,3 +92,22 @@ def _copy_records(handle: IO[bytes], out: IO[bytes]) -> int:
             writer.add_metadata(record.name, record.metadata)
     writer.finish()
     return len(stamps[JOINT_STATE] & stamps[COMPRESSED_IMAGE])
+
+
+def rescued_text(path: Path, samples: int) -> str:
+    """What a rescued capture holds, for the console: its samples (an image with a joint state of the same stamp),
+    or, for a capture without images (a standing one), its joint states and IMU messages."""
+    if samples:
+        return f"{samples} sample(s)"
+    with path.open("rb") as handle:
+        summary = make_reader(handle).get_summary()
+    counts = {IMU: 0, JOINT_STATE: 0}
+    if summary is not None and summary.statistics is not None:
+        for channel_id, count in summary.statistics.channel_message_counts.items():
+            channel = summary.channels[channel_id]
+            name = summary.schemas[channel.schema_id].name if channel.schema_id in summary.schemas else ""
+            if name in counts:
+                counts[name] += count
+    if counts[IMU]:
+        return f"{counts[JOINT_STATE]} joint state(s) and {counts[IMU]} IMU message(s)"
+    return "0 samples"
