@@ -1,16 +1,17 @@
 """The bench harness: run the measurements, write their figures as JSON (`bench/report.py` makes the docs'
 tables).
 
-    python bench/run.py [--parts fit,stream,detection,intrinsics,seeds] [--out bench/results.json]
-                        [--before PATH] [--rounds 3] [--frames 600,6000] [--stream-binning 4]
+    python bench/run.py [--parts fit,stream,...] [--out bench/results.json] [--before PATH] [--rounds 3]
+                        [--frames 600,6000] [--stream-binning 4] [--seeds 3] ...
 
-Parts: `fit` (the 24-sample 2048x1536 camera fit: first run and cached run against reading + decoding +
-OpenCV's bare detector on all cores), `stream` (peak memory of `wolfcal fit` on plain recordings of 600 and
-6000 frames), `detection` (corner accuracy on rendered views), `intrinsics` (`wolfcal intrinsics` against
-plain OpenCV), `seeds` (simulated fits against the truth over seeds). `--before PATH`: a folder holding an
-older `wolfcal` package; `fit` and `stream` then run on both, alternating which goes first. Results of the
-parts run are merged into the JSON file (other parts' results are kept). Generated inputs are kept in the temp
-folder (`common.DATA`).
+Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memory of `wolfcal fit`), `detection`,
+`intrinsics`, `seeds` (accuracy against simulated truth), `solve` (solve time on synthetic samples), `stability`
+(how far a fit moves under changes that should not matter), `recordings` (std coverage on continuous recordings),
+`floor` (the venue's floor check on rendered views), `plan` (planned against random poses), `compare` (every
+measurement system on one session), `mocap` (motion capture on another robot's data), `bus` and `capture` (the
+servo bus emulator). `--before PATH`: a folder holding an older `wolfcal` package; `fit` and `stream` then run on
+both, alternating which goes first. Results of the parts run are merged into the JSON file (other parts' results
+are kept). Generated inputs are kept in the temp folder (`common.DATA`).
 """
 
 from __future__ import annotations
@@ -29,12 +30,14 @@ from common import ROOT, start_spawner  # noqa: E402
 from quality import detection, intrinsics, seeds  # noqa: E402
 from targets import fit_speed, stream_memory, targets  # noqa: E402
 
-PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")
+PARTS = ("fit", "stream", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor", "plan",
+         "compare", "mocap", "bus", "capture")  # fmt: skip
+DEFAULT_PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")  # about a minute; the others take longer
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--parts", default=",".join(PARTS), help="comma-separated, of " + ", ".join(PARTS))
+    parser.add_argument("--parts", default=",".join(DEFAULT_PARTS), help="comma-separated, of " + ", ".join(PARTS))
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results.json")
     parser.add_argument("--before", type=Path, default=None, help="a folder holding an older wolfcal package")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of the fit part (each tree once a round)")
@@ -43,7 +46,9 @@ def main() -> None:
     parser.add_argument("--stream-binning", type=int, default=4, help="1: 2048x1536 frames; 4: 512x384")
     parser.add_argument("--views", type=int, default=20, help="rendered views per camera of the detection part")
     parser.add_argument("--seeds", type=int, default=3, help="seeds of the intrinsics and seeds parts")
-    parser.add_argument("--binning", type=int, default=4, help="image binning of the seeds part")
+    parser.add_argument("--binning", type=int, default=4, help="image binning of the seeds and recordings parts")
+    parser.add_argument("--sizes", default="25,100,400,1000", help="synthetic samples of the solve part")
+    parser.add_argument("--reads", type=int, default=2000, help="sync reads of the bus part")
     args = parser.parse_args()
     start_spawner()  # before anything large is loaded: see `common.start_spawner`
     parts = [p for p in args.parts.split(",") if p]
@@ -71,8 +76,10 @@ def main() -> None:
             results["detection"] = detection(args.views, say)
         elif part == "intrinsics":
             results["intrinsics"] = intrinsics(args.seeds, say)
-        else:
+        elif part == "seeds":
             results["seeds"] = seeds(args.seeds, args.binning, say)
+        else:
+            results[part] = in_process_part(part, args, say)
         results[part]["seconds"] = time.perf_counter() - start
         results[part]["taken"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
         results[part]["load_average"] = os.getloadavg()[0]
@@ -82,8 +89,54 @@ def main() -> None:
         "python": platform.python_version(),
         "processor": platform.processor() or platform.machine(),
     }
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
+    args.out.write_text(json.dumps(results, indent=1, default=_plain) + "\n")
     say(f"wrote {args.out}")
+
+
+def in_process_part(part: str, args: argparse.Namespace, say) -> dict:
+    """A part measured in this process, BLAS on one thread as in the `wolfcal` command (the modules are imported
+    here: their imports are heavy)."""
+    from wolfcal.blas_threads import one_blas_thread
+
+    one_blas_thread()
+    if part == "solve":
+        from solve import speed
+
+        return speed(tuple(int(n) for n in args.sizes.split(",")), say)
+    if part == "stability":
+        from solve import stability
+
+        return stability([], say)
+    if part == "recordings":
+        from coverage import recordings
+
+        return recordings(args.seeds, args.binning, say)
+    if part == "floor":
+        from floor import floor
+
+        return floor(args.seeds, say)
+    if part == "plan":
+        from plan import plan
+
+        return plan(args.seeds, say)
+    if part == "compare":
+        from compare import compare_systems
+
+        return compare_systems(args.seeds, say)
+    if part == "mocap":
+        from mocap import mocap
+
+        return mocap(args.seeds, say)
+    from hardware import bus, capture
+
+    return bus(args.reads, say) if part == "bus" else capture(3.0, 0.3, say)
+
+
+def _plain(value):
+    """numpy numbers and arrays as JSON numbers and lists."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"not JSON: {type(value).__name__}")
 
 
 if __name__ == "__main__":

@@ -47,7 +47,7 @@ def wolfgang_with_other_tags() -> dict:
     return data
 
 
-# A camera the shipped data do not use: 1280x960 with k1 = -0.12 (the floor tests' and bench_floor's)
+# A camera the shipped data do not use: 1280x960 with k1 = -0.12 (the floor tests' and the bench harness's floor part)
 OTHER_CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
                            np.array([-0.12, 0.08, 0.0005, -0.0003, 0.0]))  # fmt: skip
 

@@ -153,7 +153,7 @@ def test_scripted_capture_is_exact_to_the_tick_and_from_one_still_moment(robot, 
             assert value == ticks_to_rad(expected), (pose.name, joint)
         assert np.all(sample.velocities == 0)
     assert_same_still_moment(robot, capture)
-    assert len(summary.rest_to_sample_s) == summary.samples  # how long each took: bench/bench_capture.py
+    assert len(summary.rest_to_sample_s) == summary.samples  # how long each took: the bench harness's `capture` part
 
 
 @pytest.mark.slow

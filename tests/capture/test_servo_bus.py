@@ -121,7 +121,7 @@ def test_scripted_move_at_profile_velocity_arrives_exactly(config, emulator):
 
 
 def test_many_sync_reads_in_a_row_all_answer(config, emulator):
-    """The rate is measured by bench/bench_bus.py; here: no read is lost or mixed up with another's reply."""
+    """The rate is the bench harness's `bus` part; here: no read is lost or mixed up with another's reply."""
     with DynamixelBus(config.servos, emulator.port) as bus:
         states = [bus.read_state() for _ in range(200)]
     assert all(np.array_equal(s.ticks, states[0].ticks) for s in states)

@@ -366,8 +366,9 @@ def test_reading_reports_progress_over_the_messages_of_the_file(good, robot):
 
 @pytest.mark.slow
 def test_the_bad_inputs_script_passes_every_case():
-    """bench/bad_inputs.py: every bad input above through the real command line, one line per case."""
-    result = subprocess.run([sys.executable, str(ROOT / "bench" / "bad_inputs.py")], cwd=ROOT, capture_output=True,
+    """bad_input_cases.py: every bad input above through the real command line, one line per case."""
+    script = Path(__file__).resolve().parent / "bad_input_cases.py"
+    result = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True,
                             text=True, timeout=1800)  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr
     assert re.search(r"(\d+) of \1 cases pass", result.stdout)

@@ -34,8 +34,9 @@ DEEP = [{"RKnee": -0.6, "RHipPitch": -0.1694, "RAnklePitch": 0.1688, "LKnee": 0.
          "LAnklePitch": -0.1687},
         {"RKnee": -0.9, "RHipPitch": -0.3194, "RAnklePitch": 0.3188, "LKnee": 0.9, "LHipPitch": 0.3196,
          "LAnklePitch": -0.3186}]  # fmt: skip
-# the torso 3 cm sideways or turned 0.15 rad, 1 cm lower, each sole kept where it stands (nominal model; the stances
-# of bench/bench_floor.py --stances): every leg joint, roll and yaw too, reads another tick than in the standing pose
+# the torso 3 cm sideways or turned 0.15 rad, 1 cm lower, each sole kept where it stands (nominal model; stances a
+# floor capture spreads its samples over): every leg joint, roll and yaw too, reads another tick than in the standing
+# pose
 LEAN = yaml.safe_load((WOLFGANG / "floor_stances.yaml").read_text())
 STANDING = {"RKnee": -0.2618, "LKnee": 0.2618}
 

@@ -27,7 +27,7 @@ def offsets(data: dict) -> dict[str, float]:
 
 @pytest.mark.slow
 def test_leg_fit_of_another_robot_from_markers_and_from_c3d(tmp_path):
-    """Over 6 seeds (bench/bench_mocap_other_robot.py) the soles are within 0.78 mm; their orientation within
+    """Over 6 seeds (the bench harness's `mocap` part) the soles are within 0.78 mm; their orientation within
     0.18-0.74 deg, not 0.3: the ankle roll is each foot's last joint, so its offset error is a fixed rotation of the
     foot that a rotation of the foot markers' mounts undoes in every pose; only the mounts' 1 mm prior decides it,
     and the error is the rotation the true mount errors make about the roll axis (0.07 deg rms apart). With the true

@@ -21,8 +21,6 @@ from wolfcal.robot.parameters import ParameterSet
 
 if TYPE_CHECKING:
     from wolfcal.config import PriorConfig
-    from wolfcal.fit.problem import BlockState
-    from wolfcal.fit.solver import BlockResult
 
 
 class TagViewBlock(Protocol):
@@ -31,6 +29,9 @@ class TagViewBlock(Protocol):
     obs: Observations
     camera_name: str
     tag_ids: list[int]
+
+    @property
+    def unit_rule(self) -> OutlierRule | None: ...  # single units left out one by one (`Block.unit_rule`)
 
 
 @dataclass
@@ -45,11 +46,30 @@ class Linearization:
 
 
 @dataclass
+class BlockResult:
+    """What one measurement block says about the fit, in its own unit."""
+
+    name: str
+    system: str
+    unit: str  # the block's unit ('px', 'm', ...)
+    sigma: float  # noise per measured number of the final noise model [unit]
+    rms_before: float  # inlier units, per axis, nominal model [unit]
+    rms_after: float
+    max_after: float  # largest inlier unit distance [unit]
+    n_units: int  # inlier units (corners, markers)
+    sample_rms_before: np.ndarray  # (S_block,) per-axis RMS per sample [unit]
+    sample_rms_after: np.ndarray
+    outlier_views: list[tuple[int, int]]  # (sample, tag or marker id) of each view left out
+    outlier_samples: np.ndarray  # (S_block,) bool: every view of the sample was left out
+    class_sigma: np.ndarray  # (C,) noise per measured number of each noise class (`Block.noise_classes`) [unit]
+
+
+@dataclass
 class FittedBlock:
     """What a solved fit knows of one block, for its part of result.yaml (`Block.report`)."""
 
     result: BlockResult  # the solver's figures of the block
-    state: BlockState  # its final noise model and outlier sets
+    excluded_units: np.ndarray  # (U,) bool: single units left out by the block's unit rule (`Block.unit_rule`)
     local_values: np.ndarray  # (L,) the block's own unknowns at the solution [SI]
     residual: np.ndarray  # (U, dim) predicted minus measured at the solution [unit]
     chain: ParameterSet  # the fit's robot-model parameters

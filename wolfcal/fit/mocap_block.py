@@ -79,7 +79,9 @@ class MocapBlock(Block):
         return self.obs.marker_index
 
     def report(self, fitted: FittedBlock) -> dict:
-        return mocap_block_dict(self, fitted.result, fitted.local_values, fitted.residual)
+        return mocap_block_dict(
+            self.obs, self.placement_names, self.view_labels, fitted.result, fitted.local_values, fitted.residual
+        )
 
     @property
     def marker_names(self) -> list[str]:

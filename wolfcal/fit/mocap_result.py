@@ -12,16 +12,23 @@ import numpy as np
 from wolfcal.geometry import matrix_to_rpy, transform_from_twist_params
 
 if TYPE_CHECKING:
-    from wolfcal.fit.mocap_block import MocapBlock
-    from wolfcal.fit.solver import BlockResult
+    from wolfcal.fit.blocks import BlockResult
+    from wolfcal.markers import MarkerObservations
 
 
-def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, residual: np.ndarray) -> dict:
-    """result.yaml entry of a motion-capture block; `values` are its own unknowns [SI], `residual` (U, 3) [m] its
-    residuals at the solution."""
-    obs = block.obs
+def mocap_block_dict(
+    obs: MarkerObservations,
+    placement_names: list[str],
+    view_labels: list[tuple[int, int]],
+    b: BlockResult,
+    values: np.ndarray,
+    residual: np.ndarray,
+) -> dict:
+    """result.yaml entry of a motion-capture block: its markers `obs`, the names of its base-pose placements, the
+    (sample, marker) of each view, the solver's figures `b`; `values` are its own unknowns (6 per placement) [SI],
+    `residual` (U, 3) [m] its residuals at the solution."""
     left_out = {(s, k) for s, k in b.outlier_views}
-    inlier = np.array([(s, k) not in left_out for s, k in block.view_labels], dtype=bool)
+    inlier = np.array([(s, k) not in left_out for s, k in view_labels], dtype=bool)
     samples = [{
         "index": i,
         "source": Path(obs.sources[i]).name,
@@ -39,7 +46,7 @@ def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, resi
         per_marker[name] = {"n_used": int(rows.sum()), "rms_after_mm": round(rms * 1000, 4),
                             "noise_sigma_mm": round(float(b.class_sigma[k]) * 1000, 4)}  # fmt: skip
     poses = {}
-    for p, name in enumerate(block.placement_names):
+    for p, name in enumerate(placement_names):
         T = transform_from_twist_params(values[6 * p : 6 * p + 6])
         poses[name] = {"xyz": [float(v) for v in T[:3, 3]], "rpy": [float(v) for v in matrix_to_rpy(T[:3, :3])],
                        "T_mocap_base": np.round(T, 12).tolist()}  # fmt: skip
@@ -67,7 +74,7 @@ def mocap_block_dict(block: MocapBlock, b: BlockResult, values: np.ndarray, resi
                 "stamp_ns": int(obs.stamps_ns[s]),
                 "distance_mm": round(float(np.linalg.norm(residual[u])) * 1000, 3),
             }
-            for u, (s, k) in enumerate(block.view_labels)
+            for u, (s, k) in enumerate(view_labels)
             if (s, k) in left_out
         ],  # fmt: skip
         "unknown_marker_names": obs.unknown_names,

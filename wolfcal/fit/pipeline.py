@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,8 @@ from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
 from wolfcal.fit.result import FitResult, explain, fit_result, summary_lines, write_result
-from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.solved import Fit
+from wolfcal.fit.solver import solve
 from wolfcal.fit.systems import ALL, load_attribute, own_file_systems, system_presets
 from wolfcal.io.current import current_files, load_current
 from wolfcal.io.reader import read_capture, require_cameras
@@ -37,36 +38,6 @@ from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
-
-
-@dataclass
-class Fit:
-    """A solved fit: the measurement blocks and their observations, the unknowns and the solution."""
-
-    robot: Robot
-    observations: dict[str, Observations]  # per camera, only the tags used
-    blocks: list[Block]  # the measurement blocks (camera, floor, sole closure, motion capture)
-    chain: ParameterSet  # the robot-model parameters (the first len(chain) unknowns)
-    problem: Problem
-    solution: Solution
-    held: Corrections = field(default_factory=Corrections)  # corrections held fixed under the free ones (--current)
-
-    @property
-    def params(self) -> ParameterSet:
-        """Every unknown: the chain parameters, then each block's own (e.g. external camera poses)."""
-        return self.problem.params
-
-    @property
-    def tag_ids(self) -> list[int]:
-        """The ids of the tags on links that the fit's blocks observe (floor tags not included)."""
-        return sorted({t for b in self.blocks if b.system != "floor" for t in getattr(b, "tag_ids", ())})
-
-    @property
-    def corrections(self) -> Corrections:
-        """The fitted model's corrections (offsets [rad], frame and tag-mount vectors [m, rad]): the free
-        parameters' values (totals, not changes) with what the fit held fixed."""
-        return self.chain.corrections(self.solution.values[: len(self.chain)]).plus(self.held)
-
 
 CAMERA_SYSTEMS = (None, ALL, "head", "external")  # --system choices whose fit uses the cameras' tag views
 

@@ -25,7 +25,7 @@ from wolfcal.robot.parameters import ParameterSet
 from wolfcal.yamlfile import dump_yaml_pieces, read_yaml
 
 if TYPE_CHECKING:
-    from wolfcal.fit.pipeline import Fit
+    from wolfcal.fit.solved import Fit
 
 CONDITION_LIMIT = 100.0
 DATA_SHARE_LIMIT = 0.5
@@ -111,7 +111,9 @@ def _block_dict(fit: Fit, k: int) -> dict:
     residual = fit.problem.raw_residuals((fit.solution.values - params.references) / params.prior_sigmas)[k]
     local = fit.solution.values[state.start : state.start + len(state.block.nuisance)]
     chain_values = fit.solution.values[: len(fit.chain)]
-    return state.block.report(FittedBlock(fit.solution.blocks[k], state, local, residual, fit.chain, chain_values))
+    return state.block.report(
+        FittedBlock(fit.solution.blocks[k], state.excluded_units, local, residual, fit.chain, chain_values)
+    )
 
 
 def external_camera_poses(fit: Fit) -> dict:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wolfcal.fit.blocks import Linearization
+from wolfcal.fit.blocks import BlockResult, Linearization
 from wolfcal.fit.lm import levenberg_marquardt, marginal_std
 from wolfcal.fit.noise import GroupedWhitening, row_groups, weighted_median, weighted_median_above
 from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
@@ -60,25 +60,6 @@ CLASS_CUT = 3.5
 CLASS_FADE = 1.0
 CLASS_PRIOR_ROWS = 30
 CLASS_SCALE_FLOOR = 1.0
-
-
-@dataclass
-class BlockResult:
-    """What one measurement block says about the fit, in its own unit."""
-
-    name: str
-    system: str
-    unit: str  # the block's unit ('px', 'm', ...)
-    sigma: float  # noise per measured number of the final noise model [unit]
-    rms_before: float  # inlier units, per axis, nominal model [unit]
-    rms_after: float
-    max_after: float  # largest inlier unit distance [unit]
-    n_units: int  # inlier units (corners, markers)
-    sample_rms_before: np.ndarray  # (S_block,) per-axis RMS per sample [unit]
-    sample_rms_after: np.ndarray
-    outlier_views: list[tuple[int, int]]  # (sample, tag or marker id) of each view left out
-    outlier_samples: np.ndarray  # (S_block,) bool: every view of the sample was left out
-    class_sigma: np.ndarray  # (C,) noise per measured number of each noise class (`Block.noise_classes`) [unit]
 
 
 @dataclass

@@ -25,7 +25,7 @@ def tag_view_report(block: TagViewBlock, fitted: FittedBlock) -> dict:
     outlier_tags: dict[int, list[int]] = {}
     for s, t in sorted(b.outlier_views):
         outlier_tags.setdefault(s, []).append(t)
-    rule = fitted.state.block.unit_rule  # single corners left out one by one (None: the block has no such rule)
+    rule = block.unit_rule  # single corners left out one by one (None: the block has no such rule)
     corners = outlier_corners(block, fitted) if rule is not None else None
     samples = []
     for i in range(obs.n_samples):
@@ -74,8 +74,8 @@ def outlier_corners(block: TagViewBlock, fitted: FittedBlock) -> dict[int, list[
     """Sample -> [tag id, corner index] of each single corner the fit left out of the block's views kept
     (`Block.unit_rule`, e.g. `outliers.FLOOR_CORNER_PX`; the solver's final outlier sets). Only for a block with a
     unit rule: its units are the detected corners, one per row of its observations."""
-    obs, state = block.obs, fitted.state
+    obs = block.obs
     out: dict[int, list[list[int]]] = {}
-    for m in np.flatnonzero(state.excluded_units):
+    for m in np.flatnonzero(fitted.excluded_units):
         out.setdefault(int(obs.sample_index[m]), []).append([int(obs.tag_ids[m]), int(obs.corner_index[m])])
     return out

@@ -32,8 +32,8 @@ from wolfcal.errors import WolfcalError
 from wolfcal.external_view import external_tag_poses
 from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_block import CameraBlock
-from wolfcal.fit.pipeline import Fit
 from wolfcal.fit.problem import Problem
+from wolfcal.fit.solved import Fit
 from wolfcal.fit.uncertainty import Uncertainty, uncertainty
 from wolfcal.observations import Observations
 from wolfcal.plan.candidates import PlanCamera

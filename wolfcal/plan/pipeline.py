@@ -42,7 +42,7 @@ from wolfcal.robot.presets import DEFAULT_PRESET
 from wolfcal.robot.robot import Robot, load_robot
 
 # --criterion when none is given, per (system, preset): the one that planned the more accurate calibration in
-# bench/bench_plan.py; D for the others
+# the bench harness's `plan` part; D for the others
 DEFAULT_CRITERION = {("head", "head_camera"): "I", ("external", "leg"): "I"}
 
 

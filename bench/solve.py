@@ -1,48 +1,41 @@
-"""Fit speed: the leg preset (both sides) with the head camera on 25, 100, 400 and 1000 synthetic samples, and with an
-external camera on 30 and 120 samples. With --stability: how far the fit moves under changes that should not matter.
+"""The `solve` and `stability` parts.
 
-Run: python bench/bench_fit.py. Prints the solve's wall and CPU time (median of 3; reading and tag detection
-excluded: observations are projected without images) and the number of linearisations. BLAS runs on one thread,
-as in the `wolfcal` command.
+`solve`: the solve's wall and CPU time (median of 3; reading and tag detection excluded: observations are projected
+without images) and the number of linearisations, the leg preset (both sides) with the head camera on synthetic
+samples and with an external camera on 30 and 120. BLAS runs on one thread, as in the `wolfcal` command.
 
-python bench/bench_fit.py --stability [--floor-dir DIR] [CASE ...]: per case, the largest |change| of a chain
-parameter in its reported standard deviations (and the largest relative change of a std) when the samples come in
-another order (2 orders, corner rows shuffled too), when 1e-7 px is added to every corner (1e-10 m to every marker;
-2 draws), when BLAS runs another kernel (OPENBLAS_CORETYPE=Sandybridge: other summation orders; a subprocess), and
-when the solver's rounds stop elsewhere (ROUND_STD_TOL 0.03 and ROUND_COST_TOL 1e-4, or 0.3 and 1e-2); with the
-solve's CPU time and linearisations. Cases: the shipped demo captures (`wolfcal demo`'s two fits, the external
-camera demo), synthetic corners (head camera 25/100/400 samples with outliers, external camera 30/120), a motion-capture
-session (tests/mocap_session.py), the harness's 24-sample camera capture when present and, with
---floor-dir (a `bench_floor.py --keep` folder), its feet + floor fits.
-"""
+`stability`: per case, the largest |change| of a chain parameter in its reported standard deviations (and the largest
+relative change of a std) when the samples come in another order (2 orders, corner rows shuffled too), when 1e-7 px
+is added to every corner (1e-10 m to every marker; 2 draws), when BLAS runs another kernel
+(OPENBLAS_CORETYPE=Sandybridge: other summation orders; a subprocess), and when the solver's rounds stop elsewhere
+(ROUND_STD_TOL 0.03 and ROUND_COST_TOL 1e-4, or 0.3 and 1e-2); with the solve's CPU time and linearisations. Cases:
+the shipped demo captures (`wolfcal demo`'s two fits, the external camera demo), synthetic corners (head camera
+25/100/400 samples with outliers, external camera 30/120), a motion-capture session (tests/mocap_session.py) and the
+harness's 24-sample camera capture when present."""
 
 from __future__ import annotations
 
+import json
 import os
+import pickle
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import pickle  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from dataclasses import replace  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from wolfcal.camera.camera_info import load_camera_info  # noqa: E402
-from wolfcal.camera.model import CameraModel  # noqa: E402
-from wolfcal.fit import solver  # noqa: E402
-from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples  # noqa: E402
-from wolfcal.robot.robot import load_robot  # noqa: E402
-from wolfcal.sim.observations import reordered  # noqa: E402
-from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario  # noqa: E402
-from wolfcal.vision.observe import detect_observations  # noqa: E402
+from wolfcal.camera.camera_info import load_camera_info
+from wolfcal.camera.model import CameraModel
+from wolfcal.fit import solver
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.observations import reordered
+from wolfcal.sim.scenario import synthetic_external_scenario, synthetic_scenario
+from wolfcal.vision.observe import detect_observations
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "wolfgang"
@@ -60,25 +53,27 @@ def timed(robot, obs, options: FitOptions) -> tuple[float, float, object]:
     return float(np.median(wall)), float(np.median(cpu)), fit
 
 
-def speed() -> None:
+def speed(sizes: tuple[int, ...], say) -> dict:
+    """The solve's wall and CPU time [s] (median of 3) and linearisations: the head camera's leg preset on `sizes`
+    synthetic samples, an external camera on 30 and 120 (and 120 with a pose per sample)."""
     robot = load_robot(CONFIG)
     camera = load_camera_info(CONFIG / "basler_acA2040.yaml")
-    for n in (25, 100, 400, 1000):
-        scenario = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all")
-        wall, cpu, fit = timed(robot, scenario.obs, FitOptions(free="leg", side="both"))
-        print(
-            f"head camera, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d} corners, {len(fit.params)} "
-            f"unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), {fit.solution.evaluations} "
-            "linearisations"
-        )
-    for n, moving in ((30, False), (120, False), (120, True)):
-        scenario = synthetic_external_scenario(robot, TRIPOD, n=n, seed=n)
-        wall, cpu, fit = timed(robot, scenario.obs, FitOptions(free="leg", external_moving=moving))
-        print(
-            f"external camera{' (moving)' if moving else ''}, leg preset, {n:4d} samples, {len(scenario.obs.uv):5d}"
-            f" corners, {len(fit.params)} unknowns: solve {wall:.3f} s wall, {cpu:.3f} s CPU (median of 3), "
-            f"{fit.solution.evaluations} linearisations"
-        )
+    rows = []
+    external = [("external camera", 30, False), ("external camera", 120, False), ("external camera", 120, True)]
+    cases = [("head camera", n, False) for n in sizes] + external
+    for system, n, moving in cases:
+        if system == "head camera":
+            scenario = synthetic_scenario(robot, camera, n=n, seed=n, offsets="all")
+            options = FitOptions(free="leg", side="both")
+        else:
+            scenario = synthetic_external_scenario(robot, TRIPOD, n=n, seed=n)
+            options = FitOptions(free="leg", external_moving=moving)
+        wall, cpu, fit = timed(robot, scenario.obs, options)
+        rows.append({"system": system + (" (moving)" if moving else ""), "samples": n, "corners": len(scenario.obs.uv),
+                     "unknowns": len(fit.params), "wall": wall, "cpu": cpu,
+                     "linearisations": fit.solution.evaluations})  # fmt: skip
+        say(f"solve {rows[-1]['system']}, {n} samples: {wall:.3f} s wall, {cpu:.3f} s CPU")
+    return {"preset": "leg", "rows": rows}
 
 
 Case = Callable[[], tuple]  # -> (robot, observations by camera, markers or None, options)
@@ -120,7 +115,7 @@ def mocap_session() -> tuple:
     return robot, {}, markers, FitOptions(free="leg", system="mocap")
 
 
-def cases(floor_dir: Path | None) -> dict[str, Case]:
+def cases() -> dict[str, Case]:
     out: dict[str, Case] = {
         "demo venue": from_captures(CONFIG, [ROOT / "captures/demo.mcap", ROOT / "captures/floor_demo.mcap"],
                                     free="camera"),
@@ -132,11 +127,6 @@ def cases(floor_dir: Path | None) -> dict[str, Case]:
     }  # fmt: skip
     if (BENCH_DATA / "camera_24.mcap").is_file():  # the harness's camera capture (bench/run.py --parts fit)
         out["bench 24"] = from_captures(CONFIG, [BENCH_DATA / "camera_24.mcap"], free="camera")
-    for folder in sorted(floor_dir.glob("*_tags*")) if floor_dir else []:
-        free = {"free": folder.name.split("_")[0], "side": "both"}
-        out[f"floor {folder.name}"] = from_captures(
-            folder / "robot_standing.yaml", [folder / "feet.mcap", folder / "floor.mcap"], **free
-        )
     return out
 
 
@@ -183,8 +173,11 @@ def with_rounds(std_tol: float, cost_tol: float, fit: Callable[[], dict]) -> dic
         solver.ROUND_STD_TOL, solver.ROUND_COST_TOL = saved
 
 
-def stability(names: list[str], floor_dir: Path | None) -> None:
-    known = cases(floor_dir)
+def stability(names: list[str], say) -> dict:
+    """Per case (all by default): unknowns, linearisations, CPU [s], and per change that should not matter the
+    largest |change| of a chain parameter in its reported stds and the largest relative change of a std."""
+    known = cases()
+    out = {}
     for name in names or list(known):
         robot, observations, markers, options = known[name]()
         base = chain_fit(robot, observations, markers, options)
@@ -201,32 +194,16 @@ def stability(names: list[str], floor_dir: Path | None) -> None:
             dumped = subprocess.run([sys.executable, __file__, "--dump", str(data)], env=env, capture_output=True,
                                     text=True, check=True).stdout  # fmt: skip
         others["BLAS kernel"] = [json.loads(dumped.splitlines()[-1])]
-        parts = []
+        changes = {}
         for label, fits in others.items():
             moved, std = np.max([change(base, f) for f in fits], axis=0)
-            parts.append(f"{label} {moved:.1e} ({std:.0e})")
-        print(
-            f"{name:34s} {len(base['values']):3d} unknowns, {base['evaluations']:3d} linearisations, "
-            f"{base['cpu']:.2f} s CPU | largest change / std (std's relative change): " + ", ".join(parts),
-            flush=True,
-        )
+            changes[label] = {"moved_std": float(moved), "std_change": float(std)}
+        out[name] = {"unknowns": len(base["values"]), "linearisations": base["evaluations"], "cpu": base["cpu"],
+                     "changes": changes}  # fmt: skip
+        say(f"stability {name}: largest change {max(c['moved_std'] for c in changes.values()):.1e} std")
+    return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--stability", action="store_true")
-    parser.add_argument("--floor-dir", type=Path, default=None)
-    parser.add_argument("--dump", type=Path, help=argparse.SUPPRESS)  # a pickled case's fit as JSON
-    parser.add_argument("cases", nargs="*")
-    args = parser.parse_args()
-    if args.dump:
-        config, observations, markers, options = pickle.loads(args.dump.read_bytes())
-        print(json.dumps(chain_fit(load_robot(config), observations, markers, options)))
-    elif args.stability:
-        stability(args.cases, args.floor_dir)
-    else:
-        speed()
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # `stability`'s fit in a process with another BLAS kernel: a pickled case -> JSON
+    config, observations, markers, options = pickle.loads(Path(sys.argv[2]).read_bytes())
+    print(json.dumps(chain_fit(load_robot(config), observations, markers, options)))

@@ -1,5 +1,6 @@
-"""The motion-capture must-show over seeds, on data wolfcal did not generate (tests/mocap_session.py: the strider
-robot and its Vicon-style marker layout, yourdfpy kinematics, Markers by mcap_ros2, C3D by ezc3d).
+"""The `mocap` part: motion-capture accuracy over seeds, on data wolfcal did not generate
+(tests/mocap_session.py: the strider robot and its Vicon-style marker layout, yourdfpy kinematics,
+Markers by mcap_ros2, C3D by ezc3d).
 
 Per seed: 25 still poses, 0.025 rad rms leg offsets, 0.3 mm marker noise, 3 % occluded, 1 % reflections 2-20 mm,
 mounts off 1 mm; `wolfcal fit --system mocap --free leg` on the Markers recording and on the joint states + C3D
@@ -14,12 +15,11 @@ mounts off 1 mm; `wolfcal fit --system mocap --free leg` on the Markers recordin
   max |z|          largest |estimate - truth| / reported std over the leg offsets and the marker mounts
   flagged          reflections flagged / reflections, and other markers left out
   clock ms         |estimated - true| C3D clock offset [ms]
-Run: python bench/bench_mocap_other_robot.py [--seeds 5]
+Per source and figure the mean and max over the seeds; `pairs`: (fitted - true roll, mount rotation) [rad].
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 from pathlib import Path
@@ -79,36 +79,26 @@ def run(seed: int, folder: Path) -> dict[str, dict]:
     return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=5)
-    args = parser.parse_args()
+def mocap(seeds: int, say) -> dict:
+    """Per seed and source (markers, c3d, known), the figures of the module docstring; per source the mean and max
+    of each over the seeds, and how the ankle-roll error follows the mounts' rotation (correlation, RMS [deg])."""
     rows = []
-    print(
-        f"{'seed':>4} {'source':>7} {'sole mm':>8} {'sole deg':>8} {'roll deg':>8} {'mount deg':>9} "
-        f"{'max |z|':>7} {'flagged':>8} {'other':>5} {'clock ms':>8}"
-    )
-    for seed in range(args.seeds):
+    for seed in range(seeds):
         with tempfile.TemporaryDirectory() as tmp:
             for name, r in run(seed, Path(tmp)).items():
-                rows.append(r | {"source": name})
-                clock = "-" if r["clock_ms"] is None else f"{r['clock_ms']:.2f}"
-                print(
-                    f"{seed:>4} {name:>7} {r['sole_mm']:8.3f} {r['sole_deg']:8.3f} {r['roll_deg']:8.3f} "
-                    f"{r['mount_deg']:9.3f} {r['max_z']:7.2f} {r['flagged']:>4}/{r['reflections']:<3} "
-                    f"{r['other']:>5} {clock:>8}",
-                    flush=True,
-                )
+                rows.append(r | {"source": name, "seed": seed})
+                say(f"mocap seed {seed} {name}: sole {r['sole_mm']:.3f} mm, max |z| {r['max_z']:.2f}")
+    summary: dict[str, dict] = {}
     for source in ("markers", "c3d", "known"):
+        mine = [r for r in rows if r["source"] == source]
+        figures = {}
         for key in ("sole_mm", "sole_deg", "roll_deg", "max_z"):
-            v = np.array([r[key] for r in rows if r["source"] == source])
-            print(f"{source} {key}: mean {v.mean():.3f}, max {v.max():.3f}")
-        pairs = np.rad2deg([pair for r in rows if r["source"] == source for pair in r["pairs"]])
-        print(
-            f"{source}: ankle-roll error against the mounts' rotation: correlation "
-            f"{np.corrcoef(pairs.T)[0, 1]:.3f}, rms difference {np.sqrt(np.mean(np.diff(pairs) ** 2)):.3f} deg"
-        )
-
-
-if __name__ == "__main__":
-    main()
+            v = np.array([r[key] for r in mine])
+            figures[key] = {"mean": float(v.mean()), "max": float(v.max())}
+        pairs = np.rad2deg([pair for r in mine for pair in r["pairs"]])
+        figures["roll_vs_mount_correlation"] = float(np.corrcoef(pairs.T)[0, 1]) if len(pairs) > 1 else None
+        figures["roll_vs_mount_rms_deg"] = float(np.sqrt(np.mean(np.diff(pairs) ** 2)))
+        summary[source] = figures
+    for r in rows:
+        r["pairs"] = np.asarray(r["pairs"]).tolist()
+    return {"seeds": seeds, "rows": rows, "summary": summary}

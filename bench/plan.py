@@ -29,36 +29,32 @@ Run: python bench/bench_plan.py [--seeds 5] [--scenarios leg head_camera externa
 
 from __future__ import annotations
 
-import argparse
-import os
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from wolfcal.encoders import encoder_readings  # noqa: E402
-from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors  # noqa: E402
-from wolfcal.external_view import external_tag_poses  # noqa: E402
-from wolfcal.fit.pipeline import FitOptions, fit_observations  # noqa: E402
-from wolfcal.geometry import invert_transform, tag_corners, transform_from_xyz_rpy  # noqa: E402
-from wolfcal.markers import MarkerObservations  # noqa: E402
-from wolfcal.observations import HEAD_CAMERA, Observations  # noqa: E402
-from wolfcal.plan.candidates import plan_camera  # noqa: E402
-from wolfcal.plan.floor import expected_places  # noqa: E402
-from wolfcal.plan.information import fit_null_directions, fit_separated_std  # noqa: E402
-from wolfcal.plan.pipeline import PlanOptions, make_plan  # noqa: E402
+from wolfcal.encoders import encoder_readings
+from wolfcal.evaluate.accuracy import camera_pose_errors, link_position_errors
+from wolfcal.external_view import external_tag_poses
+from wolfcal.fit.pipeline import FitOptions, fit_observations
+from wolfcal.geometry import invert_transform, tag_corners, transform_from_xyz_rpy
+from wolfcal.markers import MarkerObservations
+from wolfcal.observations import HEAD_CAMERA, Observations
+from wolfcal.plan.candidates import plan_camera
+from wolfcal.plan.floor import expected_places
+from wolfcal.plan.information import fit_null_directions, fit_separated_std
+from wolfcal.plan.pipeline import PlanOptions, make_plan
 from wolfcal.projection import (
-    observations_from_poses,  # noqa: E402
-    tag_corner_pixels,  # noqa: E402
+    observations_from_poses,
+    tag_corner_pixels,
 )
-from wolfcal.robot.corrections import Corrections  # noqa: E402
-from wolfcal.robot.floor import camera_in_floor, floor_tag_poses  # noqa: E402
-from wolfcal.robot.robot import load_robot  # noqa: E402
-from wolfcal.sim.mocap_scene import MocapNoise, measure, true_marker_positions  # noqa: E402
-from wolfcal.sim.simulate import offset_joints  # noqa: E402
-from wolfcal.sim.truth import TruthSpec, random_truth  # noqa: E402
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor, floor_tag_poses
+from wolfcal.robot.robot import load_robot
+from wolfcal.sim.mocap_scene import MocapNoise, measure, true_marker_positions
+from wolfcal.sim.simulate import offset_joints
+from wolfcal.sim.truth import TruthSpec, random_truth
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 SCENARIOS = {"leg": ("head", "leg", "all"), "head_camera": ("head", "head_camera", "head"),
@@ -209,86 +205,21 @@ def paired(runs: list[dict], metric: str, scale: float) -> str:
     )
 
 
-def timing() -> None:
-    """Planning 20 of 2000: candidates and the whole plan, CPU and wall seconds."""
-    robot = load_robot(CONFIG)
-    for system, criterion in (("head", "D"), ("head", "I"), ("head", "E"), ("external", "D"), ("external", "I"),
-                              ("mocap", "D"), ("floor", "D")):  # fmt: skip
-        free = "head_camera" if system == "floor" else "leg"
-        marks: list[float] = []
-
-        def mark(message: str, marks: list[float] = marks) -> None:
-            if message.startswith("choosing"):
-                marks.append(time.process_time())
-
-        start, cpu = time.perf_counter(), time.process_time()
-        make_plan(robot, PlanOptions(free=free, system=system, poses=20, criterion=criterion), say=mark)
-        total, wall = time.process_time() - cpu, time.perf_counter() - start
-        print(
-            f"{system:9s} --free {free} {criterion}: 20 of 2000 in {total:.1f} s CPU (candidates "
-            f"{marks[0] - cpu:.1f} s), {wall:.1f} s wall; load average {os.getloadavg()[0]:.1f}",
-            flush=True,
-        )
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
-    parser.add_argument("--timing", action="store_true", help="time planning 20 of 2000 instead")
-    parser.add_argument("--criterion", default=None, help="D | A | E | I (default: the plan's default per preset)")
-    args = parser.parse_args()
-    if args.timing:
-        timing()
-        return
-    for name in args.scenarios:
-        runs = []
-        camera = SCENARIOS[name][1] != "leg"
-        what, scale, unit = ("camera position", 1000.0, "mm") if camera else ("sole", 1000.0, "mm")
-        for seed in range(args.seeds):
-            r = run(name, seed, args.criterion)
-            runs.append(r)
-            shown = " / ".join(f"{r[k]['error'] * scale:.2f} ({r[k]['error_observable'] * scale:.2f})" for k in SETS)
-            mdeg = np.rad2deg(1000.0)
-            rot = " / ".join(f"{r[k]['rotation'] * mdeg:.1f} ({r[k]['rotation_observable'] * mdeg:.1f})"
-                             for k in SETS) if camera else ""  # fmt: skip
-            print(f"  {name} seed {seed}: {what} error {unit} planned12 / random30 / random12 (observable part): "
-                  f"{shown}{'; rotation mdeg ' + rot if camera else ''}; worst separated std planned12 "
-                  f"{r['planned12']['separated_m'] * 1000:.3f} mm "
-                  f"{np.rad2deg(r['planned12']['separated_rad']):.4f} deg, "
-                  f"random12 {r['random12']['separated_m'] * 1000:.3f} mm "
-                  f"{np.rad2deg(r['random12']['separated_rad']):.4f} deg; null directions "
-                  f"{'/'.join(str(r[k]['null']) for k in SETS)}", flush=True)  # fmt: skip
-        med = {k: {m: np.median([r[k][m] for r in runs]) for m in METRICS} for k in SETS}
-        n = args.seeds
-        for metric, label, f, u in (("error", f"{what} error", scale, unit),
-                                    ("error_observable", f"{what} error, unseparable part removed", scale, unit),
-                                    ("rotation", "camera rotation error", np.rad2deg(1000.0), "mdeg"),
-                                    ("rotation_observable", "camera rotation error, unseparable part removed",
-                                     np.rad2deg(1000.0), "mdeg")):  # fmt: skip
-            if metric.startswith("rotation") and not camera:
-                continue
-            print(f"{name:12s} {label} (median of {n} seeds): 12 planned {med['planned12'][metric] * f:.2f} {u}, "
-                  f"30 random {med['random30'][metric] * f:.2f} {u}, 12 random {med['random12'][metric] * f:.2f} {u}; "
-                  f"paired planned12 - random30 [{u}]: {paired(runs, metric, f)}", flush=True)  # fmt: skip
-        for kind, label in (("std", "as reported"), ("separated", "unseparable directions known")):
-            gains = []
-            for u in ("m", "rad"):
-                g = [r["random12"][f"{kind}_{u}"] / r["planned12"][f"{kind}_{u}"] for r in runs
-                     if r["planned12"][f"{kind}_{u}"] > 0]  # fmt: skip
-                gains.append(f"{np.median(g):.1f}x (lowest {min(g):.1f}x) ({u})" if g else f"none ({u})")
-            print(
-                f"{name:12s} worst std among the observable offsets and camera mount (no tag mounts), {label}, "
-                f"random12/planned12, median of {n} seeds: {', '.join(gains)}",
-                flush=True,
-            )
-        print(
-            f"{name:12s} planning {np.median([r['planning_s'] for r in runs]):.1f} s wall, "
-            f"{np.median([r['planning_cpu_s'] for r in runs]):.1f} s CPU (12 of 2000; load average "
-            f"{os.getloadavg()[0]:.1f})",
-            flush=True,
-        )
-
-
-if __name__ == "__main__":
-    main()
+def plan(seeds: int, say, scenarios: tuple[str, ...] | None = None) -> dict:
+    """Per scenario: each seed's figures (`run`: per pose set the true errors [m, rad], the worst reported and
+    separated stds, the null directions; planning wall and CPU time [s]), and the medians over the seeds per pose set
+    (METRICS), the paired difference planned12 - random30 of the true error [m], and the median planning time."""
+    out = {}
+    for name in scenarios or tuple(SCENARIOS):
+        runs = [run(name, seed) for seed in range(seeds)]
+        for seed, r in enumerate(runs):
+            say(f"plan {name} seed {seed}: error planned12 {r['planned12']['error'] * 1000:.2f} mm, random30 "
+                f"{r['random30']['error'] * 1000:.2f} mm")  # fmt: skip
+        out[name] = {
+            "runs": runs,
+            "median": {k: {m: float(np.median([r[k][m] for r in runs])) for m in METRICS} for k in SETS},
+            "paired_planned12_minus_random30_mm": paired(runs, "error", 1000.0),
+            "planning_s": float(np.median([r["planning_s"] for r in runs])),
+            "planning_cpu_s": float(np.median([r["planning_cpu_s"] for r in runs])),
+        }
+    return {"seeds": seeds, "scenarios": out}

@@ -1,10 +1,9 @@
-"""Every bad input of issue 12 through the real command line (`python -m wolfcal.cli ...` in a subprocess).
+"""Bad inputs through the real command line (`python -m wolfcal.cli ...` in a subprocess), one case each: the
+inputs made in a temporary folder (a simulated capture and faulty copies of it, broken camera_info files and URDFs,
+outputs of earlier runs); per case the exit code, whether a traceback was printed, whether every input file is
+unchanged, and the message wolfcal gave (`tests/e2e/test_bad_inputs.py` runs them all).
 
-Run: `python bench/bad_inputs.py [--keep]`. Makes its inputs in a temporary folder (a simulated capture and faulty
-copies of it, broken camera_info files and URDFs, outputs of earlier runs), runs each case and prints one line per
-case: PASS/FAIL, the exit code, whether a traceback was printed, whether every input file is unchanged, and the
-message wolfcal gave. Exits 1 if any case fails. About a minute on 2 cores.
-"""
+`python tests/e2e/bad_input_cases.py [--keep]` prints one line per case and exits 1 if any fails."""
 
 from __future__ import annotations
 
@@ -26,7 +25,7 @@ from wolfcal.config import load_robot_config
 from wolfcal.hardware.bus import DynamixelBus
 from wolfcal.sim.faulty import rewrite_capture, with_camera_info, with_damaged_image, with_joint_values
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ROBOT = ROOT / "configs" / "wolfgang"
 TIMEOUT_S = 600
 

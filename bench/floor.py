@@ -1,4 +1,4 @@
-"""The venue check on rendered images: feet + floor captures -> fit -> true and measured ground error.
+"""The `floor` part: the venue check on rendered images: feet + floor captures -> fit -> true and measured ground error.
 
 A robot config and camera the shipped demos do not use (Wolfgang's URDF, feet tags 7 and 8 of 0.1 m, torso tag 3,
 floor tags 60-65 of 0.12-0.2 m lying 1-4 m away; a 1280x960 camera with k1 = -0.12), simulated with 0.025 rad rms
@@ -8,44 +8,34 @@ leg and head encoder offsets and the camera ~4 deg off. Per seed:
           its parts, whether it agrees with the true one (within 20 % or 1 cm) and its CPU time, the soles' worst
           pose error over 500 calibration-range poses, fit time
   camera  legs calibrated (no offsets), camera ~4 deg off, 24 feet + 20 floor samples, `--free camera`
-The held-out floor capture: 16 samples all standing by default; --held-stances: in the fit's 5 stances;
---held-new-stances N: in N check stances (`held_stances`, as `simulate --floor --check`); --held-samples in all,
-split between --held-layouts captures with the tags laid out anew in each; --held-distance NEAR FAR [m].
-The check (README, "The venue check"): --held-samples 48 --held-new-stances 16 --held-layouts 3.
-Run: python bench/bench_floor.py [--seeds 4] [--first-seed 0] [--scenarios leg camera] [--keep DIR] [--stances]
-     [--floor-tags 6] [--floor-samples 20] [--held-stances | --held-new-stances N] [--held-samples 16]
-     [--held-layouts 1] [--held-distance 1 4]
+The held-out floor capture: 16 samples, all standing.
 """
 
 from __future__ import annotations
 
-import argparse
-import os
 import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: BLAS threads spinning on 2 busy cores cost 50x
+import numpy as np
+import yaml
 
-import numpy as np  # noqa: E402
-import yaml  # noqa: E402
-
-from wolfcal.camera.camera_info import save_camera_info  # noqa: E402
-from wolfcal.camera.model import CameraModel  # noqa: E402
-from wolfcal.errors import WolfcalError  # noqa: E402
-from wolfcal.evaluate.accuracy import link_pose_errors  # noqa: E402
-from wolfcal.evaluate.floor_ground import measured_ground_errors  # noqa: E402
-from wolfcal.evaluate.ground import ground_errors  # noqa: E402
-from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor  # noqa: E402
-from wolfcal.io.truth import truth_paths  # noqa: E402
-from wolfcal.observations import Observations  # noqa: E402
-from wolfcal.robot.corrections import Corrections, load_corrections  # noqa: E402
-from wolfcal.robot.floor import moved_stance  # noqa: E402
-from wolfcal.robot.robot import Robot, load_robot  # noqa: E402
-from wolfcal.sim.simulate import SimOptions, simulate_capture  # noqa: E402
-from wolfcal.vision.corner_bias import CORNER_INSET  # noqa: E402
-from wolfcal.vision.observe import detect_observations  # noqa: E402
+from wolfcal.camera.camera_info import save_camera_info
+from wolfcal.camera.model import CameraModel
+from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.accuracy import link_pose_errors
+from wolfcal.evaluate.floor_ground import measured_ground_errors
+from wolfcal.evaluate.ground import ground_errors
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, split_floor
+from wolfcal.io.truth import truth_paths
+from wolfcal.observations import Observations
+from wolfcal.robot.corrections import Corrections, load_corrections
+from wolfcal.robot.floor import moved_stance
+from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.sim.simulate import SimOptions, simulate_capture
+from wolfcal.vision.corner_bias import CORNER_INSET
+from wolfcal.vision.observe import detect_observations
 
 WOLFGANG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
 CAMERA = CameraModel(1280, 960, np.array([[1000.0, 0, 645.0], [0, 1002.0, 478.0], [0, 0, 1]]),
@@ -157,7 +147,8 @@ def simulate(
 
 
 def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, n_floor: int = 20,
-        held: Held = Held()) -> str:  # fmt: skip
+        held: Held = Held()) -> dict:  # fmt: skip
+    """The figures of one scenario and seed (ground errors [m], sole errors [m, rad], CPU times [s])."""
     folder.mkdir(parents=True, exist_ok=True)
     config = write_config(folder, stances, n_tags)
     paths, held_paths = simulate(config, folder, seed, "all" if scenario == "leg" else "none", n_tags, n_floor, held)
@@ -170,7 +161,7 @@ def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, 
     rows = ground_errors(robot, CAMERA, truth, {"before": Corrections(), "after": fit.corrections}, (4.5,))[0]
     before, after = (rows["models"][k]["error_m"] for k in ("before", "after"))
     _, held_obs = split_floor(robot, observations(robot, held_paths))
-    line = f"{scenario:6s} seed {seed}: true ground error at 4.5 m {before * 100:.1f} -> {after * 100:.2f} cm"
+    out: dict = {"scenario": scenario, "seed": seed, "true_before_m": before, "true_after_m": after, "fit_cpu": cpu}
     if held_obs is not None:
         names = fit.params.names
         k = names.index(CORNER_INSET)
@@ -181,89 +172,43 @@ def run(scenario: str, seed: int, folder: Path, stances: bool, n_tags: int = 6, 
         if measured is not None:
             row = measured["models"]["after"]["rows"][0]
             agrees = abs(row["error_m"] - after) <= max(0.2 * after, 0.01)
-            parts = " ".join(f"{k.split('_')[0]} {row[k] * 100:.2f}" for k in
-                             ("formal_std_m", "sample_std_m", "tag_std_m", "rounding_std_m"))  # fmt: skip
-            line += (
-                f", measured {row['error_m'] * 100:.2f} +- {row['std_m'] * 100:.2f} cm (z "
-                f"{(row['error_m'] - after) / row['std_m']:+.1f}; {'AGREES' if agrees else 'off'}; {parts}; "
-                f"{measured['views']} views, {measured['outlier_corners']} corners left out; inset "
-                f"{inset[0]:.2f} px; measure {measure_cpu:.1f} CPU s)"
-            )
+            out |= {"measured_m": row["error_m"], "measured_std_m": row["std_m"], "agrees": bool(agrees),
+                    "z": (row["error_m"] - after) / row["std_m"], "views": measured["views"],
+                    "outlier_corners": measured["outlier_corners"], "inset_px": inset[0], "measure_cpu": measure_cpu,
+                    **{k: row[k] for k in ("formal_std_m", "sample_std_m", "tag_std_m", "rounding_std_m")}}  # fmt: skip
     rng = np.random.default_rng(seed)
     soles = [link_pose_errors(robot, s, fit.corrections, truth, 500, rng) for s in robot.config.floor_config().soles]
-    line += (
-        f", soles max {max(p.max() for _, p in soles) * 1000:.2f} mm / "
-        f"{np.rad2deg(max(r.max() for r, _ in soles)):.3f} deg"
-    )
+    out["sole_max_m"] = float(max(p.max() for _, p in soles))
+    out["sole_max_rad"] = float(max(r.max() for r, _ in soles))
     floor_block = [b for b in fit.solution.blocks if b.name == "floor"]
     if floor_block:
-        line += f", floor rms {floor_block[0].rms_after:.3f} px"
-    return line + f" [fit {cpu:.1f} CPU s]"
+        out["floor_rms_px"] = floor_block[0].rms_after
+    return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--scenarios", nargs="*", default=["leg", "camera"])
-    parser.add_argument("--keep", type=Path, help="keep the captures in this folder and reuse them")
-    parser.add_argument(
-        "--stances",
-        action="store_true",
-        help="floor samples spread over STANCES too (default: all standing at floor.standing)",
-    )
-    parser.add_argument("--floor-tags", type=int, default=6, help="floor tags lying on the floor (default 6)")
-    parser.add_argument("--floor-samples", type=int, default=20, help="floor samples in the fit (default 20)")
-    parser.add_argument(
-        "--held-stances",
-        action="store_true",
-        help="the held-out floor samples spread over STANCES "
-        "too (default: all standing): each stance rounds the standing legs' readings anew",
-    )
-    parser.add_argument(
-        "--held-new-stances",
-        type=int,
-        default=0,
-        help="the held-out floor samples spread over this many stances none of the fit's (`held_stances`)",
-    )
-    parser.add_argument("--held-samples", type=int, default=16, help="held-out floor samples (default 16)")
-    parser.add_argument(
-        "--held-layouts",
-        type=int,
-        default=1,
-        help="held-out floor captures, the tags laid out "
-        "anew in each (the held-out samples split between them; default 1)",
-    )
-    parser.add_argument(
-        "--held-distance",
-        type=float,
-        nargs=2,
-        default=FLOOR_DISTANCE_M,
-        metavar=("NEAR", "FAR"),
-        help="the held-out floor tags lie this far away [m] (default 1 4)",
-    )
-    args = parser.parse_args()
+def floor(seeds: int, say, scenarios: tuple[str, ...] = ("leg", "camera")) -> dict:
+    """Per scenario and seed the figures of `run` (or why wolfcal refused, as a user would read it); per scenario
+    the medians over the seeds of the true ground error before and after [m], the soles' worst error [m] and how
+    many measured ground errors agree with the true one."""
+    rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
-        root = args.keep or Path(tmp)
-        for scenario in args.scenarios:
-            for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for scenario in scenarios:
+            for seed in range(seeds):
                 try:
-                    # the captures depend on these options: a --keep folder per combination, never a stale one
-                    held = Held(
-                        args.held_samples,
-                        args.held_layouts,
-                        5 if args.held_stances else 1,
-                        args.held_new_stances,
-                        tuple(args.held_distance),
-                    )
-                    flags = "_stances" if args.stances else ""
-                    folder = root / f"{scenario}_{seed}_tags{args.floor_tags}_floor{args.floor_samples}{flags}"
-                    print(
-                        run(scenario, seed, folder, args.stances, args.floor_tags, args.floor_samples, held), flush=True
-                    )
-                except WolfcalError as exc:  # e.g. a floor tag seen in one sample only: what a user would read
-                    print(f"{scenario:6s} seed {seed}: refused: {exc}", flush=True)
-
-
-if __name__ == "__main__":
-    main()
+                    rows.append(run(scenario, seed, Path(tmp) / f"{scenario}_{seed}", False))
+                except WolfcalError as exc:  # e.g. a floor tag seen in one sample only
+                    rows.append({"scenario": scenario, "seed": seed, "refused": str(exc)})
+                r = rows[-1]
+                told = r.get("refused") or f"ground error {r['true_before_m']:.3f} -> {r['true_after_m']:.4f} m"
+                say(f"floor {scenario} seed {seed}: {told}")
+    summary = {}
+    for scenario in scenarios:
+        done = [r for r in rows if r["scenario"] == scenario and "refused" not in r]
+        if done:
+            summary[scenario] = {
+                **{k: float(np.median([r[k] for r in done])) for k in ("true_before_m", "true_after_m", "sole_max_m")},
+                "agrees": sum(bool(r.get("agrees")) for r in done),
+                "measured": sum("measured_m" in r for r in done),
+                "refused": sum(r["scenario"] == scenario and "refused" in r for r in rows),
+            }
+    return {"seeds": seeds, "rows": rows, "summary": summary}

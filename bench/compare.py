@@ -1,4 +1,5 @@
-"""The study's comparison table on one simulated Wolfgang session with every measurement system (`wolfcal compare`).
+"""The `compare` part: the study's comparison table on one simulated Wolfgang session with every measurement
+system (`wolfcal compare`).
 
 One truth (0.025 rad rms encoder offsets on the legs and head, the simulator's camera-mount error); per system a
 capture to fit on and a held-out one: head camera (16 + 10 samples, 1024x768 binned images) plus 20 held-out floor
@@ -7,12 +8,11 @@ samples (floor tags 0.5-5 m away), external tripod camera (20 + 10 samples), mot
 `--free leg`, external camera `--free leg`, motion capture `--free leg`. Prints the table (mean ± std per column in
 its unit; ground: error ± 1-sigma) and the decision per seed, then each calibration's ratio to "before" per column
 over the seeds.
-Run: python bench/bench_compare.py [--seeds 2] [--keep FOLDER]
+Per seed the table and the decision; per calibration and column the ratio to before over the seeds.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import tempfile
 import time
@@ -73,39 +73,32 @@ def compare(d: Path) -> dict:
     return json.loads((d / "report" / "metrics.json").read_text())
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=2)
-    parser.add_argument("--keep", type=Path, help="write the sessions here (one folder per seed) and keep them")
-    args = parser.parse_args()
+def compare_systems(seeds: int, say) -> dict:
+    """Per seed the table (calibration -> column -> mean and std in the column's unit) and the decision's message;
+    per calibration and column the ratio to "before" (mean and max over the seeds)."""
     ratios: dict[str, dict[str, list[float]]] = {}
-    for seed in range(args.seeds):
+    tables, columns = [], []
+    for seed in range(seeds):
         with tempfile.TemporaryDirectory() as tmp:
-            d = (args.keep / f"seed{seed}") if args.keep else Path(tmp)
-            d.mkdir(parents=True, exist_ok=True)
-            print(f"seed {seed}: {d}")
-            session(d, seed)
-            metrics = compare(d)
-            columns = metrics["columns"]
-            print("| calibration | " + " | ".join(f"{c['title']} [{c['unit']}]" for c in columns) + " |")
-            print("|---" * (len(columns) + 1) + "|")
-            before = metrics["table"]["before (input URDF)"]
-            for label, row in metrics["table"].items():
-                cells = []
-                for c in columns:
-                    cell = row[c["key"]]
-                    std = "?" if cell["std"] is None else f"{cell['std']:.2f}"
-                    cells.append("n/a" if cell["mean"] is None else f"{cell['mean']:.2f} ± {std}")
-                    if label != "before (input URDF)" and cell["mean"] is not None and before[c["key"]]["mean"]:
-                        ratios.setdefault(label, {}).setdefault(c["key"], []).append(
-                            cell["mean"] / before[c["key"]]["mean"]
-                        )
-                print(f"| {label} | " + " | ".join(cells) + " |")
-            print(metrics["decision"]["message"], flush=True)
-    print("ratio to before per column, over the seeds (mean, max):")
-    for label, by_column in ratios.items():
-        print(f"  {label}: " + "; ".join(f"{k} {np.mean(v):.3f} (max {np.max(v):.3f})" for k, v in by_column.items()))
-
-
-if __name__ == "__main__":
-    main()
+            session(Path(tmp), seed)
+            metrics = compare(Path(tmp))
+        columns = [{"key": c["key"], "title": c["title"], "unit": c["unit"]} for c in metrics["columns"]]
+        before = metrics["table"]["before (input URDF)"]
+        for label, row in metrics["table"].items():
+            for c in columns:
+                cell = row[c["key"]]
+                if label != "before (input URDF)" and cell["mean"] is not None and before[c["key"]]["mean"]:
+                    ratios.setdefault(label, {}).setdefault(c["key"], []).append(
+                        cell["mean"] / before[c["key"]]["mean"]
+                    )
+        tables.append({"seed": seed, "table": metrics["table"], "decision": metrics["decision"]["message"]})
+        say(f"compare seed {seed}: {metrics['decision']['message']}")
+    return {
+        "seeds": seeds,
+        "columns": columns,
+        "tables": tables,
+        "ratio_to_before": {
+            label: {k: {"mean": float(np.mean(v)), "max": float(np.max(v))} for k, v in by_column.items()}
+            for label, by_column in ratios.items()
+        },
+    }

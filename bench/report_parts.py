@@ -1,0 +1,128 @@
+"""The docs' sections of the harness's longer parts (`bench/report.py` calls these): solve time and the servo bus
+for docs/performance.md; std coverage on recordings, the floor check, planned poses, every system on one session
+and motion capture for docs/accuracy.md. A part missing from the results leaves its section out."""
+
+from __future__ import annotations
+
+
+def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head), *("| " + " | ".join(r) + " |" for r in rows), ""]
+
+
+def _when(part: dict) -> str:
+    return f"taken {part['taken']}, load average {part['load_average']:.1f} at the end, {part['seconds']:.0f} s"
+
+
+def performance_parts(results: dict) -> list[str]:
+    lines: list[str] = []
+    if "solve" in results:
+        s = results["solve"]
+        rows = [[r["system"], str(r["samples"]), str(r["corners"]), str(r["unknowns"]), f"{r['wall']:.3f} s",
+                 f"{r['cpu']:.3f} s", str(r["linearisations"])] for r in s["rows"]]  # fmt: skip
+        lines += [
+            "## Solve time",
+            "",
+            "The fit's solve alone (no reading, no detection: corners projected at a simulated truth), --free leg, "
+            f"BLAS on one thread as in the `wolfcal` command; median of 3. {_when(s)}.",
+            "",
+            *_table(["system", "samples", "corners", "unknowns", "wall", "CPU", "linearisations"], rows),
+        ]
+    if "bus" in results or "capture" in results:
+        lines += ["## Servo bus and capture", ""]
+        if "bus" in results:
+            b = results["bus"]
+            lines += [
+                f"Sync reads (position + velocity) of {b['servos']} servos through dynamixel-sdk against the bus "
+                f"emulator on a pseudo-terminal, {b['reads']} reads: {b['rate_hz']:.0f} reads/s, per read median "
+                f"{b['median_ms']:.2f} ms, 99th percentile {b['p99_ms']:.2f} ms. A real bus at 1 Mbaud is bound by "
+                f"its USB latency timer (set it to 1 ms). {_when(b)}.",
+                "",
+            ]
+        if "capture" in results:
+            c = results["capture"]
+            lines += [
+                f"A scripted capture of the robot's poses against the emulator and the simulated camera: "
+                f"{c['samples']} samples in {c['wall']:.1f} s (moves at {c['velocity_rad_s']} rad/s, stillness "
+                f"window {c['settle_s']} s); from the robot at rest to the sample on disk: median "
+                f"{c['rest_to_sample_median_s']:.2f} s, max {c['rest_to_sample_max_s']:.2f} s. {_when(c)}.",
+                "",
+            ]
+    return lines
+
+
+def accuracy_parts(results: dict) -> list[str]:
+    lines: list[str] = []
+    if "recordings" in results:
+        r = results["recordings"]
+        rows = [[free, f"{f['max_z']:.2f}", f"{f['median_z']:.2f}", f"{f['chi2_per_p']:.2f}",
+                 f"{f['beyond_3']} of {f['numbers']}"] for free, f in r["summary"].items()]  # fmt: skip
+        lines += [
+            "## Reported std on continuous recordings",
+            "",
+            f"{r['seeds']} seed(s) of a simulated plain ROS 2 recording (14 still poses of 2.5 s, images at 10 Hz, "
+            f"binned {r['binning']}x): read, paired, detected, fitted. z = (estimate - truth) / reported std over "
+            f"the free parameters; chi2/P about 1 when the covariance is right. {_when(r)}.",
+            "",
+            *_table(["--free", "max abs z", "median abs z", "chi2 / P", "beyond 3 std"], rows),
+        ]
+    if "floor" in results:
+        f = results["floor"]
+        rows = [[name, f"{s['true_before_m'] * 100:.1f} cm", f"{s['true_after_m'] * 100:.2f} cm",
+                 f"{s['sole_max_m'] * 1000:.2f} mm", f"{s['agrees']} of {s['measured']}", str(s["refused"])]
+                for name, s in f["summary"].items()]  # fmt: skip
+        lines += [
+            "## Floor check on rendered views",
+            "",
+            f"{f['seeds']} seed(s) per scenario: feet + floor captures rendered at 1280x960, 0.025 rad rms encoder "
+            "offsets (`leg`) or legs calibrated and the camera ~4 deg off (`camera`). Medians over the seeds of the "
+            "true ground error at 4.5 m before and after, and of the soles' worst error over 500 poses; how often "
+            f"the ground error measured on a held-out floor capture agrees with the true one. {_when(f)}.",
+            "",
+            *_table(["scenario", "ground error before", "after", "sole error", "measured agrees", "refused"], rows),
+        ]
+    if "plan" in results:
+        p = results["plan"]
+        rows = []
+        for name, s in p["scenarios"].items():
+            m = s["median"]
+            rows.append([name] + [f"{m[k]['error'] * 1000:.2f} mm" for k in ("planned12", "random12", "random30")]
+                        + [s["paired_planned12_minus_random30_mm"], f"{s['planning_s']:.1f} s"])  # fmt: skip
+        lines += [
+            "## Planned against random poses",
+            "",
+            f"{p['seeds']} seed(s): a random truth, 12 planned poses against 12 and 30 random ones, corners projected "
+            "with 0.15 px noise. True error (sole position over random leg poses, or camera position over the "
+            f"head's range), median over the seeds; paired difference planned 12 - random 30 [mm]. {_when(p)}.",
+            "",
+            *_table(["scenario", "12 planned", "12 random", "30 random", "planned - random 30", "planning"], rows),
+        ]
+    if "compare" in results:
+        c = results["compare"]
+        head = [f"{col['title']} [{col['unit']}]" for col in c["columns"]]
+        rows = [[label] + [f"{by[col['key']]['mean']:.3f}" if col["key"] in by else "n/a" for col in c["columns"]]
+                for label, by in c["ratio_to_before"].items()]  # fmt: skip
+        lines += [
+            "## Every measurement system on one session",
+            "",
+            f"`wolfcal compare` on {c['seeds']} simulated session(s) with a head camera, an external camera and "
+            "motion capture, each fitted and checked on held-out captures. Error after over error before per "
+            f"column, mean over the sessions (below 1: better). {_when(c)}.",
+            "",
+            *_table(["calibration", *head], rows),
+        ]
+    if "mocap" in results:
+        m = results["mocap"]
+        rows = [[source, f"{s['sole_mm']['max']:.3f} mm", f"{s['sole_deg']['max']:.3f} deg",
+                 f"{s['roll_deg']['max']:.3f} deg", f"{s['max_z']['max']:.2f}"]
+                for source, s in m["summary"].items()]  # fmt: skip
+        lines += [
+            "## Motion capture on another robot's data",
+            "",
+            f"{m['seeds']} seed(s) of a session written by independent writers (another robot, yourdfpy kinematics, "
+            "Markers by mcap_ros2, C3D by ezc3d): 25 still poses, 0.025 rad rms leg offsets, 0.3 mm noise, 3 % "
+            "occluded, 1 % reflections; `known`: the config's marker places set to the true ones. Worst over the "
+            f"seeds: sole position and rotation error, ankle-roll offset error, largest abs z. {_when(m)}.",
+            "",
+            *_table(["source", "sole position", "sole rotation", "ankle roll", "max abs z"], rows),
+        ]
+    return lines
