@@ -666,19 +666,27 @@ class FieldConfig:
 
     dimensions: FieldDimensions
     robot_at: tuple[float, float, float]  # x, y [m], yaw [rad] of the standing robot's floor frame on the field
+    # where the robot stands for the held-out field views that check a fit (another place), as robot_at; None: not set
+    check_at: tuple[float, float, float] | None = None
 
 
 def _field(path: Path, data) -> FieldConfig:
-    """`field:` with the field's `dimensions` [m] and the robot's place `robot_at: {x, y, yaw}` [m, m, rad]."""
+    """`field:` with the field's `dimensions` [m], the robot's place `robot_at: {x, y, yaw}` [m, m, rad] and,
+    optionally, the held-out check's place `check_at` (the same keys)."""
     r = _Reader(path, data, "field")
-    r.check_keys(("dimensions", "robot_at"))
+    r.check_keys(("dimensions", "robot_at"), ("check_at",))
     dimensions = r.data["dimensions"]
     if not isinstance(dimensions, dict):
         r.fail("'dimensions' must be a mapping of the field's sizes [m] (see the robot config reference)")
-    at = _Reader(path, r.data["robot_at"], "field.robot_at")
-    at.check_keys(("x", "y", "yaw"))
-    return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"),
-                       (at.number("x"), at.number("y"), at.number("yaw")))  # fmt: skip
+    places = []
+    for key in ("robot_at", "check_at"):
+        if key not in r.data:
+            continue
+        at = _Reader(path, r.data[key], f"field.{key}")
+        at.check_keys(("x", "y", "yaw"))
+        places.append((at.number("x"), at.number("y"), at.number("yaw")))
+    return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"), places[0],
+                       places[1] if len(places) > 1 else None)  # fmt: skip
 
 
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:

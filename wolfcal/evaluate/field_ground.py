@@ -1,0 +1,132 @@
+"""The measured ground error: held-out field views (the robot placed elsewhere on the field), without truth.
+
+For a judged model M (before or after), the held-out views' line points are fitted by the field block
+(`wolfcal.fit.field_block`) with the robot's own field pose free (x, y, yaw, unknown: started from the place search
+around `field.check_at`, else `field.robot_at`) and the head camera's mount free around M's (M's other corrections
+held; the fit's noise model, robust loss and priors, centred on M): the camera the views ask for, C_M, with its
+covariance (6, 6). The ground error of M at a distance D is then `evaluate.ground`'s with C_M as the reference: the
+robot stands in `floor.standing` with its head aimed by M at a ball D m away on the floor (bearings -30, 0, +30 deg),
+the ball seen through the camera C_M is put on the floor through M: the worst bearing's distance [m], and its 1 sigma
+[m], the sqrt of the trace of that offset's covariance propagated from C_M's.
+
+What is measured and what is not. The field pose takes any error that turns or shifts every view alike on the
+ground: a turn about the vertical (a HeadPan offset, the body turned on its soles) moves a ball at D sideways by D
+times the angle, and a shift of the whole robot; neither is measured, and neither is in the 1 sigma. A turn or
+shift of the camera's mount is not of that kind: the head's tilt and pan change where it moves each view, so views
+over several head angles tell it from the robot's place (each mount parameter gets nearly all its information from
+the views, `data_share`). What moves far ground points, the camera's pitch and roll against the floor and its
+height, is measured. A tilt of the whole robot on its soles (leg offsets) is measured only as far as a turn of the
+camera's mount stands in for it. The standing legs read the same encoder ticks in every held-out view: the noise
+model holds their shared rounding, so it is in the 1 sigma (and the fit's views, taken in the same stance, round
+alike: the measurement cannot see what that rounding biased in the fit, beyond its 1 sigma).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from wolfcal.camera.model import CameraModel
+from wolfcal.evaluate.ground import BEARINGS_RAD, ground_point
+from wolfcal.field.model import FieldLines, field_lines
+from wolfcal.field.observations import FieldObservations
+from wolfcal.fit.field_block import FieldBlock
+from wolfcal.fit.options import FitOptions
+from wolfcal.fit.pipeline import Fit, fit_observations
+from wolfcal.geometry import invert_transform
+from wolfcal.robot.aim import aim_head, ball_position
+from wolfcal.robot.corrections import Corrections
+from wolfcal.robot.floor import camera_in_floor
+from wolfcal.robot.parameters import build_parameter_set
+from wolfcal.robot.robot import Robot
+
+CAMERA_PRESET = "camera"  # the correction the held-out views are asked for: the head camera's mount (6)
+STEP = 1e-6  # central-difference step of the landing offset's derivatives [m, rad]
+
+
+def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
+                 weighted_at: Corrections | None = None) -> Fit:  # fmt: skip
+    """The field fit of the held-out views with the camera's mount free around `model`'s (`model`'s other
+    corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`)."""
+    chain = build_parameter_set(robot, CAMERA_PRESET, {"head": []})
+    block = FieldBlock(robot, obs, lines, fixed=chain.held(model), weighted_at=weighted_at or model)
+    options = FitOptions(free=CAMERA_PRESET, system="field", current=model)
+    return fit_observations(robot, {}, options, own_blocks=[block])
+
+
+def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str, Corrections],
+                          distances: tuple[float, ...], say: Callable[[str], None]) -> dict:  # fmt: skip
+    """Per model ('after' first: its solution weighs the points for every model): per distance the measured ground
+    error [m] (None: the ball lies above the model's horizon) with its 1 sigma [m] and worst bearing [deg]; the
+    camera's mount the views ask for (camera.x|y|z|rx|ry|rz [m, rad], with std and data share) and the robot's
+    field pose (x, y [m], yaw [rad], with std). Also the views' and line points' count."""
+    lines = field_lines(robot.config.field_config().dimensions)
+    order = sorted(models, key=lambda name: name != "after")
+    weighted_at: Corrections | None = None
+    out: dict = {"models": {}, "views": obs.n_samples, "line_points": len(obs.uv)}
+    for name in order:
+        model = models[name]
+        say(f"fitting the held-out field views with the camera's mount free around the model {name} ...")
+        fit = asked_camera(robot, obs, lines, model, weighted_at)
+        if weighted_at is None:  # weighted again at the solution, as the field fit is
+            block = fit.blocks[-1]
+            assert isinstance(block, FieldBlock)
+            weighted = block.reweighted(fit.chain, fit.solution.values)
+            fit = fit_observations(robot, {}, FitOptions(free=CAMERA_PRESET, system="field", current=model),
+                                   own_blocks=[weighted])  # fmt: skip
+            weighted_at = fit.corrections
+            obs = replace(obs, starts=fit.solution.values[len(fit.chain) :].reshape(-1, 3))
+        out["models"][name] = _model_entry(robot, obs.camera, model, fit, distances)
+    return out
+
+
+def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit,
+                 distances: tuple[float, ...]) -> dict:  # fmt: skip
+    """metrics' entry of one judged model (`measured_field_ground`)."""
+    n = len(fit.chain)
+    values, u = fit.solution.values, fit.solution.uncertainty
+    covariance = u.covariance[:n, :n]
+    rows = [_ground_row(robot, camera, model, fit.corrections, covariance, d) for d in distances]
+    names = fit.params.names
+    return {
+        "rows": rows,
+        "camera": {names[i]: {"value": float(values[i]), "std": float(u.std[i]), "data_share": float(u.data_share[i])}
+                   for i in range(n)},
+        "field_pose": {names[i].split(".")[-1]: {"value": float(values[i]), "std": float(u.std[i])}
+                       for i in range(n, len(values))},
+    }  # fmt: skip
+
+
+def _ground_row(robot: Robot, camera: CameraModel, model: Corrections, asked: Corrections, covariance: np.ndarray,
+                distance: float) -> dict:  # fmt: skip
+    """The ground error of `model` at `distance` against the camera the views ask for (`asked`, its mount's
+    covariance (6, 6)): worst bearing, its 1 sigma [m]."""
+    joint = robot.camera_joint
+    mount = asked.frames.get(joint, np.zeros(6))
+    best: dict = {"distance_m": distance, "error_m": None, "std_m": None, "worst_bearing_deg": None}
+    for bearing in BEARINGS_RAD:
+        ball = ball_position(robot, model, distance, bearing)
+        q = aim_head(robot, model, ball)
+
+        def offset(m: np.ndarray, q: np.ndarray = q, ball: np.ndarray = ball) -> np.ndarray:
+            return landing_offset(robot, camera, model, replace(asked, frames={**asked.frames, joint: m}), q, ball)
+
+        error = float(np.linalg.norm(offset(mount)))
+        if not np.isfinite(error):  # the ball lies above the model's horizon
+            return {**best, "error_m": None, "std_m": None}
+        if best["error_m"] is None or error > best["error_m"]:
+            J = np.stack([(offset(mount + h) - offset(mount - h)) / (2 * STEP) for h in STEP * np.eye(6)], axis=1)
+            best.update(error_m=error, std_m=float(np.sqrt(np.trace(J @ covariance @ J.T))),
+                        worst_bearing_deg=float(np.rad2deg(bearing)))  # fmt: skip
+    return best
+
+
+def landing_offset(robot: Robot, camera: CameraModel, model: Corrections, reference: Corrections, q: np.ndarray,
+                   ball: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(2,) where `model` puts a ball lying at `ball` (3,) on the floor (floor frame [m]) less where it lies, the
+    ball seen by `reference`'s camera at the readings q (J,) [m]; NaN when the model puts it above its horizon."""
+    T_floor_camera, _ = camera_in_floor(robot, q[None], reference)
+    uv = camera.project((invert_transform(T_floor_camera[0]) @ np.append(ball, 1.0))[:3])
+    return ground_point(robot, q, model, uv, camera)[:2] - ball[:2]
