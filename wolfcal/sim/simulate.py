@@ -156,7 +156,10 @@ def simulate_capture(
     if options.floor and (options.system != "head" or options.poses is not None):
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
     if options.floor_check and not (options.floor or options.system == "field"):
-        raise WolfcalError("--check is the held-out floor or field capture: give it with --floor or --system field")
+        raise WolfcalError(
+            "--check is the held-out floor capture: give it with --floor (or, for held-out field "
+            "views at field.check_at, with --system field)"
+        )
     if options.floor:
         if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
