@@ -61,7 +61,8 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
     """Per model ('after' first: its solution weighs the points for every model): per distance the measured ground
     error [m] (None: the ball lies above the model's horizon) with its 1 sigma [m] and worst bearing [deg]; the
     camera's mount the views ask for (camera.x|y|z|rx|ry|rz [m, rad], with std and data share) and the robot's
-    field pose (x, y [m], yaw [rad], with std). Also the views' and line points' count."""
+    field pose per placement (capture file: `field_pose`, or `field_pose@k` with several; x, y [m], yaw [rad],
+    with std). Also the views' and line points' count."""
     lines = field_lines(robot.config.field_config().dimensions)
     order = sorted(models, key=lambda name: name != "after")
     weighted_at: Corrections | None = None
@@ -90,12 +91,15 @@ def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit
     covariance = u.covariance[:n, :n]
     rows = [_ground_row(robot, camera, model, fit.corrections, covariance, d) for d in distances]
     names = fit.params.names
+    poses: dict[str, dict] = {}  # per placement ('field_pose', or 'field_pose@k' with several): x, y, yaw
+    for i in range(n, len(values)):
+        placement, component = names[i].rsplit(".", 1)
+        poses.setdefault(placement, {})[component] = {"value": float(values[i]), "std": float(u.std[i])}
     return {
         "rows": rows,
         "camera": {names[i]: {"value": float(values[i]), "std": float(u.std[i]), "data_share": float(u.data_share[i])}
                    for i in range(n)},
-        "field_pose": {names[i].split(".")[-1]: {"value": float(values[i]), "std": float(u.std[i])}
-                       for i in range(n, len(values))},
+        "field_pose": poses,
     }  # fmt: skip
 
 
