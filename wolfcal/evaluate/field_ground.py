@@ -7,7 +7,9 @@ held; the fit's noise model, robust loss and priors, centred on M): the camera t
 covariance (6, 6). The ground error of M at a distance D is then `evaluate.ground`'s with C_M as the reference: the
 robot stands in `floor.standing` with its head aimed by M at a ball D m away on the floor (bearings -30, 0, +30 deg),
 the ball seen through the camera C_M is put on the floor through M: the worst bearing's distance [m], and its 1 sigma
-[m], the sqrt of the trace of that offset's covariance propagated from C_M's.
+[m]: the sqrt of the trace of that offset's covariance, the larger of the one propagated from C_M's and the grouped
+jackknife's over the views (`jackknife_mounts`, fitted once around the model after and used for every model: the
+views ask for nearly the same camera whichever model the fit starts from).
 
 What is measured and what is not. The field pose takes any error that turns or shifts every view alike on the
 ground: a turn about the vertical (a HeadPan offset, the body turned on its soles) moves a ball at D sideways by D
@@ -44,6 +46,10 @@ from wolfcal.robot.robot import Robot
 
 CAMERA_PRESET = "camera"  # the correction the held-out views are asked for: the head camera's mount (6)
 STEP = 1e-6  # central-difference step of the landing offset's derivatives [m, rad]
+# The views are dealt into at most this many groups, each left out once (one fit each): the jackknife's spread of
+# the camera the views ask for holds what differs from view to view (a detector's bias along one view's lines)
+# whether or not the noise model holds it
+JACKKNIFE_GROUPS = 6
 
 
 def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
@@ -66,6 +72,7 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
     lines = field_lines(robot.config.field_config().dimensions)
     order = sorted(models, key=lambda name: name != "after")
     weighted_at: Corrections | None = None
+    replicates: np.ndarray | None = None
     out: dict = {"models": {}, "views": obs.n_samples, "line_points": len(obs.uv)}
     for name in order:
         model = models[name]
@@ -79,17 +86,44 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
                                    own_blocks=[weighted])  # fmt: skip
             weighted_at = fit.corrections
             obs = replace(obs, starts=fit.solution.values[len(fit.chain) :].reshape(-1, 3))
-        out["models"][name] = _model_entry(robot, obs.camera, model, fit, distances)
+            say("fitting again with each group of held-out views left out ...")
+            replicates = jackknife_mounts(robot, obs, lines, model, weighted_at)
+        out["models"][name] = _model_entry(robot, obs.camera, model, fit, replicates, distances)
     return out
 
 
-def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit,
+def jackknife_mounts(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
+                     weighted_at: Corrections) -> np.ndarray | None:  # fmt: skip
+    """(G, 6) the camera's mount the views ask for around `model` with each of G groups of views left out (view k
+    in group k mod JACKKNIFE_GROUPS); None with fewer than 3 views."""
+    if obs.n_samples < 3:
+        return None
+    groups = np.arange(obs.n_samples) % min(obs.n_samples, JACKKNIFE_GROUPS)
+    mounts = []
+    for g in np.unique(groups):
+        fit = asked_camera(robot, _views(obs, groups != g), lines, model, weighted_at)
+        mounts.append(fit.corrections.frames[robot.camera_joint])
+    return np.stack(mounts)
+
+
+def _views(obs: FieldObservations, keep: np.ndarray) -> FieldObservations:
+    """The observations of the samples `keep` (S,) bool, renumbered; placements with no sample left are dropped."""
+    index = np.cumsum(keep) - 1
+    points = keep[obs.sample_index]
+    placements, placement = np.unique(obs.placement[keep], return_inverse=True)
+    return replace(obs, q_measured=obs.q_measured[keep], stamps_ns=obs.stamps_ns[keep],
+                   sources=[s for s, k in zip(obs.sources, keep) if k], placement=placement.ravel(),
+                   starts=obs.starts[placements], sample_index=index[obs.sample_index[points]],
+                   uv=obs.uv[points])  # fmt: skip
+
+
+def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit, replicates: np.ndarray | None,
                  distances: tuple[float, ...]) -> dict:  # fmt: skip
-    """metrics' entry of one judged model (`measured_field_ground`)."""
+    """metrics' entry of one judged model (`measured_field_ground`); `replicates`: `jackknife_mounts`."""
     n = len(fit.chain)
     values, u = fit.solution.values, fit.solution.uncertainty
     covariance = u.covariance[:n, :n]
-    rows = [_ground_row(robot, camera, model, fit.corrections, covariance, d) for d in distances]
+    rows = [_ground_row(robot, camera, model, fit.corrections, covariance, replicates, d) for d in distances]
     names = fit.params.names
     poses: dict[str, dict] = {}  # per placement ('field_pose', or 'field_pose@k' with several): x, y, yaw
     for i in range(n, len(values)):
@@ -104,12 +138,15 @@ def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit
 
 
 def _ground_row(robot: Robot, camera: CameraModel, model: Corrections, asked: Corrections, covariance: np.ndarray,
-                distance: float) -> dict:  # fmt: skip
+                replicates: np.ndarray | None, distance: float) -> dict:  # fmt: skip
     """The ground error of `model` at `distance` against the camera the views ask for (`asked`, its mount's
-    covariance (6, 6)): worst bearing, its 1 sigma [m]."""
+    covariance (6, 6), its jackknife `replicates` (G, 6) or None): worst bearing; its 1 sigma [m], the larger of
+    the formal one (propagated from the covariance: holds the errors all views share, the standing legs' rounding)
+    and the jackknife's (the offset at each replicate: holds what differs from view to view), both given."""
     joint = robot.camera_joint
     mount = asked.frames.get(joint, np.zeros(6))
-    best: dict = {"distance_m": distance, "error_m": None, "std_m": None, "worst_bearing_deg": None}
+    best: dict = {"distance_m": distance, "error_m": None, "std_m": None, "formal_std_m": None,
+                  "jackknife_std_m": None, "worst_bearing_deg": None}  # fmt: skip
     for bearing in BEARINGS_RAD:
         ball = ball_position(robot, model, distance, bearing)
         q = aim_head(robot, model, ball)
@@ -119,12 +156,26 @@ def _ground_row(robot: Robot, camera: CameraModel, model: Corrections, asked: Co
 
         error = float(np.linalg.norm(offset(mount)))
         if not np.isfinite(error):  # the ball lies above the model's horizon
-            return {**best, "error_m": None, "std_m": None}
+            return {"distance_m": distance, "error_m": None, "std_m": None, "worst_bearing_deg": None}
         if best["error_m"] is None or error > best["error_m"]:
             J = np.stack([(offset(mount + h) - offset(mount - h)) / (2 * STEP) for h in STEP * np.eye(6)], axis=1)
-            best.update(error_m=error, std_m=float(np.sqrt(np.trace(J @ covariance @ J.T))),
+            formal = float(np.sqrt(np.trace(J @ covariance @ J.T)))
+            jackknife = _jackknife_std(offset, replicates)
+            best.update(error_m=error, std_m=max(formal, jackknife), formal_std_m=formal, jackknife_std_m=jackknife,
                         worst_bearing_deg=float(np.rad2deg(bearing)))  # fmt: skip
     return best
+
+
+def _jackknife_std(offset: Callable[[np.ndarray], np.ndarray], replicates: np.ndarray | None) -> float:
+    """sqrt of the trace of the grouped jackknife's covariance [m] of a landing offset over the mounts `replicates`
+    (G, 6); 0 without, inf when a replicate puts the ball above the horizon."""
+    if replicates is None:
+        return 0.0
+    values = np.array([offset(m) for m in replicates])
+    if not np.all(np.isfinite(values)):
+        return float("inf")
+    d = values - values.mean(axis=0)
+    return float(np.sqrt((len(values) - 1) / len(values) * np.sum(d**2)))
 
 
 def landing_offset(robot: Robot, camera: CameraModel, model: Corrections, reference: Corrections, q: np.ndarray,
