@@ -71,7 +71,7 @@ def one_seed(seed: int, views: int, tilt: float, folder: Path) -> list[dict]:
     for name in models:
         entry = measured["models"][name]
         row = entry["rows"][0]
-        share = min(c["data_share"] for c in entry["camera"].values())
+        share = min(c["data_share"] for c in measured["camera"].values())
         out.append({"seed": seed, "model": name, "true_m": true[name]["error_m"], "measured_m": row["error_m"],
                     "std_m": row["std_m"], "formal_m": row["formal_std_m"], "jackknife_m": row["jackknife_std_m"],
                     "data_share": share})  # fmt: skip

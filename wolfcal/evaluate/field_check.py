@@ -109,7 +109,7 @@ def report_lines(metrics: dict, distances: tuple[float, ...]) -> list[str]:
     measured, true_rows = metrics["ground"]["measured"], metrics["ground"]["rows"]
     before, after = (measured["models"][m] for m in ("before", "after"))
     places = "; ".join(f"{name} x {p['x']['value']:+.3f} m, y {p['y']['value']:+.3f} m, "
-                       f"yaw {p['yaw']['value']:+.4f} rad" for name, p in after["field_pose"].items())  # fmt: skip
+                       f"yaw {p['yaw']['value']:+.4f} rad" for name, p in measured["field_pose"].items())  # fmt: skip
     truth = " true before [cm] | true after [cm] |" if true_rows else ""
     head = "| distance [m] | before [cm] | after [cm] |" + truth
     lines = [f"# wolfcal evaluation {metrics['robot_name']}: held-out field views", "",
@@ -124,7 +124,7 @@ def report_lines(metrics: dict, distances: tuple[float, ...]) -> list[str]:
             row += "".join(f" {_cm(true_rows[k]['models'][m]['error_m'])} |" for m in ("before", "after"))
         lines.append(row)
     resolution = measured["resolution_m"]
-    lines += ["", f"The views place the robot at {places} (with the camera they ask for around after's). "
+    lines += ["", f"The views place the robot at {places} (with the camera they ask for). "
               + ("" if resolution is None else
                  f"They cannot see a ground error below {resolution * 100:.1f} cm (2 sigma) at "
                  f"{metrics['verdict']['ground_distance_m']:g} m. ")

@@ -1,15 +1,15 @@
 """The measured ground error: held-out field views (the robot placed elsewhere on the field), without truth.
 
-For a judged model M (before or after), the held-out views' line points are fitted by the field block
-(`wolfcal.fit.field_block`) with the robot's own field pose free (x, y, yaw, unknown: started from the place search
-around `field.check_at`, else `field.robot_at`) and the head camera's mount free around M's (M's other corrections
-held; the fit's noise model, robust loss and priors, centred on M): the camera the views ask for, C_M, with its
-covariance (6, 6). The ground error of M at a distance D is then `evaluate.ground`'s with C_M as the reference: the
-robot stands in `floor.standing` with its head aimed by M at a ball D m away on the floor (bearings -30, 0, +30 deg),
-the ball seen through the camera C_M is put on the floor through M: the worst bearing's distance [m], and its 1 sigma
-[m]: the sqrt of the trace of that offset's covariance, the larger of the one propagated from C_M's and the grouped
-jackknife's over the views (`jackknife_mounts`, fitted once around the model after and used for every model: the
-views ask for nearly the same camera whichever model the fit starts from).
+The held-out views' line points are fitted by the field block (`wolfcal.fit.field_block`) with the robot's own
+field pose free (x, y, yaw, unknown: started from the place search around `field.check_at`, else `field.robot_at`)
+and the head camera's mount free around the model to deploy (its other corrections held; the fit's noise model,
+robust loss and priors), then again around that solution: the camera the views ask for, C, with its covariance
+(6, 6). It does not depend on the model judged (the priors' share is a few per mille, `data_share`), so it serves
+every one. The ground error of a judged model M at a distance D is `evaluate.ground`'s with C as the reference: the
+robot stands in `floor.standing` with its head aimed by C at a ball D m away on the floor (bearings -30, 0, +30
+deg), the ball's pixel under C is put on the floor through M: the worst bearing's distance [m], and its 1 sigma [m]:
+the sqrt of the trace of that offset's covariance, the larger of the one propagated from C's and the grouped
+jackknife's over the views (`jackknife_mounts`).
 
 What is measured and what is not. The field pose takes any error that turns or shifts every view alike on the
 ground: a turn about the vertical (a HeadPan offset, the body turned on its soles) moves a ball at D sideways by D
@@ -31,14 +31,13 @@ from dataclasses import replace
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
-from wolfcal.evaluate.ground import BEARINGS_RAD, ground_point
+from wolfcal.evaluate.ground import ball_views, ground_point
 from wolfcal.field.model import FieldLines, field_lines
 from wolfcal.field.observations import FieldObservations
 from wolfcal.fit.field_block import FieldBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import Fit, fit_observations
 from wolfcal.geometry import invert_transform
-from wolfcal.robot.aim import aim_head, ball_position
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.parameters import build_parameter_set
@@ -63,45 +62,41 @@ def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model:
 
 
 def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str, Corrections],
-                          distances: tuple[float, ...], say: Callable[[str], None]) -> dict:  # fmt: skip
-    """Per model ('after' first: its solution weighs the points for every model): per distance the measured ground
-    error [m] (None: the ball lies above the model's horizon) with its 1 sigma [m] and worst bearing [deg]; the
-    camera's mount the views ask for (camera.x|y|z|rx|ry|rz [m, rad], with std and data share) and the robot's
-    field pose per placement (capture file: `field_pose`, or `field_pose@k` with several; x, y [m], yaw [rad],
-    with std). Also the views' and line points' count."""
+                          distances: tuple[float, ...], say: Callable[[str], None],
+                          around: str = "after") -> dict:  # fmt: skip
+    """Per model: per distance the measured ground error [m] (None: the ball lies above the model's horizon) with
+    its 1 sigma [m] and worst bearing [deg]. The views are fitted with the camera's mount free around the model
+    `around` (its prior centred there), then again weighted and centred at that solution (started far off, a fit
+    may settle elsewhere: the point-to-line associations and the points left out differ): the camera they ask for
+    serves every judged model. Also that camera's mount (camera.x|y|z|rx|ry|rz [m, rad], with std and data share),
+    the robot's field pose per placement (capture file: `field_pose`, or `field_pose@k` with several; x, y [m],
+    yaw [rad], with std) and the views' and line points' count."""
     lines = field_lines(robot.config.field_config().dimensions)
-    order = sorted(models, key=lambda name: name != "after")
-    weighted_at: Corrections | None = None
-    replicates: np.ndarray | None = None
-    out: dict = {"models": {}, "views": obs.n_samples, "line_points": len(obs.uv)}
-    for name in order:
-        model = models[name]
-        say(f"fitting the held-out field views with the camera's mount free around the model {name} ...")
-        fit = asked_camera(robot, obs, lines, model, weighted_at)
-        if weighted_at is None:  # weighted again at the solution, as the field fit is
-            block = fit.blocks[-1]
-            assert isinstance(block, FieldBlock)
-            weighted = block.reweighted(fit.chain, fit.solution.values)
-            fit = fit_observations(robot, {}, FitOptions(free=CAMERA_PRESET, system="field", current=model),
-                                   own_blocks=[weighted])  # fmt: skip
-            weighted_at = fit.corrections
-            obs = replace(obs, starts=fit.solution.values[len(fit.chain) :].reshape(-1, 3))
-            say("fitting again with each group of held-out views left out ...")
-            replicates = jackknife_mounts(robot, obs, lines, model, weighted_at)
-        out["models"][name] = _model_entry(robot, obs.camera, model, fit, replicates, distances)
+    say(f"fitting the held-out field views: the robot's place and the camera's mount (around the model {around}) ...")
+    first = asked_camera(robot, obs, lines, models[around])
+    obs = replace(obs, starts=first.solution.values[len(first.chain) :].reshape(-1, 3))
+    fit = asked_camera(robot, obs, lines, first.corrections)
+    obs = replace(obs, starts=fit.solution.values[len(fit.chain) :].reshape(-1, 3))
+    say("fitting again with each group of held-out views left out ...")
+    replicates = jackknife_mounts(robot, obs, lines, fit.corrections)
+    out = _asked_entry(fit)
+    out.update(views=obs.n_samples, line_points=len(obs.uv))
+    covariance = fit.solution.uncertainty.covariance[: len(fit.chain), : len(fit.chain)]
+    out["models"] = {name: {"rows": [_ground_row(robot, obs.camera, model, fit.corrections, covariance, replicates, d)
+                                     for d in distances]} for name, model in models.items()}  # fmt: skip
     return out
 
 
-def jackknife_mounts(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
-                     weighted_at: Corrections) -> np.ndarray | None:  # fmt: skip
-    """(G, 6) the camera's mount the views ask for around `model` with each of G groups of views left out (view k
-    in group k mod JACKKNIFE_GROUPS); None with fewer than 3 views."""
+def jackknife_mounts(robot: Robot, obs: FieldObservations, lines: FieldLines,
+                     model: Corrections) -> np.ndarray | None:  # fmt: skip
+    """(G, 6) the camera's mount the views ask for around `model` (weighted there) with each of G groups of views
+    left out (view k in group k mod JACKKNIFE_GROUPS); None with fewer than 3 views."""
     if obs.n_samples < 3:
         return None
     groups = np.arange(obs.n_samples) % min(obs.n_samples, JACKKNIFE_GROUPS)
     mounts = []
     for g in np.unique(groups):
-        fit = asked_camera(robot, _views(obs, groups != g), lines, model, weighted_at)
+        fit = asked_camera(robot, _views(obs, groups != g), lines, model)
         mounts.append(fit.corrections.frames[robot.camera_joint])
     return np.stack(mounts)
 
@@ -117,20 +112,16 @@ def _views(obs: FieldObservations, keep: np.ndarray) -> FieldObservations:
                    uv=obs.uv[points])  # fmt: skip
 
 
-def _model_entry(robot: Robot, camera: CameraModel, model: Corrections, fit: Fit, replicates: np.ndarray | None,
-                 distances: tuple[float, ...]) -> dict:  # fmt: skip
-    """metrics' entry of one judged model (`measured_field_ground`); `replicates`: `jackknife_mounts`."""
+def _asked_entry(fit: Fit) -> dict:
+    """The camera's mount the views ask for and the robot's field pose per placement, with std (and data share)."""
     n = len(fit.chain)
     values, u = fit.solution.values, fit.solution.uncertainty
-    covariance = u.covariance[:n, :n]
-    rows = [_ground_row(robot, camera, model, fit.corrections, covariance, replicates, d) for d in distances]
     names = fit.params.names
     poses: dict[str, dict] = {}  # per placement ('field_pose', or 'field_pose@k' with several): x, y, yaw
     for i in range(n, len(values)):
         placement, component = names[i].rsplit(".", 1)
         poses.setdefault(placement, {})[component] = {"value": float(values[i]), "std": float(u.std[i])}
     return {
-        "rows": rows,
         "camera": {names[i]: {"value": float(values[i]), "std": float(u.std[i]), "data_share": float(u.data_share[i])}
                    for i in range(n)},
         "field_pose": poses,
@@ -147,9 +138,8 @@ def _ground_row(robot: Robot, camera: CameraModel, model: Corrections, asked: Co
     mount = asked.frames.get(joint, np.zeros(6))
     best: dict = {"distance_m": distance, "error_m": None, "std_m": None, "formal_std_m": None,
                   "jackknife_std_m": None, "worst_bearing_deg": None}  # fmt: skip
-    for bearing in BEARINGS_RAD:
-        ball = ball_position(robot, model, distance, bearing)
-        q = aim_head(robot, model, ball)
+    for view in ball_views(robot, camera, asked, distance):  # the head aimed by `asked`, held for the derivatives
+        q, ball, bearing = view["q"], view["ball"], view["bearing"]
 
         def offset(m: np.ndarray, q: np.ndarray = q, ball: np.ndarray = ball) -> np.ndarray:
             return landing_offset(robot, camera, model, replace(asked, frames={**asked.frames, joint: m}), q, ball)
