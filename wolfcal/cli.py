@@ -536,7 +536,8 @@ def simulate(
         False,
         "--check",
         help="With --floor: the held-out floor capture that checks a fit, "
-        "its samples spread over floor.check_stances (stances the fit's capture did not use).",
+        "its samples spread over floor.check_stances (stances the fit's capture did not use); with --system field: "
+        "the held-out field views, the robot placed at field.check_at.",
     ),
     force: bool = force_option(),
 ) -> None:

@@ -669,17 +669,26 @@ class FieldConfig:
     # `field.sweep`: the head's pan and tilt readings [rad] a field capture goes through (a grid, pan x tilt);
     # a key left out: the default of `wolfcal.capture.field`
     sweep: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    # where the robot stands for the held-out field views that check a fit (another place), as robot_at; None: not set
+    check_at: tuple[float, float, float] | None = None
 
 
 def _field(path: Path, data) -> FieldConfig:
-    """`field:` with the field's `dimensions` [m] and the robot's place `robot_at: {x, y, yaw}` [m, m, rad]."""
+    """`field:` with the field's `dimensions` [m], the robot's place `robot_at: {x, y, yaw}` [m, m, rad] and,
+    optionally, the head sweep of a field capture `sweep: {pan, tilt}` [rad] and the held-out check's place `check_at`
+    (the keys of robot_at)."""
     r = _Reader(path, data, "field")
-    r.check_keys(("dimensions", "robot_at"), ("sweep",))
+    r.check_keys(("dimensions", "robot_at"), ("sweep", "check_at"))
     dimensions = r.data["dimensions"]
     if not isinstance(dimensions, dict):
         r.fail("'dimensions' must be a mapping of the field's sizes [m] (see the robot config reference)")
-    at = _Reader(path, r.data["robot_at"], "field.robot_at")
-    at.check_keys(("x", "y", "yaw"))
+    places = []
+    for key in ("robot_at", "check_at"):
+        if key not in r.data:
+            continue
+        at = _Reader(path, r.data[key], f"field.{key}")
+        at.check_keys(("x", "y", "yaw"))
+        places.append((at.number("x"), at.number("y"), at.number("yaw")))
     sweep = _Reader(path, r.data.get("sweep") or {}, "field.sweep")
     sweep.check_keys((), ("pan", "tilt"))
     angles = {}
@@ -690,8 +699,8 @@ def _field(path: Path, data) -> FieldConfig:
             raise WolfcalError(f"{path}: 'field.sweep.{key}' must be a non-empty list of angles [rad], found "
                                f"{values!r}")  # fmt: skip
         angles[key] = tuple(float(v) for v in values)
-    return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"),
-                       (at.number("x"), at.number("y"), at.number("yaw")), angles)  # fmt: skip
+    return FieldConfig(field_dimensions(dimensions, f"{path}: 'field.dimensions'"), places[0],
+                       sweep=angles, check_at=places[1] if len(places) > 1 else None)  # fmt: skip
 
 
 def _floor(path: Path, data, link_tags: tuple[TagConfig, ...]) -> FloorConfig:

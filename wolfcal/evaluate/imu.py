@@ -52,10 +52,12 @@ def _figures(errors: np.ndarray) -> dict:
 
 
 def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: list[Path], out_dir: Path,
-                      deploy_worse: bool, say: Callable[[str], None]) -> dict | None:  # fmt: skip
+                      deploy_worse: bool, say: Callable[[str], None], present: object = None,
+                      limits: object = None) -> dict | None:  # fmt: skip
     """The IMU check when every capture is a standing recording (IMU topic, no camera topic); None otherwise (the
     camera evaluation judges them). Returns metrics.json's content; a WolfcalError when they are the fit's own
-    (the check needs held-out recordings)."""
+    (the check needs held-out recordings). `present` and `limits` (the registry's evaluator arguments) are not
+    used: before is the nominal model, and the check has no ground error."""
     from wolfcal.evaluate.deploy import write_or_withhold_deploy_files  # the deploy files' writer
 
     if "imu" not in robot.config.sections or not captures:

@@ -152,7 +152,7 @@ def _run_external_evaluate(
     tags = set(result.tags_used)
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
-    truth = _truth_reference(captures)
+    truth = truth_reference(captures)
     figures = external_metrics(robot, observations, fitted, truth, say, present.corrections)
     worse = any(c["after"]["rms_px"] > c["before"]["rms_px"] for c in figures["cameras"].values())
     make_folder(out_dir)
@@ -190,7 +190,7 @@ def _run_external_evaluate(
     return metrics
 
 
-def _truth_reference(captures: list[Path]) -> Corrections | None:
+def truth_reference(captures: list[Path]) -> Corrections | None:
     """The simulator's true corrections when every capture has the same `.truth.yaml` beside it."""
     truths = []
     for path in captures:
@@ -323,7 +323,7 @@ def run_evaluate(
               *current_files(list(current))]  # fmt: skip
     check_output_folder(out_dir, REPORT_FILES + DEPLOY_FILES, force, inputs)
     for system in evaluating_systems():  # recordings a system judges alone (held out, or its refusal)
-        own = system.load("evaluator")(fit_dir, result, robot, sources, out_dir, deploy_worse, say)
+        own = system.load("evaluator")(fit_dir, result, robot, sources, out_dir, deploy_worse, say, present, limits)
         if own is not None:
             return own
     intrinsics = Path(result.intrinsics) if result.intrinsics else None
@@ -334,7 +334,7 @@ def run_evaluate(
     samples, obs, tags, warnings, floor = _observe(robot, result, loaded, sources, say)
     views = measure_tag_views(robot, obs)
     errors = _judge(robot, obs, views, result, fitted, present, sources, held_out, folds, say)
-    truth = _truth_reference(sources)
+    truth = truth_reference(sources)
     models = {"before": present.corrections, "after": fitted}
     ground_table, no_ground = ground_rows(robot, obs.camera, truth, models, say, distances)
     if no_ground:

@@ -4,10 +4,12 @@ Refused (unless overridden with --deploy-worse) when
 - the held-out reprojection error gets worse;
 - the model's free parameters cannot explain the held-out data (`structure.unexplained`): with the camera presets
   that is the legs, whose offsets tilt the standing robot in a way no camera correction can undo;
-- the measured ground error at the check distance (floor samples) gets worse by more than GROUND_SIGMAS of the two
-  measurements' uncertainty (`floor_ground`), or reads above the limit; a measured error below the limit whose
-  uncertainty reaches past it is a note that the floor views cannot confirm the limit. Distance and limit come from
-  the robot config's `floor.ground_check` (default 5 cm at 4.5 m, half a KidSize field).
+- the measured ground error at the check distance (held-out floor samples, `floor_ground`, or field views,
+  `field_ground`) gets worse by more than GROUND_SIGMAS of the two measurements' uncertainty, or reads above the
+  limit, or the measurement cannot see an error of the limit's size (GROUND_SIGMAS of its uncertainty reach the
+  limit: it could read near 0 for an error at the limit); a measured error below the limit whose uncertainty
+  reaches past it is a note that the views cannot confirm the limit. Distance and limit come from the robot
+  config's `floor.ground_check` (default 5 cm at 4.5 m, half a KidSize field).
 (More than 20 % of the samples left out as outliers is refused earlier, by the one outlier rule: `leftout`.)
 Without floor samples the ground error is not measured: the verdict says so, gives the ground error the fit's
 covariance predicts, and warns when the camera correction turns the camera by more than a mount moves (2 deg).
@@ -87,8 +89,8 @@ def more_precise(capture: dict | None, check: dict | None) -> str:
 
 def deploy_verdict(
     free: str,
-    before_px: float,
-    after_px: float,
+    before_px: float | None,
+    after_px: float | None,
     structure: dict | None,
     measured_ground: dict | None,
     predicted_ground_m: float | None,
@@ -97,17 +99,21 @@ def deploy_verdict(
 ) -> dict:
     """metrics.json's 'verdict': deploy (bool), worse (the pixel rule), refusals and notes (sentences), banner.
 
+    before_px, after_px: held-out reprojection RMS [px]; None when the held-out views have no tags (field views:
+    the ground error is the verdict's measure);
     structure: `structure.unexplained` of the evaluated views, with 'explained_by' and 'tested'
     (`explaining.explaining_preset`) when unexplained, or None;
     measured_ground: {'before_m', 'after_m', 'after_std_m', optional 'before_std_m'} at limits.ground_distance_m
-    from floor samples [m], optional 'capture' (`floor_ground.capture_size` of the held-out floor capture) and
-    'check' (the check's size on this robot, `robot.floor.check_size`; None: no check stances), or None;
+    from held-out views [m], optional 'capture' (`floor_ground.capture_size` of the held-out floor capture) and
+    'check' (the check's size on this robot, `robot.floor.check_size`; None: no check stances), optional 'views'
+    (what measured it, default 'the held-out floor views') and 'advice' (how to measure it more precisely, default
+    `more_precise`'s), or None;
     predicted_ground_m: 1-sigma ground error at limits.ground_distance_m from the fit's covariance [m], or None;
     camera_turn_rad: rotation angle of the fitted camera frame correction [rad].
     """
     refusals: list[tuple[str, str]] = []  # (what to do, why)
     notes: list[str] = []
-    worse = bool(after_px > before_px)
+    worse = bool(after_px is not None and before_px is not None and after_px > before_px)
     advice = _advice(free, structure)
     if structure is not None and structure["unexplained"]:
         refusals.append(_unexplained_refusal(advice, structure))
@@ -137,8 +143,9 @@ def deploy_verdict(
                   f", measured ground error at {limits.ground_distance_m:g} m "
                   f"{measured_ground['after_m'] * 100:.1f} +- "
                   f"{measured_ground['after_std_m'] * 100:.1f} cm")  # fmt: skip
-        banner = (f"Deploy the files below: held-out reprojection RMS {before_px:.3f} px -> {after_px:.3f} px"
-                  f"{ground}" + ("." if not notes else "; read the notes below first."))  # fmt: skip
+        pixels = ("" if before_px is None or after_px is None else
+                  f": held-out reprojection RMS {before_px:.3f} px -> {after_px:.3f} px")  # fmt: skip
+        banner = f"Deploy the files below{pixels}{ground}" + ("." if not notes else "; read the notes below first.")
     else:
         banner = f"Do not deploy: {refusals[0][0]}."
     return {"deploy": deploy, "worse": worse, "refusals": [why for _, why in refusals], "notes": notes,
@@ -180,11 +187,15 @@ def _unexplained_refusal(what: str, structure: dict) -> tuple[str, str]:
 def _judge_measured_ground(
     advice: str, measured_ground: dict, limits: VerdictLimits, refusals: list[tuple[str, str]], notes: list[str]
 ) -> None:
-    """Appends the ground rules' refusal or note: worse by GROUND_SIGMAS, above the limit, or not confirmed below."""
+    """Appends the ground rules' refusal or note: worse by GROUND_SIGMAS, above the limit, unable to see an error of
+    the limit's size, or not confirmed below."""
     limit_cm, at = limits.ground_limit_m * 100, f"{limits.ground_distance_m:g} m"
     b, a = measured_ground["before_m"] * 100, measured_ground["after_m"] * 100
     sa, sb = measured_ground["after_std_m"] * 100, measured_ground.get("before_std_m", 0.0) * 100
-    precise = more_precise(measured_ground.get("capture"), measured_ground.get("check"))
+    views = measured_ground.get("views", "the held-out floor views")
+    precise = measured_ground.get("advice") or more_precise(
+        measured_ground.get("capture"), measured_ground.get("check")
+    )
     if a - b > GROUND_SIGMAS * np.hypot(sa, sb):
         refusals.append((advice, f"The measured ground error at {at} gets worse: {b:.1f} +- {sb:.1f} cm -> "
                                  f"{a:.1f} +- {sa:.1f} cm (1 sigma)."))  # fmt: skip
@@ -199,9 +210,13 @@ def _judge_measured_ground(
                 ),
             )
         )
+    elif GROUND_SIGMAS * sa >= limit_cm:
+        refusals.append((precise, f"The measured ground error at {at} is {a:.1f} +- {sa:.1f} cm (1 sigma): {views} "
+                                  f"cannot see an error below {GROUND_SIGMAS * sa:.1f} cm at {at}, so they cannot "
+                                  f"judge the limit ({limit_cm:g} cm); {precise}."))  # fmt: skip
     elif a + GROUND_SIGMAS * sa > limit_cm:
         notes.append(
-            f"The measured ground error at {at} is {a:.1f} +- {sa:.1f} cm (1 sigma): the held-out floor views "
+            f"The measured ground error at {at} is {a:.1f} +- {sa:.1f} cm (1 sigma): {views} "
             f"cannot confirm that it is below the limit ({limit_cm:g} cm); {precise}."
         )
 

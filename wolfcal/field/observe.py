@@ -30,13 +30,15 @@ MIN_POINTS = 200  # fewer line points in a placement's views cannot place the ro
 FAR_FROM_CONFIGURED = (0.45, np.deg2rad(15.0))  # [m, rad]: a place found further off is said
 
 
-def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], None]) -> FieldObservations:
+def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], None],
+                       check: bool = False) -> FieldObservations:  # fmt: skip
     """Line points of every field capture (module docstring); WolfcalError naming the file when a capture holds no
-    colour head images or too few line points."""
+    colour head images or too few line points. `check`: held-out views, taken at `field.check_at` (when set)."""
     config = robot.config.field_config("a field capture needs the field's dimensions and where the robot stands")
     lines = field_lines(config.dimensions)
     distance_map = DistanceMap(lines)
-    configured = np.asarray(config.robot_at, float)
+    key = "check_at" if check and config.check_at is not None else "robot_at"
+    configured = np.asarray(getattr(config, key), float)
     q_all: list[np.ndarray] = []
     uv_all: list[np.ndarray] = []
     sample_of: list[np.ndarray] = []
@@ -73,7 +75,7 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
         assert camera is not None
         search = search_place(distance_map, robot, q, np.concatenate(
             [np.full(len(v), i) for i, v in enumerate(views)]), points, camera, configured)  # fmt: skip
-        _say_place(path, search.pose, configured, say)
+        _say_place(path, search.pose, configured, f"field.{key}", say)
         q_all.append(q)
         stamps += [s.stamp_ns for s in samples]
         sources += [str(path)] * len(samples)
@@ -85,17 +87,18 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
                              np.vstack(uv_all))  # fmt: skip
 
 
-def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, say: Callable[[str], None]) -> None:
-    """The place found, the field's symmetry, and a warning when the place is far from the configured one."""
+def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:
+    """The place found, the field's symmetry, and a warning when the place is far from the configured one (the
+    config's `key`)."""
     mirror = np.round(mirrored_pose(*found), 2)
     say(f"{path}: the robot stands at x {found[0]:+.2f} m, y {found[1]:+.2f} m, yaw {np.rad2deg(found[2]):+.1f} deg "
-        f"(field.robot_at: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
+        f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
         f"field's point symmetry fits the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that "
-        "field.robot_at names is assumed")  # fmt: skip
+        f"{key} names is assumed")  # fmt: skip
     off = np.linalg.norm(found[:2] - configured[:2]), abs(np.remainder(found[2] - configured[2] + np.pi, 2 * np.pi)
                                                            - np.pi)  # fmt: skip
     if off[0] > FAR_FROM_CONFIGURED[0] or off[1] > FAR_FROM_CONFIGURED[1]:
         say(
             f"warning: {path}: the lines fit best {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from "
-            "field.robot_at; check where the robot stood and correct field.robot_at"
+            f"{key}; check where the robot stood and correct {key}"
         )

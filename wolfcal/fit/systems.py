@@ -41,8 +41,9 @@ class System:
     # its section of the robot config, under the system's name: 'module:attribute' of a parser (config path, data)
     # -> a typed section (`RobotConfig.section`); None: the system has none (or config.py reads it)
     config: str | None = None
-    # judges held-out recordings of its own (fit_dir, result, robot, captures, out_dir, deploy_worse, say) ->
-    # metrics.json's content, or None when the captures are not its own (the camera evaluation judges them)
+    # judges held-out recordings of its own (fit_dir, result, robot, captures, out_dir, deploy_worse, say, present,
+    # limits: the 'before' calibration and the verdict's limits) -> metrics.json's content, or None when the
+    # captures are not its own (the camera evaluation judges them)
     evaluator: str | None = None
     description: str = ""
 
@@ -116,6 +117,7 @@ SYSTEMS: tuple[System, ...] = (
         "wolfcal.sim.field:simulate_field_capture",
         None,
         fit_blocks="wolfcal.fit.field_block:field_blocks",
+        evaluator="wolfcal.evaluate.field_check:evaluate_held_out",
         description="the white lines of a RoboCup field seen by the head camera while the robot stands [px]",
     ),
 )

@@ -126,7 +126,8 @@ def synthetic_field(robot: Robot, camera: CameraModel, truth: Corrections, pose:
 def simulate_field_capture(robot: Robot, out: Path, options: SimOptions, camera: CameraModel | None,
                            say: Callable[[str], None], force: bool, inputs: list[Path]) -> Corrections:  # fmt: skip
     """The field system's simulator (`wolfcal.fit.systems`): the robot stands on the config's field within 0.3 m
-    and 10 deg of `field.robot_at` and its head camera sweeps over the lines; colour images rendered with goals, two
+    and 10 deg of `field.robot_at` (`field.check_at` for the held-out check, `options.floor_check`) and its head
+    camera sweeps over the lines; colour images rendered with goals, two
     other robots, a ball, shadows, people and walls (`wolfcal.field.scene`), noise and up to 2 px of motion blur.
     Writes FILE.mcap, FILE.truth.yaml (the true corrections and `field_pose`) and FILE.truth.urdf."""
     config = robot.config.field_config("simulated field views need the field")
@@ -139,7 +140,11 @@ def simulate_field_capture(robot: Robot, out: Path, options: SimOptions, camera:
     full = camera or load_camera_info(robot.config.intrinsics_file(HEAD_CAMERA, "simulating", "pass --intrinsics"))
     binning = options.binning or sim_binning(HEAD_CAMERA)
     image_camera = full.binned(binning, HEAD_CAMERA)
-    pose = np.asarray(config.robot_at) + rng.uniform([-0.3, -0.3, -0.17], [0.3, 0.3, 0.17])
+    if options.floor_check and config.check_at is None:
+        raise WolfcalError(f"{robot.config.path}: --check places the robot at field.check_at: add it to 'field:' "
+                           "(x, y [m], yaw [rad]; another place than robot_at)")  # fmt: skip
+    at = config.check_at if options.floor_check else config.robot_at
+    pose = np.asarray(at) + rng.uniform([-0.3, -0.3, -0.17], [0.3, 0.3, 0.17])
     views = field_views(robot, image_camera, truth, pose, config.dimensions, options.samples, rng)
     scene = cluttered_scene(config.dimensions, rng)
     rays = pixel_rays(image_camera)

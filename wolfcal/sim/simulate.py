@@ -64,7 +64,8 @@ class SimOptions:
     poses: Path | None = None  # a poses file (`wolfcal plan`, `capture --poses`): its poses instead of random ones
     floor: bool = False  # floor samples: the robot stands and its head camera sees the config's floor tags
     floor_distance: tuple[float, float] = FLOOR_DISTANCE_M  # the floor tags lie this far from the robot [m]
-    floor_check: bool = False  # the held-out floor capture: samples spread over `floor.check_stances`
+    # the held-out capture: floor samples spread over `floor.check_stances`; field views from `field.check_at`
+    floor_check: bool = False
 
 
 @dataclass
@@ -154,8 +155,11 @@ def simulate_capture(
     robot = load_robot(robot_path)
     if options.floor and (options.system != "head" or options.poses is not None):
         raise WolfcalError("--floor simulates the head camera's views of the floor tags: drop --system and --poses")
-    if options.floor_check and not options.floor:
-        raise WolfcalError("--check is the held-out floor capture: give it with --floor")
+    if options.floor_check and not (options.floor or options.system == "field"):
+        raise WolfcalError(
+            "--check is the held-out floor capture: give it with --floor (or, for held-out field "
+            "views at field.check_at, with --system field)"
+        )
     if options.floor:
         if not robot.config.floor_config(FLOOR_NEEDED).tags:
             raise WolfcalError(f"{robot.config.path}: --floor needs floor tags: add 'floor.tags' (DESIGN.md)")
