@@ -21,6 +21,7 @@ import yaml
 from conftest import WOLFGANG, stop_after_sample, wolfgang_on_a_field
 from rich.console import Console
 
+from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.capture.field import (
     DEFAULT_PAN_SPAN_RAD,
     DEFAULT_PANS,
@@ -30,6 +31,7 @@ from wolfcal.capture.field import (
 )
 from wolfcal.capture.floor import without_collisions
 from wolfcal.capture.pipeline import CaptureOptions, run_capture
+from wolfcal.capture.sim_camera import SimCamera
 from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import DynamixelBus, rad_to_ticks
 from wolfcal.hardware.emulator import EmulatorProcess, spec_from_config
@@ -206,3 +208,22 @@ def test_field_capture_refuses_bad_input_before_anything_moves(tmp_path):
                          text=True, timeout=WAIT_S)  # fmt: skip
     assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
     assert "has no 'field:'" in run.stderr and not out.exists()
+
+
+def test_held_out_field_views_stand_at_check_at_and_need_it(tmp_path):
+    """--field --check: the robot stands at field.check_at (the emulated one off from it as its truth is off from
+    robot_at); a config without check_at is refused before anything opens."""
+    config = config_with(tmp_path)
+    out = tmp_path / "check.mcap"
+    with pytest.raises(WolfcalError, match=r"--field --check stands the robot at 'field.check_at'"):
+        run_capture(options(config, out, "/dev/null", floor_check=True), quiet())
+    data = yaml.safe_load(config.read_text())
+    data["field"]["check_at"] = {"x": -1.5, "y": 1.0, "yaw": 0.5}
+    config.write_text(yaml.safe_dump(data))
+    robot = load_robot(config)
+    with emulator(robot, tmp_path) as emu:
+        camera = SimCamera(robot, [emu.port], load_camera_info(WOLFGANG / "basler_acA2040.yaml").binned(4, "head"),
+                           field=True, field_check=True)  # fmt: skip
+    robot_at = np.array([-3.0, 0.0, 0.0])  # wolfgang_on_a_field's
+    offset = np.array([PLACE["x"], PLACE["y"], PLACE["yaw"]]) - robot_at
+    assert np.allclose(camera.scene.pose, np.array([-1.5, 1.0, 0.5]) + offset)

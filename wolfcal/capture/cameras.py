@@ -56,14 +56,19 @@ def plan_cameras(options: CaptureOptions, robot: Robot) -> dict[str, CaptureCame
     return cameras
 
 
-def open_sources(cameras: dict[str, CaptureCamera], robot: Robot, ports: list[str], field: bool = False) -> None:
+def open_sources(
+    cameras: dict[str, CaptureCamera], robot: Robot, ports: list[str], field: bool = False, check: bool = False
+) -> None:
     """Open every camera's source (a `sim` one reads the emulators on the servo buses `ports`; with `field` the
-    head camera sees the field the robot stands on); on failure the ones already open are closed again."""
+    head camera sees the field the robot stands on, at `field.check_at` with `check`); on failure the ones already
+    open are closed again."""
     try:
         for name, camera in cameras.items():
             if camera.source_text == "sim":
                 external = None if name == HEAD_CAMERA else name
-                camera.source = SimCamera(robot, ports, camera.image_model, external=external, field=field)
+                camera.source = SimCamera(
+                    robot, ports, camera.image_model, external=external, field=field, field_check=check
+                )
             else:
                 camera.source = open_camera(camera.source_text, camera.image_model)
     except BaseException:

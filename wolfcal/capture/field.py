@@ -74,6 +74,20 @@ def default_readings(robot: Robot, key: str, joint: str) -> tuple[float, ...]:
     return tuple(float(np.clip(t, lo, hi)) for t in tilts)
 
 
+def field_place(robot: Robot, check: bool) -> tuple[float, float, float]:
+    """Where the robot stands for a field capture (x, y [m], yaw [rad] on the field): `field.robot_at`, or with
+    `check` (the held-out views that check a fit) `field.check_at`; WolfcalError naming the key when it is missing."""
+    config = robot.config.field_config(FIELD_NEEDED_CAPTURE)
+    if not check:
+        return config.robot_at
+    if config.check_at is None:
+        raise WolfcalError(
+            f"{robot.config.path}: --field --check stands the robot at 'field.check_at', which the config does not "
+            "give: add check_at: {x, y, yaw} [m, m, rad], another place than robot_at"
+        )
+    return config.check_at
+
+
 def field_standing(robot: Robot) -> dict[str, float]:
     """The standing readings [rad] of the leg and head servos (`floor.standing`, checked against the URDF limits)
     of a robot config that has a field; WolfcalError naming the missing section otherwise."""

@@ -35,7 +35,9 @@ class CaptureOptions:
     external: list[str] = field(default_factory=list)  # --external NAME=SOURCE, one per external camera
     force: bool = False  # replace an existing capture file at --out
     floor: bool = False  # floor samples: legs standing, the head looks at the floor tags (`wolfcal.capture.floor`)
-    floor_check: bool = False  # --check: the held-out floor capture that checks a fit (`floor.check_stances`)
+    # --check: the held-out capture that checks a fit: floor views in `floor.check_stances`, or field views with the
+    # robot at `field.check_at`
+    floor_check: bool = False
     standing: bool = False  # standing samples: joint states and the IMU in stances (`wolfcal.capture.standing`)
     field_views: bool = False  # --field: standing at field.robot_at, the head sweeps the field (`capture.field`)
 
@@ -66,7 +68,7 @@ def check_options(options: CaptureOptions) -> None:
             raise WolfcalError(f"--standing records joint states and the IMU in the config's standing stances, no "
                                f"camera: drop {', '.join(given)}")  # fmt: skip
     elif options.field_views:
-        if options.floor or options.floor_check:
+        if options.floor:
             raise WolfcalError("give one of --field (views of the field's lines) and --floor (views of floor tags)")
         if options.poses is not None:
             raise WolfcalError("--field moves the head through its own sweep (field.sweep in the robot config): drop "
@@ -81,7 +83,7 @@ def check_options(options: CaptureOptions) -> None:
         if options.camera is None:
             raise WolfcalError("--floor records the head camera's views of the floor tags: give --camera SOURCE")
     elif options.floor_check:
-        raise WolfcalError("--check is the held-out floor capture: give it with --floor")
+        raise WolfcalError("--check is a held-out capture that checks a fit: give it with --floor or --field")
     elif options.manual == (options.poses is not None):
         raise WolfcalError(
             "give exactly one of --poses POSES.yaml (scripted), --manual, --floor, --field or --standing"

@@ -17,7 +17,7 @@ from rich.console import Console
 
 from wolfcal.capture.cameras import CaptureCamera, close_sources, open_sources, plan_cameras
 from wolfcal.capture.exit_torque import leave_torque, say_end
-from wolfcal.capture.field import field_script, field_standing, one_sided_note
+from wolfcal.capture.field import field_place, field_script, field_standing, one_sided_note
 from wolfcal.capture.floor import (
     check_floor_limp,
     check_views,
@@ -132,7 +132,7 @@ def _open_outputs(
     options: CaptureOptions, robot: Robot, cameras: dict[str, CaptureCamera], ports: list[str]
 ) -> CaptureWriter:
     """Open the cameras and the crash-safe capture file; the cameras are closed again if the file cannot be opened."""
-    open_sources(cameras, robot, ports, field=options.field_views)
+    open_sources(cameras, robot, ports, field=options.field_views, check=options.floor_check)
     try:
         streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
         return CaptureWriter(options.out, robot.config, streams, options.image_format)
@@ -176,4 +176,6 @@ def _plan(
         script = floor_script(robot, options.velocity or DEFAULT_VELOCITY, options.floor_check)
     elif options.field_views:
         script = field_script(robot, options.velocity or DEFAULT_VELOCITY)
+    if options.field_views:
+        field_place(robot, options.floor_check)  # refused before anything moves when --check has no place
     return script, limp, stances

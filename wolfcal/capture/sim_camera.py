@@ -6,7 +6,8 @@ truth file (`external_cameras.<NAME>.T_base_camera`, as `wolfcal simulate --syst
 floor tags at their true places when the truth file has them (`floor_tags`, as `wolfcal simulate --floor` writes it).
 With `field` (a field capture) the head camera sees the robot config's field instead (`sim.field_scene`), the robot
 standing at its true place there: the truth file's `field_pose` (as `wolfcal simulate --system field` writes it),
-else exactly at `field.robot_at`.
+else exactly at `field.robot_at`. With `field_check` (the held-out field views) it stands at `field.check_at`, off
+from it as far as the truth's place is off from `field.robot_at` (x, y and yaw alike).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from wolfcal.camera.model import CameraModel
+from wolfcal.capture.field import field_place
 from wolfcal.hardware.emulator import load_truth, read_true_angles
 from wolfcal.io.truth import load_external_truth, load_field_pose, load_floor_places
 from wolfcal.placement import TARGET_BASE, look_at
@@ -32,7 +34,7 @@ class SimCamera:
     of the first emulator that has one), or with `field` the field it stands on (module docstring)."""
 
     def __init__(self, robot: Robot, ports: list[str], camera: CameraModel, seed: int = 0, external: str | None = None,
-                 field: bool = False):  # fmt: skip
+                 field: bool = False, field_check: bool = False):  # fmt: skip
         self.name, self.ports, self.robot = "sim", ports, robot
         self._read = read_true_angles
         truth_path = next((path for path in (read_true_angles(port)[1] for port in ports) if path), None)
@@ -48,6 +50,8 @@ class SimCamera:
             config = robot.config.field_config("the simulated camera renders the field the robot stands on")
             pose = load_field_pose(Path(truth_path)) if truth_path else None
             pose = np.asarray(config.robot_at, float) if pose is None else pose
+            if field_check:
+                pose = np.asarray(field_place(robot, check=True), float) + pose - np.asarray(config.robot_at, float)
             self.scene = FieldSimScene(robot, truth, camera, config.dimensions, pose, seed=seed)
         else:
             self.scene = SimScene(robot, truth, camera, seed=seed, T_base_camera=T_base_camera,
