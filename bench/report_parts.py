@@ -1,6 +1,7 @@
-"""The docs' sections of the harness's longer parts (`bench/report.py` calls these): solve time and the servo bus
-for docs/performance.md; std coverage on recordings, the floor check, planned poses, every system on one session
-and motion capture for docs/accuracy.md. A part missing from the results leaves its section out."""
+"""The docs' sections of the harness's longer parts (`bench/report.py` calls these): solve time, the servo bus and
+the venue's robot time for docs/performance.md; std coverage on recordings, the floor check, planned poses, every
+system on one session and motion capture for docs/accuracy.md. A part missing from the results leaves its section
+out."""
 
 from __future__ import annotations
 
@@ -47,6 +48,24 @@ def performance_parts(results: dict) -> list[str]:
                 f"{c['rest_to_sample_median_s']:.2f} s, max {c['rest_to_sample_max_s']:.2f} s. {_when(c)}.",
                 "",
             ]
+    if "venue" in results:
+        v = results["venue"]
+        after = v["after"]
+        rows = [[name, f"{seconds:.1f} s"] for name, seconds in v["before"].items()]
+        lines += [
+            "## Robot time at a venue",
+            "",
+            "The head camera's recalibration against the bus emulator (its default motion model) and the simulated "
+            "camera: the single-command recipe (each capture at its default speed; a capture's robot time is its "
+            f"wall time) against one `wolfcal venue` session (from torque on to the last sample). {_when(v)}.",
+            "",
+            *_table(["single commands: capture", "robot time"], rows),
+            f"Single commands: {v['before_total_s']:.1f} s of robot time in all. `wolfcal venue`: "
+            f"{after['robot_time_s']:.1f} s of robot time ({after['wall_time_s']:.1f} s wall, fit and check "
+            f"included), the camera within {after['camera_rotation_deg']:.4f} deg and "
+            f"{after['camera_translation_mm']:.3f} mm of the truth.",
+            "",
+        ]
     return lines
 
 

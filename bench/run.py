@@ -5,14 +5,14 @@ tables).
                         [--frames 600,6000] [--stream-binning 4] [--seeds 3] ...
 
 Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memory of `wolfcal fit`), `detection`,
-`intrinsics`, `seeds` (accuracy against simulated truth), `solve` (solve time on synthetic samples), `stability`
-(how far a fit moves under changes that should not matter), `recordings` (std coverage on continuous recordings),
-`floor` (the venue's floor check on rendered views), `plan` (planned against random poses), `compare` (every
-measurement system on one session), `mocap` (motion capture on another robot's data), `bus` and `capture` (the
-servo bus emulator). `--before PATH`: a folder holding an older `wolfcal` package; `fit` and `stream` then run on
-both, alternating which goes first. Results of the parts run are merged into the JSON file (other parts' results
-are kept). Generated inputs are kept in the temp folder (`common.DATA`).
-"""
+`intrinsics`, `seeds` (accuracy against simulated truth), `solve` (solve time on synthetic samples), `stability` (how
+far a fit moves under changes that should not matter), `recordings` (std coverage on continuous recordings), `floor`
+(the venue's floor check on rendered views), `plan` (planned against random poses), `compare` (every measurement
+system on one session), `mocap` (motion capture on another robot's data), `bus` and `capture` (the servo bus
+emulator), `venue` (robot time of a venue session against single commands). `--before PATH`: a folder holding an older
+`wolfcal` package; `fit` and `stream` then run on both, alternating which goes first. Results of the parts run are
+merged into the JSON file (other parts' results are kept). Generated inputs are kept in the temp folder
+(`common.DATA`)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from quality import detection, intrinsics, seeds  # noqa: E402
 from targets import fit_speed, stream_memory, targets  # noqa: E402
 
 PARTS = ("fit", "stream", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor", "plan",
-         "compare", "mocap", "bus", "capture")  # fmt: skip
+         "compare", "mocap", "bus", "capture", "venue")  # fmt: skip
 DEFAULT_PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")  # about a minute; the others take longer
 
 
@@ -127,6 +127,10 @@ def in_process_part(part: str, args: argparse.Namespace, say) -> dict:
         from mocap import mocap
 
         return mocap(args.seeds, say)
+    if part == "venue":
+        from venue import venue
+
+        return venue(say)
     from hardware import bus, capture
 
     return bus(args.reads, say) if part == "bus" else capture(3.0, 0.3, say)

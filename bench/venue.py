@@ -8,13 +8,11 @@ is the wall time of its `run_capture` (bus checks, moves, holds, samples). The f
 the robot. After: one `wolfcal venue` session; its robot time runs from torque on to the last sample.
 Truth: captures/floor_demo.truth.yaml (served by the emulator, rendered by the simulated camera).
 
-Run: `python bench/bench_venue.py [--only before|after] [--json FILE]`.
+The harness's `venue` part (`python bench/run.py --parts venue`).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -35,7 +33,7 @@ ROBOT = ROOT / "configs" / "wolfgang"
 TRUTH = ROOT / "captures" / "floor_demo.truth.yaml"
 
 
-def before(port: str, folder: Path) -> dict[str, float]:
+def before(port: str, folder: Path, say) -> dict[str, float]:
     """Robot time [s] of each capture of the README's recipe."""
     captures = {
         "feet": {"poses": ROBOT / "poses.yaml"},
@@ -51,11 +49,11 @@ def before(port: str, folder: Path) -> dict[str, float]:
         start = time.monotonic()
         summary = run_capture(options, Console(quiet=True))
         times[name] = time.monotonic() - start
-        print(f"before: {name}: {summary.samples} samples, {times[name]:.1f} s", flush=True)
+        say(f"venue: before: {name}: {summary.samples} samples, {times[name]:.1f} s")
     return times
 
 
-def after(port: str, folder: Path) -> dict:
+def after(port: str, folder: Path, say) -> dict:
     """Robot and wall time [s] of one venue session, and its camera error against the truth [deg, mm]."""
     options = VenueOptions(robot=ROBOT, out=folder / "venue", camera="sim", port=port, yes=True)
     figures = run_venue(options, say=lambda line: None)
@@ -69,33 +67,23 @@ def after(port: str, folder: Path) -> dict:
         "camera_translation_mm": float(translation.max() * 1000),
         "deployed": figures["deploy"]["written"],
     }
-    print(f"after: robot time {result['robot_time_s']:.1f} s, wall time {result['wall_time_s']:.1f} s, samples "
-          f"{result['samples']}, camera within {result['camera_rotation_deg']:.4f} deg and "
-          f"{result['camera_translation_mm']:.3f} mm of the truth", flush=True)  # fmt: skip
+    say(f"venue: after: robot time {result['robot_time_s']:.1f} s, wall time {result['wall_time_s']:.1f} s, samples "
+        f"{result['samples']}, camera within {result['camera_rotation_deg']:.4f} deg and "
+        f"{result['camera_translation_mm']:.3f} mm of the truth")  # fmt: skip
     return result
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--only", choices=("before", "after"), help="measure one side only")
-    parser.add_argument("--json", type=Path, help="also write the figures to this JSON file")
-    args = parser.parse_args()
+def venue(say) -> dict:
+    """Robot time of the single-command recipe (`before`, per capture [s], and their sum) and of one venue session
+    (`after`), each on a fresh emulated robot."""
     robot = load_robot(ROBOT)
     results: dict = {}
     with tempfile.TemporaryDirectory() as scratch:
-        for side in ("before", "after"):
-            if args.only not in (None, side):
-                continue
+        for side, measure in (("before", before), ("after", after)):
             spec = spec_from_config(robot.config, load_truth(TRUTH), truth_path=str(TRUTH))
             with EmulatorProcess(spec) as emu:  # a fresh robot for each side
                 folder = Path(scratch) / side
                 folder.mkdir()
-                results[side] = before(emu.port, folder) if side == "before" else after(emu.port, folder)
-    if "before" in results:
-        print(f"before: {sum(results['before'].values()):.1f} s of robot time in {len(results['before'])} captures")
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
-
-
-if __name__ == "__main__":
-    main()
+                results[side] = measure(emu.port, folder, say)
+    results["before_total_s"] = sum(results["before"].values())
+    return results
