@@ -40,6 +40,7 @@ YAW_PRIOR_RAD = 0.2  # [rad] (about 10 deg)
 LINE_BIAS_PX = 0.3  # a line's points in one view share the detector's error across that line (blur, shading) [px]
 MIN_LINE_POINTS = 5  # points of a line in one view the block needs to use them
 POINTS_PER_VIEW = 35  # and the most it uses of one view
+STRETCH_POINTS = 3  # points in a row along a line that share one detection error
 VIEW_RULE = OutlierRule(4.0, 3.0)  # a view whose points are off by 4x the median view's and 3 px is left out
 LINE_POINT_RULE = OutlierRule(4.0, 2.0)  # and a single point (a robot's leg, the ball) off by 2 px of a view kept
 
@@ -58,10 +59,13 @@ class FieldBlock(Block):
     noise_min, noise_max, noise_start = 0.05, 20.0, LINE_BIAS_PX
 
     def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
-                 weighted_at: Corrections | None = None) -> None:  # fmt: skip
+                 weighted_at: Corrections | None = None, shared_lines: bool = True) -> None:  # fmt: skip
         """`weighted_at`: the model whose pixel scale on the ground weighs the points (default: `fixed`, the
-        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too."""
+        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
+        `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
+        first solve that only finds where to weigh the points."""
         self.robot, self.lines, self.fixed = robot, lines, fixed or Corrections()
+        self.shared_lines = shared_lines
         self.detected = obs  # every point found; the block uses those on lines seen by enough of them
         model = weighted_at or self.fixed
         T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
@@ -71,6 +75,7 @@ class FieldBlock(Block):
             obs, line = obs.only_points(keep), line[keep]
             T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
         self.obs, self.line_of_unit = obs, line
+        self.stretch_of_unit = _stretches(obs.sample_index, line, obs.uv)
         self.tag_ids: list[int] = []
         self.camera_name = "head"
         self.q_measured = obs.q_measured
@@ -97,10 +102,13 @@ class FieldBlock(Block):
         return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model)
 
     def shared_labels(self) -> np.ndarray:
-        """(U,) the points of one line in one view share the detector's error across that line (its width, blur
-        and shading are the same along it): one label per (view, line) where the block was weighted."""
-        _, labels = np.unique(np.stack([self.sample_of_unit, self.line_of_unit], axis=1), axis=0,
-                              return_inverse=True)  # fmt: skip
+        """(U,) the points of one stretch of a line in one view share the detector's error across that line (its
+        width, blur and shading, and the line's sub-pixel phase against the scan lines, which drifts along it):
+        one label per (view, line, stretch) where the block was weighted (none without `shared_lines`)."""
+        if not self.shared_lines:
+            return np.full(self.n_units, -1)
+        _, labels = np.unique(np.stack([self.sample_of_unit, self.line_of_unit, self.stretch_of_unit], axis=1),
+                              axis=0, return_inverse=True)  # fmt: skip
         return labels.ravel()
 
     def joint_reading_groups(self) -> np.ndarray:
@@ -181,6 +189,22 @@ class FieldBlock(Block):
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
 
 
+def _stretches(sample_index: np.ndarray, line: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(M,) the stretch of its line each point lies on: a line's points in one view, in their order along it, in
+    runs of STRETCH_POINTS (the last run takes the rest)."""
+    _, group = np.unique(np.stack([sample_index, line], axis=1), axis=0, return_inverse=True)
+    group = group.ravel()
+    stretch = np.zeros(len(group), dtype=int)
+    for g in np.unique(group):
+        members = np.flatnonzero(group == g)
+        centred = uv[members] - uv[members].mean(axis=0)
+        along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0] if len(members) > 1 else np.zeros(1)
+        rank = np.empty(len(members), dtype=int)
+        rank[np.argsort(along)] = np.arange(len(members))
+        stretch[members] = np.minimum(rank // STRETCH_POINTS, max(len(members) // STRETCH_POINTS - 1, 0))
+    return stretch
+
+
 def _points_used(sample_index: np.ndarray, line: np.ndarray) -> np.ndarray:
     """(M,) the points the block uses: those on lines seen by at least MIN_LINE_POINTS points of their view, at
     most POINTS_PER_VIEW of them per view, spread over it (`spread`). A lone point near a line (a robot's foot, a
@@ -220,7 +244,7 @@ def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
         return [], []
     tell = say or (lambda _: None)
     obs = field_observations(robot, chosen, tell)
-    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions))
+    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions), shared_lines=False)
     first = fit_observations(robot, {}, replace(options, system="field"), own_blocks=[block])
     tell("weighting the line points at the first solution ...")
     return [block.reweighted(first.chain, first.solution.values)], chosen

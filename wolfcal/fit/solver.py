@@ -58,6 +58,7 @@ MAX_FINAL_SOLVES = 4
 MIN_CLASS_UNITS = 8
 CLASS_CUT = 3.5
 CLASS_FADE = 1.0
+GROSS_FACTOR = 10.0  # units off by this many unit-rule limits are kept out of their view's estimate
 CLASS_PRIOR_ROWS = 30
 CLASS_SCALE_FLOOR = 1.0
 
@@ -119,20 +120,20 @@ def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     return block.outlier_rule.flags(view_rms(state, lin), size)
 
 
-def conditional_residuals(state: BlockState, lin: Linearization) -> np.ndarray:
+def conditional_residuals(state: BlockState, lin: Linearization, apart: np.ndarray | None = None) -> np.ndarray:
     """(U, dim) each unit's residual less what the view's share of the joint-reading errors explains [unit]: the
     noise part of the best estimate of the view's errors under the covariance of that view alone,
     sigma^2 D C_v^-1 D^-1 r (D: the rows' own noise levels, `BlockState.row_scale`; C_v: the view's covariance in
     the whitened rows' scale). What floor_ground's measurement leaves of a corner once it fits each sample's reading
-    errors as unknowns: where the fitted model puts the corner, the view's reading errors taken into account. The
-    view's share is estimated without the units left out one by one (`BlockState.excluded_units`, a stray point
-    tens of pixels off would make its whole view look off); those keep their plain residual."""
+    errors as unknowns: where the fitted model puts the corner, the view's reading errors taken into account.
+    `apart` (U,): units kept out of the view's estimate, which keep their plain residual."""
     block, r = state.block, lin.residual.ravel()
-    views = row_groups(block.view_of_unit, block.dim, ~state.excluded_units)
+    views = row_groups(block.view_of_unit, block.dim, None if apart is None else ~apart)
     w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
     D = state.row_scale
     e = (state.sigma**2 * D * w.apply(D * w.apply(r, state.sigma), state.sigma)).reshape(-1, block.dim)
-    e[state.excluded_units] = lin.residual[state.excluded_units]
+    if apart is not None:
+        e[apart] = lin.residual[apart]
     return e
 
 
@@ -141,18 +142,22 @@ def flag_units(state: BlockState, lin: Linearization) -> np.ndarray:
     for a few such units comes back without them): size = the norm of the unit's `conditional_residuals` [unit],
     limit = `OutlierRule.limit` of their robust per-axis scale (MAD of the units kept in the views kept). None
     flagged without a unit rule. On a small, strongly foreshortened far floor tag one corner slides along an edge by
-    pixels while the view's other corners fit: too little for the view rule."""
+    pixels while the view's other corners fit: too little for the view rule. Units off by more than GROSS_FACTOR
+    limits (a stray field-line point tens of pixels off) are kept out of their view's estimate, which they would
+    spoil for the others."""
     block = state.block
-    flags = np.zeros(block.n_units, dtype=bool)
     if block.unit_rule is None:
-        return flags
+        return np.zeros(block.n_units, dtype=bool)
     kept_view = ~state.excluded[block.view_of_unit]
     e = conditional_residuals(state, lin)
     counted = kept_view & ~state.excluded_units
     if not counted.any():
-        return flags
-    scale = MAD_TO_SIGMA * float(np.median(np.abs(e[counted])))
-    return np.linalg.norm(e, axis=1) > block.unit_rule.limit(np.array(scale))
+        return np.zeros(block.n_units, dtype=bool)
+    limit = block.unit_rule.limit(np.array(MAD_TO_SIGMA * float(np.median(np.abs(e[counted])))))
+    gross = np.linalg.norm(lin.residual, axis=1) > GROSS_FACTOR * limit
+    if gross.any():
+        e = conditional_residuals(state, lin, gross)
+    return np.linalg.norm(e, axis=1) > limit
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
