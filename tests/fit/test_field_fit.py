@@ -58,8 +58,8 @@ def test_the_block_derivatives_match_central_differences(tmp_path):
 @pytest.mark.parametrize("seed", [0, 3])
 def test_the_camera_and_the_place_come_out_of_line_points(tmp_path, seed):
     """Exact line points with 0.3 px noise, 12 views from a robot up to 0.3 m and 10 deg from where it was meant to
-    stand, the camera several degrees off: rotation within 0.05 deg, place within 5 cm and 0.5 deg, every estimate
-    within 3 reported std."""
+    stand, the camera several degrees off: rotation within 0.1 deg (of the points on lines, the block uses a few
+    dozen per view), place within 5 cm and 0.5 deg, every estimate within 3 reported std."""
     robot = load_robot(field_robot(tmp_path))
     rng = np.random.default_rng(seed)
     truth = random_truth(robot, TruthSpec(), rng)
@@ -73,7 +73,7 @@ def test_the_camera_and_the_place_come_out_of_line_points(tmp_path, seed):
     std = dict(zip(fit.params.names, fit.solution.std))
     true_camera = truth.frames[robot.camera_joint]
     rotation = np.array([estimate[f"camera.{c}"] for c in ("rx", "ry", "rz")])
-    assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.05
+    assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.1
     assert np.hypot(estimate["field_pose.x"] - pose[0], estimate["field_pose.y"] - pose[1]) < 0.05
     assert abs(np.rad2deg(estimate["field_pose.yaw"] - pose[2])) < 0.5
     truths = dict(zip([f"camera.{c}" for c in ("x", "y", "z", "rx", "ry", "rz")], true_camera))
@@ -139,4 +139,71 @@ def test_a_rendered_field_capture_calibrates_the_camera(tmp_path):
     rotation = np.array([params[f"camera.{c}"]["value"] for c in ("rx", "ry", "rz")])
     assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.1
     pose = truth["field_pose"]
+    assert np.hypot(params["field_pose.x"]["value"] - pose["x"], params["field_pose.y"]["value"] - pose["y"]) < 0.05
+
+
+def test_stray_points_are_left_out_without_their_views(tmp_path):
+    """Every twelfth point 60 px off (a white robot part beside a line) in every fourth view: the fit leaves out
+    most of those points one by one (not those that landed near another line) and keeps every view."""
+    robot = load_robot(field_robot(tmp_path))
+    rng = np.random.default_rng(2)
+    truth = random_truth(robot, TruthSpec(), rng)
+    pose = np.array([-3.1, 0.1, 0.05])
+    obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 12, rng)
+    stray = np.concatenate([np.flatnonzero(obs.sample_index == s)[::12] for s in range(0, 12, 4)])
+    obs.uv[stray] += [0.0, 60.0]
+    options = FitOptions(free="camera", system="field")
+    block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    first = fit_observations(robot, {}, options, own_blocks=[block])
+    fit = fit_observations(robot, {}, options, own_blocks=[block.reweighted(first.chain, first.solution.values)])
+    state = fit.problem.states[0]
+    assert not state.excluded.any()
+    used = state.block.obs.uv
+    left_out = {tuple(p) for p in used[state.excluded_units]}
+    z = (fit.solution.values - fit.params.references) / fit.params.prior_sigmas
+    residual = fit.problem.raw_residuals(z)[0][:, 0]
+    on_a_line = {tuple(p) for p in used[np.abs(residual) < 5.0]}
+    kept_strays = {tuple(p) for p in obs.uv[stray] if (used == p).all(axis=1).any()}
+    far = kept_strays - on_a_line
+    assert len(far) >= 2 and len(far & left_out) >= len(far) / 2
+
+
+def simulate(robot: Path, out: Path, *extra: str) -> None:
+    subprocess.run([sys.executable, "-m", "wolfcal.cli", "simulate", "--robot", str(robot), "--binning", "4",
+                    "--out", str(out), *extra], cwd=ROOT, check=True, capture_output=True, timeout=600)  # fmt: skip
+
+
+def test_a_robot_on_the_other_half_names_the_field_symmetry(tmp_path):
+    """The robot stood at (+3, 0) facing +x while field.robot_at says (-3, 0): its views are those of the configured
+    place turned round. The fit refuses, naming the other half and the symmetry, rather than fitting the mirror."""
+    (tmp_path / "real").mkdir()
+    real = field_robot(tmp_path / "real", dimensions=DIMENSIONS, robot_at={"x": 3.0, "y": 0.0, "yaw": 0.0})
+    simulate(real, tmp_path / "field.mcap", "--system", "field", "--samples", "6", "--seed", "4")
+    result = fit_command(tmp_path / "field.mcap", field_robot(tmp_path), tmp_path / "fit")
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    assert "the lines fit the robot on the other half of the field (x +3" in result.stderr
+    assert "point symmetry" in result.stderr and not (tmp_path / "fit").exists()
+
+
+@pytest.mark.slow
+def test_field_and_tag_captures_in_one_fit(tmp_path):
+    """`fit feet.mcap field.mcap --free camera`: the feet tags and the field lines (same true camera) in one fit;
+    both blocks contribute and the camera and the robot's place land on the truth."""
+    robot = field_robot(tmp_path)
+    simulate(robot, tmp_path / "feet.mcap", "--system", "head", "--samples", "10", "--seed", "7")
+    simulate(robot, tmp_path / "field.mcap", "--system", "field", "--samples", "10", "--seed", "7",
+             "--truth", str(tmp_path / "feet.truth.yaml"))  # fmt: skip
+    result = subprocess.run([sys.executable, "-m", "wolfcal.cli", "fit", str(tmp_path / "feet.mcap"),
+                             str(tmp_path / "field.mcap"), "--robot", str(robot), "--free", "camera", "--out",
+                             str(tmp_path / "fit")], cwd=ROOT, capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "\nhead camera: " in result.stdout and "\nfield: 10 samples" in result.stdout
+    fitted = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())
+    assert {b["name"] for b in fitted["blocks"]} == {"head camera", "field"}
+    params = {p["name"]: p for p in fitted["parameters"]}
+    true_camera = np.array(yaml.safe_load((tmp_path / "feet.truth.yaml").read_text())["truth"]["frames"][
+        load_robot(robot).camera_joint])  # fmt: skip
+    rotation = np.array([params[f"camera.{c}"]["value"] for c in ("rx", "ry", "rz")])
+    assert np.rad2deg(np.linalg.norm(log_so3(exp_so3(rotation).T @ exp_so3(true_camera[3:])))) < 0.1
+    pose = yaml.safe_load((tmp_path / "field.truth.yaml").read_text())["field_pose"]
     assert np.hypot(params["field_pose.x"]["value"] - pose["x"], params["field_pose.y"]["value"] - pose["y"]) < 0.05

@@ -19,7 +19,7 @@ from wolfcal.field.model import (
     nearest_line_normal,
 )
 from wolfcal.field.quality import detection_quality
-from wolfcal.field.render import pixel_rays, render_field_view
+from wolfcal.field.render import motion_kernel, pixel_rays, render_field_view
 from wolfcal.field.scene import Scene, cluttered_scene
 from wolfcal.geometry import transform_points
 
@@ -92,3 +92,15 @@ def test_a_view_of_the_sky_shows_no_lines() -> None:
     )
     assert not view.line_mask.any()
     assert len(detect_line_points(view.image).uv) == 0
+
+
+@pytest.mark.parametrize("length", [1.5, 2.0, 3.0, 4.0])
+def test_motion_blur_keeps_a_line_in_place(length):
+    """A horizontal motion blur of any length smears a vertical line symmetrically: its centroid stays put (an even
+    box anchored on a pixel would move it by half a pixel)."""
+    row = np.zeros(41)
+    row[18:22] = 1.0  # centred on 19.5
+    kernel = motion_kernel(length)[0]
+    blurred = np.convolve(row, kernel, mode="same")
+    assert abs(kernel.sum() - 1.0) < 1e-6 and np.allclose(kernel, kernel[::-1])
+    assert abs(blurred @ np.arange(41) / blurred.sum() - 19.5) < 1e-6

@@ -110,7 +110,11 @@ def _runs(white: np.ndarray, green: np.ndarray, contrast: np.ndarray, limit: np.
     centres = []
     for s, e in zip(starts[keep], ends[keep]):
         lo, hi = max(0, s - 1), min(n, e + 1)
-        weights = np.maximum(contrast[lo:hi], 0.0)
         positions = np.arange(lo, hi, dtype=float)
+        # above the straight line through the turf just outside the run: turf brighter on one side (a mowing
+        # stripe, a shadow's edge) must not pull the centre toward it
+        left, right = max(0, s - 2), min(n - 1, e + 1)
+        baseline = np.interp(positions, [left, right], [contrast[left], contrast[right]])
+        weights = np.maximum(contrast[lo:hi] - baseline, 0.0)
         centres.append(float(weights @ positions / weights.sum()) if weights.sum() > 0 else (s + e - 1) / 2)
     return np.asarray(centres)

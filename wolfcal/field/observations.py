@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,6 +26,17 @@ class FieldObservations:
     @property
     def n_samples(self) -> int:
         return int(self.q_measured.shape[0])
+
+    def only_points(self, keep: np.ndarray) -> FieldObservations:
+        """The line points where keep (M,) is True; samples left without a point are dropped (points renumbered to
+        the samples kept)."""
+        keep = np.asarray(keep, bool)
+        samples = np.unique(self.sample_index[keep])
+        renumber = np.full(self.n_samples, -1)
+        renumber[samples] = np.arange(len(samples))
+        return replace(self, q_measured=self.q_measured[samples], stamps_ns=self.stamps_ns[samples],
+                       sources=[self.sources[s] for s in samples], placement=self.placement[samples],
+                       sample_index=renumber[self.sample_index[keep]], uv=self.uv[keep])  # fmt: skip
 
 
 MAX_POINTS_PER_VIEW = 120  # line points kept per view, spread over what it found

@@ -19,15 +19,42 @@ from wolfcal.field.detect import detect_line_points
 from wolfcal.field.ground import camera_on_field, expected_line_width
 from wolfcal.field.model import field_lines, mirrored_pose
 from wolfcal.field.observations import FieldObservations, spread
-from wolfcal.field.place import DistanceMap, search_place
+from wolfcal.field.place import DistanceMap, PlaceSearch, search_place
 from wolfcal.io.reader import read_capture
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
+from wolfcal.vision.observe import detect_observations
 
+TAG_PROBE_SAMPLES = 3  # head images of a capture searched for tags to tell a tag capture from a field capture
 MIN_POINTS = 200  # fewer line points in a placement's views cannot place the robot and turn the camera
+MIRROR_SCORE_RATIO = 0.5  # lines fitting the robot turned round this much better name the field's symmetry
 FAR_FROM_CONFIGURED = (0.45, np.deg2rad(15.0))  # [m, rad]: a place found further off is said
+
+
+def field_captures(robot: Robot, captures: list[Path], system: str | None) -> list[Path]:
+    """The captures a fit reads as field views: with `--system field` all of them; with every system (`--system
+    all` or none) and a `field:` in the robot config, those whose first TAG_PROBE_SAMPLES head images show no tag
+    of the config (tag captures, floor captures and field captures may then be fitted together)."""
+    if system == "field":
+        return list(captures)
+    if system not in (None, "all") or robot.config.playing_field is None:
+        return []
+    return [path for path in captures if not _shows_tags(robot, path)]
+
+
+def _shows_tags(robot: Robot, path: Path) -> bool:
+    """Whether the head images of the capture's first samples show a tag of the robot config (a capture without
+    head images is no field capture)."""
+    samples = read_capture(path, robot.config).samples_of(HEAD_CAMERA)[:TAG_PROBE_SAMPLES]
+    if not samples:
+        return True
+    try:
+        observations, _ = detect_observations(samples, robot, workers=1, cameras=[HEAD_CAMERA])
+    except WolfcalError:  # no configured tag in any of them
+        return False
+    return bool(observations)
 
 
 def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], None],
@@ -73,8 +100,11 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
                                f"{MIN_POINTS} needed): aim the head at the field's lines, not at the sky or beyond "
                                "the border")  # fmt: skip
         assert camera is not None
-        search = search_place(distance_map, robot, q, np.concatenate(
-            [np.full(len(v), i) for i, v in enumerate(views)]), points, camera, configured)  # fmt: skip
+        view_of_point = np.concatenate([np.full(len(v), i) for i, v in enumerate(views)])
+        search = search_place(distance_map, robot, q, view_of_point, points, camera, configured)
+        turned = search_place(distance_map, robot, q, view_of_point, points, camera,
+                              configured + np.array([0.0, 0.0, np.pi]))  # fmt: skip
+        _check_half(path, search, turned, configured, f"field.{key}")
         _say_place(path, search.pose, configured, f"field.{key}", say)
         q_all.append(q)
         stamps += [s.stamp_ns for s in samples]
@@ -85,6 +115,23 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
     return FieldObservations(list(robot.joint_names), np.vstack(q_all), np.asarray(stamps, np.int64), sources,
                              np.asarray(placement), np.asarray(starts), camera, np.concatenate(sample_of),
                              np.vstack(uv_all))  # fmt: skip
+
+
+def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured: np.ndarray, key: str) -> None:
+    """WolfcalError when the lines fit the robot turned round at its configured place clearly better than as
+    configured: through the field's point symmetry that is the robot standing on the other half, facing as
+    configured (or turned round on this half); the views alone cannot tell which. `key`: the config key of the
+    configured place."""
+    if turned.score_m < MIRROR_SCORE_RATIO * search.score_m:
+        other = mirrored_pose(*turned.pose)
+        raise WolfcalError(
+            f"{path}: the lines fit the robot on the other half of the field (x {other[0]:+.2f} m, y {other[1]:+.2f}"
+            f" m, yaw {np.rad2deg(other[2]):+.0f} deg) or turned round where {key} puts it (yaw "
+            f"{np.rad2deg(turned.pose[2]):+.0f} deg) - the field's point symmetry makes the two look alike - far "
+            f"better than at {key} ({configured[0]:+.2f}, {configured[1]:+.2f}, "
+            f"{np.rad2deg(configured[2]):+.0f} deg; mean distance from the lines {turned.score_m:.3f} m against "
+            f"{search.score_m:.3f} m): set {key} to where the robot stood, on the half it stood on"
+        )
 
 
 def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:

@@ -87,11 +87,20 @@ def render_field_view(
         nearer = hit < distance
         distance[nearer], color[nearer], coverage[nearer] = hit[nearer], ball_color[nearer], 0.0
     image = color.reshape(h, w, 3)
-    if blur_px > 1.0:
-        kernel = np.ones((1, int(round(blur_px))), np.float32) / round(blur_px)
-        image = cv2.filter2D(image.astype(np.float32), -1, kernel)
+    if blur_px > 0.0:
+        image = cv2.filter2D(image.astype(np.float32), -1, motion_kernel(blur_px))
     image = image + rng.normal(0.0, noise_sigma, image.shape)
     return FieldView(np.clip(image, 0, 255).astype(np.uint8), (coverage >= 0.5).reshape(h, w))
+
+
+def motion_kernel(length_px: float) -> np.ndarray:
+    """(1, 2K + 1) horizontal box blur of `length_px` [px] centred on the pixel: each tap weighs the overlap of its
+    pixel [k - 1/2, k + 1/2] with [-length/2, length/2], so the blurred image keeps its place (an even box anchored
+    on a pixel would shift it by half a pixel)."""
+    half = max(length_px, 1.0) / 2
+    k = np.arange(-np.ceil(half - 0.5), np.ceil(half - 0.5) + 1)
+    weights = np.clip(np.minimum(k + 0.5, half) - np.maximum(k - 0.5, -half), 0.0, None)
+    return (weights / weights.sum()).astype(np.float32)[None]
 
 
 def _footprint(ground: np.ndarray, s: np.ndarray, h: int, w: int) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 
 from wolfcal.field.ground import ground_gradient, ground_points
 from wolfcal.field.model import FieldLines, field_lines, nearest_line, nearest_line_normal
-from wolfcal.field.observations import FieldObservations
+from wolfcal.field.observations import FieldObservations, spread
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
 from wolfcal.fit.options import FitOptions
@@ -38,6 +38,9 @@ from wolfcal.robot.robot import Robot
 PLACE_PRIOR_M = 0.3  # how far the robot may stand from `field.robot_at` [m]
 YAW_PRIOR_RAD = 0.2  # [rad] (about 10 deg)
 LINE_BIAS_PX = 0.3  # a line's points in one view share the detector's error across that line (blur, shading) [px]
+MIN_LINE_POINTS = 5  # points of a line in one view the block needs to use them
+POINTS_PER_VIEW = 35  # and the most it uses of one view
+STRETCH_POINTS = 3  # points in a row along a line that share one detection error
 VIEW_RULE = OutlierRule(4.0, 3.0)  # a view whose points are off by 4x the median view's and 3 px is left out
 LINE_POINT_RULE = OutlierRule(4.0, 2.0)  # and a single point (a robot's leg, the ball) off by 2 px of a view kept
 
@@ -56,10 +59,23 @@ class FieldBlock(Block):
     noise_min, noise_max, noise_start = 0.05, 20.0, LINE_BIAS_PX
 
     def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
-                 weighted_at: Corrections | None = None) -> None:  # fmt: skip
+                 weighted_at: Corrections | None = None, shared_lines: bool = True) -> None:  # fmt: skip
         """`weighted_at`: the model whose pixel scale on the ground weighs the points (default: `fixed`, the
-        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too."""
-        self.robot, self.obs, self.lines, self.fixed = robot, obs, lines, fixed or Corrections()
+        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
+        `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
+        first solve that only finds where to weigh the points."""
+        self.robot, self.lines, self.fixed = robot, lines, fixed or Corrections()
+        self.shared_lines = shared_lines
+        self.detected = obs  # every point found; the block uses those on lines seen by enough of them
+        model = weighted_at or self.fixed
+        T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
+        line = _lines_seen(obs, lines, T_floor_camera[obs.sample_index])
+        keep = _points_used(obs.sample_index, line)
+        if not keep.all():
+            obs, line = obs.only_points(keep), line[keep]
+            T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
+        self.obs, self.line_of_unit = obs, line
+        self.stretch_of_unit = _stretches(obs.sample_index, line, obs.uv)
         self.tag_ids: list[int] = []
         self.camera_name = "head"
         self.q_measured = obs.q_measured
@@ -68,10 +84,7 @@ class FieldBlock(Block):
         self.view_labels = [(s, -1) for s in range(obs.n_samples)]
         self.placement_of_unit = obs.placement[obs.sample_index]
         self.rays = obs.camera.unproject(obs.uv)  # (M, 3) in the optical frame
-        T_floor_camera, _ = camera_in_floor(robot, obs.q_measured, weighted_at or self.fixed)
-        T_floor_camera = T_floor_camera[obs.sample_index]
-        self.ground_gradient = ground_gradient(obs.camera, T_floor_camera, obs.uv)
-        self.line_of_unit = _lines_seen(obs, lines, T_floor_camera)
+        self.ground_gradient = ground_gradient(obs.camera, T_floor_camera[obs.sample_index], obs.uv)
         names = field_pose_names(len(obs.starts))
         self.nuisance = ParameterSet([
             Parameter(f"{name}.{c}", "field", name, i, "m" if i < 2 else "rad",
@@ -84,15 +97,18 @@ class FieldBlock(Block):
         scale on the ground changes steeply with the camera's pitch, so weights taken at a nominal model several
         degrees off misstate how far each point is off in the image."""
         local = values[len(chain) :]
-        obs = replace(self.obs, starts=local.reshape(-1, 3))
+        obs = replace(self.detected, starts=local.reshape(-1, 3))
         model = chain.corrections(values[: len(chain)]).plus(self.fixed)
         return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model)
 
     def shared_labels(self) -> np.ndarray:
-        """(U,) the points of one line in one view share the detector's error across that line (its width, blur
-        and shading are the same along it): one label per (view, line) where the block was weighted."""
-        _, labels = np.unique(np.stack([self.sample_of_unit, self.line_of_unit], axis=1), axis=0,
-                              return_inverse=True)  # fmt: skip
+        """(U,) the points of one stretch of a line in one view share the detector's error across that line (its
+        width, blur and shading, and the line's sub-pixel phase against the scan lines, which drifts along it):
+        one label per (view, line, stretch) where the block was weighted (none without `shared_lines`)."""
+        if not self.shared_lines:
+            return np.full(self.n_units, -1)
+        _, labels = np.unique(np.stack([self.sample_of_unit, self.line_of_unit, self.stretch_of_unit], axis=1),
+                              axis=0, return_inverse=True)  # fmt: skip
         return labels.ravel()
 
     def joint_reading_groups(self) -> np.ndarray:
@@ -109,6 +125,13 @@ class FieldBlock(Block):
         }
         entry["n_line_points"] = len(self.obs.uv)
         return entry
+
+    @staticmethod
+    def summary_lines(entry: dict) -> list[str]:
+        """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines."""
+        lines = Block.summary_lines(entry)
+        return [lines[0].replace("corners used", "line points used"),
+                lines[1].replace("reprojection RMS", "distance from the lines")]  # fmt: skip
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         s, k = self.sample_of_unit, self.placement_of_unit
@@ -166,6 +189,38 @@ class FieldBlock(Block):
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
 
 
+def _stretches(sample_index: np.ndarray, line: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(M,) the stretch of its line each point lies on: a line's points in one view, in their order along it, in
+    runs of STRETCH_POINTS (the last run takes the rest)."""
+    _, group = np.unique(np.stack([sample_index, line], axis=1), axis=0, return_inverse=True)
+    group = group.ravel()
+    stretch = np.zeros(len(group), dtype=int)
+    for g in np.unique(group):
+        members = np.flatnonzero(group == g)
+        centred = uv[members] - uv[members].mean(axis=0)
+        along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0] if len(members) > 1 else np.zeros(1)
+        rank = np.empty(len(members), dtype=int)
+        rank[np.argsort(along)] = np.arange(len(members))
+        stretch[members] = np.minimum(rank // STRETCH_POINTS, max(len(members) // STRETCH_POINTS - 1, 0))
+    return stretch
+
+
+def _points_used(sample_index: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """(M,) the points the block uses: those on lines seen by at least MIN_LINE_POINTS points of their view, at
+    most POINTS_PER_VIEW of them per view, spread over it (`spread`). A lone point near a line (a robot's foot, a
+    post's base, the far end of a short marking) has no others to share the line's error with; and the detector's
+    error along a line drifts slowly (the line's sub-pixel phase against the scan lines), so many points of one
+    line would count one error many times."""
+    _, group, counts = np.unique(np.stack([sample_index, line], axis=1), axis=0, return_inverse=True,
+                                 return_counts=True)  # fmt: skip
+    on_lines = np.flatnonzero(counts[group.ravel()] >= MIN_LINE_POINTS)
+    keep = np.zeros(len(line), bool)
+    for view in np.unique(sample_index[on_lines]):
+        members = on_lines[sample_index[on_lines] == view]
+        keep[members[spread(members, POINTS_PER_VIEW)]] = True
+    return keep
+
+
 def _lines_seen(obs: FieldObservations, lines: FieldLines, T_floor_camera: np.ndarray) -> np.ndarray:
     """(M,) the nearest line (`nearest_line`) of each point seen from cameras T_floor_camera (M, 4, 4) of a robot
     standing at its placement's start."""
@@ -178,16 +233,18 @@ def _lines_seen(obs: FieldObservations, lines: FieldLines, T_floor_camera: np.nd
 
 def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
                  say: Callable[[str], None] | None) -> tuple[list[Block], list[Path]]:  # fmt: skip
-    """The fit builder of the field system (`wolfcal.fit.systems`): with `--system field` every capture is a field
-    capture. Its block is solved once and weighted again at that solution (`FieldBlock.reweighted`)."""
-    if options.system != "field":
-        return [], []
-    from wolfcal.field.observe import field_observations
+    """The fit builder of the field system (`wolfcal.fit.systems`): the field captures (`field_captures`: with
+    `--system field` every capture, with every system those that show no tag). Its block is solved once on its own
+    and weighted again at that solution (`FieldBlock.reweighted`); the fit then joins it to the other blocks."""
+    from wolfcal.field.observe import field_captures, field_observations
     from wolfcal.fit.pipeline import fit_observations
 
+    chosen = field_captures(robot, list(captures), options.system)
+    if not chosen:
+        return [], []
     tell = say or (lambda _: None)
-    obs = field_observations(robot, list(captures), tell)
-    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions))
-    first = fit_observations(robot, {}, options, own_blocks=[block])
+    obs = field_observations(robot, chosen, tell)
+    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions), shared_lines=False)
+    first = fit_observations(robot, {}, replace(options, system="field"), own_blocks=[block])
     tell("weighting the line points at the first solution ...")
-    return [block.reweighted(first.chain, first.solution.values)], list(captures)
+    return [block.reweighted(first.chain, first.solution.values)], chosen

@@ -58,6 +58,7 @@ MAX_FINAL_SOLVES = 4
 MIN_CLASS_UNITS = 8
 CLASS_CUT = 3.5
 CLASS_FADE = 1.0
+GROSS_FACTOR = 10.0  # units off by this many unit-rule limits are kept out of their view's estimate
 CLASS_PRIOR_ROWS = 30
 CLASS_SCALE_FLOOR = 1.0
 
@@ -77,52 +78,67 @@ class Solution:
 
 
 def view_rms(state: BlockState, lin: Linearization) -> np.ndarray:
-    """(V,) whitened RMS of each view under the covariance of that view's own residuals."""
+    """(V,) whitened RMS of each view under the covariance of that view's own residuals, over the view's units not
+    left out one by one (`flag_units`); NaN for a view without such units."""
     block, residual = state.block, lin.residual
-    views = row_groups(block.view_of_unit, block.dim)  # every view has a unit, so group k is view k
-    rows = np.bincount(views, minlength=block.n_views)
+    counted = ~state.excluded_units
+    views = row_groups(block.view_of_unit, block.dim, counted)  # group k: the k-th view with a unit counted
+    present = np.unique(block.view_of_unit[counted])
+    rows = np.bincount(views[views >= 0], minlength=len(present))
     w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
-    return np.sqrt(w.group_norms(residual.ravel(), state.sigma) / rows)
+    out = np.full(block.n_views, np.nan)
+    out[present] = np.sqrt(w.group_norms(residual.ravel(), state.sigma) / rows)
+    return out
 
 
 def flag_outliers(state: BlockState, lin: Linearization) -> np.ndarray:
     """(V,) views the noise model explains far worse than the others and that are off by more than the floor
-    (the block's `outlier_rule`: spread = whitened view RMS, size = per-axis view RMS [unit])."""
+    (the block's `outlier_rule`: spread = whitened view RMS, size = per-axis view RMS [unit]), judged without the
+    units left out one by one (a stray point does not take its view with it)."""
     block, residual = state.block, lin.residual
-    size = rms_by(block.view_of_unit, residual, block.n_views)
+    counted = ~state.excluded_units
+    size = rms_by(block.view_of_unit[counted], residual[counted], block.n_views)
     return block.outlier_rule.flags(view_rms(state, lin), size)
 
 
-def conditional_residuals(state: BlockState, lin: Linearization) -> np.ndarray:
+def conditional_residuals(state: BlockState, lin: Linearization, apart: np.ndarray | None = None) -> np.ndarray:
     """(U, dim) each unit's residual less what the view's share of the joint-reading errors explains [unit]: the
     noise part of the best estimate of the view's errors under the covariance of that view alone,
     sigma^2 D C_v^-1 D^-1 r (D: the rows' own noise levels, `BlockState.row_scale`; C_v: the view's covariance in
     the whitened rows' scale). What floor_ground's measurement leaves of a corner once it fits each sample's reading
-    errors as unknowns: where the fitted model puts the corner, the view's reading errors taken into account."""
+    errors as unknowns: where the fitted model puts the corner, the view's reading errors taken into account.
+    `apart` (U,): units kept out of the view's estimate, which keep their plain residual."""
     block, r = state.block, lin.residual.ravel()
-    views = row_groups(block.view_of_unit, block.dim)
+    views = row_groups(block.view_of_unit, block.dim, None if apart is None else ~apart)
     w = GroupedWhitening(views, state.shared_errors(lin), state.row_scale)
     D = state.row_scale
-    return (state.sigma**2 * D * w.apply(D * w.apply(r, state.sigma), state.sigma)).reshape(-1, block.dim)
+    e = (state.sigma**2 * D * w.apply(D * w.apply(r, state.sigma), state.sigma)).reshape(-1, block.dim)
+    if apart is not None:
+        e[apart] = lin.residual[apart]
+    return e
 
 
 def flag_units(state: BlockState, lin: Linearization) -> np.ndarray:
-    """(U,) single units of the views kept that are off by more than the block's `unit_rule` allows: size = the
-    norm of the unit's `conditional_residuals` [unit], limit = `OutlierRule.limit` of their robust per-axis scale
-    (MAD of the units kept). None flagged without a unit rule. On a small, strongly foreshortened far floor tag one
-    corner slides along an edge by pixels while the view's other corners fit: too little for the view rule."""
+    """(U,) single units that are off by more than the block's `unit_rule` allows, in every view (a view left out
+    for a few such units comes back without them): size = the norm of the unit's `conditional_residuals` [unit],
+    limit = `OutlierRule.limit` of their robust per-axis scale (MAD of the units kept in the views kept). None
+    flagged without a unit rule. On a small, strongly foreshortened far floor tag one corner slides along an edge by
+    pixels while the view's other corners fit: too little for the view rule. Units off by more than GROSS_FACTOR
+    limits (a stray field-line point tens of pixels off) are kept out of their view's estimate, which they would
+    spoil for the others."""
     block = state.block
-    flags = np.zeros(block.n_units, dtype=bool)
     if block.unit_rule is None:
-        return flags
+        return np.zeros(block.n_units, dtype=bool)
     kept_view = ~state.excluded[block.view_of_unit]
     e = conditional_residuals(state, lin)
     counted = kept_view & ~state.excluded_units
     if not counted.any():
-        return flags
-    scale = MAD_TO_SIGMA * float(np.median(np.abs(e[counted])))
-    flags[kept_view] = np.linalg.norm(e[kept_view], axis=1) > block.unit_rule.limit(np.array(scale))
-    return flags
+        return np.zeros(block.n_units, dtype=bool)
+    limit = block.unit_rule.limit(np.array(MAD_TO_SIGMA * float(np.median(np.abs(e[counted])))))
+    gross = np.linalg.norm(lin.residual, axis=1) > GROSS_FACTOR * limit
+    if gross.any():
+        e = conditional_residuals(state, lin, gross)
+    return np.linalg.norm(e, axis=1) > limit
 
 
 def residual_scale(state: BlockState, residual: np.ndarray, sigma: float, n_params: float) -> float:
@@ -282,16 +298,16 @@ def _class_scale(state: BlockState) -> np.ndarray:
 
 
 def _update_outliers(problem: Problem, lins: list[Linearization]) -> bool:
-    """Flag each block's outlier views at these linearisations, then the single units left out of the views kept
-    (`flag_units`); whether any outlier set changed."""
+    """Flag the single units left out (`flag_units`), then each block's outlier views judged without them, at these
+    linearisations; whether any outlier set changed."""
     changed = False
     for state, lin in zip(problem.states, lins):
-        outliers = flag_outliers(state, lin)
-        changed |= not np.array_equal(outliers, state.excluded)
-        state.excluded = outliers
         units = flag_units(state, lin)
         changed |= not np.array_equal(units, state.excluded_units)
         state.excluded_units = units
+        outliers = flag_outliers(state, lin)
+        changed |= not np.array_equal(outliers, state.excluded)
+        state.excluded = outliers
     return changed
 
 
