@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.atomic import make_folder, replace_file
+from wolfcal.atomic import make_folder
 from wolfcal.config import RobotConfig
 from wolfcal.errors import WolfcalError
 from wolfcal.io.mcapfile import partial_path
 from wolfcal.io.msgdefs import IMU, JOINT_STATE, stamp_dict
-from wolfcal.io.writer import start_file
+from wolfcal.io.writer import finish_file, start_file
 
 NO_ORIENTATION = [-1.0] + [0.0] * 8  # orientation_covariance of an IMU that gives no orientation (REP 145)
 
@@ -85,12 +85,4 @@ class StandingWriter:
         if self._closed:
             return self.path if self.count else None
         self._closed = True
-        self._mcap.finish()
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
-        if not self.count:
-            self.partial.unlink()
-            return None
-        replace_file(self.partial, self.path)
-        return self.path
+        return finish_file(self._mcap, self._file, self.partial, self.path, bool(self.count))

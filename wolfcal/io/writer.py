@@ -96,6 +96,22 @@ def start_file(
     return mcap, channels, encoders
 
 
+def finish_file(mcap: McapWriter, file: BinaryIO, partial: Path, path: Path, written: bool) -> Path | None:
+    """Finish a capture file started by `start_file` in `file` (open on `partial`): summary and footer, fsynced,
+    closed, then renamed to `path` (inside an output set: when the whole set is written). Without `written`
+    messages the partial file is removed instead, so an empty capture never replaces an earlier one; returns
+    `path` or None."""
+    mcap.finish()
+    file.flush()
+    os.fsync(file.fileno())
+    file.close()
+    if not written:
+        partial.unlink()
+        return None
+    replace_file(partial, path)
+    return path
+
+
 class CaptureWriter:
     """Context manager writing one capture file; see the module docstring for the guarantees.
 
@@ -231,15 +247,7 @@ class CaptureWriter:
         if self._closed:
             return self.path if self.count else None
         self._closed = True
-        self._mcap.finish()
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
-        if not self.count:  # an empty capture must not replace an earlier one
-            self.partial.unlink()
-            return None
-        replace_file(self.partial, self.path)  # inside an output set: when the whole set is written
-        return self.path
+        return finish_file(self._mcap, self._file, self.partial, self.path, bool(self.count))
 
     def _sync(self) -> None:
         self._mcap.flush()
