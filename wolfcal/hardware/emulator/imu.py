@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wolfcal.geometry import log_so3
+from wolfcal.hardware.emulator.table import ControlTable
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.imu_bus import ImuBusConfig
 from wolfcal.robot.robot import Robot
@@ -38,13 +39,13 @@ class ImuSpec:
     seed: int = 0
 
 
-class EmulatedImu:
+class EmulatedImu(ControlTable):
     """The device of an `ImuSpec`; `true_angles()` gives every joint's true angle [rad] (all buses)."""
 
     def __init__(self, spec: ImuSpec, true_angles: Callable[[], dict[str, float]]):
         self.spec, self.sid, self.true_angles = spec, spec.layout.id, true_angles
         start, length = spec.layout.span
-        self.table = bytearray(max(TABLE_SIZE, start + length))
+        super().__init__(max(TABLE_SIZE, start + length))
         self.table[0:2] = (spec.layout.model if spec.layout.model is not None else spec.model).to_bytes(2, "little")
         self.silent = self.corrupt = self.missing = False  # the attributes the instruction answers look at
         self.late_replies = self.stale_replies = 0
@@ -56,14 +57,6 @@ class EmulatedImu:
     @property
     def answers(self) -> bool:
         return not (self.silent or self.missing)
-
-    def read(self, item: tuple[int, int], signed: bool = False) -> int:
-        addr, size = item
-        return int.from_bytes(self.table[addr : addr + size], "little", signed=signed)
-
-    def write(self, item: tuple[int, int], value: int) -> None:
-        addr, size = item
-        self.table[addr : addr + size] = int(value).to_bytes(size, "little", signed=value < 0)
 
     def error_byte(self) -> int:
         return 0

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.hardware import protocol as P
+from wolfcal.hardware.emulator.table import ControlTable
 
 FIRMWARE = 46  # firmware version reported by every servo
 MAX_SPEED = 5.0  # rad/s when the profile velocity is 0 (unlimited)
@@ -27,12 +28,12 @@ class ServoSpec:
     offset: float = 0.0  # true encoder offset: true angle = reading + offset [rad]
 
 
-class EmulatedServo:
+class EmulatedServo(ControlTable):
     """Control table, true angle [rad] and speed [rad/s] of one servo; `silent`, `corrupt`, `missing` are faults."""
 
     def __init__(self, sid: int, spec: ServoSpec):
         self.sid, self.spec = sid, spec
-        self.table = bytearray(P.CONTROL_TABLE_SIZE)
+        super().__init__(P.CONTROL_TABLE_SIZE)
         self.angle = 0.0
         self.speed = 0.0
         self.silent = self.corrupt = self.missing = False
@@ -53,16 +54,6 @@ class EmulatedServo:
     @property
     def torque_on(self) -> bool:
         return self.read(P.TORQUE_ENABLE) == 1
-
-    def read(self, item: tuple[int, int], signed: bool = False) -> int:
-        """The value of a control-table item (address, size)."""
-        addr, size = item
-        return int.from_bytes(self.table[addr : addr + size], "little", signed=signed)
-
-    def write(self, item: tuple[int, int], value: int) -> None:
-        """Set a control-table item (address, size)."""
-        addr, size = item
-        self.table[addr : addr + size] = int(value).to_bytes(size, "little", signed=value < 0)
 
     def reading(self) -> int:
         """The present position [ticks] its encoder gives for the true angle."""
