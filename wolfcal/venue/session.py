@@ -5,14 +5,12 @@ Phases: `feet` (the planned feet views, the robot on its stand), then, when the 
 held-out floor views of `capture --floor --check`); with `--field`, instead of the floor phases, `field` (the field
 views of `capture --field`, the robot standing on the field at `field.robot_at`) and, when the config gives
 `field.check_at`, `field_check` (the held-out field views of `capture --field --check`, the robot moved there).
-Every pose is checked against the
-URDF limits and the collision model before the bus opens and from where the robot stands (`capture.poses`,
-`capture.floor`); nothing else is sent. The session says up front what the robot must be doing and asks before
-torque is switched on (and each time the robot must stand somewhere else: on the floor, on the field, at the
-field's check place); `--yes` answers them all. Robot
-time counts from torque on to the last sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM,
-a bus or camera failure: every sample taken so far is kept, the torque is left as chosen, and `--resume DIR`
-continues where the session stopped.
+Every pose is checked against the URDF limits and the collision model before the bus opens and from where the
+robot stands (`capture.poses`, `capture.floor`); nothing else is sent. The session says up front what the robot
+must be doing and asks before torque is switched on, and each time the robot must stand somewhere else (on the
+floor, on the field, at the field's check place); `--yes` answers them all. Robot time counts from torque on to
+the last sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM, a bus or camera failure: every
+sample taken so far is kept, the torque is left as chosen, and `--resume DIR` continues where the session stopped.
 """
 
 from __future__ import annotations
@@ -87,7 +85,7 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
 
 
 def field_phases(robot: Robot, options: VenueOptions, start: dict[str, float],
-                  say: Callable[[str], None]) -> list[Phase]:  # fmt: skip
+                 say: Callable[[str], None]) -> list[Phase]:  # fmt: skip
     """The field views (`capture.field`), those the robot cannot take without touching itself left out, in the
     order of the shortest moves from the standing pose; then, when the config gives `field.check_at`, the held-out
     field views: the same sweep with the robot moved there (without it, a note that the ground error from field
