@@ -30,6 +30,7 @@ from wolfcal.hardware.emulator import EmulatorProcess, load_truth, spec_from_con
 from wolfcal.robot.floor import standing_pose
 from wolfcal.robot.robot import load_robot
 from wolfcal.venue.options import VenueOptions
+from wolfcal.venue.report import report_lines
 from wolfcal.venue.session import field_phases, run_venue
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -117,3 +118,17 @@ def test_the_held_out_field_views_stand_at_check_at_when_the_config_gives_it(tmp
     assert held_out.name == "field_check" and "field.check_at (x -1.50 m, y +1.00 m, facing +29 deg" in held_out.stand
     assert sorted(p.name for p in held_out.script.poses) == sorted(p.name for p in fitted.script.poses)
     assert len(fitted.script.poses) >= 8
+
+
+def test_without_held_out_field_views_the_ground_error_from_field_views_reads_na_with_the_reason():
+    cv = {"folds": 4, "samples": 8, "outlier_samples": 0, "before": {"rms_px": 20.0}, "after": {"rms_px": 0.2},
+          "fold_spread": {"rotation_deg": 0.01, "translation_mm": 0.05}}  # fmt: skip
+    figures = {"robot": "robot.yaml", "robot_time_s": 30.0, "wall_time_s": 40.0, "runs": 1, "plan": "cached",
+               "samples": {"feet": 8, "field": 8, "field_check": 0}, "cross_validation": cv, "held_out_floor": None,
+               "held_out_field": None, "field_views": 8, "field_check_at": None, "fit": "session/fit",
+               "verdict": {"message": "Deploy the files below.", "refusals": [], "notes": []},
+               "deploy": {"written": False, "reason": "not written"}}  # fmt: skip
+    na = "ground error from field views: n/a (it needs held-out field views, the robot placed elsewhere: "
+    assert na + "the config gives no field.check_at)" in "\n".join(report_lines(figures))
+    figures["field_check_at"] = [-1.5, 1.0, 0.5]
+    assert na + "none taken)" in "\n".join(report_lines(figures))
