@@ -251,7 +251,9 @@ def venue(
     current: Path | None = typer.Option(
         None, "--current", help="The robot's present calibration (the team's deploy files); recorded in the report."
     ),
-    yes: bool = typer.Option(False, "--yes", help="Switch torque on (and go on to the floor views) without asking."),
+    yes: bool = typer.Option(
+        False, "--yes", help="Switch torque on (and go on to each place the robot must stand) without asking."
+    ),
     velocity: float | None = typer.Option(None, "--velocity", help="Safe speed of every move [rad/s] (default 1.5)."),
     acceleration: float | None = typer.Option(
         None, "--acceleration", help="Safe acceleration of every move [rad/s^2] (default 6)."
@@ -268,7 +270,8 @@ def venue(
         False,
         "--field",
         help="Field views instead of floor views: the robot stands at the config's field.robot_at and the head "
-        "sweeps field.sweep; the fit takes the feet views and the field's lines together.",
+        "sweeps field.sweep; the fit takes the feet views and the field's lines together. With field.check_at, "
+        "then held-out field views there: their measured ground error is the verdict's.",
     ),
 ) -> None:
     """Recalibrate the head camera in one session: planned feet views, floor or field views, fit, check, deploy

@@ -4,21 +4,24 @@ elsewhere on the field, `field.check_at`).
 Before = the robot's present calibration (`--current`, else the fit's), after = the model to deploy. The ground
 error at `floor.ground_check.distance` and the other distances is measured from the held-out views' lines
 (`field_ground`), with its 1 sigma; the deploy verdict judges it as it judges the floor tags' (`verdict`), and
-refuses when the views cannot see an error of the limit's size. With the simulator's truth beside the captures the
-true ground errors are given too. `evaluate_held_out` is the registry's evaluator (`wolfcal.fit.systems`): a fit of
-field views (`--system field`) given held-out captures is judged here; metrics.json and report.md are written, and
-the deploy files when the verdict allows.
+refuses when the views cannot see an error of the limit's size. `held_out_field_ground` is that measurement and
+the verdict's input, shared by `wolfcal evaluate` and the venue session's held-out field step. With the
+simulator's truth beside the captures the true ground errors are given too. `evaluate_held_out` is the registry's
+evaluator (`wolfcal.fit.systems`): a fit of field views (`--system field`) given held-out captures is judged here;
+metrics.json and report.md are written, and the deploy files when the verdict allows.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
 import wolfcal
 from wolfcal.atomic import make_folder, write_text_atomic
+from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.deploy import camera_correction, deploy_lines, write_or_withhold_deploy_files
 from wolfcal.evaluate.field_ground import measured_field_ground
@@ -29,6 +32,7 @@ from wolfcal.evaluate.verdict import GROUND_SIGMAS, VerdictLimits, deploy_verdic
 from wolfcal.field.observe import field_observations
 from wolfcal.fit.result import FitResult
 from wolfcal.io.current import CurrentCalibration
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.robot import Robot
 
 MEANING = (
@@ -37,6 +41,40 @@ MEANING = (
     "covariance. The robot's place on the field is fitted too, so an error that turns or shifts every view alike "
     "(a HeadPan offset, the body turned on its soles) is not measured"
 )
+
+
+@dataclass(frozen=True)
+class FieldGroundCheck:
+    """The held-out field views' measurement: `measured` (`field_ground.measured_field_ground`'s per model and
+    distance, with 'resolution_m': the smallest ground error at the check distance the views can tell from none,
+    GROUND_SIGMAS of the model after's 1 sigma [m], None above its horizon; and 'meaning'), `judged` (the deploy
+    verdict's measured ground at the check distance, `verdict.deploy_verdict`) and the head camera's model of the
+    views' images."""
+
+    measured: dict
+    judged: dict
+    camera: CameraModel
+
+
+def held_out_field_ground(robot: Robot, captures: list[Path], models: dict[str, Corrections], limits: VerdictLimits,
+                          say: Callable[[str], None]) -> FieldGroundCheck:  # fmt: skip
+    """The ground error of `models` ('before' and 'after' [, others]) measured on the held-out field `captures`
+    (taken at `field.check_at`) at every distance of `limits`, and the verdict's input on it; WolfcalError naming
+    the file when a capture holds too few line points."""
+    distances = ground_distances(limits)
+    obs = field_observations(robot, captures, say, check=True)
+    measured = measured_field_ground(robot, obs, models, distances, say)
+    at = distances.index(limits.ground_distance_m)
+    after_std = measured["models"]["after"]["rows"][at]["std_m"]
+    measured["resolution_m"] = None if after_std is None else GROUND_SIGMAS * after_std
+    measured["meaning"] = MEANING
+    judged = verdict_ground(measured, distances, limits.ground_distance_m)
+    assert judged is not None  # measured is
+    if judged["after_std_m"] is None:  # the ball lies above the horizon: nothing seen
+        judged["after_std_m"] = float("inf")
+    advice = (f"to measure it more precisely, take more held-out field views at field.check_at, the head swept over "
+              f"lines from near the robot to beyond {limits.ground_distance_m:g} m")  # fmt: skip
+    return FieldGroundCheck(measured, {**judged, "views": "the held-out field views", "advice": advice}, obs.camera)
 
 
 def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: list[Path], out_dir: Path,
@@ -55,23 +93,11 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
     fitted, held_notes = deployable_model(result, present, robot)
     models = {"before": present.corrections, "after": fitted}
     distances = ground_distances(limits)
-    obs = field_observations(robot, captures, say, check=True)
-    measured = measured_field_ground(robot, obs, models, distances, say)
-    at = distances.index(limits.ground_distance_m)
-    after_std = measured["models"]["after"]["rows"][at]["std_m"]
-    measured["resolution_m"] = None if after_std is None else GROUND_SIGMAS * after_std
-    measured["meaning"] = MEANING
+    check = held_out_field_ground(robot, captures, models, limits, say)
     truth = truth_reference(captures)
-    rows, _ = ground_rows(robot, obs.camera, truth, models, say, distances) if truth is not None else ([], None)
-    judged = verdict_ground(measured, distances, limits.ground_distance_m)
-    if judged is not None and judged["after_std_m"] is None:  # the ball lies above the horizon: nothing seen
-        judged["after_std_m"] = float("inf")
-    advice = (f"to measure it more precisely, take more held-out field views at field.check_at, the head swept over "
-              f"lines from near the robot to beyond {limits.ground_distance_m:g} m")  # fmt: skip
-    verdict = deploy_verdict(result.free, None, None, None,
-                             None if judged is None else {**judged, "views": "the held-out field views",
-                                                          "advice": advice},
-                             None, camera_turn(robot, fitted, present.corrections), limits)  # fmt: skip
+    rows, _ = ground_rows(robot, check.camera, truth, models, say, distances) if truth is not None else ([], None)
+    verdict = deploy_verdict(result.free, None, None, None, check.judged, None,
+                             camera_turn(robot, fitted, present.corrections), limits)  # fmt: skip
     verdict["notes"] += held_notes
     make_folder(out_dir)
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
@@ -83,7 +109,7 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
         "free": result.free, "mode": "held-out", "system": "field",
         "captures": [str(Path(c).resolve()) for c in captures],
         "before_model": before_label(present), "current": present.to_dict() if present.sources else None,
-        "ground": ground_section(robot, truth is not None, rows, measured),
+        "ground": ground_section(robot, truth is not None, rows, check.measured),
         "verdict": verdict, "deploy": deploy, "camera_correction": camera_correction(robot, fitted),
     }  # fmt: skip
     lines = report_lines(metrics, distances)

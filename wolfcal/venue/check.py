@@ -8,9 +8,10 @@
   model fitted without its fold; the spread of the folds' camera poses around the full fit says how far one view
   more or less moves the answer.
 - Held-out floor views (the check phase's stances, none of the fit's): the measured ground error before and after
-  at the robot config's `floor.ground_check` distance (`evaluate.floor_ground`). Field views are all fitted: the
-  ground error they measure needs held-out field views (another placement of the robot), which the session does not
-  take; it reads "n/a", never a number the data did not measure.
+  at the robot config's `floor.ground_check` distance (`evaluate.floor_ground`). Or held-out field views (the
+  robot moved to `field.check_at`): the ground error measured from their lines, with its 1 sigma, by the held-out
+  field check of `wolfcal evaluate` (`evaluate.field_check.held_out_field_ground`). Without held-out views it
+  reads "n/a", never a number the data did not measure.
 - The deploy verdict of `wolfcal evaluate` (`evaluate.verdict.deploy_verdict`) on these, and the deploy files of the
   model to deploy (`evaluate.undetermined.deployable_model`) through `write_deploy`, the one place that writes them.
 "Before" is the robot's present calibration (`--current`, `io.current.load_current`), else the input URDF; the fit
@@ -29,6 +30,7 @@ from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.accuracy import camera_pose_errors
 from wolfcal.evaluate.crossval import fold_assignment
 from wolfcal.evaluate.deploy import DEPLOY_FILES, camera_correction, write_or_withhold_deploy_files
+from wolfcal.evaluate.field_check import held_out_field_ground
 from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground_figures import (
     camera_turn,
@@ -150,10 +152,10 @@ def cross_validation(robot: Robot, head: Observations, link_tags: list[int], cur
 
 
 def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path], check_parts: list[Path],
-                  field_parts: list[Path], out_dir: Path, current: Path | None,
+                  field_parts: list[Path], field_check_parts: list[Path], out_dir: Path, current: Path | None,
                   say: Callable[[str], None]) -> dict:  # fmt: skip
-    """Fit, cross-validation, held-out floor check, verdict and deploy files of a session in `out_dir`; returns
-    the figures for metrics.json (the caller adds the session's times and writes it)."""
+    """Fit, cross-validation, held-out floor or field check, verdict and deploy files of a session in `out_dir`;
+    returns the figures for metrics.json (the caller adds the session's times and writes it)."""
     present = load_current([current], robot) if current is not None else CurrentCalibration()
     options = FitOptions(free="camera", current=present.corrections if current is not None else None)
     limits = verdict_limits(robot, None, MOUNT_LIMIT_RAD)
@@ -187,12 +189,25 @@ def check_session(robot: Robot, feet_parts: list[Path], floor_parts: list[Path],
             inset = result.estimate(CORNER_INSET) or (0.0, 0.0)
             measured = measured_ground_errors(robot, floor, {"before": before, "after": fitted}, distances,
                                               inset)  # fmt: skip
+    judged = verdict_ground(measured, distances, limits.ground_distance_m)
+    held_out_field = None
+    if field_check_parts:
+        say("measuring the ground error on the held-out field views ...")
+        checked = held_out_field_ground(robot, field_check_parts, {"before": before, "after": fitted}, limits, say)
+        held_out_field, judged = checked.measured, checked.judged
     predicted = predicted_ground(robot, head.camera, result, fit.tag_ids, fitted, limits.ground_distance_m)
     verdict = deploy_verdict("camera", crossval["before"]["rms_px"], crossval["after"]["rms_px"],
-                             crossval["structure"], verdict_ground(measured, distances, limits.ground_distance_m),
-                             predicted, camera_turn(robot, fitted, before), limits)  # fmt: skip
+                             crossval["structure"], judged, predicted, camera_turn(robot, fitted, before),
+                             limits)  # fmt: skip
     deploy = write_deploy(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"], present)
     return {"fit": str(out_dir / FIT_FOLDER), "samples_fitted": head.n_samples, "cross_validation": crossval,
             "held_out_floor": measured, "field_views": len(field[0].q_measured) if field else 0,
+            "held_out_field": held_out_field, "field_check_at": _check_at(robot),
             "ground_distance_m": limits.ground_distance_m, "verdict": verdict, "deploy": deploy,
             "camera_correction": camera_correction(robot, fitted), "warnings": warnings}  # fmt: skip
+
+
+def _check_at(robot: Robot) -> list[float] | None:
+    """`field.check_at` [m, m, rad] of the robot config, None without it (or without a field)."""
+    field = robot.config.playing_field
+    return None if field is None or field.check_at is None else list(field.check_at)

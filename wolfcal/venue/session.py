@@ -3,13 +3,14 @@
 Phases: `feet` (the planned feet views, the robot on its stand), then, when the robot config has floor tags,
 `floor` (the floor views of `capture --floor`, the robot standing on the floor among the tags) and `check` (the
 held-out floor views of `capture --floor --check`); with `--field`, instead of the floor phases, `field` (the field
-views of `capture --field`, the robot standing on the field at `field.robot_at`). Every pose is checked against the
-URDF limits and the collision model before the bus opens and from where the robot stands (`capture.poses`,
-`capture.floor`); nothing else is sent. The session says up front what the robot must be doing and asks before
-torque is switched on (and before the robot must stand on the floor or the field); `--yes` answers both. Robot
-time counts from torque on to the last sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM,
-a bus or camera failure: every sample taken so far is kept, the torque is left as chosen, and `--resume DIR`
-continues where the session stopped.
+views of `capture --field`, the robot standing on the field at `field.robot_at`) and, when the config gives
+`field.check_at`, `field_check` (the held-out field views of `capture --field --check`, the robot moved there).
+Every pose is checked against the URDF limits and the collision model before the bus opens and from where the
+robot stands (`capture.poses`, `capture.floor`); nothing else is sent. The session says up front what the robot
+must be doing and asks before torque is switched on, and each time the robot must stand somewhere else (on the
+floor, on the field, at the field's check place); `--yes` answers them all. Robot time counts from torque on to
+the last sample, without the time spent waiting for the operator. Ctrl-C, SIGTERM, a bus or camera failure: every
+sample taken so far is kept, the torque is left as chosen, and `--resume DIR` continues where the session stopped.
 """
 
 from __future__ import annotations
@@ -44,7 +45,9 @@ from wolfcal.venue.report import report_lines, truth_errors
 from wolfcal.venue.state import SessionState, load_session, new_session, next_part, parts, robot_digest
 
 Ask = Callable[[str], bool]
-LABELS = {"feet": "feet view", "floor": "floor view", "check": "held-out floor view", "field": "field view"}
+LABELS = {"feet": "feet view", "floor": "floor view", "check": "held-out floor view", "field": "field view",
+          "field_check": "held-out field view"}  # fmt: skip
+FIELD_PHASES = ("field", "field_check")  # the head camera sees the field's lines, not tags
 
 
 @dataclass
@@ -63,7 +66,7 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
         say(f"note: {note}")
     phases = [Phase("feet", feet, "hangs on its stand, legs free to move (torque on: the legs and the head move)")]
     if options.field_views:
-        return [*phases, _field_phase(robot, options, start, say)]
+        return [*phases, *field_phases(robot, options, start, say)]
     floor = robot.config.floor
     if floor is None or not floor.tags:
         say(f"note: {robot.config.path} lists no floor tags ('floor.tags'): no floor views, so the ground error is "
@@ -81,20 +84,35 @@ def _phases(robot: Robot, options: VenueOptions, start: dict[str, float], say: C
     return phases
 
 
-def _field_phase(robot: Robot, options: VenueOptions, start: dict[str, float], say: Callable[[str], None]) -> Phase:
+def field_phases(robot: Robot, options: VenueOptions, start: dict[str, float],
+                 say: Callable[[str], None]) -> list[Phase]:  # fmt: skip
     """The field views (`capture.field`), those the robot cannot take without touching itself left out, in the
-    order of the shortest moves from the standing pose."""
+    order of the shortest moves from the standing pose; then, when the config gives `field.check_at`, the held-out
+    field views: the same sweep with the robot moved there (without it, a note that the ground error from field
+    views is not measured)."""
     if robot.config.floor is not None and robot.config.floor.tags:
         say("note: --field: field views instead of the floor views (the floor tags are not looked at)")
     script, note = without_collisions(robot, field_script(robot, options.velocity), start, "--field")
     for line in (note, one_sided_note(robot, script)):
         if line:
             say(f"note: {line}")
-    script, _ = shortest_order(robot, script, standing_pose(robot), start)
-    x, y, yaw = robot.config.field_config().robot_at
-    stand = (f"on the field at field.robot_at (x {x:+.2f} m, y {y:+.2f} m, facing {np.rad2deg(yaw):+.0f} deg from "
+    fitted, at = shortest_order(robot, script, standing_pose(robot), start)
+    config = robot.config.field_config()
+    phases = [Phase("field", fitted, *_standing_at("robot_at", config.robot_at))]
+    if config.check_at is None:
+        say(f"note: {robot.config.path} gives no 'field.check_at': no held-out field views, so the ground error "
+            "from field views is not measured")  # fmt: skip
+        return phases
+    held_out, _ = shortest_order(robot, script, at, start)
+    return [*phases, Phase("field_check", held_out, *_standing_at("check_at", config.check_at))]
+
+
+def _standing_at(key: str, place: tuple[float, float, float]) -> tuple[str, str]:
+    """(what the robot must be doing, where it stands) for field views at `field.<key>` = `place` [m, m, rad]."""
+    x, y, yaw = place
+    stand = (f"on the field at field.{key} (x {x:+.2f} m, y {y:+.2f} m, facing {np.rad2deg(yaw):+.0f} deg from "
              "the direction of the opponent goal)")  # fmt: skip
-    return Phase("field", script, f"stands {stand}, legs held by torque", stand)
+    return f"stands {stand}, legs held by torque", stand
 
 
 def shortest_order(robot: Robot, script: PoseScript, q_from: np.ndarray, start: dict[str, float]
@@ -182,6 +200,7 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
             parts(options.out, "floor"),
             parts(options.out, "check"),
             parts(options.out, "field"),
+            parts(options.out, "field_check"),
             options.out,
             options.current,
             say,
@@ -194,7 +213,7 @@ def run_venue(options: VenueOptions, say: Callable[[str], None] = print, ask: As
     figures.update({"robot": str(robot.config.path), "plan": feet.source, "robot_time_s": state.robot_time_s,
                     "wall_time_s": time.monotonic() - wall_start, "runs": state.runs,
                     "samples": {p: len(state.done[p]) for p in state.done}})  # fmt: skip
-    figures["truth"] = truth_errors(robot, options)
+    figures["truth"] = truth_errors(robot, options, figures)
     lines = report_lines(figures)
     write_text_atomic(options.out / "metrics.json", json.dumps(figures, indent=2, default=str) + "\n")
     write_text_atomic(options.out / "report.md", "\n".join(lines) + "\n")
@@ -229,22 +248,24 @@ def _drive_session(robot: Robot, options: VenueOptions, bus: ServoBuses, cameras
                             options.acceleration, say)  # fmt: skip
         since = time.monotonic()
         goals = driver.torque_on(touched)
-        standing = False
+        stands: str | None = None  # where the robot was last asked to stand
         for phase, poses in todo:
-            if phase.name != "feet" and not standing:  # the legs stand first, then the robot is put on the floor
-                standing = True
-                legs = floor_joints(robot)[0]
-                driver.move_only(goals, {j: q for j, q in poses[0].joints.items() if j in legs})
+            if phase.stand and phase.stand != stands:  # the legs stand first, then the robot is put down there
+                if stands is None:
+                    legs = floor_joints(robot)[0]
+                    driver.move_only(goals, {j: q for j, q in poses[0].joints.items() if j in legs})
+                stands = phase.stand
                 state.robot_time_s += time.monotonic() - since
                 state.save(options.out)
                 _confirm(f"Stand the robot {phase.stand}; its legs hold the standing pose. Go on?", options, ask,
                          say)  # fmt: skip
                 since = time.monotonic()
-            if phase.name == "field" or not driver.cameras:  # the simulated camera shows the field or the robot
+            if phase.name in FIELD_PHASES or not driver.cameras:  # the simulated camera shows the field or the robot
                 close_sources(cameras)
-                open_sources(cameras, robot, bus.port_names, field=phase.name == "field")
+                open_sources(cameras, robot, bus.port_names, field=phase.name in FIELD_PHASES,
+                             check=phase.name == "field_check")  # fmt: skip
                 driver.cameras = {n: c.source for n, c in cameras.items() if c.source is not None}
-            driver.field = phase.name == "field"
+            driver.field = phase.name in FIELD_PHASES
             streams = {name: (c.model, (c.binning, c.binning)) for name, c in cameras.items()}
             writer = CaptureWriter(next_part(options.out, phase.name), robot.config, streams)
             driver.writer = writer

@@ -19,7 +19,8 @@ from wolfcal.errors import WolfcalError
 from wolfcal.io.recover import recover_capture
 
 STATE_FILE = "session.json"
-PHASES = ("feet", "floor", "check", "field")  # feet views, floor views for the fit, held-out floor views, field views
+# feet views, floor views for the fit, held-out floor views, field views for the fit, held-out field views
+PHASES = ("feet", "floor", "check", "field", "field_check")
 
 
 @dataclass
