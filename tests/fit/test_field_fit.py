@@ -3,6 +3,7 @@ simulated truth; the block's derivatives; the field config; bad field captures."
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +15,12 @@ from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
 from wolfcal.field.model import KIDSIZE, field_lines
 from wolfcal.fit.derivative_check import assert_block_derivatives
-from wolfcal.fit.field_block import FieldBlock
+from wolfcal.fit.field_block import FieldBlock, far_places
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import fit_observations
 from wolfcal.geometry import exp_so3, log_so3
 from wolfcal.io.writer import CaptureWriter
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import build_parameter_set
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.field import synthetic_field
@@ -53,6 +55,24 @@ def test_the_block_derivatives_match_central_differences(tmp_path):
         values = np.array([truth.frames[robot.camera_joint][i] if p.kind == "frame" else 0.0
                            for i, p in zip([p.component for p in chain.parameters], chain.parameters)])  # fmt: skip
         assert_block_derivatives(block, chain, values, pose, rtol=1e-4)
+
+
+def test_a_fitted_place_far_from_the_configured_one_is_said(tmp_path):
+    """A robot placed up to 0.3 m and 10 deg off is normal; a fitted place 1.7 m and 34 deg off is named, with the
+    config's place, in the block's notes and summary."""
+    robot = load_robot(field_robot(tmp_path))
+    rng = np.random.default_rng(2)
+    obs = synthetic_field(robot, CAMERA, Corrections(), np.array([-3.0, 0.0, 0.0]), np.array([-3.0, 0.0, 0.0]),
+                          KIDSIZE, 2, rng)  # fmt: skip
+    obs = replace(obs, configured=np.array([[-3.0, 0.0, 0.0]]))
+    assert far_places(obs, ["field_pose"], np.array([[-2.8, 0.2, 0.17]])) == []
+    notes = far_places(obs, ["field_pose"], np.array([[-1.4, 0.7, 0.6]]))
+    assert len(notes) == 1 and notes[0].startswith("field_pose lies 1.75 m and 34 deg from where the config places")
+    entry = {"name": "field", "unit": "px", "n_samples": 2, "n_outlier_samples": 0, "n_outlier_views": 0,
+             "n_units_used": 10, "rms_before_px": 1.0, "rms_after_px": 0.2, "max_after_px": 0.5,
+             "notes": notes}  # fmt: skip
+    assert FieldBlock.summary_lines(entry)[-1] == f"  warning: {notes[0]}"
+    assert far_places(replace(obs, configured=None), ["field_pose"], np.array([[-1.4, 0.7, 0.6]])) == []
 
 
 @pytest.mark.parametrize("seed", [0, 3])

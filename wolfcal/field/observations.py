@@ -22,6 +22,8 @@ class FieldObservations:
     camera: CameraModel
     sample_index: np.ndarray  # (M,) sample of each line point
     uv: np.ndarray  # (M, 2) line point [px]
+    # (P, 3) where the config places each placement (`field.robot_at` or `field.check_at`); None: not known
+    configured: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:

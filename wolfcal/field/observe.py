@@ -19,7 +19,7 @@ from wolfcal.field.detect import detect_line_points
 from wolfcal.field.ground import camera_on_field, expected_line_width
 from wolfcal.field.model import field_lines, mirrored_pose
 from wolfcal.field.observations import FieldObservations, spread
-from wolfcal.field.place import DistanceMap, PlaceSearch, search_place
+from wolfcal.field.place import DistanceMap, PlaceSearch, far_from_configured, place_offset, search_place
 from wolfcal.io.reader import read_capture
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.corrections import Corrections
@@ -30,7 +30,6 @@ from wolfcal.vision.observe import detect_observations
 TAG_PROBE_SAMPLES = 3  # head images of a capture searched for tags to tell a tag capture from a field capture
 MIN_POINTS = 200  # fewer line points in a placement's views cannot place the robot and turn the camera
 MIRROR_SCORE_RATIO = 0.5  # lines fitting the robot turned round this much better name the field's symmetry
-FAR_FROM_CONFIGURED = (0.45, np.deg2rad(15.0))  # [m, rad]: a place found further off is said
 
 
 def field_captures(robot: Robot, captures: list[Path], system: str | None) -> list[Path]:
@@ -114,7 +113,7 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
     assert camera is not None
     return FieldObservations(list(robot.joint_names), np.vstack(q_all), np.asarray(stamps, np.int64), sources,
                              np.asarray(placement), np.asarray(starts), camera, np.concatenate(sample_of),
-                             np.vstack(uv_all))  # fmt: skip
+                             np.vstack(uv_all), np.tile(configured, (len(starts), 1)))  # fmt: skip
 
 
 def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured: np.ndarray, key: str) -> None:
@@ -142,9 +141,8 @@ def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, key: str, 
         f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
         f"field's point symmetry fits the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that "
         f"{key} names is assumed")  # fmt: skip
-    off = np.linalg.norm(found[:2] - configured[:2]), abs(np.remainder(found[2] - configured[2] + np.pi, 2 * np.pi)
-                                                           - np.pi)  # fmt: skip
-    if off[0] > FAR_FROM_CONFIGURED[0] or off[1] > FAR_FROM_CONFIGURED[1]:
+    off = place_offset(found, configured)
+    if far_from_configured(off):
         say(
             f"warning: {path}: the lines fit best {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from "
             f"{key}; check where the robot stood and correct {key}"

@@ -23,6 +23,8 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
 from wolfcal.robot.robot import Robot
 
+FAR_FROM_CONFIGURED = (0.45, np.deg2rad(15.0))  # [m, rad]: a place further from the config's is said
+
 RASTER_M = 0.02  # distance map resolution [m]
 TRUNCATE_M = 0.25  # a point further from every line than this counts as this far [m]
 SEARCH_M = 0.6  # the coarse grid reaches this far from the configured place [m]
@@ -110,3 +112,14 @@ def search_place(field: DistanceMap, robot: Robot, q: np.ndarray, view_of_point:
     pose, score = _best(field, ground, _grid(pose, 0.1, np.deg2rad(3.0), 11))
     configured_score = float(field.truncated_mean(_placed(ground, configured[None]))[0])
     return PlaceSearch(pose, pitch, score, configured_score)
+
+
+def place_offset(found: np.ndarray, configured: np.ndarray) -> tuple[float, float]:
+    """How far a field pose (x, y, yaw) lies from the configured one: distance [m] and turn [rad], both >= 0."""
+    turn = abs(float(np.remainder(found[2] - configured[2] + np.pi, 2 * np.pi)) - np.pi)
+    return float(np.linalg.norm(np.asarray(found[:2]) - np.asarray(configured[:2]))), turn
+
+
+def far_from_configured(off: tuple[float, float]) -> bool:
+    """Whether a place `place_offset` away is further from the config's than a robot is placed (FAR_FROM_CONFIGURED)."""
+    return off[0] > FAR_FROM_CONFIGURED[0] or off[1] > FAR_FROM_CONFIGURED[1]

@@ -24,6 +24,7 @@ import numpy as np
 from wolfcal.field.ground import ground_gradient, ground_points
 from wolfcal.field.model import FieldLines, field_lines, nearest_line, nearest_line_normal
 from wolfcal.field.observations import FieldObservations, spread
+from wolfcal.field.place import far_from_configured, place_offset
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
 from wolfcal.fit.options import FitOptions
@@ -124,6 +125,7 @@ class FieldBlock(Block):
             for name, (x, y, yaw) in zip(names, poses)
         }
         entry["n_line_points"] = len(self.obs.uv)
+        entry["notes"] = far_places(self.obs, names, poses)
         return entry
 
     @staticmethod
@@ -131,7 +133,8 @@ class FieldBlock(Block):
         """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines."""
         lines = Block.summary_lines(entry)
         return [lines[0].replace("corners used", "line points used"),
-                lines[1].replace("reprojection RMS", "distance from the lines")]  # fmt: skip
+                lines[1].replace("reprojection RMS", "distance from the lines"),
+                *(f"  warning: {note}" for note in entry.get("notes", []))]  # fmt: skip
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         s, k = self.sample_of_unit, self.placement_of_unit
@@ -187,6 +190,22 @@ class FieldBlock(Block):
         local_cols = 3 * k[:, None] + np.arange(3)
         return Linearization(residual=residual, jac_chain=d_columns[:, None, n_joints:], jac_local=jac_local,
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
+
+
+def far_places(obs: FieldObservations, names: list[str], poses: np.ndarray) -> list[str]:
+    """A note for each fitted place (P, 3: x, y [m], yaw [rad], named `names`) further from where the config puts
+    the robot (`obs.configured`) than a robot is placed: the lines may then be matched to other lines than the ones
+    the robot saw (a confident fit, but not of the robot's place)."""
+    if obs.configured is None:
+        return []
+    notes = []
+    for name, pose, at in zip(names, poses, obs.configured):
+        off = place_offset(pose, at)
+        if far_from_configured(off):
+            notes.append(f"{name} lies {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from where the config places "
+                         f"the robot ({at[0]:+.2f}, {at[1]:+.2f}, {np.rad2deg(at[2]):+.0f} deg): check where it stood; "
+                         "the lines may be matched to others than it saw")  # fmt: skip
+    return notes
 
 
 def _stretches(sample_index: np.ndarray, line: np.ndarray, uv: np.ndarray) -> np.ndarray:
