@@ -48,11 +48,12 @@ def test_the_block_derivatives_match_central_differences(tmp_path):
     pose = np.array([-3.1, 0.15, 0.05])
     obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 3, rng)
     block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    places = rng.normal(0.0, 0.005, len(block.nuisance) - 3)  # the markings' places off their nominal ones [m]
     for preset in ("camera", "leg"):  # the camera's mount; the head and camera chain with the standing legs
         chain = build_parameter_set(robot, preset, {"head": []})
         values = np.array([truth.frames[robot.camera_joint][i] if p.kind == "frame" else 0.0
                            for i, p in zip([p.component for p in chain.parameters], chain.parameters)])  # fmt: skip
-        assert_block_derivatives(block, chain, values, pose, rtol=1e-4)
+        assert_block_derivatives(block, chain, values, np.concatenate([pose, places]), rtol=1e-4)
 
 
 @pytest.mark.parametrize("seed", [0, 3])
