@@ -146,14 +146,24 @@ class FieldBlock(Block):
             for name, (x, y, yaw) in zip(names, poses)
         }
         entry["n_line_points"] = len(self.obs.uv)
+        marking_names = self.nuisance.names[3 * len(poses) :]
+        entry["marking_places_m"] = {name: round(float(v), 5) for name, v in
+                                     zip(marking_names, fitted.local_values[3 * len(poses) :])}  # fmt: skip
         return entry
 
     @staticmethod
     def summary_lines(entry: dict) -> list[str]:
-        """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines."""
+        """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines, and the
+        markings' places (`marking_places_m`: the parameter list of the summary leaves them out)."""
         lines = Block.summary_lines(entry)
-        return [lines[0].replace("corners used", "line points used"),
-                lines[1].replace("reprojection RMS", "distance from the lines")]  # fmt: skip
+        lines = [lines[0].replace("corners used", "line points used"),
+                 lines[1].replace("reprojection RMS", "distance from the lines")]  # fmt: skip
+        places = entry.get("marking_places_m") or {}
+        if places:
+            name = max(places, key=lambda n: abs(places[n]))
+            lines.append(f"  markings' places ({len(places)} unknowns, prior {1000 * MARKING_PRIOR_M:.0f} mm, in "
+                         f"result.yaml): largest {name} {1000 * places[name]:+.1f} mm")  # fmt: skip
+        return lines
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         s, k = self.sample_of_unit, self.placement_of_unit
