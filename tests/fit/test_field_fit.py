@@ -14,8 +14,9 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
 from wolfcal.field.model import KIDSIZE, field_lines
+from wolfcal.field.place import far_places
 from wolfcal.fit.derivative_check import assert_block_derivatives
-from wolfcal.fit.field_block import FieldBlock, far_places
+from wolfcal.fit.field_block import FieldBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import fit_observations
 from wolfcal.geometry import exp_so3, log_so3
@@ -50,11 +51,12 @@ def test_the_block_derivatives_match_central_differences(tmp_path):
     pose = np.array([-3.1, 0.15, 0.05])
     obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 3, rng)
     block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    places = rng.normal(0.0, 0.005, len(block.nuisance) - 3)  # the markings' places off their nominal ones [m]
     for preset in ("camera", "leg"):  # the camera's mount; the head and camera chain with the standing legs
         chain = build_parameter_set(robot, preset, {"head": []})
         values = np.array([truth.frames[robot.camera_joint][i] if p.kind == "frame" else 0.0
                            for i, p in zip([p.component for p in chain.parameters], chain.parameters)])  # fmt: skip
-        assert_block_derivatives(block, chain, values, pose, rtol=1e-4)
+        assert_block_derivatives(block, chain, values, np.concatenate([pose, places]), rtol=1e-4)
 
 
 def test_a_fitted_place_far_from_the_configured_one_is_said(tmp_path):

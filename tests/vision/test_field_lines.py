@@ -42,8 +42,9 @@ def test_the_markings_lie_where_the_rules_put_them() -> None:
     assert np.allclose(distance_to_lines(lines, on_lines), 0.0, atol=1e-12)
     off = np.array([[1.0, 1.0], [-3.0, 0.2], [4.4, 0.0]])  # 0.66 m from the circle, 0.15 from the mark's arm, 0.1
     assert np.allclose(distance_to_lines(lines, off), [np.sqrt(2) - 0.75, 0.15, 0.1])
-    distance, normal = nearest_line_normal(lines, np.array([[4.4, 0.0], [0.8, 0.0]]))  # goal line runs along +y
+    distance, normal, index = nearest_line_normal(lines, np.array([[4.4, 0.0], [0.8, 0.0]]))  # goal line: along +y
     assert np.allclose(distance, [0.1, 0.05]) and np.allclose(normal, [[-1.0, 0.0], [1.0, 0.0]])
+    assert np.allclose(lines.segments[index[0]], [[4.5, -3.0], [4.5, 3.0]]) and index[1] == len(lines.segments)
     assert mirrored_pose(-3.0, 0.5, 0.2) == pytest.approx((3.0, -0.5, 0.2 - np.pi))
     assert field_lines(ADULTSIZE).circle_radius == 1.5
 

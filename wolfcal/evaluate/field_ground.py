@@ -56,7 +56,8 @@ def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model:
     """The field fit of the held-out views with the camera's mount free around `model`'s (`model`'s other
     corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`)."""
     chain = build_parameter_set(robot, CAMERA_PRESET, {"head": []})
-    block = FieldBlock(robot, obs, lines, fixed=chain.held(model), weighted_at=weighted_at or model)
+    block = FieldBlock(robot, obs, lines, fixed=chain.held(model), weighted_at=weighted_at or model,
+                       marking_places=False)  # fmt: skip
     options = FitOptions(free=CAMERA_PRESET, system="field", current=model)
     return fit_observations(robot, {}, options, own_blocks=[block])
 
@@ -74,9 +75,9 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
     lines = field_lines(robot.config.field_config().dimensions)
     say(f"fitting the held-out field views: the robot's place and the camera's mount (around the model {around}) ...")
     first = asked_camera(robot, obs, lines, models[around])
-    obs = replace(obs, starts=first.solution.values[len(first.chain) :].reshape(-1, 3))
+    obs = replace(obs, starts=_places(first))
     fit = asked_camera(robot, obs, lines, first.corrections)
-    obs = replace(obs, starts=fit.solution.values[len(fit.chain) :].reshape(-1, 3))
+    obs = replace(obs, starts=_places(fit))
     say("fitting again with each group of held-out views left out ...")
     replicates = jackknife_mounts(robot, obs, lines, fit.corrections)
     out = _asked_entry(fit)
@@ -112,13 +113,20 @@ def _views(obs: FieldObservations, keep: np.ndarray) -> FieldObservations:
                    uv=obs.uv[points])  # fmt: skip
 
 
+def _places(fit: Fit) -> np.ndarray:
+    """(P, 3) the robot's field pose per placement at the fit's solution (`FieldBlock.places`)."""
+    (block,) = fit.blocks
+    assert isinstance(block, FieldBlock)
+    return block.places(fit.solution.values[len(fit.chain) :])
+
+
 def _asked_entry(fit: Fit) -> dict:
     """The camera's mount the views ask for and the robot's field pose per placement, with std (and data share)."""
     n = len(fit.chain)
     values, u = fit.solution.values, fit.solution.uncertainty
     names = fit.params.names
     poses: dict[str, dict] = {}  # per placement ('field_pose', or 'field_pose@k' with several): x, y, yaw
-    for i in range(n, len(values)):
+    for i in range(n, n + 3 * len(_places(fit))):
         placement, component = names[i].rsplit(".", 1)
         poses.setdefault(placement, {})[component] = {"value": float(values[i]), "std": float(u.std[i])}
     return {

@@ -149,8 +149,9 @@ def nearest_line(lines: FieldLines, points: np.ndarray) -> np.ndarray:
     return np.where(circle < distances.min(axis=1), len(ab), distances.argmin(axis=1))
 
 
-def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For field points (N, 2): the signed offset [m] from the nearest line and that line's unit normal (N, 2), so
+def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For field points (N, 2): the signed offset [m] from the nearest line, that line's unit normal (N, 2) and its
+    index (N,) (`nearest_line`), so
     that offset = normal . (point - a point of the line): a straight line's fixed normal (its direction turned left),
     the circle's outward radial. The offset is smooth across the line (a residual without a kink at zero); beyond a
     segment's end it is the offset from the segment's extension."""
@@ -164,7 +165,7 @@ def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarr
     radius = np.linalg.norm(p, axis=1)
     radial = p / np.maximum(radius, 1e-12)[:, None]
     normal = np.where(use_circle[:, None], radial, normal)
-    return np.where(use_circle, radius - lines.circle_radius, offset), normal
+    return np.where(use_circle, radius - lines.circle_radius, offset), normal, index
 
 
 def _segment_normals(ab: np.ndarray) -> np.ndarray:

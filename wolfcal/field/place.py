@@ -18,6 +18,7 @@ import numpy as np
 from wolfcal.camera.model import CameraModel
 from wolfcal.field.ground import ground_points
 from wolfcal.field.model import FieldLines
+from wolfcal.field.observations import FieldObservations
 from wolfcal.field.scene import BORDER_STRIP
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import camera_in_floor
@@ -123,3 +124,19 @@ def place_offset(found: np.ndarray, configured: np.ndarray) -> tuple[float, floa
 def far_from_configured(off: tuple[float, float]) -> bool:
     """Whether a place `place_offset` away is further from the config's than a robot is placed (FAR_FROM_CONFIGURED)."""
     return off[0] > FAR_FROM_CONFIGURED[0] or off[1] > FAR_FROM_CONFIGURED[1]
+
+
+def far_places(obs: FieldObservations, names: list[str], poses: np.ndarray) -> list[str]:
+    """A note for each fitted place (P, 3: x, y [m], yaw [rad], named `names`) further from where the config puts
+    the robot (`obs.configured`) than a robot is placed: the lines may then be matched to other lines than the ones
+    the robot saw (a confident fit, but not of the robot's place)."""
+    if obs.configured is None:
+        return []
+    notes = []
+    for name, pose, at in zip(names, poses, obs.configured):
+        off = place_offset(pose, at)
+        if far_from_configured(off):
+            notes.append(f"{name} lies {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from where the config places "
+                         f"the robot ({at[0]:+.2f}, {at[1]:+.2f}, {np.rad2deg(at[2]):+.0f} deg): check where it stood; "
+                         "the lines may be matched to others than it saw")  # fmt: skip
+    return notes

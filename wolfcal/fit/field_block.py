@@ -8,6 +8,11 @@ ray meets the floor at a ground point; its residual is the distance of that poin
 (`wolfcal.field.model`, the association redone at every linearisation), divided by the ground length of one pixel
 across that line at that place under the nominal model, so it reads in pixels and far points count as near ones.
 
+Each marking's place is an unknown too, with a prior of MARKING_PRIOR_M (`line<k>.offset`, `circle.x|y|radius`): an
+error that every view of one marking repeats (paint off the field's dimensions, a line on the edge of two mowing
+stripes read a little toward the brighter one) is not averaged out by more views, and the robot's place, which
+the markings' places share, is known only as well as they are.
+
 What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
 holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
 pairs from the correlations. The field's point symmetry is handled before the fit (`wolfcal.field.place`).
@@ -21,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.field.ground import ground_gradient, ground_points
-from wolfcal.field.model import FieldLines, field_lines, nearest_line, nearest_line_normal
-from wolfcal.field.observations import FieldObservations, spread
-from wolfcal.field.place import far_from_configured, place_offset
+from wolfcal.field.ground import ground_gradient
+from wolfcal.field.model import FieldLines, field_lines, nearest_line_normal
+from wolfcal.field.observations import FieldObservations
+from wolfcal.field.place import far_places
+from wolfcal.field.selection import line_stretches, lines_seen, points_used
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
 from wolfcal.fit.options import FitOptions
@@ -38,10 +44,10 @@ from wolfcal.robot.robot import Robot
 
 PLACE_PRIOR_M = 0.3  # how far the robot may stand from `field.robot_at` [m]
 YAW_PRIOR_RAD = 0.2  # [rad] (about 10 deg)
+# how far a marking's detected centre may lie from where the field's dimensions put it, the same in every view of it:
+# the paint's place, and the detector's lean toward the brighter of two mowing stripes whose edge a line lies on [m]
+MARKING_PRIOR_M = 0.01
 LINE_BIAS_PX = 0.3  # a line's points in one view share the detector's error across that line (blur, shading) [px]
-MIN_LINE_POINTS = 5  # points of a line in one view the block needs to use them
-POINTS_PER_VIEW = 35  # and the most it uses of one view
-STRETCH_POINTS = 3  # points in a row along a line that share one detection error
 VIEW_RULE = OutlierRule(4.0, 3.0)  # a view whose points are off by 4x the median view's and 3 px is left out
 LINE_POINT_RULE = OutlierRule(4.0, 2.0)  # and a single point (a robot's leg, the ball) off by 2 px of a view kept
 
@@ -60,9 +66,14 @@ class FieldBlock(Block):
     noise_min, noise_max, noise_start = 0.05, 20.0, LINE_BIAS_PX
 
     def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
-                 weighted_at: Corrections | None = None, shared_lines: bool = True) -> None:  # fmt: skip
-        """`weighted_at`: the model whose pixel scale on the ground weighs the points (default: `fixed`, the
-        nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
+                 weighted_at: Corrections | None = None, shared_lines: bool = True,
+                 marking_places: bool = True) -> None:  # fmt: skip
+        """Own unknowns: the robot's place per placement (`field_pose_names`), then the place of every marking,
+        shared by every view and placement: a straight line's offset along its normal
+        (`line<k>.offset`, k its row in `lines.segments`) and the centre circle's centre and radius (`circle.x|y`,
+        `circle.radius`) [m]; `marking_places` False: the markings held where the field's dimensions put them.
+        `weighted_at`: the model whose pixel scale on the ground weighs the points (default:
+        `fixed`, the nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
         `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
         first solve that only finds where to weigh the points."""
         self.robot, self.lines, self.fixed = robot, lines, fixed or Corrections()
@@ -70,13 +81,13 @@ class FieldBlock(Block):
         self.detected = obs  # every point found; the block uses those on lines seen by enough of them
         model = weighted_at or self.fixed
         T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
-        line = _lines_seen(obs, lines, T_floor_camera[obs.sample_index])
-        keep = _points_used(obs.sample_index, line)
+        line = lines_seen(obs, lines, T_floor_camera[obs.sample_index])
+        keep = points_used(obs.sample_index, line)
         if not keep.all():
             obs, line = obs.only_points(keep), line[keep]
             T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
         self.obs, self.line_of_unit = obs, line
-        self.stretch_of_unit = _stretches(obs.sample_index, line, obs.uv)
+        self.stretch_of_unit = line_stretches(obs.sample_index, line, obs.uv)
         self.tag_ids: list[int] = []
         self.camera_name = "head"
         self.q_measured = obs.q_measured
@@ -87,20 +98,29 @@ class FieldBlock(Block):
         self.rays = obs.camera.unproject(obs.uv)  # (M, 3) in the optical frame
         self.ground_gradient = ground_gradient(obs.camera, T_floor_camera[obs.sample_index], obs.uv)
         names = field_pose_names(len(obs.starts))
-        self.nuisance = ParameterSet([
-            Parameter(f"{name}.{c}", "field", name, i, "m" if i < 2 else "rad",
-                      PLACE_PRIOR_M if i < 2 else YAW_PRIOR_RAD, float(obs.starts[k, i]))
-            for k, name in enumerate(names) for i, c in enumerate(("x", "y", "yaw"))
-        ])  # fmt: skip
+        places = [Parameter(f"{name}.{c}", "field", name, i, "m" if i < 2 else "rad",
+                            PLACE_PRIOR_M if i < 2 else YAW_PRIOR_RAD, float(obs.starts[k, i]))
+                  for k, name in enumerate(names) for i, c in enumerate(("x", "y", "yaw"))]  # fmt: skip
+        # every marking's place is an unknown, seen or not: a point's nearest marking may change as the estimate
+        # moves, and one held at its nominal place would pin the robot's place, which the markings' places share
+        self.marking_places = marking_places
+        marking_names = [*(f"line{k}.offset" for k in range(len(lines.segments))), "circle.x", "circle.y",
+                         "circle.radius"] if marking_places else []  # fmt: skip
+        self.nuisance = ParameterSet(places + [Parameter(name, "marking", name.split(".")[0], i, "m", MARKING_PRIOR_M)
+                                               for i, name in enumerate(marking_names)])  # fmt: skip
 
     def reweighted(self, chain: ParameterSet, values: np.ndarray) -> FieldBlock:
         """The same points weighted at a solution (chain values, then this block's own), starting there: the pixel
         scale on the ground changes steeply with the camera's pitch, so weights taken at a nominal model several
         degrees off misstate how far each point is off in the image."""
-        local = values[len(chain) :]
-        obs = replace(self.detected, starts=local.reshape(-1, 3))
+        obs = replace(self.detected, starts=self.places(values[len(chain) :]))
         model = chain.corrections(values[: len(chain)]).plus(self.fixed)
-        return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model)
+        return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model,
+                          marking_places=self.marking_places)  # fmt: skip
+
+    def places(self, local_values: np.ndarray) -> np.ndarray:
+        """(P, 3) the robot's place per placement (x, y [m], yaw [rad]) from the block's own unknowns (L,)."""
+        return local_values[: 3 * len(self.obs.starts)].reshape(-1, 3)
 
     def shared_labels(self) -> np.ndarray:
         """(U,) the points of one stretch of a line in one view share the detector's error across that line (its
@@ -119,22 +139,31 @@ class FieldBlock(Block):
     def report(self, fitted: FittedBlock) -> dict:
         entry = super().report(fitted)
         names = field_pose_names(len(self.obs.starts))
-        poses = fitted.local_values.reshape(-1, 3)
+        poses = self.places(fitted.local_values)
         entry["field_poses"] = {
             name: {"x_m": round(float(x), 5), "y_m": round(float(y), 5), "yaw_rad": round(float(yaw), 6)}
             for name, (x, y, yaw) in zip(names, poses)
         }
         entry["n_line_points"] = len(self.obs.uv)
+        marking_names = self.nuisance.names[3 * len(poses) :]
+        entry["marking_places_m"] = {name: round(float(v), 5) for name, v in
+                                     zip(marking_names, fitted.local_values[3 * len(poses) :])}  # fmt: skip
         entry["notes"] = far_places(self.obs, names, poses)
         return entry
 
     @staticmethod
     def summary_lines(entry: dict) -> list[str]:
-        """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines."""
+        """The common lines (`Block.summary_lines`), counting line points and their RMS across the lines, and the
+        markings' places (`marking_places_m`: the parameter list of the summary leaves them out)."""
         lines = Block.summary_lines(entry)
-        return [lines[0].replace("corners used", "line points used"),
-                lines[1].replace("reprojection RMS", "distance from the lines"),
-                *(f"  warning: {note}" for note in entry.get("notes", []))]  # fmt: skip
+        lines = [lines[0].replace("corners used", "line points used"),
+                 lines[1].replace("reprojection RMS", "distance from the lines")]  # fmt: skip
+        places = entry.get("marking_places_m") or {}
+        if places:
+            name = max(places, key=lambda n: abs(places[n]))
+            lines.append(f"  markings' places ({len(places)} unknowns, prior {1000 * MARKING_PRIOR_M:.0f} mm, in "
+                         f"result.yaml): largest {name} {1000 * places[name]:+.1f} mm")  # fmt: skip
+        return [*lines, *(f"  warning: {note}" for note in entry.get("notes", []))]
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
         s, k = self.sample_of_unit, self.placement_of_unit
@@ -158,20 +187,29 @@ class FieldBlock(Block):
                 - (do[..., 2:3] / d[:, None, 2:3]) * d[:, None, :2]
                 + scale[:, None, None] * (dd[..., :2] - dd[..., 2:3] * d[:, None, :2] / d[:, None, 2:3])
             )
-        x, y, yaw = local_values.reshape(-1, 3)[k].T
+        x, y, yaw = self.places(local_values)[k].T
         cos, sin = np.cos(yaw), np.sin(yaw)
         R = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], axis=1)  # (M, 2, 2) floor -> field
         turned = np.einsum("mij,mj->mi", R, g)
         p = turned + np.stack([x, y], axis=1)
-        offset, normal = nearest_line_normal(self.lines, p)
-        on_circle = np.abs(np.linalg.norm(p, axis=1) - self.lines.circle_radius) <= np.abs(offset) + 1e-12
+        offset, normal, marking = nearest_line_normal(self.lines, p)
+        known = np.full(len(p), self.marking_places)
+        column = 3 * len(self.obs.starts) + marking if self.marking_places else np.zeros(len(p), int)  # 1st unknown
+        on_circle = marking == len(self.lines.segments)
+        placed = known & on_circle  # from the circle's fitted centre and radius
+        offset = offset - np.where(known & ~on_circle, local_values[column], 0.0)
+        centre = np.zeros((int(on_circle.sum()), 2))
+        centre[placed[on_circle]] = local_values[column[placed, None] + np.arange(2)]
+        radius = np.linalg.norm(p[on_circle] - centre, axis=1)
+        normal[on_circle] = (p[on_circle] - centre) / radius[:, None]
+        offset[on_circle] = radius - self.lines.circle_radius
+        offset[placed] -= local_values[column[placed] + 2]
         A = R @ self.ground_gradient  # (M, 2, 2) d(field point)/d(pixel), held at the nominal model's
         m = np.einsum("mji,mj->mi", A, normal)  # how far across the line one pixel step moves [m/px]
         weight = 1.0 / np.maximum(np.linalg.norm(m, axis=1), 1e-9)  # [px/m]
         residual = (offset * weight)[:, None]
         grad = weight[:, None] * normal  # d(residual)/d(field point) [px/m]
         if on_circle.any():  # the circle's normal turns with the point, and the weight with it
-            radius = np.linalg.norm(p[on_circle], axis=1)
             n = normal[on_circle]
             Am = np.einsum("mij,mj->mi", A[on_circle], m[on_circle])
             across = Am - np.einsum("mi,mi->m", n, Am)[:, None] * n
@@ -184,70 +222,17 @@ class FieldBlock(Block):
         dm_dyaw = np.einsum("mji,mj->mi", dA_dyaw, normal)
         dweight_dyaw = -(weight**3) * np.einsum("mi,mi->m", m, dm_dyaw)
         d_yaw = np.einsum("mi,mi->m", grad, dp_dyaw) + offset * dweight_dyaw
-        jac_local = np.stack([grad[:, 0], grad[:, 1], d_yaw], axis=1)[:, None, :]
+        d_marking = np.zeros((len(p), 3))  # a line's offset; the circle's centre (x, y) and radius
+        d_marking[:, 0] = -weight * known
+        d_marking[placed] = np.column_stack([-grad[placed], -weight[placed]])
+        jac_local = np.concatenate([np.stack([grad[:, 0], grad[:, 1], d_yaw], axis=1), d_marking], axis=1)[:, None]
         bad = ~(np.isfinite(residual[:, 0]) & (scale > 0) & np.all(np.isfinite(d_columns), axis=1))
         residual[bad], d_columns[bad], jac_local[bad] = BEHIND_CAMERA_PX, 0.0, 0.0
-        local_cols = 3 * k[:, None] + np.arange(3)
+        local_cols = np.concatenate(
+            [3 * k[:, None] + np.arange(3), column[:, None] + np.where(placed[:, None], np.arange(3), 0)], axis=1
+        )
         return Linearization(residual=residual, jac_chain=d_columns[:, None, n_joints:], jac_local=jac_local,
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
-
-
-def far_places(obs: FieldObservations, names: list[str], poses: np.ndarray) -> list[str]:
-    """A note for each fitted place (P, 3: x, y [m], yaw [rad], named `names`) further from where the config puts
-    the robot (`obs.configured`) than a robot is placed: the lines may then be matched to other lines than the ones
-    the robot saw (a confident fit, but not of the robot's place)."""
-    if obs.configured is None:
-        return []
-    notes = []
-    for name, pose, at in zip(names, poses, obs.configured):
-        off = place_offset(pose, at)
-        if far_from_configured(off):
-            notes.append(f"{name} lies {off[0]:.2f} m and {np.rad2deg(off[1]):.0f} deg from where the config places "
-                         f"the robot ({at[0]:+.2f}, {at[1]:+.2f}, {np.rad2deg(at[2]):+.0f} deg): check where it stood; "
-                         "the lines may be matched to others than it saw")  # fmt: skip
-    return notes
-
-
-def _stretches(sample_index: np.ndarray, line: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """(M,) the stretch of its line each point lies on: a line's points in one view, in their order along it, in
-    runs of STRETCH_POINTS (the last run takes the rest)."""
-    _, group = np.unique(np.stack([sample_index, line], axis=1), axis=0, return_inverse=True)
-    group = group.ravel()
-    stretch = np.zeros(len(group), dtype=int)
-    for g in np.unique(group):
-        members = np.flatnonzero(group == g)
-        centred = uv[members] - uv[members].mean(axis=0)
-        along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0] if len(members) > 1 else np.zeros(1)
-        rank = np.empty(len(members), dtype=int)
-        rank[np.argsort(along)] = np.arange(len(members))
-        stretch[members] = np.minimum(rank // STRETCH_POINTS, max(len(members) // STRETCH_POINTS - 1, 0))
-    return stretch
-
-
-def _points_used(sample_index: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """(M,) the points the block uses: those on lines seen by at least MIN_LINE_POINTS points of their view, at
-    most POINTS_PER_VIEW of them per view, spread over it (`spread`). A lone point near a line (a robot's foot, a
-    post's base, the far end of a short marking) has no others to share the line's error with; and the detector's
-    error along a line drifts slowly (the line's sub-pixel phase against the scan lines), so many points of one
-    line would count one error many times."""
-    _, group, counts = np.unique(np.stack([sample_index, line], axis=1), axis=0, return_inverse=True,
-                                 return_counts=True)  # fmt: skip
-    on_lines = np.flatnonzero(counts[group.ravel()] >= MIN_LINE_POINTS)
-    keep = np.zeros(len(line), bool)
-    for view in np.unique(sample_index[on_lines]):
-        members = on_lines[sample_index[on_lines] == view]
-        keep[members[spread(members, POINTS_PER_VIEW)]] = True
-    return keep
-
-
-def _lines_seen(obs: FieldObservations, lines: FieldLines, T_floor_camera: np.ndarray) -> np.ndarray:
-    """(M,) the nearest line (`nearest_line`) of each point seen from cameras T_floor_camera (M, 4, 4) of a robot
-    standing at its placement's start."""
-    g = ground_points(obs.camera, T_floor_camera, obs.uv)
-    x, y, yaw = obs.starts[obs.placement[obs.sample_index]].T
-    c, s = np.cos(yaw), np.sin(yaw)
-    field = np.stack([x + c * g[:, 0] - s * g[:, 1], y + s * g[:, 0] + c * g[:, 1]], axis=1)
-    return nearest_line(lines, np.nan_to_num(field))
 
 
 def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,

@@ -409,7 +409,9 @@ def summary_lines(result: FitResult) -> list[str]:
         f"condition number (column-scaled Jacobian): {result.condition_number or float('inf'):.3g}",
         "parameters (value +- std, share of information from data):",
     ]
-    width = max(len(p.name) for p in result.parameters)
-    for p in result.parameters:
+    hidden = {name for b in result.blocks for name in b.get("marking_places_m", ())}  # named in their block's lines
+    shown = [p for p in result.parameters if p.name not in hidden]
+    width = max(len(p.name) for p in shown)
+    for p in shown:
         lines.append(f"  {p.name:<{width}}  {p.display:>28}  data {p.data_share:.0%}")
     return lines

@@ -398,7 +398,10 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     return Solution(
         values=problem.values(z),
         uncertainty=information_uncertainty(
-            information, problem.params.prior_sigmas, lambda: problem.information(z, triangular=True)[2]
+            information,
+            problem.params.prior_sigmas,
+            lambda: problem.information(z, triangular=True)[2],
+            conditioned=np.array([p.kind != "marking" for p in problem.params.parameters], bool),
         ),
         blocks=[_block_result(s, b, a) for s, b, a in zip(problem.states, before, after)],
         sigma_q=problem.sigma_q,

@@ -59,18 +59,23 @@ def information_uncertainty(
     information: np.ndarray,
     prior_sigmas: np.ndarray,
     triangular: np.ndarray | Callable[[], np.ndarray | None] | None = None,
+    conditioned: np.ndarray | None = None,
 ) -> Uncertainty:
     """Uncertainty of the unknowns from the information J^T J (P, P) of the whitened data Jacobian J in
     prior-normalised units. The condition number from J's triangular factor R (J = Q R, (P, P)) when given, else
     from the information's eigenvalues (which lose what lies below 1e-8 of the largest singular value: a nearly
     singular problem reads infinite). `triangular` may be a function giving R (or None), called only where the
     eigenvalues would not do (a condition number from them of EIGEN_CONDITION_LIMIT or more): R costs a fit's
-    whitened Jacobian formed and factored chunk by chunk, several times the cost of the normal equations."""
+    whitened Jacobian formed and factored chunk by chunk, several times the cost of the normal equations.
+    `conditioned`: (P,) bool, the unknowns whose columns the condition number covers (default all): not those only
+    their priors hold apart by design (a field marking's place against the robot's)."""
     n = len(prior_sigmas)
     cov_z = np.linalg.inv(information + np.eye(n))
     d = np.sqrt(np.clip(np.diag(cov_z), 1e-300, None))
+    keep = np.ones(n, bool) if conditioned is None else np.asarray(conditioned, bool)
+    information = information[np.ix_(keep, keep)]
     norms = np.sqrt(np.clip(np.diag(information), 0.0, None))
-    if n == 0:
+    if not keep.any():
         condition = 1.0
     elif np.any(norms < 1e-12):
         condition = float("inf")
@@ -80,7 +85,7 @@ def information_uncertainty(
             condition = float(np.sqrt(e[-1] / e[0])) if e[0] > 0 else float("inf")
             triangular = triangular() if callable(triangular) and not condition < EIGEN_CONDITION_LIMIT else None
         if triangular is not None:  # singular values of the column-scaled Jacobian J / norms = Q (R / norms)
-            s = np.linalg.svd(triangular / norms, compute_uv=False)
+            s = np.linalg.svd(triangular[:, keep] / norms, compute_uv=False)
             condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     return Uncertainty(
         std=d * prior_sigmas,

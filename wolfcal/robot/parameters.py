@@ -25,7 +25,9 @@ SIDES = ("right", "left", "both")
 @dataclass(frozen=True)
 class Parameter:
     name: str
-    kind: str  # 'offset' | 'frame' | 'tag' (chain parameters) | 'pose' (a measurement block's own unknown)
+    # 'offset' | 'frame' | 'tag' (chain parameters) | 'pose' (a measurement block's own unknown) | 'marking' (a
+    # field marking's place: held by its prior against the robot's place, left out of the condition number)
+    kind: str
     target: str  # joint name, tag id as text, or the block's name for its unknowns (e.g. 'tripod@1')
     component: int  # index in (x, y, z, rx, ry, rz); 0 for offsets
     unit: str  # 'rad' | 'm' | 'px' (a measurement block's image-space unknown)
