@@ -28,7 +28,7 @@ from wolfcal.sim.truth import TruthSpec, random_truth
 
 ROOT = Path(__file__).resolve().parents[2]
 TRUE_PLACE = {"x": -2.75, "y": -0.2, "yaw": float(np.deg2rad(8.0))}  # robot_at is (-3, 0, 0)
-SWEEP = {"pan": [-0.4, 0.1, 0.6, 1.1], "tilt": [-0.5, -0.22]}  # 8 views, none touching the shoulders
+SWEEP = {"pan": [-0.4, 0.1, 0.6, 1.1], "tilt": [-0.5, -0.36, -0.22]}  # 12 views, none touching the shoulders
 
 
 def wolfcal(*args: str) -> subprocess.CompletedProcess:
@@ -51,10 +51,10 @@ def test_a_field_capture_from_the_emulator_calibrates_the_camera(tmp_path):
         taken = wolfcal("capture", "--field", "--robot", str(config), "--port", emu.port, "--camera", "sim",
                         "--velocity", "4", "--out", str(capture))  # fmt: skip
     assert taken.returncode == 0, taken.stderr
-    assert "Traceback" not in taken.stderr and "8 sample(s) saved" in taken.stderr and "field-line" in taken.stderr
+    assert "Traceback" not in taken.stderr and "12 sample(s) saved" in taken.stderr and "field-line" in taken.stderr
     grid = {tuple(rad_to_ticks(p.joints[j]) for j in ("HeadPan", "HeadTilt")) for p in field_script(robot, 4).poses}
     samples = read_capture(capture, robot.config).samples
-    assert len(samples) == 8
+    assert len(samples) == 12
     for sample in samples:
         values = dict(zip(sample.joint_names, sample.positions, strict=True))
         assert tuple(rad_to_ticks(values[j]) for j in ("HeadPan", "HeadTilt")) in grid
