@@ -18,7 +18,7 @@ import numpy as np
 
 from wolfcal.camera.model import CameraModel
 from wolfcal.capture.field import field_place
-from wolfcal.hardware.emulator import load_truth, read_true_angles
+from wolfcal.hardware.emulator import load_truth, read_true_angles, truth_file_of
 from wolfcal.io.truth import load_external_truth, load_field_pose, load_floor_places
 from wolfcal.placement import TARGET_BASE, look_at
 from wolfcal.robot.corrections import Corrections
@@ -37,7 +37,7 @@ class SimCamera:
                  field: bool = False, field_check: bool = False):  # fmt: skip
         self.name, self.ports, self.robot = "sim", ports, robot
         self._read = read_true_angles
-        truth_path = next((path for path in (read_true_angles(port)[1] for port in ports) if path), None)
+        truth_path = truth_file_of(ports)
         truth = load_truth(Path(truth_path)) if truth_path else Corrections()
         T_base_camera, floor_places = None, None
         if external is None and truth_path:

@@ -14,7 +14,7 @@ from wolfcal.evaluate.ground import ground_errors
 from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.fit.result import load_result
 from wolfcal.hardware.buses import port_paths
-from wolfcal.hardware.emulator import load_truth, read_true_angles
+from wolfcal.hardware.emulator import load_truth, truth_file_of
 from wolfcal.io.current import CurrentCalibration, load_current
 from wolfcal.io.truth import load_field_pose
 from wolfcal.observations import HEAD_CAMERA
@@ -34,7 +34,7 @@ def truth_errors(robot: Robot, options: VenueOptions, figures: dict) -> dict | N
         return None
     servos = robot.config.servos
     paths = port_paths(options.port, list(servos.buses)) or {device: device for device in servos.buses}
-    truth_path = next((path for path in (read_true_angles(port)[1] for port in paths.values()) if path), None)
+    truth_path = truth_file_of(paths.values())
     if not truth_path:
         return None
     result = load_result(options.out / FIT_FOLDER)

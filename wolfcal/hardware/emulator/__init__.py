@@ -23,7 +23,7 @@ The names imported below are the package's public interface.
 from wolfcal.hardware.emulator.faults import Fault, parse_fault
 from wolfcal.hardware.emulator.process import EmulatorProcess
 from wolfcal.hardware.emulator.spec import EmulatorSpec, load_truth, spec_from_config
-from wolfcal.hardware.emulator.true_state import read_true_angles, state_paths
+from wolfcal.hardware.emulator.true_state import read_true_angles, state_paths, truth_file_of
 
 __all__ = [
     "EmulatorProcess",
@@ -32,6 +32,7 @@ __all__ = [
     "load_truth",
     "parse_fault",
     "read_true_angles",
+    "truth_file_of",
     "spec_from_config",
     "state_paths",
 ]

@@ -8,6 +8,7 @@ import json
 import os
 import tempfile
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -63,3 +64,8 @@ def read_true_angles(port: str) -> tuple[dict[str, float], str | None]:
             break
         time.sleep(0.0005)
     return dict(zip(info["joints"], values.tolist(), strict=True)), info["truth"]
+
+
+def truth_file_of(ports: Iterable[str]) -> str | None:
+    """The truth YAML path of the first emulator serving one of `ports` that has one (None: none has)."""
+    return next((path for path in (read_true_angles(port)[1] for port in ports) if path), None)
