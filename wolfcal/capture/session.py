@@ -26,7 +26,6 @@ from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import Robot
 from wolfcal.vision.tags import detect_tags
 
-HARDWARE_POLL_S = 1.0  # hardware error status is polled at most this often while reading
 POLL_S = 0.005  # pause between bus reads while waiting
 
 
@@ -61,16 +60,11 @@ class CaptureSession:
         self.tag_ids = {t.id for t in tags}  # floor capture: the floor tags too
         self.families = sorted({t.family for t in tags})
         self.summary = CaptureSummary(None, 0)
-        self.last_hw_poll = 0.0
         self.rest_since: float | None = None  # when every joint last became still
 
     def read(self) -> JointState:
-        """Read the bus into the stillness window (and poll hardware errors now and then)."""
-        now = time.monotonic()
-        if now - self.last_hw_poll > HARDWARE_POLL_S:
-            self.bus.check_hardware()
-            self.last_hw_poll = now
-        state = self.bus.read_state()
+        """Read the bus into the stillness window (hardware errors checked now and then: `read_state_polled`)."""
+        state = self.bus.read_state_polled()
         self.window.add(time.monotonic(), state)
         if np.any(self.window.spread() > self.gates.tolerance_ticks):
             self.rest_since = None

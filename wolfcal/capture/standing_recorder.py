@@ -8,7 +8,6 @@ import time
 
 import numpy as np
 
-from wolfcal.capture.session import HARDWARE_POLL_S
 from wolfcal.hardware.buses import ServoBuses
 from wolfcal.hardware.imu_device import BusImu
 from wolfcal.io.imu import ACCEL_SCATTER_M_S2, GYRO_STILL_RAD_S, STILL_WINDOW_S, ImuStream, still_messages
@@ -25,7 +24,6 @@ class StandingRecorder:
         self.bus, self.imu, self.writer, self.period = bus, imu, writer, 1.0 / rate_hz
         self.last_positions = np.zeros(len(bus.joints))  # (J,) [rad] of the latest reading
         self.next_at = 0.0  # monotonic time of the next reading [s]
-        self.last_hw_poll = 0.0
         self.begin_stance()
 
     def begin_stance(self) -> None:
@@ -42,10 +40,7 @@ class StandingRecorder:
         if pause > 0:
             time.sleep(pause)  # pacing the readings, not waiting for an event
         self.next_at = time.monotonic() + self.period
-        if time.monotonic() - self.last_hw_poll > HARDWARE_POLL_S:
-            self.bus.check_hardware()
-            self.last_hw_poll = time.monotonic()
-        state = self.bus.read_state()
+        state = self.bus.read_state_polled()
         stamp = time.time_ns()
         self.writer.joint_state(stamp, self.bus.joints, state.positions, state.velocities)
         accel, gyro = self.imu.read()

@@ -9,6 +9,8 @@ or DEVICE=PATH,... naming each device of `servos.ports` (e.g. the ptys `wolfcal 
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from typing import TypeVar
@@ -20,6 +22,8 @@ from wolfcal.errors import WolfcalError
 from wolfcal.hardware.bus import BusError, DynamixelBus, JointState
 
 Result = TypeVar("Result")
+
+HARDWARE_POLL_S = 1.0  # `read_state_polled` checks the servos' hardware error status at most this often [s]
 
 
 class ServoBuses:
@@ -40,6 +44,7 @@ class ServoBuses:
             bus = DynamixelBus(config, paths.get(device, device), baudrate)
             self.buses.append(bus)
             self.bus_of.update({joint: bus for joint in joints})
+        self.last_hardware_check = -math.inf  # monotonic time of the last `check_hardware` in `read_state_polled`
         self.port_names = [bus.port_name for bus in self.buses]
         self.port_name = ", ".join(self.port_names)
 
@@ -117,6 +122,16 @@ class ServoBuses:
             ticks.update(zip(bus.joints, state.ticks))
             velocity.update(zip(bus.joints, state.velocity_units))
         return JointState(np.array([ticks[j] for j in self.joints]), np.array([velocity[j] for j in self.joints]))
+
+    def read_state_polled(self) -> JointState:
+        """`read_state`, checking the hardware error status first when it was last checked over HARDWARE_POLL_S
+        ago (a servo in overload or overheating raises its `BusError` then): for loops that read the bus without
+        pause while the robot moves or holds."""
+        now = time.monotonic()
+        if now - self.last_hardware_check > HARDWARE_POLL_S:
+            self.check_hardware()
+            self.last_hardware_check = now
+        return self.read_state()
 
     def set_torque(self, joints: Iterable[str], on: bool) -> None:
         for bus, group in self._grouped(joints).items():

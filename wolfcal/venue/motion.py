@@ -33,7 +33,6 @@ from wolfcal.vision.tags import detect_tags
 ARRIVAL_TICKS = 8  # a joint within this many ticks of its goal has arrived (then the stillness gate waits)
 ARRIVAL_MARGIN_S = 3.0  # time allowed for a move beyond its profile's duration
 POSE_TIMEOUT_S = 5.0  # after arrival, a pose that is not still by then is given up
-HARDWARE_POLL_S = 1.0  # hardware error status is polled at most this often
 POLL_S = 0.002  # pause between bus reads while waiting
 GRAB_TRIES = 4  # still moments tried at a pose before it is given up (the image gates may fail on noise)
 NO_TAG_POSES = 3  # a session whose first poses all show no tag stops after this many
@@ -83,16 +82,12 @@ class PoseDriver:
         self.velocity, self.acceleration, self.say = velocity, acceleration, say
         self.index = {j: k for k, j in enumerate(bus.joints)}
         self.window = StillnessWindow(bus.joints, gates)
-        self.last_hw_poll = 0.0
         self.hold_s: list[float] = []  # per pose: from arrival to frames grabbed [s]
 
     # --- bus ------------------------------------------------------------------------------------------------
     def read(self) -> JointState:
-        now = time.monotonic()
-        if now - self.last_hw_poll > HARDWARE_POLL_S:
-            self.bus.check_hardware()
-            self.last_hw_poll = now
-        state = self.bus.read_state()
+        """Read the bus into the stillness window (hardware errors checked now and then: `read_state_polled`)."""
+        state = self.bus.read_state_polled()
         self.window.add(time.monotonic(), state)
         return state
 
