@@ -27,14 +27,12 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
 
-import wolfcal
 from wolfcal.atomic import output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.external import foot_tag_grid_mm
@@ -43,6 +41,7 @@ from wolfcal.evaluate.floor_ground import measured_ground_errors
 from wolfcal.evaluate.ground_figures import ground_check
 from wolfcal.evaluate.metrics import measure_tag_views, model_errors, outlier_samples
 from wolfcal.evaluate.pipeline import load_fit, refuse_fitted_captures
+from wolfcal.evaluate.provenance import provenance
 from wolfcal.evaluate.report import render_html, render_markdown
 from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.pipeline import load_captures, samples_of, split_floor
@@ -357,9 +356,7 @@ def run_compare(
         )
     decision = decide(columns, calibrations)
     metrics: dict[str, Any] = {
-        "wolfcal_version": wolfcal.__version__,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "robot": str(robot.config.path), "robot_name": robot.config.name,
+        **provenance(robot),
         "captures": [str(Path(c).resolve()) for c in captures],
         "meaning": __doc__.split("\n\n", 1)[1].strip(),
         "calibrations": [{"label": c.label, "fit_dir": c.fit_dir, "system": c.system, "preset": c.preset}

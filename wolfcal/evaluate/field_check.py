@@ -16,10 +16,8 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 
-import wolfcal
 from wolfcal.atomic import make_folder, write_text_atomic
 from wolfcal.camera.model import CameraModel
 from wolfcal.errors import WolfcalError
@@ -27,6 +25,7 @@ from wolfcal.evaluate.deploy import camera_correction, deploy_lines, write_or_wi
 from wolfcal.evaluate.field_ground import measured_field_ground
 from wolfcal.evaluate.ground_figures import camera_turn, ground_distances, ground_rows, ground_section, verdict_ground
 from wolfcal.evaluate.pipeline import before_label, truth_reference
+from wolfcal.evaluate.provenance import provenance
 from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.evaluate.verdict import GROUND_SIGMAS, VerdictLimits, deploy_verdict
 from wolfcal.field.observe import field_observations
@@ -103,10 +102,7 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
                                             deploy_worse, present)  # fmt: skip
     metrics = {
-        "wolfcal_version": wolfcal.__version__,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "fit_dir": str(Path(fit_dir).resolve()), "robot": str(robot.config.path), "robot_name": robot.config.name,
-        "free": result.free, "mode": "held-out", "system": "field",
+        **provenance(robot, fit_dir, result.free), "mode": "held-out", "system": "field",
         "captures": [str(Path(c).resolve()) for c in captures],
         "before_model": before_label(present), "current": present.to_dict() if present.sources else None,
         "ground": ground_section(robot, truth is not None, rows, check.measured),

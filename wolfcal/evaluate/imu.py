@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-import wolfcal
 from wolfcal.atomic import output_set, write_text_atomic
 from wolfcal.errors import WolfcalError
+from wolfcal.evaluate.provenance import provenance
 from wolfcal.io.imu import StandingSamples, read_standing, topics_of
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.floor import floor_frames
@@ -85,8 +84,7 @@ def evaluate_held_out(fit_dir: Path, result: FitResult, robot: Robot, captures: 
         else None
     )
     metrics: dict = {
-        "wolfcal_version": wolfcal.__version__, "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "fit_dir": str(Path(fit_dir).resolve()), "robot": str(robot.config.path), "free": result.free,
+        **provenance(robot, fit_dir, result.free),
         "mode": "held-out", "captures": [str(Path(c).resolve()) for c in captures], "system": "imu",
         "n_samples": samples.n_samples, "meaning": MEANING,
         "before": _figures(before), "after": _figures(after),

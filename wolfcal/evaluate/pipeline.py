@@ -14,12 +14,10 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-import wolfcal
 from wolfcal.atomic import make_folder, output_set, write_bytes_atomic, write_text_atomic
 from wolfcal.errors import WolfcalError
 from wolfcal.evaluate.crossval import cross_validate
@@ -46,6 +44,7 @@ from wolfcal.evaluate.metrics import (
     outlier_samples,
     summary,
 )
+from wolfcal.evaluate.provenance import provenance
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
     MEANINGS,
@@ -177,8 +176,7 @@ def _run_external_evaluate(
                "the calibration improves the held-out external-camera views")  # fmt: skip
     lines += ["", f"**{verdict}**"]
     metrics = {
-        "wolfcal_version": wolfcal.__version__, "fit_dir": str(fit_dir.resolve()), "robot": str(robot.config.path),
-        "robot_name": robot.config.name, "free": result.free, "mode": "held-out",
+        **provenance(robot, fit_dir, result.free), "mode": "held-out",
         "captures": [str(Path(c).resolve()) for c in captures], "external": figures,
         "verdict": {"worse": worse, "message": verdict}, "deploy": deploy, "warnings": warnings + detect_warnings,
     }  # fmt: skip
@@ -357,12 +355,7 @@ def run_evaluate(
     deploy = write_or_withhold_deploy_files(robot, fitted, out_dir, None if verdict["deploy"] else verdict["message"],
                                             deploy_worse, present)  # fmt: skip
     metrics = {
-        "wolfcal_version": wolfcal.__version__,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "fit_dir": str(fit_dir.resolve()),
-        "robot": str(robot.config.path),
-        "robot_name": robot.config.name,
-        "free": result.free,
+        **provenance(robot, fit_dir, result.free),
         "mode": "held-out" if held_out else "cross-validation",
         "mode_note": errors.mode_note,
         "captures": [str(p.resolve()) for p in sources],
