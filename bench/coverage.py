@@ -1,11 +1,9 @@
-"""The `recordings` part: uncertainty on continuous recordings: do the reported standard deviations cover the
-true error?
-
-A plain ROS 2 recording (wolfcal/sim/recording.py: 14 still poses, 2.5 s each at 10 Hz images, so about 20 kept
-frames per pose, 1 s of motion in between) of the Wolfgang head camera (binned images, barrel distortion, image
-noise), read by wolfcal's reader, tags detected, averaged per still span as `wolfcal fit` does, fitted; per seed the largest and median
-|z| = |estimate - truth| / reported std over the free parameters, and chi-square per parameter (sum z^2 / P,
-about 1 when the reported covariance is right).
+"""The `recordings` part: uncertainty on continuous recordings: do the reported standard deviations cover the true
+error? A plain ROS 2 recording (wolfcal/sim/recording.py: 14 still poses, 2.5 s each at 10 Hz images, so about 20
+kept frames per pose, 1 s of motion in between) of the Wolfgang head camera (binned images, barrel distortion, image
+noise), read by wolfcal's reader, tags detected, averaged per still span as `wolfcal fit` does, fitted; per seed the
+largest and median |z| = |estimate - truth| / reported std over the free parameters, and chi-square per parameter
+(sum z^2 / P, about 1 when the reported covariance is right).
 Per preset over the seeds: max and median |z|, chi-square per parameter, how many |z| beyond 3.
 """
 
