@@ -424,8 +424,8 @@ def detect_captures(
     robot: Robot, captures: list[Path], intrinsics: Path | None, options: FitOptions, say: Callable[[str], None]
 ) -> tuple[dict[str, Observations], list[str]]:
     """The captures read and their tags detected in the images of the cameras --system takes: per camera, the
-    detected tag corners [px] with the joint readings of their samples; and the warnings of reading and detection
-    (frames skipped, repeated images)."""
+    detected tag corners [px] with the joint readings of their samples, a recording's frames averaged per still span
+    (`still_span_observations`); and the warnings of reading and detection (frames skipped, repeated images)."""
     required = (HEAD_CAMERA,) if options.system == "head" else ()
     samples, warnings = load_samples(robot, captures, intrinsics, cameras=required, say=say)
     say(f"read {len(samples)} sample(s) from {len(captures)} capture file(s); detecting tags ...")
