@@ -72,11 +72,10 @@ def summarize_spans(obs: Observations, rule: OutlierRule = SPAN_FRAME_PX) -> Obs
     far = rule.flags(np.where(judged, spread, np.nan))
     keep = ~far[view]
     # the mean of each corner over the frames kept
-    _, kept_group = np.unique(group[keep], return_inverse=True)
+    _, first_kept, kept_group = np.unique(group[keep], return_index=True, return_inverse=True)
     kept_group = kept_group.ravel()
-    n_kept = int(kept_group.max()) + 1
-    first = np.zeros(n_kept, dtype=np.int64)
-    first[kept_group[::-1]] = np.flatnonzero(keep)[::-1]  # a row of each group: its span, tag and corner
+    n_kept = len(first_kept)
+    first = np.flatnonzero(keep)[first_kept]  # a row of each group: its span, tag and corner
     frames = np.bincount(kept_group, minlength=n_kept)
     uv = np.stack([np.bincount(kept_group, obs.uv[keep, a], n_kept) for a in range(2)], axis=1) / frames[:, None]
     deviation = obs.uv[keep] - uv[kept_group]
@@ -91,8 +90,7 @@ def summarize_spans(obs: Observations, rule: OutlierRule = SPAN_FRAME_PX) -> Obs
                   for j in range(obs.q_measured.shape[1])], axis=1).reshape(len(spans_kept), -1)  # fmt: skip
     stamps = np.full(len(spans_kept), np.iinfo(np.int64).max)
     np.minimum.at(stamps, member, obs.stamps_ns[in_kept])
-    a_sample = np.zeros(len(spans_kept), dtype=np.int64)  # of each span (its frames share one source)
-    a_sample[member[::-1]] = np.flatnonzero(in_kept)[::-1]
+    a_sample = np.flatnonzero(in_kept)[np.unique(member, return_index=True)[1]]  # its frames share one source
     return Observations(
         joint_names=list(obs.joint_names),
         q_measured=q,
