@@ -79,8 +79,8 @@ def accuracy_parts(results: dict) -> list[str]:
             "## Reported std on continuous recordings",
             "",
             f"{r['seeds']} seed(s) of a simulated plain ROS 2 recording (14 still poses of 2.5 s, images at 10 Hz, "
-            f"binned {r['binning']}x): read, paired, detected, fitted. z = (estimate - truth) / reported std over "
-            f"the free parameters; chi2/P about 1 when the covariance is right. {_when(r)}.",
+            f"binned {r['binning']}x): read, paired, detected, averaged per still span, fitted. z = (estimate - truth) "
+            f"/ reported std over the free parameters; chi2/P about 1 when the covariance is right. {_when(r)}.",
             "",
             *_table(["--free", "max abs z", "median abs z", "chi2 / P", "beyond 3 std"], rows),
         ]

@@ -5,6 +5,10 @@ config (its `name`). One row per detected corner (vectorised over everything): w
 (aruco order: top-left, top-right, bottom-right, bottom-left) and where it was seen, in pixels (OpenCV convention).
 A view is one tag in one image (`Observations.views`): the unit the fit leaves out as an outlier and the unit of
 the tag-grid metric.
+
+The frames of a plain recording name their still span (`span_of_sample`); `wolfcal.spans.summarize_spans` turns the
+frames of each span into one sample whose corners are the means over the frames that saw them (`SpanFrames`: how
+many frames and their scatter about the mean, per corner).
 """
 
 from __future__ import annotations
@@ -27,6 +31,20 @@ def rms_by(group: np.ndarray, values: np.ndarray, n_groups: int) -> np.ndarray:
 
 
 @dataclass
+class SpanFrames:
+    """The frames behind each sample and corner of observations summarised by still span."""
+
+    frames_of_sample: np.ndarray  # (S,) int frames of each sample (its still span's frames with a tag seen)
+    frames: np.ndarray  # (M,) int frames averaged into each corner
+    scatter: np.ndarray  # (M, 2) sum of squared deviations of those frames' corners about the mean, per axis [px^2]
+    left_out: int = 0  # tag views of single frames left out of their span's mean (far from its other frames)
+
+    def subset(self, samples: np.ndarray, keep: np.ndarray) -> SpanFrames:
+        """Of the samples `samples` (indices) and the corners `keep` (M,) bool."""
+        return SpanFrames(self.frames_of_sample[samples], self.frames[keep], self.scatter[keep], self.left_out)
+
+
+@dataclass
 class Observations:
     joint_names: list[str]
     q_measured: np.ndarray  # (S, J) encoder readings [rad]
@@ -38,6 +56,8 @@ class Observations:
     corner_index: np.ndarray  # (M,) int in 0..3
     uv: np.ndarray  # (M, 2) detected corner [px]
     camera_name: str = HEAD_CAMERA  # which camera saw these corners
+    span_of_sample: np.ndarray | None = None  # (S,) int still span of each frame of a recording, -1: none
+    span_frames: SpanFrames | None = None  # set when each sample is a still span's frames averaged
 
     @classmethod
     def of_views(
@@ -51,11 +71,12 @@ class Observations:
         tag_ids: np.ndarray,
         uv: np.ndarray,
         camera_name: str = HEAD_CAMERA,
+        span_of_sample: np.ndarray | None = None,
     ) -> Observations:
         """Observations of whole views: view v is tag `tag_ids[v]` in sample `sample[v]` (V,), its four corners
         `uv` (V, 4, 2) [px] in aruco order; the sample fields as in the class."""
         return cls(joint_names, q_measured, stamps_ns, sources, camera, np.repeat(sample, 4), np.repeat(tag_ids, 4),
-                   np.tile(np.arange(4), len(sample)), uv.reshape(-1, 2), camera_name)  # fmt: skip
+                   np.tile(np.arange(4), len(sample)), uv.reshape(-1, 2), camera_name, span_of_sample)  # fmt: skip
 
     @property
     def n_samples(self) -> int:
@@ -109,6 +130,8 @@ class Observations:
             corner_index=self.corner_index[keep],
             uv=self.uv[keep],
             camera_name=self.camera_name,
+            span_of_sample=None if self.span_of_sample is None else self.span_of_sample[samples],
+            span_frames=None if self.span_frames is None else self.span_frames.subset(samples, keep),
         )
 
     def repeated_samples(self) -> int:

@@ -44,6 +44,11 @@ class OutlierRule:
 # noise model knows the joint-reading error each view carries), size = per-axis RMS [px].
 FIT_VIEW_PX = OutlierRule(factor=4.0, floor=0.5)
 
+# A frame's view of a tag within a still span of a recording, before the span's frames are averaged
+# (`wolfcal.spans`): spread = size = per-axis RMS distance of its corners from the span's per-corner median [px]. As
+# the fit's views: a misdetected frame is off by pixels, the detector's frame-to-frame noise by a tenth of one.
+SPAN_FRAME_PX = OutlierRule(factor=4.0, floor=0.5)
+
 # Floor-tag corners, one corner of a view (the views kept by the view rule): limit (`OutlierRule.limit`) at this
 # factor times the robust residual scale (per axis) of the corners counted, size = the corner's distance from where
 # the fitted floor puts it, the view's joint-reading errors taken into account [px]. Per corner, not per view: on a

@@ -1,7 +1,8 @@
 """Reported uncertainty on a continuous recording: a plain ROS 2 recording (written with mcap_ros2, not wolfcal's
 capture format) of 14 still poses with about 20 frames each and motion in between, images rendered through the
-distorted head camera with image noise of their own; `wolfcal fit --free head_camera` on it must report standard
-deviations that cover the true error without being absurdly conservative."""
+distorted head camera with image noise of their own; `wolfcal fit --free head_camera` on it (one sample per still
+pose, its frames averaged) must report standard deviations that cover the true error without being absurdly
+conservative."""
 
 from pathlib import Path
 
@@ -30,7 +31,10 @@ def test_reported_std_covers_the_error_on_a_continuous_recording(tmp_path, seed)
     )
     assert result.exit_code == 0, result.output
     data = yaml.safe_load((out / "result.yaml").read_text())
-    assert 14 * 18 <= data["n_samples"] <= 14 * 22  # only the still frames: about 20 per pose
+    head = data["blocks"][0]
+    assert head["n_samples"] == data["n_samples"] <= 14  # one sample per still pose: its frames averaged
+    assert 14 * 18 <= head["n_frames"] <= 14 * 22  # only the still frames: about 20 per pose
+    assert sum(s["frames"] for s in head["samples"]) == head["n_frames"]
     params = build_parameter_set(robot, "head_camera", {"head": data["tags_used"]})
     truth_of = dict(zip(params.names, params.values_from(truth)))
     z = {p["name"]: abs(p["value"] - truth_of[p["name"]]) / p["std"] for p in data["parameters"]}

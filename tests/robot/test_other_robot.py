@@ -160,7 +160,9 @@ def test_fit_on_a_plain_recording_of_another_robot(tmp_path):
     assert result.exit_code == 0, result.output
     data = yaml.safe_load((tmp_path / "fit" / "result.yaml").read_text())
     assert data["tags_used"] == [7, 9]
-    assert still - 2 <= data["n_samples"] <= still  # only frames taken while every joint was still
+    head = data["blocks"][0]
+    assert still - 2 <= head["n_frames"] <= still  # only frames taken while every joint was still
+    assert head["n_samples"] == 12  # one sample per still pose: its frames averaged
     estimate = Corrections.from_dict(data["corrections"])
     q = np.zeros((1, 3))
     base = robot.model.link_poses(q, ["cam"], TRUTH, base="base")["cam"]

@@ -133,6 +133,18 @@ class Block:
         """(U,) label of a detection error each unit shares with others (-1: none). Default: none."""
         return np.full(self.n_units, -1)
 
+    def unit_frames(self) -> np.ndarray | None:
+        """(U,) frames averaged into each unit (a still span's mean, `wolfcal.spans`): its own noise is the block's
+        level / sqrt(frames), a detection error that repeats at one pose is not averaged. None (default): each unit is
+        one measurement."""
+        return None
+
+    def unit_scatter(self) -> np.ndarray | None:
+        """(U, dim) sum of squared deviations of the frames averaged into each unit about their mean [unit^2]
+        (frames - 1 degrees of freedom per number): the noise level is estimated from it too. None with
+        `unit_frames` None."""
+        return None
+
     def noise_classes(self) -> np.ndarray:
         """(U,) noise class of each unit: units of one class share a noise level, estimated apart from the other
         classes' (e.g. one per motion-capture marker). Default: one class, the block's level."""
@@ -170,10 +182,18 @@ class Block:
         u = entry["unit"]
         what, used = ("reprojection", "corners") if u == "px" else ("residual", "residuals")
         scale, shown = (1000.0, "mm") if u == "m" else (1.0, u)
+        samples = f"{entry['n_samples']} samples"
+        if "n_frames" in entry:  # still spans of a recording (`wolfcal.spans`)
+            samples = f"{entry['n_samples']} still spans of {entry['n_frames']} frames"
         return [
-            f"{entry['name']}: {entry['n_samples']} samples ({entry['n_outlier_samples']} left out as outliers, "
+            f"{entry['name']}: {samples} ({entry['n_outlier_samples']} left out as outliers, "
             f"{entry['n_outlier_views']} outlier view(s) in all"
             + (f", {entry['n_outlier_corners']} single corner(s) far off" if entry.get("n_outlier_corners") else "")
+            + (
+                f", {entry['n_frame_views_left_out']} single frame's tag view(s) far from their span left out"
+                if entry.get("n_frame_views_left_out")
+                else ""
+            )
             + f"), {used} used: {entry['n_units_used']}",
             f"  {what} RMS (per axis, inliers): {entry[f'rms_before_{u}'] * scale:.3f} {shown} before -> "
             f"{entry[f'rms_after_{u}'] * scale:.3f} {shown} after (max {entry[f'max_after_{u}'] * scale:.3f} {shown})",

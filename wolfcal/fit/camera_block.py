@@ -95,6 +95,14 @@ class CameraBlock(Block):
         )
         return labels.ravel()
 
+    def unit_frames(self) -> np.ndarray | None:
+        """The frames averaged into each corner of still-span observations (`Observations.span_frames`)."""
+        return None if self.obs.span_frames is None else self.obs.span_frames.frames
+
+    def unit_scatter(self) -> np.ndarray | None:
+        """Their scatter about each corner's mean [px^2] (`Observations.span_frames`)."""
+        return None if self.obs.span_frames is None else self.obs.span_frames.scatter
+
     def start_noise(self, priors: PriorConfig) -> float:
         """The configured corner detection noise (`priors.pixel_noise`) [px]."""
         return priors.pixel_noise

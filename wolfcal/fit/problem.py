@@ -57,6 +57,8 @@ class BlockState:
         self.labels = block.shared_labels()  # (U,) fixed: derived once
         self.classes = block.noise_classes()  # (U,) fixed: derived once
         self.unit_scale = np.ones(block.n_units)  # (U,) each unit's noise level relative to sigma (its class's)
+        self.frames = block.unit_frames()  # (U,) frames averaged into each unit, None: one each
+        self.scatter = block.unit_scatter()  # (U, dim) their squared deviations about the unit's mean
         self.whitening: GroupedWhitening | None = None
 
     def shared_size(self, sigma: float) -> float:
@@ -65,8 +67,17 @@ class BlockState:
 
     @property
     def row_scale(self) -> np.ndarray:
-        """(R,) each residual row's noise level relative to sigma."""
-        return np.repeat(self.unit_scale, self.block.dim)
+        """(R,) each residual row's noise level relative to sigma: its class's, over sqrt(frames) of a mean."""
+        scale = self.unit_scale if self.frames is None else self.unit_scale / np.sqrt(self.frames)
+        return np.repeat(scale, self.block.dim)
+
+    def frame_scatter(self) -> tuple[float, float]:
+        """(sum of squared deviations [unit^2], degrees of freedom) of the frames averaged into the inlier units
+        about their means (`Block.unit_scatter`); (0, 0) when the units are single measurements."""
+        if self.frames is None or self.scatter is None:
+            return 0.0, 0.0
+        inlier = self.inlier_units
+        return float(np.sum(self.scatter[inlier])), float(np.sum(self.frames[inlier] - 1) * self.block.dim)
 
     @property
     def inlier_units(self) -> np.ndarray:
@@ -86,7 +97,9 @@ class BlockState:
         self.reading_of_unit = _one_group(reading)
         per_joint = np.any(reading != reading[:, :1], axis=1).any()
         label = np.where(self.inlier_units, self.labels, -1)
-        counts = np.bincount(label[label >= 0]) if np.any(label >= 0) else np.zeros(0, int)
+        # shared by at least two measurements: units, or the frames averaged into them
+        weights = None if self.frames is None else self.frames[label >= 0]
+        counts = np.bincount(label[label >= 0], weights) if np.any(label >= 0) else np.zeros(0, int)
         label = np.where((label >= 0) & (counts[np.maximum(label, 0)] >= 2) if len(counts) else False, label, -1)
         return SharedErrors(
             A=A,

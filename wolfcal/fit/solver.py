@@ -26,6 +26,8 @@ from wolfcal.fit.problem import MAD_TO_SIGMA, BlockState, Problem
 from wolfcal.fit.uncertainty import Uncertainty, information_uncertainty
 from wolfcal.observations import rms_by
 
+Standardizer = Callable[[float], tuple[np.ndarray, np.ndarray]]  # `GroupedWhitening.standardizer`
+
 # A round's solve (before its outlier and noise update) stops once a step gains less than this in cost (half the
 # whitened sum of squares): within about 0.05 standard deviations of the round's optimum, where the robust loss's
 # linear arms would otherwise take many small steps. The solve after the last round converges fully.
@@ -165,26 +167,54 @@ def _scale_above_one(w: np.ndarray, dof: np.ndarray, n_params: float) -> bool:
     return weighted_median_above(np.abs(w, out=w), dof, 1.0 / (MAD_TO_SIGMA * np.sqrt(n / (n - n_params))))
 
 
+def _pooled_scale(w: np.ndarray, dof: np.ndarray, n_params: float, scatter: tuple[float, float], sigma: float) -> float:
+    """The scale of a block whose units are means of frames: the squares of `_robust_scale` of its standardised
+    numbers and of the frames' scatter about their means at the level `sigma` (sum of squares / sigma^2 per degree
+    of freedom), pooled by their degrees of freedom."""
+    squares, frame_dof = scatter
+    n = float(np.sum(dof))
+    model = _robust_scale(w, dof, n_params) ** 2 * max(n - n_params, 0.0)
+    return float(np.sqrt((model + squares / sigma**2) / (max(n - n_params, 0.0) + frame_dof)))
+
+
+def _scale_at(standardized: Standardizer, sigma: float, n_params: float, scatter: tuple[float, float]) -> float:
+    """The scale `estimate_noise` brings to 1, at the level `sigma` (`standardized`: `GroupedWhitening.standardizer`
+    of the residuals; `scatter`: `BlockState.frame_scatter`)."""
+    if scatter[1] > 0:
+        return _pooled_scale(*standardized(sigma), n_params, scatter, sigma)
+    return _robust_scale(*standardized(sigma), n_params)
+
+
+def _above_one(standardized: Standardizer, sigma: float, n_params: float, scatter: tuple[float, float]) -> bool:
+    """Whether `_scale_at` exceeds 1 (without a sort when the units are single measurements)."""
+    if scatter[1] > 0:
+        return _scale_at(standardized, sigma, n_params, scatter) > 1.0
+    return _scale_above_one(*standardized(sigma), n_params)
+
+
 def estimate_noise(state: BlockState, residual: np.ndarray, n_params: float) -> float:
     """Set the block's noise level so that its whitened inlier residuals have unit scale (bisection on the log,
     within the block's `noise_min` .. `noise_max` [unit]); returns the residual scale reached (`residual_scale`,
-    from the search's own standardised numbers unless setting the level decomposed the groups again)."""
+    from the search's own standardised numbers unless setting the level decomposed the groups again). Units that
+    are means of frames (`Block.unit_frames`) add the frames' scatter about their means (`_pooled_scale`): the
+    frame-to-frame noise that the means no longer show."""
     standardized = state.noise_model.standardizer(residual.ravel())
+    scatter = state.frame_scatter()
     lo, hi = np.log(state.block.noise_min), np.log(state.block.noise_max)
     # The scale falls as the level grows: at or below 1 at the floor, every step of the search goes down (the same
     # steps, without evaluating them; the level of a block more precise than the floor, e.g. rendered captures).
-    at_floor = not _scale_above_one(*standardized(float(np.exp(lo))), n_params)
+    at_floor = not _above_one(standardized, float(np.exp(lo)), n_params, scatter)
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        if not at_floor and _scale_above_one(*standardized(float(np.exp(mid))), n_params):
+        if not at_floor and _above_one(standardized, float(np.exp(mid)), n_params, scatter):
             lo = mid
         else:
             hi = mid
     sigma = float(np.exp(hi))
-    scale = _robust_scale(*standardized(sigma), n_params)
+    scale = _scale_at(standardized, sigma, n_params, scatter)
     del standardized  # its arrays are not kept while set_sigma may decompose the groups again
     if state.set_sigma(sigma):  # another noise model: its own standardised numbers
-        return residual_scale(state, residual, state.sigma, n_params)
+        return _scale_at(state.noise_model.standardizer(residual.ravel()), state.sigma, n_params, scatter)
     return scale
 
 

@@ -27,12 +27,14 @@ def tag_view_report(block: TagViewBlock, fitted: FittedBlock) -> dict:
         outlier_tags.setdefault(s, []).append(t)
     rule = block.unit_rule  # single corners left out one by one (None: the block has no such rule)
     corners = outlier_corners(block, fitted) if rule is not None else None
+    spans = obs.span_frames  # each sample a still span's frames averaged (`wolfcal.spans`), or None
     samples = []
     for i in range(obs.n_samples):
         samples.append({
             "index": i,
             "source": Path(obs.sources[i]).name,
             "stamp_ns": int(obs.stamps_ns[i]),
+            **({"frames": int(spans.frames_of_sample[i])} if spans is not None else {}),
             "tags": tags[i],
             f"rms_before_{unit}": round(float(b.sample_rms_before[i]), 4),
             f"rms_after_{unit}": round(float(b.sample_rms_after[i]), 4),
@@ -56,12 +58,22 @@ def tag_view_report(block: TagViewBlock, fitted: FittedBlock) -> dict:
         "unit": unit,
         "tags_used": block.tag_ids,
         "rms_meaning": f"per-axis RMS of corner residuals in {unit} (sqrt(mean(du^2 + dv^2) / 2)), inlier views"
-        + (", single corners left out excluded" if rule is not None else ""),
+        + (", single corners left out excluded" if rule is not None else "")
+        + (", each corner the mean over its still span's frames" if spans is not None else ""),
         f"rms_before_{unit}": round(b.rms_before, 4),
         f"rms_after_{unit}": round(b.rms_after, 4),
         f"max_after_{unit}": round(b.max_after, 4),
         f"noise_sigma_{unit}": round(b.sigma, 4),
         "n_samples": obs.n_samples,
+        **(
+            {
+                "samples_meaning": "each sample is one still span of a recording: its frames' corners averaged",
+                "n_frames": int(spans.frames_of_sample.sum()),
+                "n_frame_views_left_out": spans.left_out,  # far from their span's other frames, before averaging
+            }
+            if spans is not None
+            else {}
+        ),
         "n_outlier_samples": sum(s["outlier"] for s in samples),
         "n_outlier_views": len(b.outlier_views),
         **corner_keys,

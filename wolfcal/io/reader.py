@@ -5,14 +5,15 @@ Cameras: the head camera ('head', topics `camera.topic` / `camera.info_topic`) a
 (written by `CaptureWriter`) holds one JointState per sample, with the stamp of the sample's images: every image is
 used. Any other file is read as a recording: each camera's images are paired with the joint states around them and
 kept only when the robot was still, and kept frames of different cameras within 0.02 s of each other form one sample
-(see `wolfcal.io.recording`). Intrinsics per camera: see `intrinsics_choice` (`--intrinsics` applies to the head
-camera only). One pass: frames are paired with the joint states as they are read (`wolfcal.io.pairing`: a window
-of a few seconds of joint states; a file whose stamps are further out of order is read again and paired on the whole
-log) and kept from stamps and image headers; a kept image holds only its location in the file (`wolfcal.io.stream`),
-its bytes are read back when they are detected or drawn. Memory does not grow with the images or the joint states.
-The images' checks are remembered beside the detection cache (`_Checks`, `wolfcal.io.filememo`): a second read of an
-unchanged file takes them from there and reads only the first bytes of each png image message (`iter_message_heads`),
-so a fit from cached detections reads no image.
+(see `wolfcal.io.recording`); each kept image names its still span (`SampleImage.span`: the camera's frames of one
+still pose, `still_spans`), which a fit averages into one sample. Intrinsics per camera: see `intrinsics_choice`
+(`--intrinsics` applies to the head camera only). One pass: frames are paired with the joint states as they are read
+(`wolfcal.io.pairing`: a window of a few seconds of joint states; a file whose stamps are further out of order is
+read again and paired on the whole log) and kept from stamps and image headers; a kept image holds only its location
+in the file (`wolfcal.io.stream`), its bytes are read back when they are detected or drawn. Memory does not grow
+with the images or the joint states. The images' checks are remembered beside the detection cache (`_Checks`,
+`wolfcal.io.filememo`): a second read of an unchanged file takes them from there and reads only the first bytes of
+each png image message (`iter_message_heads`), so a fit from cached detections reads no image.
 
 Unusable data (`wolfcal.io.validate`, `wolfcal.camera.validate`): every CameraInfo and intrinsics file is validated
 (errors name file, topic and field); joint states with NaN or infinite positions are left out with a note naming
@@ -46,7 +47,7 @@ from wolfcal.io.mcapfile import channel_decoder, check_mcap, is_finished, messag
 from wolfcal.io.message_heads import iter_message_heads
 from wolfcal.io.msgdefs import CONFIG_ATTACHMENT, URDF_ATTACHMENT, header_stamp_ns
 from wolfcal.io.pairing import DISORDER_NS, Disorder, FramePairer, Pairing
-from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp
+from wolfcal.io.recording import SAMPLE_TOLERANCE_NS, Paired, group_by_stamp, still_spans
 from wolfcal.io.samples import HEAD_CAMERA, Capture, Sample, SampleImage
 from wolfcal.io.stream import ImageLocation
 from wolfcal.io.validate import drop_damaged_images, finite_joint_note
@@ -340,26 +341,33 @@ def _keep_frames(
     mine = sorted((f for f in read.pairing.frames if f.camera == name), key=lambda f: f.stamp)
     start = int(read.stamps[name][0]) if len(read.stamps[name]) else 0
     kept: dict[int, _Frame] = {}
+    readings: list[np.ndarray | None] = []  # per image in stamp order: its readings when kept (`still_spans`)
     for frame in mine:
         header: _Header = frame.item  # type: ignore[assignment]
         stamp, kind, size, damage, log_time = header
         where = f"'{name}' image {(stamp - start) / 1e9:.3f} s after its first (stamp {stamp} ns)"
         if kind is None or size is None:
             skipped.append(f"{where}: not a png or jpeg image")
-            continue
-        if frame.bad_stamp:
+            readings.append(None)
             continue
         paired = frame.result
-        if not isinstance(paired, Paired):
-            skipped.append(f"{where}: {paired}")
+        if frame.bad_stamp or not isinstance(paired, Paired):
+            if not frame.bad_stamp:
+                skipped.append(f"{where}: {paired}")
+            readings.append(None)
             continue
         if stamp in kept:
             skipped.append(f"{where}: a second image with the same stamp")
             continue
+        readings.append(paired.positions)
         info = infos[int(np.argmin(np.abs(info_stamps - stamp)))][1] if len(infos) else None
         location = ImageLocation(path, topic, log_time, stamp)
         image = SampleImage(b"", kind, chooser.for_image(size, info), source, stamp, location)
         kept[stamp] = _Frame(name, stamp, image, paired, damage)
+    if not read.pairing.exact:  # a recording: its frames' still spans (a capture file's samples stand alone)
+        spans = iter(span for span in still_spans(readings) if span >= 0)
+        for kept_frame in kept.values():
+            kept_frame.image.span = next(spans)
     return list(kept.values())
 
 

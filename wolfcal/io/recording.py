@@ -10,6 +10,11 @@ for every joint:
 Joint states are kept per joint, so recordings in which several publishers share the topic (e.g. legs and
 head on separate messages) pair too.
 
+Still spans: the kept frames of one camera that follow each other with no frame left out between them and whose
+joint readings all lie within one encoder tick of each other (per joint) form one still span (`still_spans`): one
+still pose seen again and again. A fit of a recording averages each span's corners into one sample
+(`wolfcal.spans`).
+
 Several cameras: each camera's frames are paired and tested on their own; kept frames of different cameras whose
 stamps lie within `SAMPLE_TOLERANCE_NS` of the group's first frame form one sample (one frame per camera), others
 are separate samples. In a capture file the frames of one sample share one stamp exactly.
@@ -226,3 +231,28 @@ def group_by_stamp(stamps: Sequence[int], cameras: Sequence[str], tolerance_ns: 
         else:
             groups.append([i])
     return groups
+
+
+def still_spans(readings: Sequence[np.ndarray | None]) -> list[int]:
+    """Still span of each frame of one camera, in stamp order: `readings` holds each frame's joint readings (J,)
+    [rad], or None for a frame that was not kept (it ends the span before it). A frame joins the current span when
+    the frame before it was kept and each joint's readings over the span, its own included, stay within one encoder
+    tick; spans are numbered 0, 1, ... in order; -1 for frames not kept."""
+    out: list[int] = []
+    span, low, high = -1, None, None
+    previous_kept = False
+    for q in readings:
+        if q is None:
+            out.append(-1)
+            previous_kept = False
+            continue
+        if previous_kept and low is not None and high is not None:
+            new_low, new_high = np.minimum(low, q), np.maximum(high, q)
+            if np.all(new_high - new_low <= ENCODER_TICK + 1e-9):
+                low, high = new_low, new_high
+                out.append(span)
+                continue
+        span, low, high = span + 1, q, q
+        out.append(span)
+        previous_kept = True
+    return out

@@ -4,7 +4,9 @@ A sample is one still moment: the joint angles the encoders reported (radians, `
 offset) and the image of each camera that saw the moment: the head camera (`HEAD_CAMERA`) and/or external cameras
 (by their config names). An image read from a file holds only its location there, and its bytes are read back
 when needed (`wolfcal.io.stream`; hundreds of full-resolution images do not fit in memory at once); an image made
-in memory holds its encoded bytes. Each has the intrinsics at its own resolution (binning already applied).
+in memory holds its encoded bytes. Each has the intrinsics at its own resolution (binning already applied). A frame of a
+plain recording also names its still span (frames of one camera at one still pose, one after the other), which a fit
+averages into one sample; a capture file's samples have none.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ class SampleImage:
     source: str = ""  # capture file and topic, for messages
     stamp_ns: int = 0  # header stamp of the image [ns]
     location: ImageLocation | None = None  # where its bytes lie in the file it was read from
+    span: int = -1  # still span of a recording's frame (`wolfcal.io.recording.still_spans`), per camera; -1: none
 
     def encoded(self) -> bytes:
         """The encoded bytes (read from the file when the image holds only its location)."""

@@ -77,6 +77,7 @@ def _stack(name: str, robot: Robot, samples: list[Sample], views: FoundTags, cam
         ids[keep].copy(),
         corners[keep].copy(),
         name,
+        np.array([s.images[name].span for s in samples], dtype=np.int64),
     )
 
 
