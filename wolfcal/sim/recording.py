@@ -4,9 +4,10 @@ between still poses while joint states, images and camera info stream with their
 Per still pose: `move_s` of smooth motion from the previous pose, then `hold_s` still. Joint states at
 `joint_rate_hz` (encoder readings: true angle minus the true offset, quantised to ticks; with `flicker` a reading
 near a tick boundary flips between the two neighbouring ticks from message to message, as a servo's encoder does),
-images of the head camera at `image_rate_hz` (rendered at the true angles of their own stamp, each with its own
-image noise), camera info at 1 Hz. Messages are written with mcap_ros2 directly. `simulate_recording` draws a
-truth and still poses in which the head camera sees a tag and writes such a recording of them.
+images of the head camera at `image_rate_hz` (rendered at the true angles of their own stamp, a held pose's view
+once, each frame with image noise of its own), camera info at 1 Hz. Messages are written with mcap_ros2 directly.
+`simulate_recording` draws a truth and still poses in which the head camera sees a tag and writes such a recording
+of them.
 """
 
 from __future__ import annotations
@@ -58,7 +59,18 @@ def write_recording(
 ) -> None:
     """Write the recording of true still poses (P, J) [rad] seen by the head camera `camera` (the images' size)."""
     rng = np.random.default_rng(options.seed)
-    scene = SimScene(robot, truth, camera, seed=options.seed + 1, noise_sigma=options.noise_sigma)
+    scene = SimScene(robot, truth, camera, seed=options.seed + 1, noise_sigma=0.0)
+    held: list = [None, None]  # the still pose being held (its readings' bytes) and its noise-free view
+
+    def image_at(t: float) -> np.ndarray:
+        """The gray image at time t: the noise-free view at the true angles (a held pose's rendered once) plus
+        image noise of its own."""
+        q = q_at(t)
+        if held[0] != q.tobytes():
+            held[:] = [q.tobytes(), scene.render_true(q).astype(np.float32)]
+        noisy = held[1] + options.noise_sigma * rng.standard_normal(held[1].shape, dtype=np.float32)
+        return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+
     offsets = truth.offset_vector(robot.joint_names)
     period = options.move_s + options.hold_s
 
@@ -86,7 +98,7 @@ def write_recording(
                            "effort": []}  # fmt: skip
                 writer.write_message(config.joint_states_topic, schemas[JOINT_STATE], message, log_time=stamp)
             elif kind == "image":
-                png = cv2.imencode(".png", scene.render_true(q_at(t)))[1].tobytes()
+                png = cv2.imencode(".png", image_at(t))[1].tobytes()
                 message = {"header": header, "format": "png", "data": png}
                 writer.write_message(head.topic, schemas[COMPRESSED_IMAGE], message, log_time=stamp)
             else:
