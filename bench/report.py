@@ -38,6 +38,16 @@ def _when(part: dict) -> str:
     return f"taken {part['taken']}, load average {part['load_average']:.1f} at the end, {part['seconds']:.0f} s"
 
 
+def _code_lines(results: dict) -> list[str]:
+    """Which code each row ran, per part (`commit_of`): the parts may have been measured against different code."""
+    lines = []
+    for part, what in (("fit", "camera fit"), ("stream", "memory")):
+        code = results.get(part, {}).get("code")
+        if code:
+            lines.append(f"- {what} ({part} part): " + "; ".join(f"{label}: {c}" for label, c in code.items()))
+    return [*lines, ""] if lines else []
+
+
 def targets_section(results: dict) -> list[str]:
     rows = []
     for row in results.get("targets", []):
@@ -63,12 +73,13 @@ def targets_section(results: dict) -> list[str]:
     return [
         "## Targets",
         "",
-        "Medians over the rounds; `before` and `after` ran alternately in one session. Cached fit: `run_fit` in a "
+        "Medians over the rounds; in each part `before` and `after` ran alternately in one session (the code of each below). Cached fit: `run_fit` in a "
         "process that has run one fit already (in brackets: a whole `wolfcal fit` process, start-up and imports "
         "included). First run over the floor: the ratio of wall times, per round, its median (in brackets: of CPU "
         "times, which a busy machine disturbs less). Peak memory: the "
         f"resident peak of a whole `wolfcal fit --free camera --no-cache` process, frames of {size}.",
         "",
+        *_code_lines(results),
         *_table(
             [
                 "code",

@@ -20,6 +20,7 @@ import argparse
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -80,6 +81,8 @@ def main() -> None:
             results["seeds"] = seeds(args.seeds, args.binning, say)
         else:
             results[part] = in_process_part(part, args, say)
+        if part in ("fit", "stream"):
+            results[part]["code"] = {label: commit_of(path) for label, path in trees.items()}
         results[part]["seconds"] = time.perf_counter() - start
         results[part]["taken"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
         results[part]["load_average"] = os.getloadavg()[0]
@@ -91,6 +94,20 @@ def main() -> None:
     }
     args.out.write_text(json.dumps(results, indent=1, default=_plain) + "\n")
     say(f"wrote {args.out}")
+
+
+def commit_of(tree: Path) -> str:
+    """The commit a checkout holds, as `<short hash> <subject>` (", with uncommitted changes" when it has some);
+    "unknown" outside git."""
+
+    def git(*args: str) -> str:
+        run = subprocess.run(["git", "-C", str(tree), *args], capture_output=True, text=True)
+        return run.stdout.strip() if run.returncode == 0 else ""
+
+    head = git("log", "-1", "--format=%h %s")
+    if not head:
+        return "unknown"
+    return head + (", with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def in_process_part(part: str, args: argparse.Namespace, say) -> dict:
