@@ -73,7 +73,8 @@ def targets_section(results: dict) -> list[str]:
     return [
         "## Targets",
         "",
-        "Medians over the rounds; in each part `before` and `after` ran alternately in one session (the code of each below). Cached fit: `run_fit` in a "
+        "Medians over the rounds; in each part `before` and `after` ran alternately in one session (the code of "
+        "each below). Cached fit: `run_fit` in a "
         "process that has run one fit already (in brackets: a whole `wolfcal fit` process, start-up and imports "
         "included). First run over the floor: the ratio of wall times, per round, its median (in brackets: of CPU "
         "times, which a busy machine disturbs less). Peak memory: the "
