@@ -34,9 +34,9 @@ MEANINGS = {
 # metrics['meanings']['samples'] of observations summarised by still span (a plain recording, `wolfcal.spans`)
 SPAN_MEANING = (
     "each sample is one still span of a plain recording, as the fit takes it: per tag corner the mean of the span's "
-    "frames that saw it, the span's median joint readings, its first frame's stamp; every pixel and tag-grid figure "
-    "is of these means (a mean of n frames carries about 1/sqrt(n) of one frame's random detection noise, but all "
-    "of a model error and of a detection error that repeats at one pose)"
+    "frames that saw it, the span's median joint readings, the stamp of its first frame with a tag seen; every "
+    "pixel and tag-grid figure is of these means (a mean of n frames carries about 1/sqrt(n) of one frame's random "
+    "detection noise, but all of a model error and of a detection error that repeats at one pose)"
 )
 
 

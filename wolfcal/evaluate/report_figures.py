@@ -2,8 +2,8 @@
 corners and the kinematic skeleton projected into the camera image, the parameter correlation). Drawing is `figures`.
 
 Pixels [px] follow OpenCV (centre of the top-left pixel at (0, 0)) at the captured image's resolution. A sample that
-is a still span of a recording (`wolfcal.spans`) is drawn on the span's first frame (the sample's stamp), its detected
-corners the means over the span's frames; the captions say so.
+is a still span of a recording (`wolfcal.spans`) is drawn on the span's first frame with a tag seen (the sample's
+stamp), its detected corners the means over the span's frames; the captions say so.
 """
 
 from __future__ import annotations
@@ -148,8 +148,8 @@ def _overlays(
             + (" (outlier)" if outliers[s] else ""),
         )
         span = "" if obs.span_frames is None else (
-            f"; a still span of {int(obs.span_frames.frames_of_sample[s])} frames drawn on its first frame, the "
-            "green rings its frames' mean corners")  # fmt: skip
+            f"; a still span of {int(obs.span_frames.frames_of_sample[s])} frames drawn on its first frame with a tag "
+            "seen, the green rings its frames' mean corners")  # fmt: skip
         captions.append(
             (
                 name,
