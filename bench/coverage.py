@@ -14,10 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples, still_span_observations
+from wolfcal.fit.pipeline import FitOptions, fit_observations, load_samples
 from wolfcal.observations import HEAD_CAMERA
 from wolfcal.robot.robot import load_robot
 from wolfcal.sim.recording import RecordingOptions, simulate_recording
+from wolfcal.spans import still_span_observations
 from wolfcal.vision.observe import detect_observations
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "wolfgang"
@@ -28,7 +29,7 @@ def z_scores(robot, truth, path: Path, free: str):
     span)."""
     samples, _ = load_samples(robot, [path], None)
     options = FitOptions(free=free)
-    obs = still_span_observations(robot, detect_observations(samples, robot)[0], options)[HEAD_CAMERA]
+    obs = still_span_observations(robot.config, detect_observations(samples, robot)[0])[HEAD_CAMERA]
     fit = fit_observations(robot, obs, options)
     z = np.abs(fit.solution.values - fit.params.values_from(truth)) / fit.solution.std
     return fit, z

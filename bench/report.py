@@ -121,7 +121,8 @@ def fit_section(fit: dict) -> list[str]:
     ]
 
 
-def stream_section(stream: dict) -> list[str]:
+def stream_section(stream: dict, command: str = "fit --free camera --no-cache", used: str = "fit") -> list[str]:
+    """The peaks, wall and CPU times of a `wolfcal` command on the long recordings (`stream`, `evaluate` parts)."""
     rows = []
     for label, figures in stream["trees"].items():
         for n in map(str, stream["frames"]):
@@ -139,12 +140,12 @@ def stream_section(stream: dict) -> list[str]:
             )
     size = "x".join(map(str, stream["size"]))
     return [
-        "## Memory on long recordings",
+        "## Memory on long recordings" + ("" if used == "fit" else f": {command.split()[0]}"),
         "",
         f"Plain ROS 2 recordings, head camera at 10 Hz ({size} jpeg), joint states at 100 Hz, the robot holding "
-        f"a pose for 2 s and moving for 1 s; `wolfcal fit --free camera --no-cache`; {_when(stream)}.",
+        f"a pose for 2 s and moving for 1 s; `wolfcal {command}`; {_when(stream)}.",
         "",
-        *_table(["code", "frames", "file", "peak RSS", "wall", "CPU", "fit"], rows),
+        *_table(["code", "frames", "file", "peak RSS", "wall", "CPU", used], rows),
     ]
 
 
@@ -163,6 +164,8 @@ def performance(results: dict) -> str:
         lines += fit_section(results["fit"])
     if "stream" in results:
         lines += stream_section(results["stream"])
+    if "evaluate" in results:
+        lines += stream_section(results["evaluate"], "evaluate FIT --no-cache", "judged by cross-validation")
     lines += performance_parts(results)
     return HEADER + "\n".join(lines).rstrip() + "\n"
 

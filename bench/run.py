@@ -4,15 +4,15 @@ tables).
     python bench/run.py [--parts fit,stream,...] [--out bench/results.json] [--before PATH] [--rounds 3]
                         [--frames 600,6000] [--stream-binning 4] [--seeds 3] ...
 
-Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memory of `wolfcal fit`), `detection`,
-`intrinsics`, `seeds` (accuracy against simulated truth), `solve` (solve time on synthetic samples), `stability` (how
-far a fit moves under changes that should not matter), `recordings` (std coverage on continuous recordings), `floor`
-(the venue's floor check on rendered views), `plan` (planned against random poses), `compare` (every measurement
-system on one session), `mocap` (motion capture on another robot's data), `bus` and `capture` (the servo bus
-emulator), `venue` (robot time of a venue session against single commands). `--before PATH`: a folder holding an older
-`wolfcal` package; `fit` and `stream` then run on both, alternating which goes first. Results of the parts run are
-merged into the JSON file (other parts' results are kept). Generated inputs are kept in the temp folder
-(`common.DATA`)."""
+Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memory of `wolfcal fit`), `evaluate`
+(the same of `wolfcal evaluate`), `detection`, `intrinsics`, `seeds` (accuracy against simulated truth), `solve` (solve
+time on synthetic samples), `stability` (how far a fit moves under changes that should not matter), `recordings` (std
+coverage on continuous recordings), `floor` (the venue's floor check on rendered views), `plan` (planned against random
+poses), `compare` (every measurement system on one session), `mocap` (motion capture on another robot's data), `bus`
+and `capture` (the servo bus emulator), `venue` (robot time of a venue session against single commands). `--before
+PATH`: a folder holding an older `wolfcal` package; `fit`, `stream` and `evaluate` then run on both, alternating which
+goes first. Results of the parts run are merged into the JSON file (other parts' results are kept). Generated inputs
+are kept in the temp folder (`common.DATA`)."""
 
 from __future__ import annotations
 
@@ -29,10 +29,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 from common import ROOT, start_spawner  # noqa: E402
 from quality import detection, intrinsics, seeds  # noqa: E402
-from targets import fit_speed, stream_memory, targets  # noqa: E402
+from targets import evaluate_memory, fit_speed, stream_memory, targets  # noqa: E402
 
-PARTS = ("fit", "stream", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor", "plan",
-         "compare", "mocap", "bus", "capture", "venue")  # fmt: skip
+PARTS = ("fit", "stream", "evaluate", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor",
+         "plan", "compare", "mocap", "bus", "capture", "venue")  # fmt: skip
 DEFAULT_PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")  # about a minute; the others take longer
 
 
@@ -73,6 +73,9 @@ def main() -> None:
         elif part == "stream":
             frames = [int(n) for n in args.frames.split(",")]
             results["stream"] = stream_memory(trees, frames, args.stream_binning, args.stream_rounds, say)
+        elif part == "evaluate":
+            frames = [int(n) for n in args.frames.split(",")]
+            results["evaluate"] = evaluate_memory(trees, frames, args.stream_binning, args.stream_rounds, say)
         elif part == "detection":
             results["detection"] = detection(args.views, say)
         elif part == "intrinsics":

@@ -1,14 +1,15 @@
 """The speed and memory parts: a camera fit's first and cached runs against the detection floor, and the peak
-memory of fits on long recordings. Each runs on every tree given (this checkout, and an older one to compare
-with), alternating which runs first (`common.alternating`).
+memory of fits and of their evaluations on long recordings. Each runs on every tree given (this checkout, and an
+older one to compare with), alternating which runs first (`common.alternating`).
 """
 
 from __future__ import annotations
 
+import json
 import tempfile
 from pathlib import Path
 
-from common import CONFIG, DATA, alternating, run_child, summary
+from common import CONFIG, DATA, ROOT, alternating, run_child, summary
 from recording import recording
 
 CHILD = str(Path(__file__).resolve().parent / "child.py")
@@ -91,34 +92,54 @@ def fit_speed(trees: dict[str, Path], rounds: int, say) -> dict:
 def stream_memory(trees: dict[str, Path], frames: list[int], binning: int, rounds: int, say) -> dict:
     """Per tree and recording length: peak RSS [MB], wall and CPU [s] of a whole `wolfcal fit --free camera
     --no-cache` process on a plain recording (`recording.recording`), and the samples it used."""
+
+    def fit(path: Path, out: Path) -> list[str]:
+        return ["fit", str(path), "--robot", str(CONFIG), "--free", "camera", "--out", str(out), "--no-cache"]
+
+    def used(run, _out: Path) -> str:
+        return next((line.strip() for line in run.output.splitlines() if line.startswith("head camera:")), "")
+
+    return _recording_runs(trees, frames, binning, rounds, "stream", fit, used, say)
+
+
+def evaluate_memory(trees: dict[str, Path], frames: list[int], binning: int, rounds: int, say) -> dict:
+    """Per tree and recording length: peak RSS [MB], wall and CPU [s] of a whole `wolfcal evaluate --no-cache`
+    process (cross-validation over the fit's samples) on a fit of a plain recording (`wolfcal fit --free camera`
+    by this checkout, made once, not measured), and the samples it judged."""
+    fits: dict[Path, Path] = {}
+
+    def evaluate(path: Path, out: Path) -> list[str]:
+        if path not in fits:
+            fits[path] = out.parent / f"fit_{path.stem}"
+            run_child(ROOT, [*CLI, "fit", str(path), "--robot", str(CONFIG), "--free", "camera", "--out",
+                             str(fits[path])])  # fmt: skip
+        return ["evaluate", str(fits[path]), "--out", str(out), "--no-cache", "--deploy-worse"]
+
+    def judged(_run, out: Path) -> str:
+        metrics = json.loads((out / "metrics.json").read_text())
+        spans = f" (still spans of {metrics['n_frames']} frames)" if "n_frames" in metrics else ""
+        return f"{metrics['n_samples']} samples{spans}, {metrics['folds']} folds"
+
+    return _recording_runs(trees, frames, binning, rounds, "evaluate", evaluate, judged, say)
+
+
+def _recording_runs(trees, frames, binning, rounds, name, argv, line, say) -> dict:
+    """Per tree and recording length: the figures of a whole `wolfcal` process, `argv(recording, out folder)` its
+    arguments, `line(run, out folder)` what it says it used."""
     paths = {n: recording(DATA, n, binning) for n in frames}
     out: dict[str, dict] = {label: {} for label in trees}
     with tempfile.TemporaryDirectory() as scratch:
         for k, label, tree in alternating(trees, rounds):
             for n, path in paths.items():
+                arguments = argv(path, Path(scratch) / "out")
                 _warm(path)
-                run = run_child(
-                    tree,
-                    [
-                        *CLI,
-                        "fit",
-                        str(path),
-                        "--robot",
-                        str(CONFIG),
-                        "--free",
-                        "camera",
-                        "--out",
-                        str(Path(scratch) / "out"),
-                        "--no-cache",
-                        "--force",
-                    ],
-                )
-                used = next((line.strip() for line in run.output.splitlines() if line.startswith("head camera:")), "")
+                run = run_child(tree, [*CLI, *arguments, "--force"])
+                used = line(run, Path(scratch) / "out")
                 entry = out[label].setdefault(str(n), {"peak_mb": [], "wall": [], "cpu": [], "line": used})
                 entry["peak_mb"].append(run.peak_mb)
                 entry["wall"].append(run.wall)
                 entry["cpu"].append(run.cpu)
-                say(f"stream {label} round {k + 1}: {n} frames, peak {run.peak_mb:.0f} MB, {run.wall:.1f} s; {used}")
+                say(f"{name} {label} round {k + 1}: {n} frames, peak {run.peak_mb:.0f} MB, {run.wall:.1f} s; {used}")
     for figures in out.values():
         for entry in figures.values():
             for key in ("peak_mb", "wall", "cpu"):

@@ -11,13 +11,20 @@ Before averaging, a frame's view of a tag (its four corners) far from the span's
 out: spread = its per-axis RMS distance from the span's per-corner median, judged by `SPAN_FRAME_PX` against the
 median spread of all such views (views of a tag seen in fewer than three frames of a span are never judged: no
 majority to judge them by).
+
+`still_span_observations` is the one place that decides which cameras' observations are summarised: the fit, the
+evaluation (cross-validation and held-out recordings) and `wolfcal compare` all call it, so that a "sample" means
+the same to each of them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
-from wolfcal.observations import Observations, SpanFrames
+from wolfcal.config import RobotConfig
+from wolfcal.observations import HEAD_CAMERA, Observations, SpanFrames
 from wolfcal.outliers import SPAN_FRAME_PX, OutlierRule
 
 MIN_JUDGED_FRAMES = 3  # frames of one tag in one span from which a frame's view can be judged against the others
@@ -104,3 +111,24 @@ def summarize_spans(obs: Observations, rule: OutlierRule = SPAN_FRAME_PX) -> Obs
         camera_name=obs.camera_name,
         span_frames=SpanFrames(np.bincount(member, minlength=len(spans_kept)), frames, scatter, int(far.sum())),
     )
+
+
+def still_span_observations(
+    config: RobotConfig, observations: Mapping[str, Observations], external_moving: bool = False
+) -> dict[str, Observations]:
+    """Each camera's frames of plain recordings averaged per still span (`summarize_spans`; capture files' samples
+    stay as they are). Not for a camera that sees floor tags (the floor block weighs single frames) nor for an
+    external camera with one pose per sample (`external_moving`: --external-moving)."""
+    floor_ids = config.floor.tag_ids if config.floor is not None else []
+    out = {}
+    for name, obs in observations.items():
+        moving = name != HEAD_CAMERA and external_moving
+        out[name] = obs if moving or np.isin(obs.tag_ids, floor_ids).any() else summarize_spans(obs)
+    return out
+
+
+def sample_count(obs: Observations) -> str:
+    """How many samples, in words: 'N sample(s)', or 'N still span(s) of M frames' (`Observations.span_frames`)."""
+    if obs.span_frames is None:
+        return f"{obs.n_samples} sample(s)"
+    return f"{obs.n_samples} still span(s) of {int(obs.span_frames.frames_of_sample.sum())} frames"

@@ -54,6 +54,7 @@ from wolfcal.outputs import check_output_folder
 from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 from wolfcal.robot.robot import Robot
+from wolfcal.spans import sample_count, still_span_observations
 from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations
 
@@ -71,6 +72,7 @@ class Calibration:
     preset: str  # --free (and --side)
     corrections: Corrections
     corner_inset: tuple[float, float] | None = None  # the fit's floor.corner_inset and 1-sigma [px], if it had one
+    external_moving: bool = False  # the fit took one external-camera pose per sample (--external-moving)
 
 
 @dataclass
@@ -100,7 +102,8 @@ def _calibrations(fit_dirs: list[Path]) -> tuple[Robot, list[Calibration], list[
         preset = result.free + ("" if result.side == "both" else f" ({result.side})")
         system = ", ".join(result.systems_used) or result.system
         calibrations.append(Calibration(Path(fit_dir).name, str(Path(fit_dir).resolve()), system, preset,
-                                        result.corrections, result.estimate(CORNER_INSET)))  # fmt: skip
+                                        result.corrections, result.estimate(CORNER_INSET),
+                                        result.external_moving))  # fmt: skip
         used.append(result.captures)
     assert robot is not None  # fit_dirs is not empty
     labels = [c.label for c in calibrations]
@@ -131,22 +134,24 @@ def _head_columns(
     say: Callable,
     corner_inset: tuple[float, float],
 ) -> list[Column]:
-    """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen."""
+    """Head camera: per-sample RMS [px] and per-view tag grid [mm] of every model on the link tags seen (a
+    recording's samples: its still spans, as the fit takes them)."""
     samples, _ = samples_of(loaded, robot)
     observations, _ = detect_observations(samples, robot, cameras=[HEAD_CAMERA])
-    links_only, floor = split_floor(robot, observations)
+    links_only, floor = split_floor(robot, still_span_observations(robot.config, observations))
     ground = _ground_column(robot, models, floor, say, corner_inset)
     if HEAD_CAMERA not in links_only:
         return ground
     obs = links_only[HEAD_CAMERA]
-    say(f"head camera: {obs.n_samples} held-out sample(s), tags {', '.join(map(str, obs.observed_tag_ids))}")
+    say(f"head camera: {sample_count(obs)} held out, tags {', '.join(map(str, obs.observed_tag_ids))}")
     views = measure_tag_views(robot, obs)
     errors = {label: model_errors(robot, obs, views, model) for label, model in models.items()}
     before = errors[BEFORE_LABEL]
     best = min(errors.values(), key=lambda e: float(np.nanmedian(e.sample_rms)))
     keep = ~outlier_samples(before, best)
-    px = Column("head_px", "head camera reprojection RMS per axis, per sample", "px", "head")
-    mm = Column("head_tag_grid_mm", "head camera tag-grid distance (2019 study), per tag view", "mm", "head")
+    of = "" if obs.span_frames is None else " (still-span means)"
+    px = Column("head_px", f"head camera reprojection RMS per axis, per sample{of}", "px", "head")
+    mm = Column("head_tag_grid_mm", f"head camera tag-grid distance (2019 study), per tag view{of}", "mm", "head")
     for label, e in errors.items():
         px.values[label] = e.sample_rms[keep]
         grid = e.view_grid[keep[views.sample] & np.isfinite(e.view_grid)]
@@ -178,18 +183,20 @@ def _ground_column(robot: Robot, models: dict[str, Corrections], floor: Observat
 
 
 def _external_columns(
-    robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable
+    robot: Robot, models: dict[str, Corrections], loaded: list[Capture], say: Callable, moving: bool
 ) -> list[Column]:
-    """Each external camera: foot tag relative to torso tag, tag-grid distance [mm] per view."""
+    """Each external camera: foot tag relative to torso tag, tag-grid distance [mm] per view (a recording's: per
+    still span, unless the camera moved between samples, `moving`)."""
     names = [c.name for c in robot.config.external_cameras]
     if not any(n in c.cameras for c in loaded for n in names):
         return []
     samples, _ = samples_of(loaded, robot, cameras=())
     observations, _ = detect_observations(samples, robot, cameras=names)
     columns = []
-    for name, obs in observations.items():
-        column = Column(f"external_{name}_mm", f"external camera {name}: foot tag relative to torso tag, tag grid",
-                        "mm", "external")  # fmt: skip
+    for name, obs in still_span_observations(robot.config, observations, moving).items():
+        of = "" if obs.span_frames is None else " (still-span means)"
+        column = Column(f"external_{name}_mm", f"external camera {name}: foot tag relative to torso tag, tag grid"
+                        f"{of}", "mm", "external")  # fmt: skip
         for label, model in models.items():
             column.values[label] = np.array(foot_tag_grid_mm(robot, obs, model))
         if len(column.values[BEFORE_LABEL]):
@@ -347,7 +354,7 @@ def run_compare(
     # The corner inset is the detector's, the same for every model: taken from the first fit that measured it.
     inset = next((c.corner_inset for c in calibrations if c.corner_inset is not None), (0.0, 0.0))
     columns = [*_head_columns(robot, models, [c for c in loaded if HEAD_CAMERA in c.cameras], say, inset),
-               *_external_columns(robot, models, loaded, say),
+               *_external_columns(robot, models, loaded, say, any(c.external_moving for c in calibrations)),
                *_mocap_column(robot, models, mocap_captures, say)]  # fmt: skip
     if not columns:
         raise WolfcalError(

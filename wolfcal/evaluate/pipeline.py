@@ -48,10 +48,13 @@ from wolfcal.evaluate.provenance import provenance
 from wolfcal.evaluate.report import before_after_table, render_html, render_markdown
 from wolfcal.evaluate.report_content import (
     MEANINGS,
+    SPAN_MEANING,
     cross_validation_note,
     held_out_note,
     report_blocks,
     sample_rows,
+    span_counts,
+    spans_of,
 )
 from wolfcal.evaluate.report_figures import Figures, report_figures
 from wolfcal.evaluate.structure import unexplained
@@ -69,6 +72,7 @@ from wolfcal.outputs import check_output_folder
 from wolfcal.progress import Progress
 from wolfcal.robot.corrections import Corrections, load_corrections
 from wolfcal.robot.robot import Robot, load_robot
+from wolfcal.spans import sample_count, still_span_observations
 from wolfcal.vision.corner_bias import CORNER_INSET
 from wolfcal.vision.observe import detect_observations, observations_of
 
@@ -112,14 +116,18 @@ def refuse_fitted_captures(captures: list[Path], fit_captures: list[str]) -> Non
 def _observe(
     robot: Robot, result: FitResult, loaded: list[Capture], sources: list[Path], say: Callable[[str], None]
 ) -> tuple[list[Sample], Observations, list[int], list[str], Observations | None]:
-    """Samples of the read sources, their corners of the fit's tags, those tags, detection warnings, and the views
-    of floor tags (None without)."""
+    """Samples of the read sources, their corners of the fit's tags (a recording's frames averaged per still span,
+    as the fit takes them: `still_span_observations`), those tags, detection warnings, and the views of floor tags
+    (None without)."""
     samples, _ = samples_of(loaded, robot)
     say(f"read {len(samples)} sample(s) from {len(sources)} capture file(s); detecting tags ...")
     observations, warnings = detect_observations(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=[HEAD_CAMERA]
     )
+    observations = still_span_observations(robot.config, observations, result.external_moving)
     obs = observations_of(observations, HEAD_CAMERA, sources)
+    if obs.span_frames is not None:
+        say(f"head camera: {sample_count(obs)}, one sample each as in the fit")
     floor_ids = [t for t in obs.observed_tag_ids if robot.config.floor is not None and t in robot.config.floor.tag_ids]
     floor = obs.only_tags(floor_ids) if floor_ids else None
     tags = [t for t in result.tags_used if t in obs.observed_tag_ids]
@@ -148,6 +156,7 @@ def _run_external_evaluate(
     samples, warnings = samples_of(loaded, robot, cameras=())
     names = [c.name for c in robot.config.external_cameras]
     observations, detect_warnings = detect_observations(samples, robot, cameras=names)
+    observations = still_span_observations(robot.config, observations, result.external_moving)
     tags = set(result.tags_used)
     observations = {n: o.only_tags(sorted(tags & set(o.observed_tag_ids))) for n, o in observations.items()
                     if tags & set(o.observed_tag_ids)}  # fmt: skip
@@ -232,11 +241,11 @@ def _after(
     each sample under the model to deploy of the cross-validation fold that left it out.
     Also the model per sample, the fold of each sample (None when held out) and the sentence saying which."""
     if held_out is not None:
-        note = held_out_note(held_out, result.captures)
+        note = held_out_note(held_out, result.captures, obs)
         return model_errors(robot, obs, views, fitted), [fitted] * obs.n_samples, None, note
     fold_of, models = cross_validate(robot, obs, result.options, folds, say, present)
     after = merge_folds(obs, views, fold_of, [model_errors(robot, obs, views, c) for c in models])
-    return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs.n_samples)
+    return after, [models[k] for k in fold_of], fold_of, cross_validation_note(len(models), obs)
 
 
 def _judge(
@@ -346,7 +355,7 @@ def run_evaluate(
                                 distances)  # fmt: skip
     verdict = deploy_verdict(result.free, errors.summary_before["rms_px"], errors.summary_after["rms_px"], structure,
                              verdict_ground(measured, distances, limits.ground_distance_m), predicted,
-                             camera_turn(robot, fitted, present.corrections), limits)  # fmt: skip
+                             camera_turn(robot, fitted, present.corrections), limits, spans_of(obs))  # fmt: skip
     verdict["notes"] += held_notes
     say("drawing the pictures ...")
     sample_by_key = {(s.source, int(s.stamp_ns)): s for s in samples}
@@ -362,8 +371,9 @@ def run_evaluate(
         "folds": errors.folds,
         "tags_used": tags,
         "n_samples": obs.n_samples,
+        **span_counts(obs),
         "n_outliers": int(errors.outliers.sum()),
-        "meanings": dict(MEANINGS),
+        "meanings": dict(MEANINGS) | ({"samples": SPAN_MEANING} if obs.span_frames is not None else {}),
         "before_model": before_label(present),
         "current": present.to_dict() if present.sources else None,
         "before": errors.summary_before,

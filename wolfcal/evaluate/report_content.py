@@ -31,30 +31,63 @@ MEANINGS = {
     "and by the model [mm] (the 2019 study's metric), inlier samples",
     "ground": "distance on the field between where the ball is and where the model puts it [m]",
 }
+# metrics['meanings']['samples'] of observations summarised by still span (a plain recording, `wolfcal.spans`)
+SPAN_MEANING = (
+    "each sample is one still span of a plain recording, as the fit takes it: per tag corner the mean of the span's "
+    "frames that saw it, the span's median joint readings, the stamp of its first frame with a tag seen; every "
+    "pixel and tag-grid figure is of these means (a mean of n frames carries about 1/sqrt(n) of one frame's random "
+    "detection noise, but all of a model error and of a detection error that repeats at one pose)"
+)
 
 
-def held_out_note(sources: list[Path], fit_captures: list[str]) -> str:
-    """How a held-out evaluation was made: which captures were judged, which the fit used."""
+def span_counts(obs: Observations) -> dict:
+    """{'n_frames': frames behind the samples} of observations summarised by still span; {} otherwise (capture
+    files: one frame per sample)."""
+    return {} if obs.span_frames is None else {"n_frames": int(obs.span_frames.frames_of_sample.sum())}
+
+
+def spans_of(obs: Observations) -> str:
+    """' (N still spans of M frames, each span's mean)' for pixel figures of span means; '' otherwise."""
+    counts = span_counts(obs)
+    if not counts:
+        return ""
+    return f" (of still-span means: {obs.n_samples} spans of {counts['n_frames']} frames)"
+
+
+def held_out_note(sources: list[Path], fit_captures: list[str], obs: Observations) -> str:
+    """How a held-out evaluation was made: which captures were judged, which the fit used (and `span_note`)."""
     return (
         f"Held-out evaluation on {', '.join(p.name for p in sources)}: samples the fit "
-        f"({', '.join(Path(c).name for c in fit_captures)}) did not use."
+        f"({', '.join(Path(c).name for c in fit_captures)}) did not use." + span_note(obs)
     )
 
 
-def cross_validation_note(n_folds: int, n_samples: int) -> str:
-    """How a k-fold cross-validation was made, and why a held-out capture is the stronger test."""
+def cross_validation_note(n_folds: int, obs: Observations) -> str:
+    """How a k-fold cross-validation was made, and why a held-out capture is the stronger test (and `span_note`)."""
     return (
         f"No held-out capture was given: {n_folds}-fold cross-validation over the fit's own "
-        f"{n_samples} sample(s). Each sample is judged by a calibration fitted on the other folds "
+        f"{obs.n_samples} sample(s). Each sample is judged by a calibration fitted on the other folds "
         "(sample i in fold i mod k), so no number here comes from a sample its model was fitted on. "
         "The deploy files hold the calibration fitted on all samples. A capture taken apart from the "
-        "fit's (wolfcal evaluate FIT_DIR --capture HELDOUT.mcap) is the stronger test."
+        "fit's (wolfcal evaluate FIT_DIR --capture HELDOUT.mcap) is the stronger test." + span_note(obs)
+    )
+
+
+def span_note(obs: Observations) -> str:
+    """' Each sample is a still span ...' for observations summarised by still span; '' otherwise."""
+    counts = span_counts(obs)
+    if not counts:
+        return ""
+    return (
+        f" Each sample is one still span of a recording ({obs.n_samples} spans of {counts['n_frames']} frames), "
+        "its frames' tag corners averaged, as the fit takes it: the pixel figures are of these means."
     )
 
 
 def sample_rows(obs: Observations, errors: HeldOutErrors) -> list[dict]:
     """One record per sample for metrics.json: errors in px (4 decimals) and tag-grid distance in mm (3 decimals,
-    None without a fully seen tag)."""
+    None without a fully seen tag); of a still span (a recording) also its frame count, its stamp its first
+    frame's."""
     before, after, outliers, fold_of = errors.before, errors.after, errors.outliers, errors.fold_of
 
     def mm(v: float) -> float | None:
@@ -62,12 +95,14 @@ def sample_rows(obs: Observations, errors: HeldOutErrors) -> list[dict]:
 
     rows = []
     tags = obs.tags_by_sample()
+    frames = None if obs.span_frames is None else obs.span_frames.frames_of_sample
     for s in range(obs.n_samples):
         rows.append(
             {
                 "index": s,
                 "source": Path(obs.sources[s]).name,
                 "stamp_ns": int(obs.stamps_ns[s]),
+                **({} if frames is None else {"frames": int(frames[s])}),
                 "tags": tags[s],
                 "fold": None if fold_of is None else int(fold_of[s]),
                 "rms_before_px": round(float(before.sample_rms[s]), 4),
@@ -169,7 +204,7 @@ def report_blocks(metrics: dict, captions: list[tuple[str, str]]) -> list[Block]
     blocks.append(("h2", "Pictures"))
     blocks += [("figure", c) for c in captions]
     blocks += _parameter_blocks(m["parameters"])
-    blocks += _per_sample_blocks(m["samples"], m["folds"] is not None)
+    blocks += _per_sample_blocks(m["samples"], m["folds"] is not None, "n_frames" in m)
     blocks += _deploy_blocks(m)
     if m["warnings"]:
         blocks.append(("h2", "Notes"))
@@ -191,8 +226,9 @@ def _headline_blocks(m: dict) -> list[Block]:
         (
             "p",
             f"Before: {m.get('before_model', 'input URDF')} as it is. After: with the calibration. Every number "
-            f"comes from samples the calibration was not fitted on ({m['n_samples']} sample(s), {m['n_outliers']} "
-            "outlier sample(s) left out of these numbers and marked in the table below).",
+            f"comes from samples the calibration was not fitted on ({m['n_samples']} sample(s)"
+            + (f", still spans of {m['n_frames']} frames, each the mean of its frames" if "n_frames" in m else "")
+            + f", {m['n_outliers']} outlier sample(s) left out of these numbers and marked in the table below).",
         ),
         ("table", (column_headers(m), headline_rows(m), set())),
         (
@@ -216,13 +252,14 @@ def _parameter_blocks(parameters: list[dict]) -> list[Block]:
     ]
 
 
-def _per_sample_blocks(samples: list[dict], folds: bool) -> list[Block]:
-    """The per-sample table from `sample_rows`; outlier rows are marked."""
-    headers = ["sample", "capture", "tags"] + (["fold"] if folds else [])
+def _per_sample_blocks(samples: list[dict], folds: bool, spans: bool) -> list[Block]:
+    """The per-sample table from `sample_rows` (with each still span's frame count when `spans`); outlier rows are
+    marked."""
+    headers = ["sample", "capture"] + (["frames"] if spans else []) + ["tags"] + (["fold"] if folds else [])
     headers += ["RMS before", "RMS after", "max after", "grid before", "grid after", ""]
     rows, marked = [], set()
     for i, s in enumerate(samples):
-        row = [str(s["index"]), s["source"], " ".join(map(str, s["tags"]))]
+        row = [str(s["index"]), s["source"]] + ([str(s["frames"])] if spans else []) + [" ".join(map(str, s["tags"]))]
         row += [str(s["fold"] + 1)] if folds else []
         row += [f"{s['rms_before_px']:.3f}", f"{s['rms_after_px']:.3f}", f"{s['max_after_px']:.2f}"]
         row += [
@@ -238,7 +275,8 @@ def _per_sample_blocks(samples: list[dict], folds: bool) -> list[Block]:
         (
             "p",
             "RMS per axis and largest corner error in pixels, tag-grid distance in millimetres; "
-            "outlier samples are marked (highlighted) and left out of the numbers above.",
+            "outlier samples are marked (highlighted) and left out of the numbers above."
+            + (" Each sample is a still span: its frames' mean corners, 'frames' how many." if spans else ""),
         ),
         ("table", (headers, rows, marked)),
     ]

@@ -1,7 +1,9 @@
 """Which pictures the evaluation report shows, with their captions: the data behind each picture (errors, predicted
 corners and the kinematic skeleton projected into the camera image, the parameter correlation). Drawing is `figures`.
 
-Pixels [px] follow OpenCV (centre of the top-left pixel at (0, 0)) at the captured image's resolution.
+Pixels [px] follow OpenCV (centre of the top-left pixel at (0, 0)) at the captured image's resolution. A sample that
+is a still span of a recording (`wolfcal.spans`) is drawn on the span's first frame with a tag seen (the sample's
+stamp), its detected corners the means over the span's frames; the captions say so.
 """
 
 from __future__ import annotations
@@ -71,9 +73,9 @@ def report_figures(
 ) -> Figures:
     """All pictures of the report: PNG bytes by file name, and (file name, caption) in report order.
 
-    samples: the captured samples by (source, stamp_ns), for their images; errors: before and after on the held-out
-    samples (with the calibrated model that judges each); covariance: the fit's {"names", "matrix"} (SI units), or
-    None.
+    samples: the captured samples (frames) by (source, stamp_ns), for their images (a still span's: its first
+    frame's, the span's stamp); errors: before and after on the held-out samples (with the calibrated model that
+    judges each); covariance: the fit's {"names", "matrix"} (SI units), or None.
     """
     pngs: dict[str, bytes] = {}
     captions: list[tuple[str, str]] = []
@@ -90,6 +92,7 @@ def report_figures(
 def _error_charts(obs: Observations, errors: HeldOutErrors) -> Figures:
     """Histogram of the inlier corner errors and the per-sample RMS bars [px]."""
     before, after, outliers = errors.before, errors.after, errors.outliers
+    spans = "" if obs.span_frames is None else " Each sample is a still span of a recording: its frames' mean corners."
     inlier_corners = ~outliers[obs.sample_index]
     pngs = {
         "corner_histogram.png": fig.histogram_png(
@@ -111,13 +114,13 @@ def _error_charts(obs: Observations, errors: HeldOutErrors) -> Figures:
             "corner_histogram.png",
             "Distance between where each tag corner was detected and where the "
             "model predicts it, inlier samples: red with the input URDF, blue calibrated. Further left is "
-            "better.",
+            "better." + spans,
         ),
         (
             "per_sample.png",
             "Each held-out sample's reprojection RMS before (red) and after (blue); grey "
             "columns marked x are outlier samples (blurred image or a joint reading that does not match "
-            "the image), left out of the headline numbers.",
+            "the image), left out of the headline numbers." + spans,
         ),
     ]
     return pngs, captions
@@ -144,10 +147,13 @@ def _overlays(
             f"sample {s}: RMS {before.sample_rms[s]:.2f} px before, {after.sample_rms[s]:.2f} px after"
             + (" (outlier)" if outliers[s] else ""),
         )
+        span = "" if obs.span_frames is None else (
+            f"; a still span of {int(obs.span_frames.frames_of_sample[s])} frames drawn on its first frame with a tag "
+            "seen, the green rings its frames' mean corners")  # fmt: skip
         captions.append(
             (
                 name,
-                f"Sample {s} ({Path(obs.sources[s]).name}): detected tag corners (green rings), "
+                f"Sample {s} ({Path(obs.sources[s]).name}{span}): detected tag corners (green rings), "
                 "corners and the robot's kinematic skeleton (lines between joint origins) as each model "
                 "predicts them from the joint readings: red input URDF, blue calibrated.",
             )

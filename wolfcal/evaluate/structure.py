@@ -7,6 +7,10 @@ pose-dependent shift (sigma_q^2 A A^T, A = d(pixels)/d(readings), the fit's nois
 that noise model have unit RMS when the model explains the data (outlier samples are left out first); an RMS far
 above 1 means a structured
 error the model's free parameters could not absorb (a camera fitted on a robot whose legs are off).
+
+On a recording's still-span means (`wolfcal.spans`) the corner noise so measured is the means' own; its floor
+`priors.pixel_noise` is also the fit's floor for the detection error that repeats at one pose, which a span's mean
+keeps whole, so averaging frames does not make the test easier.
 """
 
 from __future__ import annotations

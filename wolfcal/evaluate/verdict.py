@@ -96,6 +96,7 @@ def deploy_verdict(
     predicted_ground_m: float | None,
     camera_turn_rad: float,
     limits: VerdictLimits = VerdictLimits(),
+    pixels_of: str = "",
 ) -> dict:
     """metrics.json's 'verdict': deploy (bool), worse (the pixel rule), refusals and notes (sentences), banner.
 
@@ -109,7 +110,8 @@ def deploy_verdict(
     (what measured it, default 'the held-out floor views') and 'advice' (how to measure it more precisely, default
     `more_precise`'s), or None;
     predicted_ground_m: 1-sigma ground error at limits.ground_distance_m from the fit's covariance [m], or None;
-    camera_turn_rad: rotation angle of the fitted camera frame correction [rad].
+    camera_turn_rad: rotation angle of the fitted camera frame correction [rad];
+    pixels_of: what the pixel figures are of, said after them (e.g. ' (of still-span means: ...)'), or ''.
     """
     refusals: list[tuple[str, str]] = []  # (what to do, why)
     notes: list[str] = []
@@ -123,7 +125,7 @@ def deploy_verdict(
                 "keep the input URDF and refit with more varied poses or fewer free parameters",
                 (
                     f"The calibration makes held-out error worse: reprojection RMS {after_px:.3f} px calibrated vs "
-                    f"{before_px:.3f} px with the input URDF."
+                    f"{before_px:.3f} px with the input URDF{pixels_of}."
                 ),
             )
         )
@@ -144,7 +146,7 @@ def deploy_verdict(
                   f"{measured_ground['after_m'] * 100:.1f} +- "
                   f"{measured_ground['after_std_m'] * 100:.1f} cm")  # fmt: skip
         pixels = ("" if before_px is None or after_px is None else
-                  f": held-out reprojection RMS {before_px:.3f} px -> {after_px:.3f} px")  # fmt: skip
+                  f": held-out reprojection RMS {before_px:.3f} px -> {after_px:.3f} px{pixels_of}")  # fmt: skip
         banner = f"Deploy the files below{pixels}{ground}" + ("." if not notes else "; read the notes below first.")
     else:
         banner = f"Do not deploy: {refusals[0][0]}."

@@ -36,7 +36,7 @@ from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet, build_parameter_set, tags_for_preset
 from wolfcal.robot.robot import Robot, load_robot
 from wolfcal.robot.urdf_writer import write_calibrated_urdf
-from wolfcal.spans import summarize_spans
+from wolfcal.spans import sample_count, still_span_observations
 from wolfcal.vision.observe import detect_observations
 from wolfcal.yamlfile import load_yaml
 
@@ -435,28 +435,7 @@ def detect_captures(
         samples, robot, progress=Progress(say, "detecting tags", "samples"), cameras=wanted
     )
     warnings += detect_warnings + repeat_warnings(observations, options.noise_floor_px)
-    return still_span_observations(robot, observations, options), warnings
-
-
-def still_span_observations(
-    robot: Robot, observations: dict[str, Observations], options: FitOptions
-) -> dict[str, Observations]:
-    """Each camera's frames of plain recordings averaged per still span (`wolfcal.spans.summarize_spans`; capture
-    files' samples stay as they are). Not for a camera that sees floor tags (the floor block weighs single frames)
-    nor for an external camera with one pose per sample (--external-moving)."""
-    floor_ids = robot.config.floor.tag_ids if robot.config.floor is not None else []
-    out = {}
-    for name, obs in observations.items():
-        moving = name != HEAD_CAMERA and options.external_moving
-        out[name] = obs if moving or np.isin(obs.tag_ids, floor_ids).any() else summarize_spans(obs)
-    return out
-
-
-def sample_count(obs: Observations) -> str:
-    """How many samples, in words: 'N sample(s)', or 'N still span(s) of M frames' (`Observations.span_frames`)."""
-    if obs.span_frames is None:
-        return f"{obs.n_samples} sample(s)"
-    return f"{obs.n_samples} still span(s) of {int(obs.span_frames.frames_of_sample.sum())} frames"
+    return still_span_observations(robot.config, observations, options.external_moving), warnings
 
 
 def write_fit(out_dir: Path, fit: Fit, result: FitResult) -> None:
