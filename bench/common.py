@@ -18,6 +18,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "wolfgang"
+
+
+def config_of(tree: Path) -> Path:
+    """The Wolfgang config of a checkout (an older tree reads its own: newer configs have keys it does not know)."""
+    return tree / "configs" / "wolfgang"
+
+
 DATA = Path(tempfile.gettempdir()) / "wolfcal_bench"  # generated inputs, kept between runs
 
 

@@ -9,7 +9,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from common import CONFIG, DATA, ROOT, alternating, run_child, summary
+from common import CONFIG, DATA, ROOT, alternating, config_of, run_child, summary
 from recording import recording
 
 CHILD = str(Path(__file__).resolve().parent / "child.py")
@@ -48,7 +48,7 @@ def fit_speed(trees: dict[str, Path], rounds: int, say) -> dict:
         for k, label, tree in alternating(trees, rounds):
             cache = Path(scratch) / f"{label}_{k}"
             floor = run_child(tree, [CHILD, "floor", str(capture)]).result or {}
-            fit = run_child(tree, [CHILD, "fit", str(capture), str(CONFIG), str(cache)]).result or {}
+            fit = run_child(tree, [CHILD, "fit", str(capture), str(config_of(tree)), str(cache)]).result or {}
             process = run_child(
                 tree,
                 [
@@ -56,7 +56,7 @@ def fit_speed(trees: dict[str, Path], rounds: int, say) -> dict:
                     "fit",
                     str(capture),
                     "--robot",
-                    str(CONFIG),
+                    str(config_of(tree)),
                     "--free",
                     "camera",
                     "--out",
@@ -93,8 +93,8 @@ def stream_memory(trees: dict[str, Path], frames: list[int], binning: int, round
     """Per tree and recording length: peak RSS [MB], wall and CPU [s] of a whole `wolfcal fit --free camera
     --no-cache` process on a plain recording (`recording.recording`), and the samples it used."""
 
-    def fit(path: Path, out: Path) -> list[str]:
-        return ["fit", str(path), "--robot", str(CONFIG), "--free", "camera", "--out", str(out), "--no-cache"]
+    def fit(tree: Path, path: Path, out: Path) -> list[str]:
+        return ["fit", str(path), "--robot", str(config_of(tree)), "--free", "camera", "--out", str(out), "--no-cache"]
 
     def used(run, _out: Path) -> str:
         return next((line.strip() for line in run.output.splitlines() if line.startswith("head camera:")), "")
@@ -108,7 +108,7 @@ def evaluate_memory(trees: dict[str, Path], frames: list[int], binning: int, rou
     by this checkout, made once, not measured), and the samples it judged."""
     fits: dict[Path, Path] = {}
 
-    def evaluate(path: Path, out: Path) -> list[str]:
+    def evaluate(_tree: Path, path: Path, out: Path) -> list[str]:
         if path not in fits:
             fits[path] = out.parent / f"fit_{path.stem}"
             run_child(ROOT, [*CLI, "fit", str(path), "--robot", str(CONFIG), "--free", "camera", "--out",
@@ -124,14 +124,14 @@ def evaluate_memory(trees: dict[str, Path], frames: list[int], binning: int, rou
 
 
 def _recording_runs(trees, frames, binning, rounds, name, argv, line, say) -> dict:
-    """Per tree and recording length: the figures of a whole `wolfcal` process, `argv(recording, out folder)` its
+    """Per tree and recording length: the figures of a whole `wolfcal` process, `argv(tree, recording, out folder)` its
     arguments, `line(run, out folder)` what it says it used."""
     paths = {n: recording(DATA, n, binning) for n in frames}
     out: dict[str, dict] = {label: {} for label in trees}
     with tempfile.TemporaryDirectory() as scratch:
         for k, label, tree in alternating(trees, rounds):
             for n, path in paths.items():
-                arguments = argv(path, Path(scratch) / "out")
+                arguments = argv(tree, path, Path(scratch) / "out")
                 _warm(path)
                 run = run_child(tree, [*CLI, *arguments, "--force"])
                 used = line(run, Path(scratch) / "out")
