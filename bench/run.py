@@ -100,8 +100,8 @@ def main() -> None:
 
 
 def commit_of(tree: Path) -> str:
-    """The commit a checkout holds, as `<short hash> <subject>` (", with uncommitted changes" when it has some);
-    "unknown" outside git."""
+    """The commit a checkout holds, as `<short hash> <subject>` (subject cut at 72 characters; ", with changes to
+    wolfcal/" when its package differs from the commit); "unknown" outside git."""
 
     def git(*args: str) -> str:
         run = subprocess.run(["git", "-C", str(tree), *args], capture_output=True, text=True)
@@ -110,7 +110,8 @@ def commit_of(tree: Path) -> str:
     head = git("log", "-1", "--format=%h %s")
     if not head:
         return "unknown"
-    return head + (", with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else "")
+    head = head if len(head) <= 80 else head[:77] + "..."
+    return head + (", with changes to wolfcal/" if git("status", "--porcelain", "--", "wolfcal") else "")
 
 
 def in_process_part(part: str, args: argparse.Namespace, say) -> dict:
