@@ -10,7 +10,12 @@ Measured, with `detect_line_points(image)` (no camera model for these images, so
 - line points against the lines labelled by hand in `realfield_lines.yaml` (centre polylines in pixels): a point
   within `NEAR_PX` of a labelled line is true, any other point false; a labelled line's coverage is the share of its
   length (sampled every pixel) with a detected point within `NEAR_PX`.
-With `--before PATH` the detector of that tree (its `wolfcal/field/detect.py`) is measured on the same images too.
+For comparison, the same detector on rendered views with their truth (`rendered`): a cluttered 512x384 view from a
+standing robot (goals, robots, ball, shadows, people, 2 px motion blur) over `RENDER_SEEDS`, in neutral light and
+under `WARM_LIGHT`, with the expected line width: share of points on a truth line pixel, share of the lines'
+crossings found, median distance of the points on a line to its centre, and share of points more than 2 px from
+every true line centre. With `--before PATH` the detector of that tree (its `wolfcal/field/detect.py`) is measured
+on the same images too.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from __future__ import annotations
 import importlib.util
 import subprocess
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
 
@@ -27,6 +33,7 @@ import yaml
 SOURCE_URL = "https://github.com/GuiFornes/field_detector"
 LABELS = Path(__file__).resolve().with_name("realfield_lines.yaml")
 NEAR_PX = 6.0  # a point this close to a labelled centre line is on it [px]
+RENDER_SEEDS = (4, 5, 6)
 
 
 def _reader(folder: Path) -> tuple[Callable[[str], np.ndarray], list[str]] | None:
@@ -109,6 +116,48 @@ def measure(detect: ModuleType, read: Callable[[str], np.ndarray], masks: list[s
     }
 
 
+def rendered(detect: ModuleType) -> dict:
+    """Detection figures of one detector module on rendered views, per light (see the module docstring)."""
+    from wolfcal.camera.camera_info import load_camera_info
+    from wolfcal.field.ground import expected_line_width, ground_points, ground_step
+    from wolfcal.field.model import KIDSIZE, distance_to_lines, field_lines
+    from wolfcal.field.quality import detection_quality
+    from wolfcal.field.render import render_field_view
+    from wolfcal.field.scene import WARM_LIGHT, cluttered_scene
+
+    camera = load_camera_info(Path(__file__).resolve().parents[1] / "configs/wolfgang/basler_acA2040.yaml").binned(4)
+    pitch, lines = 0.35, field_lines(KIDSIZE)
+    forward = np.array([np.cos(pitch), 0.0, -np.sin(pitch)])
+    right = np.array([0.0, -1.0, 0.0])
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([right, np.cross(forward, right), forward])
+    T[:3, 3] = [-3.0, 0.0, 0.6]  # a standing robot's head at the penalty mark, looking down the field
+    width = expected_line_width(camera, T, KIDSIZE.line_width)
+    figures = {}
+    for light, cast in (("neutral", (1.0, 1.0, 1.0)), ("warm", WARM_LIGHT)):
+        on = found = crossings = points = off = 0
+        centre: list[np.ndarray] = []
+        for seed in RENDER_SEEDS:
+            rng = np.random.default_rng(seed)
+            scene = replace(cluttered_scene(KIDSIZE, rng), colour_cast=cast)
+            view = render_field_view(camera, T, KIDSIZE, scene, rng, noise_sigma=3.0, blur_px=2.0)
+            found_points = detect.detect_line_points(view.image, width)
+            q = detection_quality(found_points, view.line_mask, camera, T, lines, step=4, max_run_px=12)
+            on, found, crossings, points = on + q.on_line, found + q.found, crossings + q.crossings, points + q.points
+            centre.append(q.centre_error_px)
+            uv = found_points.uv
+            px = distance_to_lines(lines, ground_points(camera, T, uv)) / np.nanmin(ground_step(camera, T, uv), axis=1)
+            off += int(np.sum(~(px <= 2.0)))
+        figures[light] = {
+            "points": points,
+            "precision": on / max(points, 1),
+            "recall": found / max(crossings, 1),
+            "centre_px_median": float(np.median(np.concatenate(centre))) if points else None,
+            "off_2px_share": off / max(points, 1),
+        }
+    return figures
+
+
 def realfield(source: Path | None, trees: dict[str, Path], say) -> dict | None:
     """Measure the detector of each tree (name -> folder holding `wolfcal`); None (and a message) when the
     repository's images are not at `source`."""
@@ -121,7 +170,9 @@ def realfield(source: Path | None, trees: dict[str, Path], say) -> dict | None:
     result: dict = {"masks": len(masks), "labelled_images": len(labels), "labelled_lines": 0, "near_px": NEAR_PX}
     result["labelled_lines"] = sum(len(lines) for lines in labels.values())
     for name, tree in trees.items():
-        figures = measure(_detector(tree), read, masks, labels)
+        detector = _detector(tree)
+        figures = measure(detector, read, masks, labels)
+        figures["rendered"] = rendered(detector)
         result[name] = figures
         say(
             f"realfield {name}: region IoU median {figures['region_iou']['median']:.3f}, points outside the field "
@@ -129,6 +180,13 @@ def realfield(source: Path | None, trees: dict[str, Path], say) -> dict | None:
             f"{figures['false_points']}, line coverage median {figures['line_coverage']['median']:.2f}"
         )
     return result
+
+
+def _rendered_cell(f: dict) -> str:
+    if not f["points"]:
+        return "no points"
+    centre = "n/a" if f["centre_px_median"] is None else f"{f['centre_px_median']:.2f} px"
+    return f"{100 * f['precision']:.0f} % / {100 * f['recall']:.0f} % / {centre} / {100 * f['off_2px_share']:.0f} %"
 
 
 def realfield_section(results: dict) -> list[str]:
@@ -150,6 +208,11 @@ def realfield_section(results: dict) -> list[str]:
         [f"labelled lines at least half covered (of {r['labelled_lines']})"]
         + [str(r[t]["lines_half_covered"]) for t in trees],
     ]
+    for light in ("neutral", "warm"):
+        rows.append(
+            [f"rendered, {light} light: on a line / crossings found / centre error / off lines by > 2 px"]
+            + [_rendered_cell(r[t]["rendered"][light]) for t in trees]
+        )
     head = ["on real images", *trees]
     return [
         "## Field lines on real robot-camera images",
@@ -160,8 +223,12 @@ def realfield_section(results: dict) -> list[str]:
         f"points against the field lines labelled by hand on {r['labelled_images']} of these images "
         f"(`bench/realfield_lines.yaml`): a point within {r['near_px']:.0f} px of a labelled line is on it; a "
         "line's coverage is the share of its length with a point that near. No camera model is known for these "
-        "images, so the detector runs without the expected line width. `before`: the detector of the tree "
-        f"given by `--before`. Taken {r['taken']}, {r['seconds']:.0f} s.",
+        "images, so the detector runs without the expected line width. The last rows: the same detector on "
+        f"rendered cluttered views ({len(RENDER_SEEDS)} seeds, 512x384, with the expected line width) in neutral "
+        "light and under a warm light seen without white balance, against their truth: share of points on a "
+        "line pixel, of the lines' crossings found, median distance from the line centre, share of points more "
+        "than 2 px from every line. `before`: the detector of the tree given by `--before`. "
+        f"Taken {r['taken']}, {r['seconds']:.0f} s.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),

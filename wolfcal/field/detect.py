@@ -7,15 +7,14 @@ posts, robots' white parts and the ball seen across their width. Only pixels bel
 each column's boundary is the row above which the pixels are mostly not turf and below which they mostly are, and
 the field region is the convex upper envelope of these rows (a column's row replaced by the lowest of its
 neighbours' first, so that green things beyond the carpet, people's clothes or a banner, do not lift it).
-"White" is judged against the turf next to it, in the turf's own colour cast: a white pixel is brighter than the
-local turf (its green pixels in a window of 1/16 of the image width, without those already 2 spreads brighter
-than the rest, which under warm light may be a wide yellowish line) by more than `CONTRAST_SPREAD` times the
-turf's local brightness spread and by `MIN_BRIGHTER` of the turf's brightness, and less green than the turf
-(green minus the larger of red and blue, over green) by more than `CONTRAST_SPREAD` times that measure's local
-spread. A line under warm light looks yellow, under shade grey, but mixing white into turf always makes it
-brighter and less green; a brighter tuft of grass keeps the turf's colour. A point is kept only if an adjacent
-scan of the same direction has a point close enough to continue the same stripe (within twice the run's length
-plus two pixels): a stripe crosses every scan, a speck of turf texture rarely two.
+"White" is judged against the turf next to it, in the turf's own colour cast. The local turf is the green pixels
+in a window of 1/16 of the image width, without those already 2 spreads brighter than the rest (under warm light
+a wide yellowish line passes for green). A white pixel is brighter than the local turf by `BRIGHTER_SPREAD` times
+the turf's brightness spread and by `MIN_BRIGHTER` of its brightness, and less green (`greenness`: green minus the
+larger of red and blue, over green) by `LESS_GREEN_SPREAD` times that measure's spread and by `MIN_LESS_GREEN`. A
+line under warm light looks yellow and in shade grey, but white mixed into turf always makes it brighter and less
+green; a brighter tuft of grass keeps the turf's colour, and a speck of grass texture rarely stands out by several
+times the turf's own spread on both measures.
 Points come in OpenCV's pixel convention (centre of the top-left pixel at (0, 0)).
 """
 
@@ -29,9 +28,10 @@ import numpy as np
 GREEN_HUE = (30, 95)  # OpenCV hue range of turf (0-180)
 MIN_GREEN_SATURATION = 50
 BORDER_PX = 3  # green must lie within this many pixels of a run's ends
-CONTRAST_SPREAD = 3.0  # a white pixel stands out from the local turf by this many times the turf's spread
-MIN_BRIGHTER = 0.3  # ... and brighter than it by at least this share of its brightness
-MIN_LESS_GREEN = 0.06  # ... and at least this much less green (see `greenness`)
+BRIGHTER_SPREAD = 3.0  # a white pixel is brighter than the local turf by this many times the turf's spread
+MIN_BRIGHTER = 0.3  # ... and by at least this share of its brightness
+LESS_GREEN_SPREAD = 2.0  # ... and less green by this many times the spread of the turf's greenness
+MIN_LESS_GREEN = 0.06  # ... and by at least this much (see `greenness`)
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,8 @@ def white_mask(image: np.ndarray, green: np.ndarray) -> tuple[np.ndarray, np.nda
     brighter = value - turf_value
     less_green = turf_colour - colour
     with np.errstate(invalid="ignore"):
-        white = (brighter > np.maximum(MIN_BRIGHTER * turf_value, CONTRAST_SPREAD * value_spread)) & (
-            less_green > np.maximum(MIN_LESS_GREEN, CONTRAST_SPREAD * colour_spread)
+        white = (brighter > np.maximum(MIN_BRIGHTER * turf_value, BRIGHTER_SPREAD * value_spread)) & (
+            less_green > np.maximum(MIN_LESS_GREEN, LESS_GREEN_SPREAD * colour_spread)
         )
     return white, np.nan_to_num(brighter)
 
@@ -128,41 +128,24 @@ def detect_line_points(image: np.ndarray, expected_width_px: np.ndarray | None =
         g_map = green if along_rows else green.T
         c_map = contrast if along_rows else contrast.T
         lim = None if limit is None else (limit[0] if along_rows else limit[1].T)
-        scans = [
-            _runs(w_map[line], g_map[line], c_map[line], lim[line] if lim is not None else default_limit)
-            for line in range(0, w_map.shape[0], step)
-        ]
-        for k, (centres, lengths) in enumerate(scans):
-            neighbours = [scans[j][0] for j in (k - 1, k + 1) if 0 <= j < len(scans)]
-            keep = _continued(centres, lengths, neighbours)
-            if keep.any():
-                uv = np.column_stack([centres[keep], np.full(int(keep.sum()), k * step, float)])
+        for line in range(0, w_map.shape[0], step):
+            centres = _runs(w_map[line], g_map[line], c_map[line], lim[line] if lim is not None else default_limit)
+            if len(centres):
+                uv = np.column_stack([centres, np.full(len(centres), line, float)])
                 found.append(uv if along_rows else uv[:, ::-1])
-                rows_flag.append(np.full(int(keep.sum()), along_rows))
+                rows_flag.append(np.full(len(centres), along_rows))
     if not found:
         return LinePoints(np.zeros((0, 2)), np.zeros(0, bool))
     return LinePoints(np.vstack(found), np.concatenate(rows_flag))
 
 
-def _continued(centres: np.ndarray, lengths: np.ndarray, neighbours: list[np.ndarray]) -> np.ndarray:
-    """(N,) bool: a run centre has a centre on an adjacent scan within twice its run length plus 2 px."""
-    keep = np.zeros(len(centres), bool)
-    for other in neighbours:
-        if len(other) and len(centres):
-            keep |= np.abs(centres[:, None] - other[None]).min(axis=1) <= 2.0 * lengths + 2.0
-    return keep
-
-
-def _runs(
-    white: np.ndarray, green: np.ndarray, contrast: np.ndarray, limit: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Sub-pixel centres and lengths [px] of white runs along one scan line that have green on both sides and fit
-    `limit`."""
+def _runs(white: np.ndarray, green: np.ndarray, contrast: np.ndarray, limit: np.ndarray | float) -> np.ndarray:
+    """Sub-pixel centres of white runs along one scan line that have green on both sides and fit `limit`."""
     padded = np.concatenate([[False], white, [False]])
     edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
     starts, ends = edges[0::2], edges[1::2]  # run = [start, end)
     if not len(starts):
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0)
     n = len(white)
     green_before = np.array([green[max(0, s - BORDER_PX) : s].any() for s in starts])
     green_after = np.array([green[e : min(n, e + BORDER_PX)].any() for e in ends])
@@ -179,4 +162,4 @@ def _runs(
         baseline = np.interp(positions, [left, right], [contrast[left], contrast[right]])
         weights = np.maximum(contrast[lo:hi] - baseline, 0.0)
         centres.append(float(weights @ positions / weights.sum()) if weights.sum() > 0 else (s + e - 1) / 2)
-    return np.asarray(centres), (ends - starts)[keep].astype(float)
+    return np.asarray(centres)
