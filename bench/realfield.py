@@ -213,7 +213,7 @@ def realfield_section(results: dict) -> list[str]:
             [f"rendered, {light} light: on a line / crossings found / centre error / off lines by > 2 px"]
             + [_rendered_cell(r[t]["rendered"][light]) for t in trees]
         )
-    head = ["on real images", *trees]
+    head = ["figure", *trees]
     return [
         "## Field lines on real robot-camera images",
         "",
