@@ -13,13 +13,10 @@ error that every view of one marking repeats (paint off the field's dimensions, 
 stripes read a little toward the brighter one) is not averaged out by more views, and the robot's place, which
 the markings' places share, is known only as well as they are.
 
-The reported std: the line detector's errors are not all named by the noise model below (one error per
-stretch of a line in a view, the joint readings' rounding, each point's own): on rendered views the estimates
-scatter between groups of views by up to 3x their formal std, and the error shared by a line's points in one view
-is larger than a stretch's. So the fit checks each unknown's std against a grouped jackknife over the views
-(`wolfcal.fit.jackknife`, JACKKNIFE_GROUPS groups, sample k in group k mod G) and reports the larger (STD_RULE),
-as the held-out check (`wolfcal.evaluate.field_ground`) does; what every view shares (a marking's place) does not
-move between groups and stays in the formal std through the markings' priors.
+The reported std: the noise model (each point's error, one per stretch of a line in a view, the joint readings'
+rounding) does not name all the detector does: a line's points in one view err together by more than a stretch's
+share. So the fit reports each std as the larger of the formal one and a grouped jackknife's over the views
+(STD_RULE, `wolfcal.fit.jackknife`), as the held-out check does; the markings' places stay in the formal part.
 
 What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
 holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
@@ -28,21 +25,17 @@ pairs from the correlations. The field's point symmetry is handled before the fi
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from wolfcal.field.ground import ground_gradient
-from wolfcal.field.model import FieldLines, field_lines, nearest_line_normal
+from wolfcal.field.model import FieldLines, nearest_line_normal
 from wolfcal.field.observations import FieldObservations
 from wolfcal.field.place import far_places
 from wolfcal.field.selection import line_stretches, lines_seen, points_used
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
-from wolfcal.fit.jackknife import JACKKNIFE_GROUPS
-from wolfcal.fit.options import FitOptions
 from wolfcal.outliers import OutlierRule
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
@@ -279,23 +272,3 @@ class FieldBlock(Block):
         )
         return Linearization(residual=residual, jac_chain=d_columns[:, None, n_joints:], jac_local=jac_local,
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
-
-
-def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
-                 say: Callable[[str], None] | None) -> tuple[list[Block], list[Path]]:  # fmt: skip
-    """The fit builder of the field system (`wolfcal.fit.systems`): the field captures (`field_captures`: with
-    `--system field` every capture, with every system those that show no tag). Its block is solved once on its own
-    and weighted again at that solution (`FieldBlock.reweighted`); the fit then joins it to the other blocks, and
-    checks the reported std against a jackknife over groups of the field views (module docstring)."""
-    from wolfcal.field.observe import field_captures, field_observations
-    from wolfcal.fit.pipeline import fit_observations
-
-    chosen = field_captures(robot, list(captures), options.system)
-    if not chosen:
-        return [], []
-    tell = say or (lambda _: None)
-    obs = field_observations(robot, chosen, tell)
-    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions), shared_lines=False)
-    first = fit_observations(robot, {}, replace(options, system="field"), own_blocks=[block])
-    tell("weighting the line points at the first solution ...")
-    return [block.reweighted(first.chain, first.solution.values, JACKKNIFE_GROUPS)], chosen
