@@ -81,8 +81,10 @@ def spread_checked(problem: Problem, solution: Solution, sigmas: Sequence[float]
             blocks = list(problem.blocks)
             blocks[i] = block.without_samples(groups != g)
             again = Problem(problem.chain, blocks, list(sigmas), problem.sigma_q, problem.huber_k)
-            # a placement whose samples all fell in the group left out has no unknowns there: it keeps the solution
             at = {name: k for k, name in enumerate(params.names)}
+            if not set(again.params.names) <= set(at):  # a placement left without samples renames the others
+                continue
+            # a placement whose samples all fell in the group left out has no unknowns there: it keeps the solution
             rows = np.array([at[name] for name in again.params.names])
             values = solution.values.copy()
             _start_where_solved(again, problem, i, block.units_in(blocks[i], groups != g), z[rows])
