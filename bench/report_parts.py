@@ -147,7 +147,8 @@ def accuracy_parts(results: dict) -> list[str]:
     return lines + field_parts(results)
 
 
-FIELD_HEAD = ["seed", "rotation", "translation", "ground at 4.5 m", "place", "max abs z", "CPU / wall (load)"]
+FIELD_HEAD = ["seed", "rotation [deg]", "translation [mm]", "ground at 4.5 m [cm]", "place (field) [mm / deg]",
+              "max abs z", "field CPU / wall [s] (load)"]  # fmt: skip
 CHECK_HEAD = ["seed", "model", "true [cm]", "measured [cm]", "1 sigma (formal, jackknife) [cm]", "off [cm]"]
 
 
@@ -198,7 +199,7 @@ def field_parts(results: dict) -> list[str]:
             f"Seeds 0-{c['seeds'] - 1}: {c['views']} rendered field views fitted at `field.robot_at`, {c['views']} "
             "held out with the robot near `field.check_at` (another place, the same true camera). The ground error "
             f"at {c['distance_m']:g} m measured on the held-out views (no truth) against the true one, for the "
-            f"fitted camera (after), the nominal one (before, 3-4 deg off) and the fitted one tilted by "
+            f"fitted camera (after), the nominal one (before, several degrees off) and the fitted one tilted by "
             f"{c['tilt_mrad']:g} mrad (an error near the 5 cm limit); 1 sigma: the larger of the formal and the "
             f"jackknife's (both given) [cm]. {_when(c)}.{refused}",
             "",
