@@ -3,7 +3,8 @@
 A block may ask for it (`Replicable`: `jackknife_groups` > 0, e.g. the field lines, whose detector errors the noise
 model does not fully name). Its samples are dealt into G groups (sample k in group k mod G, `view_groups`); the
 problem is solved G times more, each time with one group left out (`Replicable.without_samples`, the other blocks
-kept), started at the solution with its noise model (levels and outlier sets). The jackknife's covariance of the G
+kept), from the solution and under the fit's noise model (its levels and outlier sets held: the jackknife of the
+fit's estimator with its weights, not of its outlier and noise rounds). The jackknife's covariance of the G
 estimates, (G - 1) / G * sum (x_g - mean)(x_g - mean)^T, holds what differs from view to view whether or not the
 noise model holds it. The rule: each unknown's std is the larger of the formal one and the jackknife's; the
 covariance is scaled alike, D C D with D = diag(reported / formal), so the correlations (and the data shares) stay
@@ -15,13 +16,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from functools import partial
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from wolfcal.fit.blocks import Block
+from wolfcal.fit.lm import levenberg_marquardt, marginal_std
 from wolfcal.fit.problem import Problem
-from wolfcal.fit.solver import Solution, solve
+from wolfcal.fit.solver import FINAL_DAMPING, FINAL_FTOL, FINAL_STD_TOL, Solution
 
 JACKKNIFE_GROUPS = 6  # groups of views each left out once: one more solve each
 
@@ -88,7 +91,7 @@ def spread_checked(problem: Problem, solution: Solution, sigmas: Sequence[float]
             rows = np.array([at[name] for name in again.params.names])
             values = solution.values.copy()
             _start_where_solved(again, problem, i, block.units_in(blocks[i], groups != g), z[rows])
-            values[rows] = solve(again, start=z[rows]).values
+            values[rows] = again.values(_converged(again, z[rows]))
             replicates.append(values)
         spread = np.sqrt(np.clip(np.diag(jackknife_covariance(np.array(replicates))), 0.0, None))
         spreads[i] = spread
@@ -102,10 +105,18 @@ def spread_checked(problem: Problem, solution: Solution, sigmas: Sequence[float]
     return replace(solution, uncertainty=uncertainty), spreads
 
 
+def _converged(problem: Problem, z: np.ndarray) -> np.ndarray:
+    """The unknowns (prior-normalised) where `problem`'s cost under its present noise model is least, from z:
+    Newton steps on the robust loss, converged as the fit's final solve (`wolfcal.fit.solver`)."""
+    newton = partial(problem.normal_equations, curvature=True)
+    std = marginal_std(problem.normal_equations(z)[0])
+    return levenberg_marquardt(problem.residuals, newton, z, ftol=FINAL_FTOL, std_tol=FINAL_STD_TOL, std=std,
+                               damping=FINAL_DAMPING).x  # fmt: skip
+
+
 def _start_where_solved(again: Problem, problem: Problem, replicated: int, units: np.ndarray, z: np.ndarray) -> None:
-    """The replicate `again` (block `replicated` on fewer samples, its units `units` of the fit's) starts from the
-    fit's noise model: its noise levels, unit levels and outlier sets (so its rounds need not find them again from
-    the nominal model), linearised at z."""
+    """The replicate `again` (block `replicated` on fewer samples, its units `units` of the fit's) under the fit's
+    noise model: its noise levels, unit levels and outlier sets, the noise groups built at z."""
     for k, (state, solved) in enumerate(zip(again.states, problem.states)):
         own = units if k == replicated else np.arange(solved.block.n_units)
         state.excluded_units = solved.excluded_units[own]

@@ -351,15 +351,12 @@ def _update_round(problem: Problem, z: np.ndarray, rows_total: int) -> tuple[boo
     return changed, change, notes
 
 
-def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None,
-          start: np.ndarray | None = None) -> Solution:  # fmt: skip
+def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None] | None = None) -> Solution:
     """Solve with outlier rounds (module docstring); each block's noise level stays within its `noise_min` ..
-    `noise_max`. `start`: the prior-normalised unknowns (P,) to start from (default: the priors' centres, 0)."""
+    `noise_max`."""
     say = progress or (lambda _msg: None)
     z = np.zeros(len(problem.params))
     before = [r.copy() for r in problem.raw_residuals(z)]
-    if start is not None:
-        z = np.asarray(start, dtype=float).copy()
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
