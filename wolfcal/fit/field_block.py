@@ -13,10 +13,9 @@ error that every view of one marking repeats (paint off the field's dimensions, 
 stripes read a little toward the brighter one) is not averaged out by more views, and the robot's place, which
 the markings' places share, is known only as well as they are.
 
-The reported std: the noise model (each point's error, one per stretch of a line in a view, the joint readings'
-rounding) does not name all the detector does: a line's points in one view err together by more than a stretch's
-share. So the fit reports each std as the larger of the formal one and a grouped jackknife's over the views
-(STD_RULE, `wolfcal.fit.jackknife`), as the held-out check does; the markings' places stay in the formal part.
+The noise model below does not name all the detector does (a line's points in one view err together by more than a
+stretch's share): each reported std is the larger of the formal one and a grouped jackknife's over the views
+(`wolfcal.fit.jackknife.RULE`), as the held-out check's; the markings' places stay in the formal part.
 
 What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
 holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
@@ -36,6 +35,7 @@ from wolfcal.field.place import far_places
 from wolfcal.field.selection import line_stretches, lines_seen, points_used
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
+from wolfcal.fit.jackknife import RULE
 from wolfcal.outliers import OutlierRule
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
@@ -49,11 +49,6 @@ YAW_PRIOR_RAD = 0.2  # [rad] (about 10 deg)
 # how far a marking's detected centre may lie from where the field's dimensions put it, the same in every view of it:
 # the paint's place, and the detector's lean toward the brighter of two mowing stripes whose edge a line lies on [m]
 MARKING_PRIOR_M = 0.01
-STD_RULE = (
-    "each unknown's std is the larger of the formal one (the noise model's) and a grouped jackknife's over the "
-    "views (dealt into groups, each left out once, the fit solved again): the detector's errors shared along a "
-    "line and between the lines of a view are held by the jackknife where the noise model misses them"
-)
 LINE_BIAS_PX = 0.3  # a line's points in one view share the detector's error across that line (blur, shading) [px]
 VIEW_RULE = OutlierRule(4.0, 3.0)  # a view whose points are off by 4x the median view's and 3 px is left out
 LINE_POINT_RULE = OutlierRule(4.0, 2.0)  # and a single point (a robot's leg, the ball) off by 2 px of a view kept
@@ -181,7 +176,7 @@ class FieldBlock(Block):
         entry["notes"] = far_places(self.obs, names, poses)
         if self.jackknife_ratio:
             shown = [*fitted.chain.names, *self.nuisance.names[: 3 * len(poses)]]
-            entry["std_rule"] = STD_RULE
+            entry["std_rule"] = RULE
             entry["jackknife_over_formal_std"] = {name: round(self.jackknife_ratio[name], 3) for name in shown}
         return entry
 

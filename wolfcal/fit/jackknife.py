@@ -27,6 +27,11 @@ from wolfcal.fit.problem import Problem
 from wolfcal.fit.solver import FINAL_DAMPING, FINAL_FTOL, FINAL_STD_TOL, Solution
 
 JACKKNIFE_GROUPS = 6  # groups of views each left out once: one more solve each
+RULE = (  # in words, for result.yaml
+    "each unknown's std is the larger of the formal one (the noise model's) and a grouped jackknife's over the "
+    "views (dealt into groups, each left out once, the fit solved again under its noise model): errors shared by "
+    "the points of a view that the noise model misses are held by the jackknife"
+)
 
 
 @runtime_checkable
