@@ -13,9 +13,9 @@ error that every view of one marking repeats (paint off the field's dimensions, 
 stripes read a little toward the brighter one) is not averaged out by more views, and the robot's place, which
 the markings' places share, is known only as well as they are.
 
-The noise model below does not name all the detector does (a line's points in one view err together by more than a
-stretch's share): each reported std is the larger of the formal one and a grouped jackknife's over the views
-(`wolfcal.fit.jackknife.RULE`), as the held-out check's; the markings' places stay in the formal part.
+The noise model below does not name all the detector does (a view off as a whole by more than its readings'
+rounding, a line on a mowing stripe's edge read off near the robot): each reported std is the larger of the formal
+one and a grouped jackknife's over the views (`wolfcal.fit.jackknife.RULE`), as the held-out check's.
 
 What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
 holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
