@@ -1,7 +1,7 @@
 """The docs' sections of the harness's longer parts (`bench/report.py` calls these): solve time, the servo bus and
 the venue's robot time for docs/performance.md; std coverage on recordings, the floor check, planned poses, every
-system on one session and motion capture for docs/accuracy.md. A part missing from the results leaves its section
-out."""
+system on one session, motion capture and the field lines for docs/accuracy.md. A part missing from the results
+leaves its section out."""
 
 from __future__ import annotations
 
@@ -143,5 +143,69 @@ def accuracy_parts(results: dict) -> list[str]:
             f"seeds: sole position and rotation error, ankle-roll offset error, largest abs z. {_when(m)}.",
             "",
             *_table(["source", "sole position", "sole rotation", "ankle roll", "max abs z"], rows),
+        ]
+    return lines + field_parts(results)
+
+
+FIELD_HEAD = ["seed", "rotation [deg]", "translation [mm]", "ground at 4.5 m [cm]", "place (field) [mm / deg]",
+              "max abs z", "field CPU / wall [s] (load)"]  # fmt: skip
+CHECK_HEAD = ["seed", "model", "true [cm]", "measured [cm]", "1 sigma (formal, jackknife) [cm]", "off [cm]"]
+
+
+def field_parts(results: dict) -> list[str]:
+    """The field part (the camera from field lines against tags, per seed) and the field_check part (the held-out
+    ground error from field views against the true one)."""
+    lines: list[str] = []
+    if "field" in results:
+        f = results["field"]
+        rows = [[str(r["seed"]), f"{r['rotation_deg']:.3f} / {r['tags']['rotation_deg']:.3f}",
+                 f"{r['translation_mm']:.1f} / {r['tags']['translation_mm']:.1f}",
+                 f"{r['ground_cm']:.2f} / {r['tags']['ground_cm']:.2f}", f"{r['place_mm']:.1f} / {r['yaw_deg']:.3f}",
+                 f"{r['max_z']:.2f} / {r['tags']['max_z']:.2f}",
+                 f"{r['cpu_s']:.1f} / {r['wall_s']:.1f} ({r['load']:.1f})"]
+                for r in f["rows"]]  # fmt: skip
+        w, t = f["worst"], f["worst_tags"]
+        lines += [
+            "## Field lines against tags",
+            "",
+            f"Seeds 0-{f['seeds'] - 1}: a rendered field capture of {f['views']} views (512x384 colour, goals, two "
+            "other robots, a ball, shadows, people and walls, uneven light, noise, up to 2 px of motion blur) of a "
+            "standing Wolfgang within 0.3 m and 10 deg of `field.robot_at` on a KidSize field, `--system field "
+            f"--free camera`; and {f['tag_samples']} feet-tag samples of the same true camera, `--free camera`. "
+            "Field / tags: the camera's rotation [deg] and translation [mm] error, the ground error at 4.5 m [cm] "
+            "(worst bearing of -30, 0, +30 deg), the largest |estimate - truth| / reported std (camera x, y, z, rx, "
+            "ry, rz; with field lines also the robot's x, y, yaw); the robot's place error [mm / deg]; detection + "
+            "fit of the field capture in one process, BLAS on one thread as in the `wolfcal` command: CPU / wall "
+            f"[s] (load average after it, 2 cores). {_when(f)}.",
+            "",
+            *_table(FIELD_HEAD, rows),
+            f"Worst over the seeds, field lines: rotation {w['rotation_deg']:.3f} deg (target 0.1), place "
+            f"{w['place_mm'] / 10:.1f} cm / {w['yaw_deg']:.3f} deg (5 cm / 0.5 deg), ground error at 4.5 m "
+            f"{w['ground_cm']:.2f} cm (3 cm), max abs z {w['max_z']:.2f} (3), detection + fit {w['cpu_s']:.1f} s "
+            f"CPU, {w['wall_s']:.1f} s wall (10 s); tags: rotation {t['rotation_deg']:.3f} deg, ground error "
+            f"{t['ground_cm']:.2f} cm, max abs z {t['max_z']:.2f}.",
+            "",
+        ]
+    if "field_check" in results:
+        c = results["field_check"]
+        rows = [[str(r["seed"]), r["model"], f"{100 * r['true_m']:.1f}", f"{100 * r['measured_m']:.1f}",
+                 f"{100 * r['std_m']:.2f} ({100 * r['formal_m']:.2f}, {100 * r['jackknife_m']:.2f})",
+                 f"{100 * abs(r['measured_m'] - r['true_m']):.1f}", f"{100 * (c['agree_m'] + 2 * r['std_m']):.1f}",
+                 "yes" if r["agrees"] else "no"] for r in c["rows"]]  # fmt: skip
+        refused = "".join(f" Seed {r['seed']}: the fit refused its capture." for r in c["refused"])
+        lines += [
+            "## Held-out ground error from field views",
+            "",
+            f"Seeds 0-{c['seeds'] - 1}: {c['views']} rendered field views fitted at `field.robot_at`, {c['views']} "
+            "held out with the robot near `field.check_at` (another place, the same true camera). The ground error "
+            f"at {c['distance_m']:g} m measured on the held-out views (no truth) against the true one, for the "
+            f"fitted camera (after), the nominal one (before, several degrees off) and the fitted one tilted by "
+            f"{c['tilt_mrad']:g} mrad (an error near the 5 cm limit); 1 sigma: the larger of the formal and the "
+            f"jackknife's (both given) [cm]. {_when(c)}.{refused}",
+            "",
+            *_table([*CHECK_HEAD, f"{100 * c['agree_m']:g} cm + 2 sigma [cm]", "agrees"], rows),
+            f"{c['agree']} of {c['measured']} measurements agree with the true ground error within "
+            f"{100 * c['agree_m']:g} cm + 2 sigma.",
+            "",
         ]
     return lines

@@ -9,7 +9,8 @@ Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memo
 (solve time on synthetic samples), `stability` (how far a fit moves under changes that should not matter),
 `recordings` (std coverage on continuous recordings), `floor` (the venue's floor check on rendered views), `plan`
 (planned against random poses), `compare` (every measurement system on one session), `mocap` (motion capture on
-another robot's data), `bus` and `capture` (the servo bus emulator), `venue` (robot time of a venue session against
+another robot's data), `field` and `field_check` (the camera from field lines against tags, the held-out ground
+error from field views), `bus` and `capture` (the servo bus emulator), `venue` (robot time of a venue session against
 single commands), `realfield` (the field-line detector on real robot-camera images, `--field-images`: a clone of
 https://github.com/GuiFornes/field_detector). `--before PATH`: a folder holding an older `wolfcal` package; `fit`,
 `stream` and `evaluate` then run on both, alternating which goes first. Results of the parts run are merged into the
@@ -34,7 +35,7 @@ from quality import detection, intrinsics, seeds  # noqa: E402
 from targets import evaluate_memory, fit_speed, stream_memory, targets  # noqa: E402
 
 PARTS = ("fit", "stream", "evaluate", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor",
-         "plan", "compare", "mocap", "bus", "capture", "venue", "realfield")  # fmt: skip
+         "plan", "compare", "mocap", "field", "field_check", "bus", "capture", "venue", "realfield")  # fmt: skip
 DEFAULT_PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")  # about a minute; the others take longer
 
 
@@ -55,6 +56,8 @@ def main() -> None:
     parser.add_argument(
         "--field-images", type=Path, default=None, help="realfield: a clone of GuiFornes/field_detector"
     )
+    parser.add_argument("--field-views", type=int, default=20, help="rendered views per capture of the field part")
+    parser.add_argument("--check-views", type=int, default=12, help="views per capture of the field_check part")
     args = parser.parse_args()
     start_spawner()  # before anything large is loaded: see `common.start_spawner`
     parts = [p for p in args.parts.split(",") if p]
@@ -160,6 +163,14 @@ def in_process_part(part: str, args: argparse.Namespace, say) -> dict:
         from mocap import mocap
 
         return mocap(args.seeds, say)
+    if part == "field":
+        from field import field
+
+        return field(args.seeds, args.field_views, say)
+    if part == "field_check":
+        from field_check import field_check
+
+        return field_check(args.seeds, args.check_views, say)
     if part == "venue":
         from venue import venue
 

@@ -17,6 +17,7 @@ from wolfcal.field.model import KIDSIZE, field_lines
 from wolfcal.field.place import far_places
 from wolfcal.fit.derivative_check import assert_block_derivatives
 from wolfcal.fit.field_block import FieldBlock
+from wolfcal.fit.jackknife import JACKKNIFE_GROUPS
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import fit_observations
 from wolfcal.geometry import exp_so3, log_so3
@@ -102,6 +103,33 @@ def test_the_camera_and_the_place_come_out_of_line_points(tmp_path, seed):
     truths.update({"field_pose.x": pose[0], "field_pose.y": pose[1], "field_pose.yaw": pose[2]})
     z = {name: (estimate[name] - value) / std[name] for name, value in truths.items()}
     assert max(abs(v) for v in z.values()) < 3.0, z
+
+
+def test_an_error_the_noise_model_does_not_name_is_held_by_the_jackknife(tmp_path):
+    """Line points of 12 views, each view shifted as a whole by 1 px rms (an error no part of the noise model
+    names): the formal std leaves an estimate beyond 3.5 std of the truth; the reported one, the larger of the
+    formal and the grouped jackknife's over the views, holds every estimate within 3 std, and the covariance is
+    scaled with it (the correlations stay the formal ones)."""
+    robot = load_robot(field_robot(tmp_path))
+    rng = np.random.default_rng(2)
+    truth = random_truth(robot, TruthSpec(), rng)
+    pose = np.array([-3.0, 0.0, 0.0]) + rng.uniform([-0.3, -0.3, -0.17], [0.3, 0.3, 0.17])
+    obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 12, rng, 0.1)
+    obs = replace(obs, uv=obs.uv + rng.normal(0.0, 1.0, (obs.n_samples, 2))[obs.sample_index])
+    options = FitOptions(free="camera", system="field")
+    block = FieldBlock(robot, obs, field_lines(KIDSIZE))
+    first = fit_observations(robot, {}, options, own_blocks=[block])
+    checked = block.reweighted(first.chain, first.solution.values, JACKKNIFE_GROUPS)
+    fit = fit_observations(robot, {}, options, own_blocks=[checked])
+    names = [*fit.chain.names, "field_pose.x", "field_pose.y", "field_pose.yaw"]
+    at = [fit.params.names.index(name) for name in names]
+    error = fit.solution.values[at] - np.concatenate([truth.frames[robot.camera_joint], pose])
+    reported = fit.solution.uncertainty.std[at]
+    ratio = np.array([checked.jackknife_ratio[name] for name in names])
+    formal = reported / np.maximum(ratio, 1.0)
+    assert np.abs(error / formal).max() > 3.5 and np.abs(error / reported).max() < 3.0, (error / formal, ratio)
+    u = fit.solution.uncertainty
+    assert np.allclose(u.covariance, u.correlation * np.outer(u.std, u.std))
 
 
 def test_the_field_config_is_read_and_checked(tmp_path):

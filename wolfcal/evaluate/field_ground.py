@@ -35,6 +35,7 @@ from wolfcal.evaluate.ground import ball_views, ground_point
 from wolfcal.field.model import FieldLines, field_lines
 from wolfcal.field.observations import FieldObservations
 from wolfcal.fit.field_block import FieldBlock
+from wolfcal.fit.jackknife import jackknife_covariance, view_groups
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import Fit, fit_observations
 from wolfcal.geometry import invert_transform
@@ -45,16 +46,15 @@ from wolfcal.robot.robot import Robot
 
 CAMERA_PRESET = "camera"  # the correction the held-out views are asked for: the head camera's mount (6)
 STEP = 1e-6  # central-difference step of the landing offset's derivatives [m, rad]
-# The views are dealt into at most this many groups, each left out once (one fit each): the jackknife's spread of
-# the camera the views ask for holds what differs from view to view (a detector's bias along one view's lines)
-# whether or not the noise model holds it
-JACKKNIFE_GROUPS = 6
 
 
 def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
                  weighted_at: Corrections | None = None) -> Fit:  # fmt: skip
     """The field fit of the held-out views with the camera's mount free around `model`'s (`model`'s other
-    corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`)."""
+    corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`). The
+    markings are held where the field's dimensions put them: freed, their 25 places trade against the camera's
+    pitch and height across one placement's views and the measurement's 1 sigma grows 2-3x, to where a dozen views
+    no longer see an error of the verdict's limit; the detector's lean on them is a few mm."""
     chain = build_parameter_set(robot, CAMERA_PRESET, {"head": []})
     block = FieldBlock(robot, obs, lines, fixed=chain.held(model), weighted_at=weighted_at or model,
                        marking_places=False)  # fmt: skip
@@ -91,26 +91,15 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
 def jackknife_mounts(robot: Robot, obs: FieldObservations, lines: FieldLines,
                      model: Corrections) -> np.ndarray | None:  # fmt: skip
     """(G, 6) the camera's mount the views ask for around `model` (weighted there) with each of G groups of views
-    left out (view k in group k mod JACKKNIFE_GROUPS); None with fewer than 3 views."""
+    left out (`wolfcal.fit.jackknife.view_groups`); None with fewer than 3 views."""
     if obs.n_samples < 3:
         return None
-    groups = np.arange(obs.n_samples) % min(obs.n_samples, JACKKNIFE_GROUPS)
+    groups = view_groups(obs.n_samples)
     mounts = []
     for g in np.unique(groups):
-        fit = asked_camera(robot, _views(obs, groups != g), lines, model)
+        fit = asked_camera(robot, obs.only_samples(groups != g), lines, model)
         mounts.append(fit.corrections.frames[robot.camera_joint])
     return np.stack(mounts)
-
-
-def _views(obs: FieldObservations, keep: np.ndarray) -> FieldObservations:
-    """The observations of the samples `keep` (S,) bool, renumbered; placements with no sample left are dropped."""
-    index = np.cumsum(keep) - 1
-    points = keep[obs.sample_index]
-    placements, placement = np.unique(obs.placement[keep], return_inverse=True)
-    return replace(obs, q_measured=obs.q_measured[keep], stamps_ns=obs.stamps_ns[keep],
-                   sources=[s for s, k in zip(obs.sources, keep) if k], placement=placement.ravel(),
-                   starts=obs.starts[placements], sample_index=index[obs.sample_index[points]],
-                   uv=obs.uv[points])  # fmt: skip
 
 
 def _places(fit: Fit) -> np.ndarray:
@@ -172,8 +161,7 @@ def _jackknife_std(offset: Callable[[np.ndarray], np.ndarray], replicates: np.nd
     values = np.array([offset(m) for m in replicates])
     if not np.all(np.isfinite(values)):
         return float("inf")
-    d = values - values.mean(axis=0)
-    return float(np.sqrt((len(values) - 1) / len(values) * np.sum(d**2)))
+    return float(np.sqrt(np.trace(jackknife_covariance(values))))
 
 
 def landing_offset(robot: Robot, camera: CameraModel, model: Corrections, reference: Corrections, q: np.ndarray,

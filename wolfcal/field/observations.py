@@ -40,6 +40,19 @@ class FieldObservations:
                        sources=[self.sources[s] for s in samples], placement=self.placement[samples],
                        sample_index=renumber[self.sample_index[keep]], uv=self.uv[keep])  # fmt: skip
 
+    def only_samples(self, keep: np.ndarray) -> FieldObservations:
+        """The samples where keep (S,) is True and their line points, renumbered; placements left without a sample
+        are dropped (the others renumbered in order)."""
+        keep = np.asarray(keep, bool)
+        index = np.cumsum(keep) - 1
+        points = keep[self.sample_index]
+        placements, placement = np.unique(self.placement[keep], return_inverse=True)
+        configured = None if self.configured is None else self.configured[placements]
+        return replace(self, q_measured=self.q_measured[keep], stamps_ns=self.stamps_ns[keep],
+                       sources=[s for s, k in zip(self.sources, keep) if k], placement=placement.ravel(),
+                       starts=self.starts[placements], sample_index=index[self.sample_index[points]],
+                       uv=self.uv[points], configured=configured)  # fmt: skip
+
 
 MAX_POINTS_PER_VIEW = 120  # line points kept per view, spread over what it found
 

@@ -13,6 +13,10 @@ error that every view of one marking repeats (paint off the field's dimensions, 
 stripes read a little toward the brighter one) is not averaged out by more views, and the robot's place, which
 the markings' places share, is known only as well as they are.
 
+The noise model below does not name all the detector does (a view off as a whole by more than its readings'
+rounding, a line on a mowing stripe's edge read off near the robot): each reported std is the larger of the formal
+one and a grouped jackknife's over the views (`wolfcal.fit.jackknife.RULE`), as the held-out check's.
+
 What lines alone cannot tell: the camera's height against the scale of what it sees (only the lines' perspective
 holds it), and its yaw against the robot's yaw on the field (both turn every view alike); the summary names such
 pairs from the correlations. The field's point symmetry is handled before the fit (`wolfcal.field.place`).
@@ -20,20 +24,18 @@ pairs from the correlations. The field's point symmetry is handled before the fi
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from wolfcal.field.ground import ground_gradient
-from wolfcal.field.model import FieldLines, field_lines, nearest_line_normal
+from wolfcal.field.model import FieldLines, nearest_line_normal
 from wolfcal.field.observations import FieldObservations
 from wolfcal.field.place import far_places
 from wolfcal.field.selection import line_stretches, lines_seen, points_used
 from wolfcal.fit.blocks import Block, FittedBlock, Linearization, held_joint_groups
 from wolfcal.fit.floor_block import standing_chain
-from wolfcal.fit.options import FitOptions
+from wolfcal.fit.jackknife import RULE
 from wolfcal.outliers import OutlierRule
 from wolfcal.projection import BEHIND_CAMERA_PX
 from wolfcal.robot.corrections import Corrections
@@ -67,7 +69,7 @@ class FieldBlock(Block):
 
     def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
                  weighted_at: Corrections | None = None, shared_lines: bool = True,
-                 marking_places: bool = True) -> None:  # fmt: skip
+                 marking_places: bool = True, jackknife_groups: int = 0) -> None:  # fmt: skip
         """Own unknowns: the robot's place per placement (`field_pose_names`), then the place of every marking,
         shared by every view and placement: a straight line's offset along its normal
         (`line<k>.offset`, k its row in `lines.segments`) and the centre circle's centre and radius (`circle.x|y`,
@@ -75,14 +77,17 @@ class FieldBlock(Block):
         `weighted_at`: the model whose pixel scale on the ground weighs the points (default:
         `fixed`, the nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
         `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
-        first solve that only finds where to weigh the points."""
+        first solve that only finds where to weigh the points. `jackknife_groups` > 0: the reported std checked
+        against a jackknife over that many groups of views (`wolfcal.fit.jackknife`)."""
         self.robot, self.lines, self.fixed = robot, lines, fixed or Corrections()
-        self.shared_lines = shared_lines
+        self.shared_lines, self.jackknife_groups = shared_lines, jackknife_groups
+        self.jackknife_ratio: dict[str, float] = {}
         self.detected = obs  # every point found; the block uses those on lines seen by enough of them
-        model = weighted_at or self.fixed
+        model = self.weighted_at = weighted_at or self.fixed
         T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
         line = lines_seen(obs, lines, T_floor_camera[obs.sample_index])
         keep = points_used(obs.sample_index, line)
+        self.point_of_unit = np.flatnonzero(keep)  # (U,) each unit's point in `detected`
         if not keep.all():
             obs, line = obs.only_points(keep), line[keep]
             T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
@@ -109,14 +114,34 @@ class FieldBlock(Block):
         self.nuisance = ParameterSet(places + [Parameter(name, "marking", name.split(".")[0], i, "m", MARKING_PRIOR_M)
                                                for i, name in enumerate(marking_names)])  # fmt: skip
 
-    def reweighted(self, chain: ParameterSet, values: np.ndarray) -> FieldBlock:
+    def reweighted(self, chain: ParameterSet, values: np.ndarray, jackknife_groups: int = 0) -> FieldBlock:
         """The same points weighted at a solution (chain values, then this block's own), starting there: the pixel
         scale on the ground changes steeply with the camera's pitch, so weights taken at a nominal model several
         degrees off misstate how far each point is off in the image."""
         obs = replace(self.detected, starts=self.places(values[len(chain) :]))
         model = chain.corrections(values[: len(chain)]).plus(self.fixed)
         return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model,
+                          marking_places=self.marking_places, jackknife_groups=jackknife_groups)  # fmt: skip
+
+    @property
+    def n_samples(self) -> int:
+        return self.detected.n_samples
+
+    def without_samples(self, keep: np.ndarray) -> FieldBlock:
+        """The views where keep (S,) is True (of every view found, `detected`), weighted and started alike
+        (`wolfcal.fit.jackknife.Replicable`)."""
+        return FieldBlock(self.robot, self.detected.only_samples(keep), self.lines, self.fixed,
+                          weighted_at=self.weighted_at, shared_lines=self.shared_lines,
                           marking_places=self.marking_places)  # fmt: skip
+
+    def units_in(self, part: Block, keep: np.ndarray) -> np.ndarray:
+        """(U_part,) this block's unit of each unit of `part` (`without_samples(keep)`): the points a view uses do
+        not depend on the other views."""
+        assert isinstance(part, FieldBlock)
+        points = np.flatnonzero(np.asarray(keep, bool)[self.detected.sample_index])[part.point_of_unit]
+        units = np.searchsorted(self.point_of_unit, points)
+        assert np.array_equal(self.point_of_unit[units], points), "a view's points do not depend on the others"
+        return units
 
     def places(self, local_values: np.ndarray) -> np.ndarray:
         """(P, 3) the robot's place per placement (x, y [m], yaw [rad]) from the block's own unknowns (L,)."""
@@ -149,6 +174,10 @@ class FieldBlock(Block):
         entry["marking_places_m"] = {name: round(float(v), 5) for name, v in
                                      zip(marking_names, fitted.local_values[3 * len(poses) :])}  # fmt: skip
         entry["notes"] = far_places(self.obs, names, poses)
+        if self.jackknife_ratio:
+            shown = [*fitted.chain.names, *self.nuisance.names[: 3 * len(poses)]]
+            entry["std_rule"] = RULE
+            entry["jackknife_over_formal_std"] = {name: round(self.jackknife_ratio[name], 3) for name in shown}
         return entry
 
     @staticmethod
@@ -163,6 +192,11 @@ class FieldBlock(Block):
             name = max(places, key=lambda n: abs(places[n]))
             lines.append(f"  markings' places ({len(places)} unknowns, prior {1000 * MARKING_PRIOR_M:.0f} mm, in "
                          f"result.yaml): largest {name} {1000 * places[name]:+.1f} mm")  # fmt: skip
+        ratios = entry.get("jackknife_over_formal_std") or {}
+        if ratios:
+            name = max(ratios, key=lambda n: ratios[n])
+            lines.append(f"  std: the larger of the formal one and a jackknife's over groups of the views (largest "
+                         f"jackknife / formal: {name} {ratios[name]:.2f})")  # fmt: skip
         return [*lines, *(f"  warning: {note}" for note in entry.get("notes", []))]
 
     def linearize(self, chain_values: np.ndarray, local_values: np.ndarray, chain: ParameterSet) -> Linearization:
@@ -233,22 +267,3 @@ class FieldBlock(Block):
         )
         return Linearization(residual=residual, jac_chain=d_columns[:, None, n_joints:], jac_local=jac_local,
                              local_cols=local_cols, joint_sensitivity=d_columns[:, None, :n_joints])  # fmt: skip
-
-
-def field_blocks(robot: Robot, captures: list[Path], options: FitOptions,
-                 say: Callable[[str], None] | None) -> tuple[list[Block], list[Path]]:  # fmt: skip
-    """The fit builder of the field system (`wolfcal.fit.systems`): the field captures (`field_captures`: with
-    `--system field` every capture, with every system those that show no tag). Its block is solved once on its own
-    and weighted again at that solution (`FieldBlock.reweighted`); the fit then joins it to the other blocks."""
-    from wolfcal.field.observe import field_captures, field_observations
-    from wolfcal.fit.pipeline import fit_observations
-
-    chosen = field_captures(robot, list(captures), options.system)
-    if not chosen:
-        return [], []
-    tell = say or (lambda _: None)
-    obs = field_observations(robot, chosen, tell)
-    block = FieldBlock(robot, obs, field_lines(robot.config.field_config().dimensions), shared_lines=False)
-    first = fit_observations(robot, {}, replace(options, system="field"), own_blocks=[block])
-    tell("weighting the line points at the first solution ...")
-    return [block.reweighted(first.chain, first.solution.values)], chosen

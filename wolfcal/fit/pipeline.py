@@ -16,6 +16,7 @@ from wolfcal.fit.blocks import Block
 from wolfcal.fit.camera_axes import check_camera_axes
 from wolfcal.fit.camera_block import CameraBlock, placements
 from wolfcal.fit.floor_block import FloorBlock, SoleClosure, check_floor_samples
+from wolfcal.fit.jackknife import spread_checked
 from wolfcal.fit.mocap_block import MocapBlock
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.problem import Problem
@@ -113,8 +114,9 @@ def fit_observations(
         blocks.append(mocap)
     blocks += list(own_blocks)
     _check_enough_data(blocks, len(chain), options.free)
-    problem = Problem(chain, blocks, block_sigmas(robot, blocks), robot.config.priors.encoder_noise, options.huber_k)
-    solution = solve(problem, progress=say)
+    sigmas = block_sigmas(robot, blocks)
+    problem = Problem(chain, blocks, sigmas, robot.config.priors.encoder_noise, options.huber_k)
+    solution, _ = spread_checked(problem, solve(problem, progress=say), sigmas, say)  # blocks that ask for it
     return Fit(robot, used, blocks, chain, problem, solution, held)
 
 

@@ -314,8 +314,9 @@ def _one_group(reading: np.ndarray) -> np.ndarray:
     if not np.any(reading != reading[:, :1]):
         return reading[:, 0].copy() if reading.size else np.zeros(len(reading), dtype=int)  # not a view of (U, J)
     n_units, n_joints = reading.shape
-    joint = np.broadcast_to(np.arange(n_joints), reading.shape)
-    _, node = np.unique(np.stack([joint, reading], axis=-1).reshape(-1, 2), axis=0, return_inverse=True)
+    low = int(reading.min())
+    key = np.arange(n_joints) * (int(reading.max()) - low + 1) + (reading - low)  # (U, J) one number per (joint, group)
+    _, node = np.unique(key.ravel(), return_inverse=True)
     node = node.ravel() + n_units
     unit = np.repeat(np.arange(n_units), n_joints)
     n = int(node.max()) + 1

@@ -116,7 +116,7 @@ SYSTEMS: tuple[System, ...] = (
         "wolfcal.field.observe:field_observations",
         "wolfcal.sim.field:simulate_field_capture",
         None,
-        fit_blocks="wolfcal.fit.field_block:field_blocks",
+        fit_blocks="wolfcal.fit.field_fit:field_blocks",
         evaluator="wolfcal.evaluate.field_check:evaluate_held_out",
         description="the white lines of a RoboCup field seen by the head camera while the robot stands [px]",
     ),

@@ -1,7 +1,7 @@
 """The end of a venue session: fit the camera, check it on views the fit did not use, verdict, deploy files.
 
 - Fit: `--free camera` on the feet views and the floor views of the fit (`fit.pipeline.fit_observations`), or the
-  feet views and the field views (the field block of `wolfcal fit --system field`, `fit.field_block.field_blocks`,
+  feet views and the field views (the field block of `wolfcal fit --system field`, `fit.field_fit.field_blocks`,
   with the robot's place on the field as its unknowns), written as `wolfcal fit` writes it (`fit/`: result.yaml,
   calibrated.urdf, calibrated_robot.yaml).
 - Cross-validation over the session's own views (`evaluate.crossval`): each sample's tags on the feet judged by the
@@ -44,7 +44,7 @@ from wolfcal.evaluate.structure import unexplained
 from wolfcal.evaluate.undetermined import deployable_model
 from wolfcal.evaluate.verdict import MOUNT_LIMIT_RAD, deploy_verdict
 from wolfcal.fit.blocks import Block
-from wolfcal.fit.field_block import field_blocks
+from wolfcal.fit.field_fit import field_blocks
 from wolfcal.fit.options import FitOptions
 from wolfcal.fit.pipeline import check_solution_left_out, detect_captures, fit_observations, write_fit
 from wolfcal.fit.result import fit_result
