@@ -74,8 +74,10 @@ class FieldBlock(Block):
         shared by every view and placement: a straight line's offset along its normal
         (`line<k>.offset`, k its row in `lines.segments`) and the centre circle's centre and radius (`circle.x|y`,
         `circle.radius`) [m]; `marking_places` False: the markings held where the field's dimensions put them.
-        `weighted_at`: the model whose pixel scale on the ground weighs the points (default:
-        `fixed`, the nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
+        `weighted_at`: the model whose pixel scale on the ground weighs the points and whose nearest lines choose
+        them (default: `fixed`, the nominal model); a solve with the block starts there too (`Block.chain_start`):
+        a start degrees off, with the points weighted for a camera where it should be, can settle on other lines.
+        `reweighted` gives a block weighted and started at a fit's solution.
         `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
         first solve that only finds where to weigh the points. `jackknife_groups` > 0: the reported std checked
         against a jackknife over that many groups of views (`wolfcal.fit.jackknife`)."""
@@ -84,6 +86,7 @@ class FieldBlock(Block):
         self.jackknife_ratio: dict[str, float] = {}
         self.detected = obs  # every point found; the block uses those on lines seen by enough of them
         model = self.weighted_at = weighted_at or self.fixed
+        self.chain_start = weighted_at
         T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
         line = lines_seen(obs, lines, T_floor_camera[obs.sample_index])
         keep = points_used(obs.sample_index, line)

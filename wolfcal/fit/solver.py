@@ -385,8 +385,8 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     """Solve with outlier rounds (module docstring); each block's noise level stays within its `noise_min` ..
     `noise_max`."""
     say = progress or (lambda _msg: None)
-    z = np.zeros(len(problem.params))
-    before = [r.copy() for r in problem.raw_residuals(z)]
+    before = [r.copy() for r in problem.raw_residuals(np.zeros(len(problem.params)))]  # the nominal model's
+    z = problem.start.copy()
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):
