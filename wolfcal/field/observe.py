@@ -3,7 +3,8 @@
 Each sample's head image (colour: the turf is told from the lines by its green) is searched for line points
 (`wolfcal.field.detect`) no wider than a line would appear under the nominal model at the configured place
 (`field.robot_at`); at most `MAX_POINTS_PER_VIEW` points of a view are kept, spread over it. Then the robot's place
-is searched around the configured one (`wolfcal.field.place`): the fit starts there.
+is searched around the configured one (`wolfcal.field.place`): the fit starts there, with the camera at the
+search's pitch.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
     uv_all: list[np.ndarray] = []
     sample_of: list[np.ndarray] = []
     starts: list[np.ndarray] = []
+    pitches: list[float] = []
     stamps: list[int] = []
     sources: list[str] = []
     placement: list[int] = []
@@ -110,10 +112,11 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
         sources += [str(path)] * len(samples)
         placement += [k] * len(samples)
         starts.append(search.pose)
+        pitches.append(search.pitch)
     assert camera is not None
     return FieldObservations(list(robot.joint_names), np.vstack(q_all), np.asarray(stamps, np.int64), sources,
                              np.asarray(placement), np.asarray(starts), camera, np.concatenate(sample_of),
-                             np.vstack(uv_all), np.tile(configured, (len(starts), 1)))  # fmt: skip
+                             np.vstack(uv_all), np.tile(configured, (len(starts), 1)), np.asarray(pitches))  # fmt: skip
 
 
 def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured: np.ndarray, key: str) -> None:
