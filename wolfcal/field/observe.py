@@ -106,7 +106,7 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
         turned = search_place(distance_map, robot, q, view_of_point, points, camera,
                               configured + np.array([0.0, 0.0, np.pi]))  # fmt: skip
         _check_half(path, search, turned, configured, f"field.{key}")
-        _say_place(path, search.pose, configured, f"field.{key}", say)
+        _say_place(path, search, configured, f"field.{key}", say)
         q_all.append(q)
         stamps += [s.stamp_ns for s in samples]
         sources += [str(path)] * len(samples)
@@ -136,14 +136,15 @@ def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured
         )
 
 
-def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:
-    """The place found, the field's symmetry, and a warning when the place is far from the configured one (the
-    config's `key`)."""
+def _say_place(path: Path, search: PlaceSearch, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:
+    """The place and camera pitch found, the field's symmetry, and a warning when the place is far from the
+    configured one (the config's `key`)."""
+    found = search.pose
     mirror = np.round(mirrored_pose(*found), 2)
     say(f"{path}: the robot stands at x {found[0]:+.2f} m, y {found[1]:+.2f} m, yaw {np.rad2deg(found[2]):+.1f} deg "
-        f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
-        f"field's point symmetry fits the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that "
-        f"{key} names is assumed")  # fmt: skip
+        f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg), the camera "
+        f"pitched about {np.rad2deg(search.pitch):+.0f} deg from the nominal model; the field's point symmetry fits "
+        f"the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that {key} names is assumed")  # fmt: skip
     off = place_offset(found, configured)
     if far_from_configured(off):
         say(
