@@ -91,7 +91,8 @@ class ParameterSet:
 
     def held_by(self, corrections: Corrections) -> np.ndarray:
         """(P,) whether `corrections` holds a value of each chain parameter (its joint's offset, its frame, its tag)."""
-        held = {"offset": set(corrections.offsets), "frame": set(corrections.frames), "tag": set(corrections.tags)}
+        held: dict[str, set] = {"offset": set(corrections.offsets), "frame": set(corrections.frames),
+                                "tag": set(corrections.tags)}  # fmt: skip
         return np.array([p.in_chain and (int(p.target) if p.kind == "tag" else p.target) in held[p.kind]
                          for p in self.parameters], bool)  # fmt: skip
 
