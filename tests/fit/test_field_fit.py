@@ -14,7 +14,7 @@ from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.config import load_robot_config
 from wolfcal.errors import WolfcalError
 from wolfcal.field.model import KIDSIZE, field_lines
-from wolfcal.field.place import far_places
+from wolfcal.field.place import DistanceMap, far_places, search_place
 from wolfcal.fit.derivative_check import assert_block_derivatives
 from wolfcal.fit.field_block import FieldBlock
 from wolfcal.fit.jackknife import JACKKNIFE_GROUPS
@@ -104,6 +104,30 @@ def test_the_camera_and_the_place_come_out_of_line_points(tmp_path, seed, tilt):
     truths.update({"field_pose.x": pose[0], "field_pose.y": pose[1], "field_pose.yaw": pose[2]})
     z = {name: (estimate[name] - value) / std[name] for name, value in truths.items()}
     assert max(abs(v) for v in z.values()) < 3.0, z
+
+
+@pytest.mark.parametrize("prior_deg, found_deg", [(None, -16.0), (4.0, -12.0)])
+def test_the_place_search_finds_a_camera_pitched_far_down(tmp_path, prior_deg, found_deg):
+    """A camera pitched 16 deg down (the simulated tilt and 3 std of its spread beyond it): with the config's
+    camera rotation prior (5.7 deg) the pitches tried reach it, and the search finds it within 1 deg and the robot's
+    place within 0.1 m. With a prior of 4 deg they reach 12 deg: the search takes the pitch nearest the truth, not
+    one that lifts the far points above the horizon and scores the near ones alone (it took +8 deg, 0.4 m off)."""
+    path = field_robot(tmp_path)
+    if prior_deg is not None:
+        data = yaml.safe_load(path.read_text())
+        data["priors"] = {"camera_rotation": float(np.deg2rad(prior_deg))}
+        path.write_text(yaml.safe_dump(data))
+    robot = load_robot(path)
+    rng = np.random.default_rng(1)
+    truth = random_truth(robot, TruthSpec(camera_tilt=-0.24), rng)
+    assert np.rad2deg(truth.frames[robot.camera_joint][3]) == pytest.approx(-16.0, abs=0.1)
+    pose = np.array([-3.0, 0.0, 0.0]) + rng.uniform([-0.3, -0.3, -0.17], [0.3, 0.3, 0.17])
+    obs = synthetic_field(robot, CAMERA, truth, pose, np.array([-3.0, 0.0, 0.0]), KIDSIZE, 12, rng)
+    found = search_place(DistanceMap(field_lines(KIDSIZE)), robot, obs.q_measured, obs.sample_index, obs.uv,
+                         obs.camera, np.array([-3.0, 0.0, 0.0]))  # fmt: skip
+    assert np.rad2deg(found.pitch) == pytest.approx(found_deg, abs=1.0)
+    if prior_deg is None:
+        assert np.hypot(*(found.pose[:2] - pose[:2])) < 0.1
 
 
 def test_an_error_the_noise_model_does_not_name_is_held_by_the_jackknife(tmp_path):
