@@ -1,6 +1,7 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
+Rounds, from `Problem.start` (the references, or where a block asks the robot model to start): robust
+Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
 image: its residuals, whitened with the covariance of that view alone so that no other view's error leaks in, far
 above the other views' and off by more than the block's floor; they get zero weight; then in the views kept, single
 units far off where the block has a unit rule: floor-tag corners, `flag_units`) -> per block, estimate the
