@@ -11,6 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
+from realfield import realfield_section
 from report_parts import accuracy_parts, performance_parts
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -254,6 +255,7 @@ def accuracy(results: dict) -> str:
                 "as optimistic until that is found.",
             ]
     lines += accuracy_parts(results)
+    lines += realfield_section(results)
     return HEADER + "\n".join(lines).rstrip() + "\n"
 
 

@@ -10,10 +10,12 @@ Parts (bench/README.md says what each measures): `fit`, `stream` (speed and memo
 `recordings` (std coverage on continuous recordings), `floor` (the venue's floor check on rendered views), `plan`
 (planned against random poses), `compare` (every measurement system on one session), `mocap` (motion capture on
 another robot's data), `field` and `field_check` (the camera from field lines against tags, the held-out ground
-error from field views), `bus` and `capture` (the servo bus emulator), `venue` (robot time of a venue session
-against single commands). `--before PATH`: a folder holding an older `wolfcal` package; `fit`, `stream` and
-`evaluate` then run on both, alternating which goes first. Results of the parts run are merged into the JSON file
-(other parts' results are kept). Generated inputs are kept in the temp folder (`common.DATA`)."""
+error from field views), `bus` and `capture` (the servo bus emulator), `venue` (robot time of a venue session against
+single commands), `realfield` (the field-line detector on real robot-camera images, `--field-images`: a clone of
+https://github.com/GuiFornes/field_detector). `--before PATH`: a folder holding an older `wolfcal` package; `fit`,
+`stream` and `evaluate` then run on both, alternating which goes first. Results of the parts run are merged into the
+JSON file (other parts' results are kept). Generated inputs are kept in the temp folder (`common.DATA`). A part
+skipped for want of its input (`realfield` without `--field-images`) keeps its earlier figures."""
 
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ from quality import detection, intrinsics, seeds  # noqa: E402
 from targets import evaluate_memory, fit_speed, stream_memory, targets  # noqa: E402
 
 PARTS = ("fit", "stream", "evaluate", "detection", "intrinsics", "seeds", "solve", "stability", "recordings", "floor",
-         "plan", "compare", "mocap", "field", "field_check", "bus", "capture", "venue")  # fmt: skip
+         "plan", "compare", "mocap", "field", "field_check", "bus", "capture", "venue", "realfield")  # fmt: skip
 DEFAULT_PARTS = ("fit", "stream", "detection", "intrinsics", "seeds")  # about a minute; the others take longer
 
 
@@ -51,6 +53,9 @@ def main() -> None:
     parser.add_argument("--binning", type=int, default=4, help="image binning of the seeds and recordings parts")
     parser.add_argument("--sizes", default="25,100,400,1000", help="synthetic samples of the solve part")
     parser.add_argument("--reads", type=int, default=2000, help="sync reads of the bus part")
+    parser.add_argument(
+        "--field-images", type=Path, default=None, help="realfield: a clone of GuiFornes/field_detector"
+    )
     parser.add_argument("--field-views", type=int, default=20, help="rendered views per capture of the field part")
     parser.add_argument("--check-views", type=int, default=12, help="views per capture of the field_check part")
     args = parser.parse_args()
@@ -85,6 +90,13 @@ def main() -> None:
             results["intrinsics"] = intrinsics(args.seeds, say)
         elif part == "seeds":
             results["seeds"] = seeds(args.seeds, args.binning, say)
+        elif part == "realfield":
+            from realfield import realfield
+
+            measured = realfield(args.field_images, trees, say)
+            if measured is None:
+                continue  # the images are absent: an earlier measurement stays
+            results[part] = measured
         else:
             results[part] = in_process_part(part, args, say)
         if part in ("fit", "stream"):

@@ -93,7 +93,7 @@ def wolfcal(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.slow
 def test_evaluate_judges_a_field_fit_on_held_out_field_views(tmp_path):
-    """Rendered views (12 at robot_at fitted, 8 at check_at held out, the same true camera): `wolfcal evaluate`
+    """Rendered views (12 at robot_at fitted, 12 at check_at held out, the same true camera): `wolfcal evaluate`
     measures the ground error at 4.5 m before and after within 2 cm + 2 sigma of the truth and deploys; without
     held-out views it says what to give."""
     robot = str(field_robot(tmp_path))
@@ -101,7 +101,7 @@ def test_evaluate_judges_a_field_fit_on_held_out_field_views(tmp_path):
     common = ["--system", "field", "--binning", "4", "--robot", robot]
     assert wolfcal("simulate", *common, "--samples", "12", "--seed", "3", "--out", str(fitted)).returncode == 0
     truth = str(tmp_path / "field.truth.yaml")
-    done = wolfcal("simulate", *common, "--samples", "8", "--seed", "4", "--check", "--truth", truth,
+    done = wolfcal("simulate", *common, "--samples", "12", "--seed", "4", "--check", "--truth", truth,
                    "--out", str(check))  # fmt: skip
     assert done.returncode == 0, done.stderr
     done = wolfcal("fit", str(fitted), "--system", "field", "--free", "camera", "--robot", robot,

@@ -1,5 +1,6 @@
 """Field lines: the field model's geometry, rendered views and the line detector against the views' truth."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 from wolfcal.camera.camera_info import load_camera_info
 from wolfcal.errors import WolfcalError
 from wolfcal.field.detect import detect_line_points
-from wolfcal.field.ground import expected_line_width, ground_points
+from wolfcal.field.ground import expected_line_width, ground_points, ground_step
 from wolfcal.field.model import (
     ADULTSIZE,
     KIDSIZE,
@@ -20,7 +21,7 @@ from wolfcal.field.model import (
 )
 from wolfcal.field.quality import detection_quality
 from wolfcal.field.render import motion_kernel, pixel_rays, render_field_view
-from wolfcal.field.scene import Scene, cluttered_scene
+from wolfcal.field.scene import WARM_LIGHT, Scene, cluttered_scene
 from wolfcal.geometry import transform_points
 
 CAMERA = load_camera_info(Path(__file__).resolve().parents[2] / "configs" / "wolfgang" / "basler_acA2040.yaml")
@@ -105,3 +106,26 @@ def test_motion_blur_keeps_a_line_in_place(length):
     blurred = np.convolve(row, kernel, mode="same")
     assert abs(kernel.sum() - 1.0) < 1e-6 and np.allclose(kernel, kernel[::-1])
     assert abs(blurred @ np.arange(41) / blurred.sum() - 19.5) < 1e-6
+
+
+def test_lines_are_found_under_a_warm_light() -> None:
+    """The cluttered view under a hall's warm light seen without white balance (lines look yellow, more saturated
+    than the turf): white is judged against the local turf's own colour, so the lines are still found, and few
+    points lie off the lines. Far lines thinner than half a pixel leave no truth pixels but are still seen, so the
+    points are also judged by their distance to the nearest true line centre."""
+    camera = CAMERA.binned(4)
+    rng = np.random.default_rng(4)
+    scene = dataclasses.replace(cluttered_scene(KIDSIZE, rng), colour_cast=WARM_LIGHT)
+    T = looking(-3.0, 0.0, 0.6, 0.0, 0.35)
+    view = render_field_view(camera, T, KIDSIZE, scene, rng, noise_sigma=3.0, blur_px=2.0)
+    line_pixels = view.image[view.line_mask].astype(float)
+    assert np.median(line_pixels[:, 2] - line_pixels[:, 0]) > 100  # the cast holds: red far above blue on a line
+    points = detect_line_points(view.image, expected_line_width(camera, T, KIDSIZE.line_width), step=4)
+    quality = detection_quality(points, view.line_mask, camera, T, field_lines(KIDSIZE), step=4, max_run_px=12)
+    assert quality.points > 200
+    assert quality.precision > 0.8, quality
+    assert quality.recall > 0.8, quality
+    assert np.median(quality.centre_error_px) < 0.6
+    ground = ground_points(camera, T, points.uv)
+    off_px = distance_to_lines(field_lines(KIDSIZE), ground) / np.nanmin(ground_step(camera, T, points.uv), axis=1)
+    assert np.mean(~(off_px <= 2.0)) < 0.15, np.mean(~(off_px <= 2.0))

@@ -49,15 +49,16 @@ STEP = 1e-6  # central-difference step of the landing offset's derivatives [m, r
 
 
 def asked_camera(robot: Robot, obs: FieldObservations, lines: FieldLines, model: Corrections,
-                 weighted_at: Corrections | None = None) -> Fit:  # fmt: skip
+                 weighted_at: Corrections | None = None, held_lines: bool = False) -> Fit:  # fmt: skip
     """The field fit of the held-out views with the camera's mount free around `model`'s (`model`'s other
-    corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`). The
+    corrections held) and the field pose free; the points weighted at `weighted_at` (default: `model`), each held
+    on its nearest line there with `held_lines` (`FieldBlock`: for a fit weighted at a solution). The
     markings are held where the field's dimensions put them: freed, their 25 places trade against the camera's
     pitch and height across one placement's views and the measurement's 1 sigma grows 2-3x, to where a dozen views
     no longer see an error of the verdict's limit; the detector's lean on them is a few mm."""
     chain = build_parameter_set(robot, CAMERA_PRESET, {"head": []})
     block = FieldBlock(robot, obs, lines, fixed=chain.held(model), weighted_at=weighted_at or model,
-                       marking_places=False)  # fmt: skip
+                       marking_places=False, held_lines=held_lines)  # fmt: skip
     options = FitOptions(free=CAMERA_PRESET, system="field", current=model)
     return fit_observations(robot, {}, options, own_blocks=[block])
 
@@ -67,8 +68,10 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
                           around: str = "after") -> dict:  # fmt: skip
     """Per model: per distance the measured ground error [m] (None: the ball lies above the model's horizon) with
     its 1 sigma [m] and worst bearing [deg]. The views are fitted with the camera's mount free around the model
-    `around` (its prior centred there), then again weighted and centred at that solution (started far off, a fit
-    may settle elsewhere: the point-to-line associations and the points left out differ): the camera they ask for
+    `around` (its prior centred there), then again weighted and centred at that solution, each point held on its
+    nearest line there (started far off, a fit may settle elsewhere: the point-to-line associations and the points
+    left out differ; and a point that changes its line moves the cost by a step, on which a solve, or a jackknife
+    replicate started at the solution, may stop): the camera they ask for
     serves every judged model. Also that camera's mount (camera.x|y|z|rx|ry|rz [m, rad], with std and data share),
     the robot's field pose per placement (capture file: `field_pose`, or `field_pose@k` with several; x, y [m],
     yaw [rad], with std) and the views' and line points' count."""
@@ -76,7 +79,7 @@ def measured_field_ground(robot: Robot, obs: FieldObservations, models: dict[str
     say(f"fitting the held-out field views: the robot's place and the camera's mount (around the model {around}) ...")
     first = asked_camera(robot, obs, lines, models[around])
     obs = replace(obs, starts=_places(first))
-    fit = asked_camera(robot, obs, lines, first.corrections)
+    fit = asked_camera(robot, obs, lines, first.corrections, held_lines=True)
     obs = replace(obs, starts=_places(fit))
     say("fitting again with each group of held-out views left out ...")
     replicates = jackknife_mounts(robot, obs, lines, fit.corrections)
@@ -97,7 +100,7 @@ def jackknife_mounts(robot: Robot, obs: FieldObservations, lines: FieldLines,
     groups = view_groups(obs.n_samples)
     mounts = []
     for g in np.unique(groups):
-        fit = asked_camera(robot, obs.only_samples(groups != g), lines, model)
+        fit = asked_camera(robot, obs.only_samples(groups != g), lines, model, held_lines=True)
         mounts.append(fit.corrections.frames[robot.camera_joint])
     return np.stack(mounts)
 

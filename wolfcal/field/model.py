@@ -150,14 +150,21 @@ def nearest_line(lines: FieldLines, points: np.ndarray) -> np.ndarray:
 
 
 def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For field points (N, 2): the signed offset [m] from the nearest line, that line's unit normal (N, 2) and its
-    index (N,) (`nearest_line`), so
-    that offset = normal . (point - a point of the line): a straight line's fixed normal (its direction turned left),
+    """For field points (N, 2): the signed offset [m] from the nearest line (`nearest_line`), that line's unit normal
+    (N, 2) and its index (N,), as `line_offset_normal` gives them."""
+    index = nearest_line(lines, points)
+    offset, normal = line_offset_normal(lines, points, index)
+    return offset, normal, index
+
+
+def line_offset_normal(lines: FieldLines, points: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For field points (N, 2) and a line of each (N,: a row of `lines.segments`, or `len(lines.segments)` for the
+    centre circle): the signed offset [m] from that line and its unit normal (N, 2), so that
+    offset = normal . (point - a point of the line): a straight line's fixed normal (its direction turned left),
     the circle's outward radial. The offset is smooth across the line (a residual without a kink at zero); beyond a
     segment's end it is the offset from the segment's extension."""
     p = np.asarray(points, float).reshape(-1, 2)
     a, ab = lines.segments[:, 0], lines.segments[:, 1] - lines.segments[:, 0]
-    index = nearest_line(lines, p)
     use_circle = index == len(ab)
     segment = np.where(use_circle, 0, index)
     normal = _segment_normals(ab)[segment]
@@ -165,7 +172,7 @@ def nearest_line_normal(lines: FieldLines, points: np.ndarray) -> tuple[np.ndarr
     radius = np.linalg.norm(p, axis=1)
     radial = p / np.maximum(radius, 1e-12)[:, None]
     normal = np.where(use_circle[:, None], radial, normal)
-    return np.where(use_circle, radius - lines.circle_radius, offset), normal, index
+    return np.where(use_circle, radius - lines.circle_radius, offset), normal
 
 
 def _segment_normals(ab: np.ndarray) -> np.ndarray:

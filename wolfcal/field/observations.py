@@ -24,6 +24,8 @@ class FieldObservations:
     uv: np.ndarray  # (M, 2) line point [px]
     # (P, 3) where the config places each placement (`field.robot_at` or `field.check_at`); None: not known
     configured: np.ndarray | None = None
+    # (P,) the camera pitch correction each placement's search placed the points best with [rad]; None: not searched
+    pitches: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -48,10 +50,11 @@ class FieldObservations:
         points = keep[self.sample_index]
         placements, placement = np.unique(self.placement[keep], return_inverse=True)
         configured = None if self.configured is None else self.configured[placements]
+        pitches = None if self.pitches is None else self.pitches[placements]
         return replace(self, q_measured=self.q_measured[keep], stamps_ns=self.stamps_ns[keep],
                        sources=[s for s, k in zip(self.sources, keep) if k], placement=placement.ravel(),
                        starts=self.starts[placements], sample_index=index[self.sample_index[points]],
-                       uv=self.uv[points], configured=configured)  # fmt: skip
+                       uv=self.uv[points], configured=configured, pitches=pitches)  # fmt: skip
 
 
 MAX_POINTS_PER_VIEW = 120  # line points kept per view, spread over what it found

@@ -3,7 +3,8 @@
 Each sample's head image (colour: the turf is told from the lines by its green) is searched for line points
 (`wolfcal.field.detect`) no wider than a line would appear under the nominal model at the configured place
 (`field.robot_at`); at most `MAX_POINTS_PER_VIEW` points of a view are kept, spread over it. Then the robot's place
-is searched around the configured one (`wolfcal.field.place`): the fit starts there.
+is searched around the configured one (`wolfcal.field.place`): the fit starts there, with the camera at the
+search's pitch.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
     uv_all: list[np.ndarray] = []
     sample_of: list[np.ndarray] = []
     starts: list[np.ndarray] = []
+    pitches: list[float] = []
     stamps: list[int] = []
     sources: list[str] = []
     placement: list[int] = []
@@ -104,16 +106,17 @@ def field_observations(robot: Robot, captures: list[Path], say: Callable[[str], 
         turned = search_place(distance_map, robot, q, view_of_point, points, camera,
                               configured + np.array([0.0, 0.0, np.pi]))  # fmt: skip
         _check_half(path, search, turned, configured, f"field.{key}")
-        _say_place(path, search.pose, configured, f"field.{key}", say)
+        _say_place(path, search, configured, f"field.{key}", say)
         q_all.append(q)
         stamps += [s.stamp_ns for s in samples]
         sources += [str(path)] * len(samples)
         placement += [k] * len(samples)
         starts.append(search.pose)
+        pitches.append(search.pitch)
     assert camera is not None
     return FieldObservations(list(robot.joint_names), np.vstack(q_all), np.asarray(stamps, np.int64), sources,
                              np.asarray(placement), np.asarray(starts), camera, np.concatenate(sample_of),
-                             np.vstack(uv_all), np.tile(configured, (len(starts), 1)))  # fmt: skip
+                             np.vstack(uv_all), np.tile(configured, (len(starts), 1)), np.asarray(pitches))  # fmt: skip
 
 
 def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured: np.ndarray, key: str) -> None:
@@ -133,14 +136,15 @@ def _check_half(path: Path, search: PlaceSearch, turned: PlaceSearch, configured
         )
 
 
-def _say_place(path: Path, found: np.ndarray, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:
-    """The place found, the field's symmetry, and a warning when the place is far from the configured one (the
-    config's `key`)."""
+def _say_place(path: Path, search: PlaceSearch, configured: np.ndarray, key: str, say: Callable[[str], None]) -> None:
+    """The place and camera pitch found, the field's symmetry, and a warning when the place is far from the
+    configured one (the config's `key`)."""
+    found = search.pose
     mirror = np.round(mirrored_pose(*found), 2)
     say(f"{path}: the robot stands at x {found[0]:+.2f} m, y {found[1]:+.2f} m, yaw {np.rad2deg(found[2]):+.1f} deg "
-        f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg); the "
-        f"field's point symmetry fits the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that "
-        f"{key} names is assumed")  # fmt: skip
+        f"({key}: {configured[0]:+.2f}, {configured[1]:+.2f}, {np.rad2deg(configured[2]):+.1f} deg), the camera "
+        f"pitched about {np.rad2deg(search.pitch):+.0f} deg from the nominal model; the field's point symmetry fits "
+        f"the same views at ({mirror[0]:+.2f}, {mirror[1]:+.2f}): the half that {key} names is assumed")  # fmt: skip
     off = place_offset(found, configured)
     if far_from_configured(off):
         say(

@@ -1,11 +1,15 @@
 """Where the robot stands on the field, before the fit: a search around the configured place.
 
-The line points of a placement's views are put on the floor through the nominal model with the camera pitched by
-each of `PITCHES` (a camera several degrees off moves far points by metres); each candidate pose (x, y, yaw) of the
+The line points of a placement's views are put on the floor through the nominal model with the camera pitched
+(`pitched`) by each of `pitches` (a camera several degrees off moves far points by metres: the grid spans
+PITCH_REACH standard deviations of the config's camera rotation prior); each candidate pose (x, y, yaw) of the
 floor frame on the field is scored by the mean distance of those points from the nearest line, truncated at
-`TRUNCATE_M` (points on no line count alike), looked up in a distance map of the field at `RASTER_M`. A coarse
+`TRUNCATE_M` (points on no line count alike, and so do points whose rays miss the floor at that pitch: a pitch
+that lifts the far points above the horizon is not scored on the near ones alone), looked up in a distance map of
+the field at `RASTER_M`. A coarse
 grid around `field.robot_at` for every pitch, then a finer one around the best. The field is point-symmetric: the
-mirrored pose scores the same, so the search stays on the configured half.
+mirrored pose scores the same, so the search stays on the configured half. The fit starts at the place found and
+with the camera at the pitch found (`wolfcal.fit.field_fit`).
 """
 
 from __future__ import annotations
@@ -30,8 +34,10 @@ RASTER_M = 0.02  # distance map resolution [m]
 TRUNCATE_M = 0.25  # a point further from every line than this counts as this far [m]
 SEARCH_M = 0.6  # the coarse grid reaches this far from the configured place [m]
 SEARCH_YAW = np.deg2rad(20.0)
-PITCHES = np.deg2rad(np.arange(-8.0, 8.5, 1.0))  # camera pitch corrections tried [rad]
+PITCH_STEP = np.deg2rad(1.0)  # between the camera pitch corrections tried [rad]
+PITCH_REACH = 3.0  # the pitches tried reach this many of the camera rotation prior's std either way
 COARSE_POINTS = 400  # points the coarse grid scores
+OFF_FIELD = 1e6  # where a point whose ray misses the floor is put: beyond every line [m]
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,19 @@ class DistanceMap:
         return np.where(inside, np.minimum(d, TRUNCATE_M), TRUNCATE_M).mean(axis=-1)
 
 
+def pitches(robot: Robot) -> np.ndarray:
+    """(K,) the camera pitch corrections the search tries [rad]: 0 and every PITCH_STEP out to PITCH_REACH times
+    the config's camera rotation prior either way."""
+    steps = int(PITCH_REACH * robot.config.priors.camera_rotation / PITCH_STEP)
+    return PITCH_STEP * np.arange(-steps, steps + 1)
+
+
+def pitched(robot: Robot, pitch: float) -> Corrections:
+    """The nominal model with the head camera pitched by `pitch` [rad]: turned about its optical x axis (right),
+    positive up."""
+    return Corrections(frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, pitch, 0.0, 0.0])})
+
+
 def _placed(ground: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """(K, N, 2) field points of floor points (N, 2) for floor-frame poses (K, 3) on the field."""
     c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
@@ -99,17 +118,16 @@ def search_place(field: DistanceMap, robot: Robot, q: np.ndarray, view_of_point:
     coarse = np.unique(np.linspace(0, len(uv) - 1, min(len(uv), COARSE_POINTS)).astype(int))
     best: tuple[float, np.ndarray, float] | None = None  # score, pose, pitch
     grounds = {}
-    for pitch in PITCHES:
-        model = Corrections(frames={robot.camera_joint: np.array([0.0, 0.0, 0.0, pitch, 0.0, 0.0])})
-        ground = ground_points(camera, camera_in_floor(robot, q, model)[0][view_of_point], uv)
+    for pitch in pitches(robot):
+        ground = ground_points(camera, camera_in_floor(robot, q, pitched(robot, pitch))[0][view_of_point], uv)
+        ground = np.where(np.isfinite(ground), ground, OFF_FIELD)  # a ray that misses the floor: on no line
         grounds[float(pitch)] = ground
-        finite = np.all(np.isfinite(ground[coarse]), axis=1)
-        pose, score = _best(field, ground[coarse][finite], _grid(configured, SEARCH_M, SEARCH_YAW, 13))
+        pose, score = _best(field, ground[coarse], _grid(configured, SEARCH_M, SEARCH_YAW, 13))
         if best is None or score < best[0]:
             best = (score, pose, float(pitch))
     assert best is not None
     _, pose, pitch = best
-    ground = grounds[pitch][np.all(np.isfinite(grounds[pitch]), axis=1)]
+    ground = grounds[pitch]
     pose, score = _best(field, ground, _grid(pose, 0.1, np.deg2rad(3.0), 11))
     configured_score = float(field.truncated_mean(_placed(ground, configured[None]))[0])
     return PlaceSearch(pose, pitch, score, configured_score)

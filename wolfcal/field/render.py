@@ -3,7 +3,8 @@
 Every pixel's ray (from `CameraModel.unproject`, distortion included) is traced in the field frame: the carpet
 (the plane z = 0 within the border strip: green turf with mowing stripes, grain and uneven light; white markings
 centred on the model's lines), the hall floor beyond it, and the scene's boxes and ball, whichever the ray meets
-first. Line edges are anti-aliased by the pixel's footprint on the ground. Pixels follow OpenCV (centre of the
+first. Line edges are anti-aliased by the pixel's footprint on the ground; the scene's colour cast (a warm light
+seen without white balance) scales every channel. Pixels follow OpenCV (centre of the
 top-left pixel at (0, 0)).
 """
 
@@ -86,7 +87,7 @@ def render_field_view(
             hit[near_ball], ball_color[near_ball] = _hit_ball(origin, rays[near_ball], centre, radius)
         nearer = hit < distance
         distance[nearer], color[nearer], coverage[nearer] = hit[nearer], ball_color[nearer], 0.0
-    image = color.reshape(h, w, 3)
+    image = color.reshape(h, w, 3) * np.asarray(scene.colour_cast)
     if blur_px > 0.0:
         image = cv2.filter2D(image.astype(np.float32), -1, motion_kernel(blur_px))
     image = image + rng.normal(0.0, noise_sigma, image.shape)

@@ -13,6 +13,7 @@ BORDER_STRIP = 1.0  # carpet beyond the touch and goal lines [m] (RoboCup: at le
 GOAL_WIDTH = 2.6  # between the posts' centres [m]
 GOAL_HEIGHT = 1.2
 POST_RADIUS = 0.05
+WARM_LIGHT = (0.35, 0.9, 1.6)  # BGR gains of a hall's warm light seen without white balance: white looks yellow
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,7 @@ class Scene:
     ball: tuple[np.ndarray, float] | None = None  # centre (3,) [m] and radius [m]
     shadows: list[tuple[np.ndarray, float]] = field(default_factory=list)  # ground discs: centre (2,), radius [m]
     light_gradient: np.ndarray = field(default_factory=lambda: np.zeros(2))  # relative brightness change per m
+    colour_cast: tuple[float, float, float] = (1.0, 1.0, 1.0)  # BGR gains of the light on everything
 
 
 def goal_boxes(dims: FieldDimensions) -> list[Box]:

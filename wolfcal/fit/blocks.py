@@ -17,6 +17,7 @@ from wolfcal.encoders import RAD_PER_TICK
 from wolfcal.graph import connected_components
 from wolfcal.observations import Observations
 from wolfcal.outliers import OutlierRule
+from wolfcal.robot.corrections import Corrections
 from wolfcal.robot.parameters import ParameterSet
 
 if TYPE_CHECKING:
@@ -100,6 +101,9 @@ class Block:
     view_of_unit: np.ndarray  # (U,) outlier unit (view) of each unit
     view_labels: list[tuple[int, int]]  # (sample, tag or marker id) of each view
     q_measured: np.ndarray  # (S, J) joint readings of the block's samples [rad]
+    # the robot model a solve with this block starts from (`Problem.start`; e.g. where the block alone was solved):
+    # None: the fit's references (the nominal model, or the present calibration)
+    chain_start: Corrections | None = None
 
     @property
     def n_units(self) -> int:

@@ -29,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from wolfcal.field.ground import ground_gradient
-from wolfcal.field.model import FieldLines, nearest_line_normal
+from wolfcal.field.model import FieldLines, line_offset_normal, nearest_line_normal
 from wolfcal.field.observations import FieldObservations
 from wolfcal.field.place import far_places
 from wolfcal.field.selection import line_stretches, lines_seen, points_used
@@ -69,21 +69,28 @@ class FieldBlock(Block):
 
     def __init__(self, robot: Robot, obs: FieldObservations, lines: FieldLines, fixed: Corrections | None = None,
                  weighted_at: Corrections | None = None, shared_lines: bool = True,
-                 marking_places: bool = True, jackknife_groups: int = 0) -> None:  # fmt: skip
+                 marking_places: bool = True, jackknife_groups: int = 0, held_lines: bool = False) -> None:  # fmt: skip
         """Own unknowns: the robot's place per placement (`field_pose_names`), then the place of every marking,
         shared by every view and placement: a straight line's offset along its normal
         (`line<k>.offset`, k its row in `lines.segments`) and the centre circle's centre and radius (`circle.x|y`,
         `circle.radius`) [m]; `marking_places` False: the markings held where the field's dimensions put them.
-        `weighted_at`: the model whose pixel scale on the ground weighs the points (default:
-        `fixed`, the nominal model); `reweighted` gives a block weighted at a fit's solution, its start there too.
+        `weighted_at`: the model whose pixel scale on the ground weighs the points and whose nearest lines choose
+        them (default: `fixed`, the nominal model); a solve with the block starts there too (`Block.chain_start`):
+        a start degrees off, with the points weighted for a camera where it should be, can settle on other lines.
+        `reweighted` gives a block weighted and started at a fit's solution.
         `shared_lines` False: no error shared by a line's points (`shared_labels`), a cheaper noise model for a
         first solve that only finds where to weigh the points. `jackknife_groups` > 0: the reported std checked
-        against a jackknife over that many groups of views (`wolfcal.fit.jackknife`)."""
+        against a jackknife over that many groups of views (`wolfcal.fit.jackknife`). `held_lines`: each point
+        kept on the line nearest it where the block is weighted (`line_of_unit`), not the nearest at each
+        linearisation: a point near two lines (a corner, a line's end) that changes its line changes its
+        residual by a jump (the pixel scale across the two differs), and the solve may stop at another of the
+        many such steps of the cost, by up to half a standard deviation."""
         self.robot, self.lines, self.fixed = robot, lines, fixed or Corrections()
-        self.shared_lines, self.jackknife_groups = shared_lines, jackknife_groups
+        self.shared_lines, self.jackknife_groups, self.held_lines = shared_lines, jackknife_groups, held_lines
         self.jackknife_ratio: dict[str, float] = {}
         self.detected = obs  # every point found; the block uses those on lines seen by enough of them
         model = self.weighted_at = weighted_at or self.fixed
+        self.chain_start = weighted_at
         T_floor_camera = camera_in_floor(robot, obs.q_measured, model)[0]
         line = lines_seen(obs, lines, T_floor_camera[obs.sample_index])
         keep = points_used(obs.sample_index, line)
@@ -117,11 +124,13 @@ class FieldBlock(Block):
     def reweighted(self, chain: ParameterSet, values: np.ndarray, jackknife_groups: int = 0) -> FieldBlock:
         """The same points weighted at a solution (chain values, then this block's own), starting there: the pixel
         scale on the ground changes steeply with the camera's pitch, so weights taken at a nominal model several
-        degrees off misstate how far each point is off in the image."""
+        degrees off misstate how far each point is off in the image. Each point is held on its nearest line there
+        (`held_lines`)."""
         obs = replace(self.detected, starts=self.places(values[len(chain) :]))
         model = chain.corrections(values[: len(chain)]).plus(self.fixed)
         return FieldBlock(self.robot, obs, self.lines, self.fixed, weighted_at=model,
-                          marking_places=self.marking_places, jackknife_groups=jackknife_groups)  # fmt: skip
+                          marking_places=self.marking_places, jackknife_groups=jackknife_groups,
+                          held_lines=True)  # fmt: skip
 
     @property
     def n_samples(self) -> int:
@@ -132,7 +141,7 @@ class FieldBlock(Block):
         (`wolfcal.fit.jackknife.Replicable`)."""
         return FieldBlock(self.robot, self.detected.only_samples(keep), self.lines, self.fixed,
                           weighted_at=self.weighted_at, shared_lines=self.shared_lines,
-                          marking_places=self.marking_places)  # fmt: skip
+                          marking_places=self.marking_places, held_lines=self.held_lines)  # fmt: skip
 
     def units_in(self, part: Block, keep: np.ndarray) -> np.ndarray:
         """(U_part,) this block's unit of each unit of `part` (`without_samples(keep)`): the points a view uses do
@@ -226,7 +235,11 @@ class FieldBlock(Block):
         R = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], axis=1)  # (M, 2, 2) floor -> field
         turned = np.einsum("mij,mj->mi", R, g)
         p = turned + np.stack([x, y], axis=1)
-        offset, normal, marking = nearest_line_normal(self.lines, p)
+        if self.held_lines:
+            marking = self.line_of_unit
+            offset, normal = line_offset_normal(self.lines, p, marking)
+        else:
+            offset, normal, marking = nearest_line_normal(self.lines, p)
         known = np.full(len(p), self.marking_places)
         column = 3 * len(self.obs.starts) + marking if self.marking_places else np.zeros(len(p), int)  # 1st unknown
         on_circle = marking == len(self.lines.segments)

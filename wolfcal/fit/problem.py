@@ -170,15 +170,27 @@ class Problem:
             start += len(block.nuisance)
         self.params = params
         self._cache: tuple[bytes, list[Linearization]] | None = None
-        z0 = np.zeros(len(self.params))
-        for state, lin in zip(self.states, self.evaluate(z0)):
-            # Start each block's noise level at the spread of its residuals under the nominal model (at least
+        self.start = self._start()
+        for state, lin in zip(self.states, self.evaluate(self.start)):
+            # Start each block's noise level at the spread of its residuals where the solve starts (at least
             # the configured value), so the first solve is least squares rather than a long walk along the
             # Huber loss's linear arms; the rounds then estimate it.
             r = lin.residual[np.all(np.abs(lin.residual) < 1e3, axis=1)]
             spread = MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r, axis=0)))) if r.size else 0.0
             state.sigma = max(state.sigma, spread)
-        self.linearize(z0)
+        self.linearize(self.start)
+
+    def _start(self) -> np.ndarray:
+        """(P,) where the solve starts, prior-normalised: every unknown at its reference (z = 0), but the chain
+        parameters that the first block's `Block.chain_start` holds at its values (the robot model the block was
+        solved at alone: a fit that starts degrees off may settle on other lines for its points)."""
+        z = np.zeros(len(self.params))
+        start = next((b.chain_start for b in self.blocks if b.chain_start is not None), None)
+        if start is not None:
+            held = self.chain.held_by(start)
+            moved = (self.chain.values_from(start) - self.chain.references) / self.chain.prior_sigmas
+            z[: self.n_chain] = np.where(held, moved, 0.0)
+        return z
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return self.params.values(z)

@@ -1,6 +1,7 @@
 """Solve the problem and report how far to trust each number.
 
-Rounds: robust Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
+Rounds, from `Problem.start` (the references, or where a block asks the robot model to start): robust
+Levenberg-Marquardt solve (analytic Jacobian) -> per block, flag outlier views (one tag in one
 image: its residuals, whitened with the covariance of that view alone so that no other view's error leaks in, far
 above the other views' and off by more than the block's floor; they get zero weight; then in the views kept, single
 units far off where the block has a unit rule: floor-tag corners, `flag_units`) -> per block, estimate the
@@ -385,8 +386,8 @@ def solve(problem: Problem, max_rounds: int = 5, progress: Callable[[str], None]
     """Solve with outlier rounds (module docstring); each block's noise level stays within its `noise_min` ..
     `noise_max`."""
     say = progress or (lambda _msg: None)
-    z = np.zeros(len(problem.params))
-    before = [r.copy() for r in problem.raw_residuals(z)]
+    before = [r.copy() for r in problem.raw_residuals(np.zeros(len(problem.params)))]  # the nominal model's
+    z = problem.start.copy()
     rows_total = sum(r.size for r in before)
     evaluations = 0
     for round_index in range(max_rounds):

@@ -89,6 +89,13 @@ class ParameterSet:
                            {k: v for k, v in corrections.frames.items() if k not in frames},
                            {k: v for k, v in corrections.tags.items() if k not in tags})  # fmt: skip
 
+    def held_by(self, corrections: Corrections) -> np.ndarray:
+        """(P,) whether `corrections` holds a value of each chain parameter (its joint's offset, its frame, its tag)."""
+        held: dict[str, set] = {"offset": set(corrections.offsets), "frame": set(corrections.frames),
+                                "tag": set(corrections.tags)}  # fmt: skip
+        return np.array([p.in_chain and (int(p.target) if p.kind == "tag" else p.target) in held[p.kind]
+                         for p in self.parameters], bool)  # fmt: skip
+
     def values_from(self, corrections: Corrections) -> np.ndarray:
         """The parameter values a `Corrections` object holds (e.g. a simulator's truth) [SI]."""
         values = []
