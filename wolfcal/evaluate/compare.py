@@ -149,7 +149,7 @@ def _head_columns(
     before = errors[BEFORE_LABEL]
     best = min(errors.values(), key=lambda e: float(np.nanmedian(e.sample_rms)))
     keep = ~outlier_samples(before, best)
-    of = "" if obs.span_frames is None else " (still-span means)"
+    of = _span_means(obs)
     px = Column("head_px", f"head camera reprojection RMS per axis, per sample{of}", "px", "head")
     mm = Column("head_tag_grid_mm", f"head camera tag-grid distance (2019 study), per tag view{of}", "mm", "head")
     for label, e in errors.items():
@@ -194,7 +194,7 @@ def _external_columns(
     observations, _ = detect_observations(samples, robot, cameras=names)
     columns = []
     for name, obs in still_span_observations(robot.config, observations, moving).items():
-        of = "" if obs.span_frames is None else " (still-span means)"
+        of = _span_means(obs)
         column = Column(f"external_{name}_mm", f"external camera {name}: foot tag relative to torso tag, tag grid"
                         f"{of}", "mm", "external")  # fmt: skip
         for label, model in models.items():
@@ -388,3 +388,8 @@ def run_compare(
     say(decision["message"])
     say(f"report: {out_dir / 'report.html'}")
     return metrics
+
+
+def _span_means(obs: Observations) -> str:
+    """' (still-span means)' for a column of observations summarised by still span, '' otherwise."""
+    return "" if obs.span_frames is None else " (still-span means)"

@@ -78,6 +78,7 @@ def spread_checked(problem: Problem, solution: Solution, sigmas: Sequence[float]
     formal = solution.uncertainty.std
     reported = formal.copy()
     spreads: dict[int, np.ndarray] = {}
+    at = {name: k for k, name in enumerate(params.names)}  # the fit's index of each unknown
     for i, block in enumerate(problem.blocks):
         if not isinstance(block, Replicable) or block.jackknife_groups <= 0 or block.n_samples < 3:
             continue
@@ -89,7 +90,6 @@ def spread_checked(problem: Problem, solution: Solution, sigmas: Sequence[float]
             blocks = list(problem.blocks)
             blocks[i] = block.without_samples(groups != g)
             again = Problem(problem.chain, blocks, list(sigmas), problem.sigma_q, problem.huber_k)
-            at = {name: k for k, name in enumerate(params.names)}
             if not set(again.params.names) <= set(at):  # a placement left without samples renames the others
                 continue
             # a placement whose samples all fell in the group left out has no unknowns there: it keeps the solution
